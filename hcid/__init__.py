@@ -1,0 +1,1 @@
+"""hcid: identify human-controller models from closed-loop manual-control data."""
