@@ -1,0 +1,23 @@
+"""Exceptions of hcid.
+
+Every error a user can cause (a bad config, a missing or corrupt data file, a
+grid that cannot be fitted) is an :class:`HcidError`. The CLI turns these into
+one line on stderr and exit code 2, in one place; anything else is a bug and
+keeps its traceback.
+"""
+
+
+class HcidError(Exception):
+    """Base class of the errors hcid reports to the user as one line."""
+
+
+class ConfigError(HcidError, ValueError):
+    """A config key is unknown, of the wrong type, or out of range."""
+
+
+class DataError(HcidError, ValueError):
+    """A data file or table is missing, corrupt, or holds invalid values."""
+
+
+class IdentificationError(HcidError, ValueError):
+    """An identification request cannot be carried out on the given data."""

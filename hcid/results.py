@@ -1,0 +1,166 @@
+"""Result tables on disk: Parquet in a run directory, written atomically.
+
+Layout of a run directory (default ``runs/<config name>``):
+
+- ``config.yaml``: the resolved config of the run.
+- ``simulations.parquet``: one row per model, seed and sample.
+- ``simulation_summary.parquet``: one row per model and seed.
+
+Every write goes to a temporary file beside the target and is renamed over it,
+so a reader never sees a half-written table and an interrupted write leaves the
+previous table intact.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from hcid.errors import DataError
+from hcid.simulate import CHANNELS, Realization
+
+__all__ = [
+    "SIMULATIONS",
+    "SIMULATION_SUMMARY",
+    "read_table",
+    "realizations_table",
+    "records",
+    "summary_table",
+    "write_table",
+    "write_text",
+]
+
+SIMULATIONS = "simulations.parquet"
+SIMULATION_SUMMARY = "simulation_summary.parquet"
+
+_SIMULATION_SCHEMA = pa.schema(
+    [("model", pa.string()), ("seed", pa.int64()), ("k", pa.int64()), ("t", pa.float64())]
+    + [(name, pa.float64()) for name in CHANNELS]
+)
+
+
+def _current_umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _current_umask()
+
+
+def _atomic(path: Path, write) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.chmod(tmp, 0o666 & ~_UMASK)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_table(table: pa.Table, path: str | Path) -> None:
+    """Write a Parquet table atomically (temporary file, then rename)."""
+    _atomic(Path(path), lambda tmp: pq.write_table(table, tmp))
+
+
+def write_text(text: str, path: str | Path) -> None:
+    """Write a text file atomically."""
+    _atomic(Path(path), lambda tmp: Path(tmp).write_text(text))
+
+
+def read_table(path: str | Path, required: Sequence[str] = (), *, hint: str = "") -> pa.Table:
+    """Read a Parquet table, checking that it exists, parses and has the columns.
+
+    Raises
+    ------
+    DataError
+        One line naming the file and what is wrong.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: missing{'; ' + hint if hint else ''}")
+    try:
+        table = pq.read_table(path)
+    except (pa.ArrowException, OSError) as exc:
+        raise DataError(f"{path}: not a readable Parquet table ({str(exc).splitlines()[0]})") from exc
+    missing = [c for c in required if c not in table.column_names]
+    if missing:
+        raise DataError(f"{path}: missing columns {missing}")
+    return table
+
+
+def realizations_table(realizations: Sequence[Realization]) -> pa.Table:
+    """Stack realizations into the ``simulations.parquet`` table (given order)."""
+    columns: dict[str, list] = {name: [] for name in _SIMULATION_SCHEMA.names}
+    for r in realizations:
+        n = r.t.size
+        columns["model"].append(np.full(n, r.model, dtype=object))
+        columns["seed"].append(np.full(n, r.seed, dtype=np.int64))
+        columns["k"].append(np.arange(n, dtype=np.int64))
+        columns["t"].append(r.t)
+        for name in CHANNELS:
+            columns[name].append(getattr(r, name))
+    arrays = [pa.array(np.concatenate(columns[f.name]), type=f.type) for f in _SIMULATION_SCHEMA]
+    return pa.Table.from_arrays(arrays, schema=_SIMULATION_SCHEMA)
+
+
+def summary_table(
+    realizations: Sequence[Realization], disturbance_only: Sequence[Realization]
+) -> pa.Table:
+    """Per model and seed: RMS(e) in deg, var(n)/var(u), the same ratio in the
+    disturbance-only task, and Kn."""
+    return pa.table(
+        {
+            "model": pa.array([r.model for r in realizations], pa.string()),
+            "seed": pa.array([r.seed for r in realizations], pa.int64()),
+            "rms_e_deg": pa.array([r.rms_e_deg for r in realizations], pa.float64()),
+            "noise_ratio": pa.array([r.noise_ratio for r in realizations], pa.float64()),
+            "noise_ratio_disturbance_only": pa.array(
+                [r.noise_ratio for r in disturbance_only], pa.float64()
+            ),
+            "kn": pa.array([r.kn for r in realizations], pa.float64()),
+        }
+    )
+
+
+def records(table: pa.Table, path: str | Path = SIMULATIONS) -> dict[tuple[str, int], dict[str, np.ndarray]]:
+    """Split a simulations table into one dict of float64 arrays per (model, seed).
+
+    Raises
+    ------
+    DataError
+        If a channel holds NaN or inf, or a record's samples are not 0..N-1.
+    """
+    missing = [c for c in _SIMULATION_SCHEMA.names if c not in table.column_names]
+    if missing:
+        raise DataError(f"{path}: missing columns {missing}")
+    model = table.column("model").to_numpy(zero_copy_only=False).astype(str)
+    seed = table.column("seed").to_numpy()
+    k = table.column("k").to_numpy()
+    data = {name: table.column(name).to_numpy().astype(np.float64) for name in ("t", *CHANNELS)}
+    for name, values in data.items():
+        bad = ~np.isfinite(values)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise DataError(
+                f"{path}: column {name!r} holds {values[i]} at model {model[i]}, seed {seed[i]}, k {k[i]}"
+            )
+    out: dict[tuple[str, int], dict[str, np.ndarray]] = {}
+    keys = np.char.add(np.char.add(model, "\0"), seed.astype(str))
+    _, first = np.unique(keys, return_index=True)
+    for start in np.sort(first):
+        m, s = model[start], int(seed[start])
+        rows = np.flatnonzero((model == m) & (seed == s))
+        if not np.array_equal(k[rows], np.arange(rows.size)):
+            raise DataError(f"{path}: samples of model {m}, seed {s} are not k = 0..{rows.size - 1} in order")
+        out[(m, s)] = {name: values[rows] for name, values in data.items()}
+    return out

@@ -1,0 +1,45 @@
+"""Shared fixtures: configs and simulated records of the paper study."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hcid.config import load_config
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER_CONFIG = ROOT / "configs" / "paper.yaml"
+CI_CONFIG = ROOT / "configs" / "ci.yaml"
+
+
+@pytest.fixture(scope="session")
+def paper_config():
+    return load_config(PAPER_CONFIG)
+
+
+@pytest.fixture(scope="session")
+def ci_config():
+    return load_config(CI_CONFIG)
+
+
+def _record(config, model_name: str, seed: int) -> dict[str, np.ndarray]:
+    from hcid.simulate import remnant_gain, simulate_realization
+
+    r = simulate_realization(config, config.model(model_name), seed, remnant_gain(config))
+    shift = config.identify.shift_samples(config.timing.output_rate)
+    ft_s = np.concatenate([r.ft[shift:], np.zeros(shift)])  # SPEC 3: ft_s(k) = ft(k + 25)
+    return {"ft": r.ft, "ft_s": ft_s, "fd": r.fd, "e": r.e, "u": r.u, "theta": r.theta, "n": r.n}
+
+
+@pytest.fixture(scope="session")
+def paper_record(paper_config):
+    """FF model, seed 1, of configs/paper.yaml at 25 Hz (2048 samples); ft_s is ft shifted 1 s."""
+    return _record(paper_config, "FF", 1)
+
+
+@pytest.fixture(scope="session")
+def paper_record_fb(paper_config):
+    """FB model, seed 1, of configs/paper.yaml."""
+    return _record(paper_config, "FB", 1)
