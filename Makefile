@@ -12,8 +12,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/hcid run configs/paper.yaml
-	$(BIN)/hcid report runs/paper
+	$(BIN)/hcid simulate configs/paper.yaml
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -m "not slow" tests

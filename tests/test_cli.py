@@ -1,0 +1,77 @@
+"""The command line: simulate, determinism across --jobs, bad input."""
+
+import re
+
+import pyarrow.parquet as pq
+import pytest
+from typer.testing import CliRunner
+
+from hcid.cli import app
+
+from .conftest import CI_CONFIG
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory):
+    base = tmp_path_factory.mktemp("sim")
+    out = {}
+    for jobs in (1, 2):
+        run = base / f"jobs{jobs}"
+        result = runner.invoke(app, ["simulate", str(CI_CONFIG), "--run", str(run),
+                                     "--jobs", str(jobs), "--quiet"])
+        assert result.exit_code == 0, result.output
+        out[jobs] = (run, result.output)
+    return out
+
+
+def test_simulate_writes_tables(simulated):
+    run, output = simulated[1]
+    table = pq.read_table(run / "simulations.parquet")
+    assert table.column_names == ["model", "seed", "k", "t", "ft", "fd", "e", "u", "theta", "n"]
+    assert table.num_rows == 2 * 3 * 2048  # ci.yaml: 2 models x 3 seeds x 2048 samples
+    summary = pq.read_table(run / "simulation_summary.parquet")
+    assert summary.num_rows == 6
+    assert (run / "config.yaml").is_file()
+    assert re.search(r"FB\s+3\s+2\.\d+ \+- ", output)
+
+
+@pytest.mark.parametrize("name", ["simulations.parquet", "simulation_summary.parquet", "config.yaml"])
+def test_simulate_identical_across_jobs(simulated, name):
+    assert (simulated[1][0] / name).read_bytes() == (simulated[2][0] / name).read_bytes()
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (("seeds: [1, 2, 3]", "seeds: []"), "seeds: must be a non-empty list"),
+        (("zeta_n: 0.26", "zeta_n: 0.26\n  extra: 1"), "loop.extra: unknown key"),
+        (("estimation: [129, 1088], validation: [1089, 2048]}\n  stage1",
+          "estimation: [129, 1088], validation: [1089, 3000]}\n  stage1"),
+         "identify.direct.validation"),
+        (("Kc: 2.75", "Kc: [2.75]"), "loop.Kc: must be a number"),
+    ],
+)
+def test_bad_config_exit_2_one_line_nothing_written(tmp_path, edit, message):
+    text = CI_CONFIG.read_text()
+    assert edit[0] in text
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(text.replace(edit[0], edit[1], 1))
+    run = tmp_path / "run"
+    result = runner.invoke(app, ["simulate", str(bad), "--run", str(run), "--quiet"])
+    assert result.exit_code == 2
+    assert message in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not run.exists()
+
+
+def test_bad_config_keeps_earlier_results(simulated, tmp_path):
+    run = simulated[1][0]
+    before = (run / "simulations.parquet").read_bytes()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(CI_CONFIG.read_text().replace("seeds: [1, 2, 3]", "seeds: [1, -2]"))
+    result = runner.invoke(app, ["simulate", str(bad), "--run", str(run), "--quiet"])
+    assert result.exit_code == 2
+    assert "seeds[1]: must be an integer in [0, 2147483647], got -2" in result.stderr
+    assert (run / "simulations.parquet").read_bytes() == before
