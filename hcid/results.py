@@ -164,3 +164,108 @@ def records(table: pa.Table, path: str | Path = SIMULATIONS) -> dict[tuple[str, 
             raise DataError(f"{path}: samples of model {m}, seed {s} are not k = 0..{rows.size - 1} in order")
         out[(m, s)] = {name: values[rows] for name, values in data.items()}
     return out
+
+
+# --------------------------------------------------------------------------- identification tables
+
+FRONTIER = "frontier.parquet"
+STAGE1 = "stage1.parquet"
+IDENTIFY_LOG = "identify_log.parquet"
+SELECTION = "selection.parquet"
+BREAKPOINTS = "breakpoints.parquet"
+THRESHOLDS = "thresholds.parquet"
+PARTS = ".parts"
+
+#: Engine column names -> table column names (input 1 is ft, input 2 is e).
+FRONTIER_NAMES = {"nb1": "nb_ft", "nb2": "nb_e", "nk1": "nk_ft", "nk2": "nk_e", "b1": "b_ft", "b2": "b_e"}
+KEY_COLUMNS = ("model", "seed", "method")
+
+
+def frontier_part(model: str, seed: int, result) -> dict[str, pa.Table]:
+    """Tables of one realization and method: frontier rows, stage-1 row, log row.
+
+    ``result`` is a :class:`hcid.identify.MethodResult`. Wall times go to the log
+    only, so the frontier and stage-1 tables are deterministic.
+    """
+    fit = result.fit.to_arrow().replace_schema_metadata(None)
+    fit = fit.rename_columns([FRONTIER_NAMES.get(c, c) for c in fit.column_names])
+    n = fit.num_rows
+    keys = [
+        pa.array([model] * n, pa.string()),
+        pa.array([seed] * n, pa.int64()),
+        pa.array([result.method] * n, pa.string()),
+    ]
+    frontier = pa.Table.from_arrays(keys + fit.columns, names=[*KEY_COLUMNS, *fit.column_names])
+    log = {
+        "model": [model], "seed": [seed], "method": [result.method],
+        "n_candidates": [result.fit.n_candidates], "n_unstable": [result.fit.n_unstable_total],
+        "stage1_candidates": [0], "stage1_unstable": [0],
+        "seconds_stage1": [0.0], "seconds": [result.seconds],
+    }
+    tables = {"frontier": frontier}
+    s1 = result.stage1
+    if s1 is not None:
+        tables["stage1"] = pa.table({
+            "model": [model], "seed": [seed], "na": [s1.na], "nb_ft": [s1.nb1], "nb_fd": [s1.nb2],
+            "nk_ft": [s1.nk1], "nk_fd": [s1.nk2], "v": [s1.v],
+            "n_candidates": [s1.n_candidates], "n_unstable": [s1.n_unstable],
+        })
+        log.update(stage1_candidates=[s1.n_candidates], stage1_unstable=[s1.n_unstable],
+                   seconds_stage1=[s1.seconds])
+    tables["log"] = pa.table(log)
+    return tables
+
+
+def write_part(run_dir: Path, model: str, seed: int, method: str, tables: dict[str, pa.Table]) -> None:
+    """Store one finished task so an interrupted run can resume from it."""
+    folder = Path(run_dir) / PARTS / method
+    for kind, table in tables.items():
+        write_table(table, folder / f"{model}__{seed}.{kind}.parquet")
+
+
+def read_parts(run_dir: Path) -> dict[tuple[str, int, str], dict[str, pa.Table]]:
+    """Finished tasks of an interrupted run, keyed by (model, seed, method).
+
+    A task counts only when its frontier and log parts are both readable.
+    """
+    found: dict[tuple[str, int, str], dict[str, pa.Table]] = {}
+    root = Path(run_dir) / PARTS
+    if not root.is_dir():
+        return found
+    for path in sorted(root.glob("*/*.frontier.parquet")):
+        method = path.parent.name
+        stem = path.name[: -len(".frontier.parquet")]
+        model, _, seed = stem.rpartition("__")
+        tables = {}
+        try:
+            for kind in ("frontier", "log", "stage1"):
+                part = path.with_name(f"{stem}.{kind}.parquet")
+                if part.is_file():
+                    tables[kind] = pq.read_table(part)
+        except (pa.ArrowException, OSError):
+            continue  # a part cut off mid-write is simply recomputed
+        if "log" in tables and (method == "direct" or "stage1" in tables):
+            found[(model, int(seed), method)] = tables
+    return found
+
+
+def clear_parts(run_dir: Path) -> None:
+    import shutil
+
+    shutil.rmtree(Path(run_dir) / PARTS, ignore_errors=True)
+
+
+def split_by_key(table: pa.Table, keys: Sequence[str]) -> dict[tuple, pa.Table]:
+    """Rows of ``table`` grouped by the values of ``keys``, in first-seen order."""
+    if table.num_rows == 0:
+        return {}
+    cols = [table.column(k).to_pylist() for k in keys]
+    groups: dict[tuple, list[int]] = {}
+    for i, key in enumerate(zip(*cols, strict=True)):
+        groups.setdefault(key, []).append(i)
+    return {key: table.take(pa.array(rows, pa.int64())) for key, rows in groups.items()}
+
+
+def concat(tables: Sequence[pa.Table]) -> pa.Table:
+    """Concatenate tables of one schema into a single-chunk table."""
+    return pa.concat_tables(tables).combine_chunks()

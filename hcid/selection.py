@@ -1,0 +1,164 @@
+"""Model selection by ``MSC = log V + W d`` over W (SPEC section 4).
+
+Only the best candidate per (na, nb_ft, nb_e) can be selected, so selection
+works on a realization's frontier. As a function of W the selection is
+piecewise constant; it changes at the vertices of the lower convex hull of the
+points (d, log V), and those breakpoints are computed exactly here.
+
+Ties follow SPEC: equal MSC -> smaller d, then smaller
+(na, nb_ft, nb_e, nk_ft, nk_e). At a breakpoint both neighbours have equal MSC,
+so the smaller-d model is selected there: each selection holds on a half-open
+interval ``[w_from, w_to)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "Segments",
+    "breakpoints",
+    "select_at",
+    "select_brute_force",
+    "false_negative_threshold",
+    "false_positive_threshold",
+    "w_aic",
+    "w_bic",
+]
+
+
+def w_aic(n_estimation: int) -> float:
+    """AIC penalty ``2 / Nf`` (SPEC 4)."""
+    return 2.0 / n_estimation
+
+
+def w_bic(n_estimation: int) -> float:
+    """BIC penalty ``ln(Nf) / Nf`` (SPEC 4)."""
+    return float(np.log(n_estimation) / n_estimation)
+
+
+def _order_key(orders: np.ndarray) -> np.ndarray:
+    """Row order that sorts by d is done by the caller; this ranks orders/delays lexicographically."""
+    return np.lexsort(orders.T[::-1])
+
+
+@dataclass(frozen=True)
+class Segments:
+    """The selection of one realization as a function of W.
+
+    ``index[i]`` (a frontier row) is selected for ``w_from[i] <= W < w_to[i]``;
+    ``w_from[0] = 0`` and ``w_to[-1] = inf``. Consecutive entries differ.
+    """
+
+    index: np.ndarray
+    w_from: np.ndarray
+    w_to: np.ndarray
+
+    def at(self, w: np.ndarray) -> np.ndarray:
+        """Frontier row selected at each W (W >= 0)."""
+        return self.index[np.searchsorted(self.w_from, np.asarray(w, dtype=np.float64), side="right") - 1]
+
+
+def _ranked(d: np.ndarray, v: np.ndarray, orders: np.ndarray) -> np.ndarray:
+    """Indices of finite-V rows sorted by the full tie rule (d, log V, orders)."""
+    finite = np.flatnonzero(np.isfinite(v) & (v > 0))
+    rank_orders = np.empty(orders.shape[0], dtype=np.int64)
+    rank_orders[_order_key(orders)] = np.arange(orders.shape[0])
+    keys = (rank_orders[finite], np.log(v[finite]), d[finite])
+    return finite[np.lexsort(keys)]
+
+
+def breakpoints(d: np.ndarray, v: np.ndarray, orders: np.ndarray) -> Segments:
+    """Exact selection intervals in W from the lower convex hull of (d, log V).
+
+    Parameters
+    ----------
+    d : ndarray of int, shape (m,)
+        Parameter counts of the frontier rows.
+    v : ndarray, shape (m,)
+        V of the rows; inf (unstable) rows are never selected.
+    orders : ndarray of int, shape (m, 5)
+        (na, nb_ft, nb_e, nk_ft, nk_e) per row, for the tie rule.
+
+    Returns
+    -------
+    Segments
+    """
+    d = np.asarray(d, dtype=np.int64)
+    v = np.asarray(v, dtype=np.float64)
+    ranked = _ranked(d, v, np.asarray(orders))
+    if ranked.size == 0:
+        raise ValueError("breakpoints: every frontier row is unstable")
+    # Best row per d: the first in (d, log V, orders) order.
+    first_of_d = np.concatenate([[True], np.diff(d[ranked]) != 0])
+    best = ranked[first_of_d]
+    dd = d[best].astype(np.float64)
+    lv = np.log(v[best])
+
+    # W -> 0+: the smallest log V, ties to smaller d (best is sorted by d).
+    current = int(np.argmin(lv))
+    index, w_from = [best[current]], [0.0]
+    while current > 0:
+        # Moving to a smaller-d point p becomes worth it at W = (L_p - L_c) / (d_c - d_p).
+        slopes = (lv[:current] - lv[current]) / (dd[current] - dd[:current])
+        w_next = slopes.min()
+        # Collinear points tie at w_next: the tie rule takes the smallest d.
+        nxt = int(np.flatnonzero(slopes == w_next)[0])
+        w_next = max(float(w_next), w_from[-1])
+        if w_next == w_from[-1]:
+            index[-1] = best[nxt]
+        else:
+            index.append(best[nxt])
+            w_from.append(w_next)
+        current = nxt
+    w_from_arr = np.asarray(w_from)
+    w_to = np.append(w_from_arr[1:], np.inf)
+    return Segments(index=np.asarray(index, dtype=np.int64), w_from=w_from_arr, w_to=w_to)
+
+
+def select_at(d: np.ndarray, v: np.ndarray, orders: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Frontier row selected at each W, via :func:`breakpoints`."""
+    return breakpoints(d, v, orders).at(w)
+
+
+def select_brute_force(d: np.ndarray, v: np.ndarray, orders: np.ndarray, w: float) -> int:
+    """Slow twin of :func:`select_at`: argmin of log V + W d with the tie rule, row by row."""
+    best, best_key = -1, None
+    for i in range(len(d)):
+        if not np.isfinite(v[i]) or v[i] <= 0:
+            continue
+        key = (np.log(v[i]) + w * d[i], d[i], tuple(int(x) for x in orders[i]))
+        if best_key is None or key < best_key:
+            best, best_key = i, key
+    return best
+
+
+def false_positive_threshold(segments: list[Segments], nb_ft: list[np.ndarray]) -> float:
+    """W_FP: the largest W at which any realization selects a model with nb_ft > 0.
+
+    Each realization is a false positive on the union of its intervals with
+    nb_ft > 0; the supremum is the right end of the last such interval. 0 when
+    no realization is ever a false positive; inf when one stays a false positive
+    for every W.
+    """
+    w_fp = 0.0
+    for seg, nb in zip(segments, nb_ft, strict=True):
+        positive = nb[seg.index] > 0
+        if positive.any():
+            w_fp = max(w_fp, float(seg.w_to[np.flatnonzero(positive)[-1]]))
+    return w_fp
+
+
+def false_negative_threshold(segments: list[Segments], nb_ft: list[np.ndarray], level: float = 2.0) -> float:
+    """W_FN: the smallest W at which the mean selected nb_ft drops below ``level``.
+
+    The mean is piecewise constant with jumps at the union of the realizations'
+    breakpoints, so it is evaluated exactly there. 0 when it starts below the
+    level; inf when it never drops below it.
+    """
+    candidates = np.unique(np.concatenate([s.w_from for s in segments]))
+    means = np.mean([nb[s.at(candidates)] for s, nb in zip(segments, nb_ft, strict=True)], axis=0)
+    below = np.flatnonzero(means < level)
+    return float(candidates[below[0]]) if below.size else float("inf")
