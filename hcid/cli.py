@@ -33,6 +33,13 @@ RunOpt = Annotated[
 ]
 JobsOpt = Annotated[int, typer.Option("--jobs", min=1, max=256, help="Worker processes.")]
 QuietOpt = Annotated[bool, typer.Option("--quiet", help="No progress bar.")]
+ForceOpt = Annotated[bool, typer.Option("--force", help="Recompute what is already done.")]
+MethodOpt = Annotated[str, typer.Option("--method", help="direct, indirect or both.")]
+BackendOpt = Annotated[str, typer.Option("--backend", help="loky (local processes) or dask.")]
+SchedulerOpt = Annotated[
+    str | None,
+    typer.Option("--scheduler", help="dask scheduler address tcp://host:port [default: a local cluster]."),
+]
 
 
 def _user_errors(func):
@@ -61,14 +68,107 @@ _PAPER_RMS_E = {"FB": 2.43, "FF": 1.22}
 
 @app.command()
 @_user_errors
-def simulate(config: ConfigArg, run: RunOpt = None, jobs: JobsOpt = 2, quiet: QuietOpt = False):
+def simulate(config: ConfigArg, run: RunOpt = None, jobs: JobsOpt = 2, quiet: QuietOpt = False,
+             force: ForceOpt = False):
     """Simulate every model x seed of CONFIG and write RUN/simulations.parquet."""
     from hcid.config import load_config
     from hcid.pipeline import simulate_study
 
     cfg = load_config(config)
-    result = simulate_study(cfg, _run_dir(run, cfg), jobs=jobs, show_progress=not quiet)
+    result = simulate_study(cfg, _run_dir(run, cfg), jobs=jobs, show_progress=not quiet, force=force)
     _print_simulation_summary(result)
+
+
+def _methods(method: str) -> tuple[str, ...]:
+    from hcid.errors import HcidError
+
+    choices = {"direct": ("direct",), "indirect": ("indirect",), "both": ("direct", "indirect")}
+    try:
+        return choices[method]
+    except KeyError:
+        raise HcidError(f"--method: must be one of direct, indirect, both; got {method!r}") from None
+
+
+@app.command()
+@_user_errors
+def identify(config: ConfigArg, method: MethodOpt = "both", run: RunOpt = None, jobs: JobsOpt = 2,
+             backend: BackendOpt = "loky", scheduler: SchedulerOpt = None, force: ForceOpt = False,
+             quiet: QuietOpt = False):
+    """Identify every model x seed of CONFIG; writes RUN/frontier.parquet (and stage1.parquet)."""
+    from hcid.config import load_config
+    from hcid.pipeline import identify_study, simulate_study
+
+    cfg = load_config(config)
+    methods = _methods(method)
+    run_dir = _run_dir(run, cfg)
+    if not (run_dir / "simulations.parquet").exists():
+        _print_simulation_summary(simulate_study(cfg, run_dir, jobs=jobs, show_progress=not quiet))
+    result = identify_study(cfg, run_dir, methods, jobs=jobs, force=force, backend=backend,
+                            scheduler=scheduler, show_progress=not quiet)
+    _print_identify_summary(result)
+
+
+def _print_identify_summary(result) -> None:
+    log = result.log.to_pydict()
+    typer.echo(
+        f"identified {result.computed} realization-methods, reused {result.reused}; "
+        f"{sum(log['n_candidates']) + sum(log['stage1_candidates']):,} candidates in the tables, "
+        f"{sum(log['n_unstable']) + sum(log['stage1_unstable']):,} unstable"
+    )
+    typer.echo(f"wrote {result.run_dir / 'frontier.parquet'}")
+
+
+@app.command("sweep-w")
+@_user_errors
+def sweep_w(config: ConfigArg, run: RunOpt = None):
+    """Select models over the W grid; writes selection, breakpoints and thresholds tables."""
+    from hcid.config import load_config
+    from hcid.pipeline import sweep_study
+
+    cfg = load_config(config)
+    result = sweep_study(cfg, _run_dir(run, cfg))
+    _print_thresholds(result.thresholds)
+    typer.echo(f"wrote {result.run_dir / 'thresholds.parquet'}")
+
+
+# Paper section 5.2, for the summary only.
+_PAPER_THRESHOLDS = {("direct", "w_fp"): 1.2e-2, ("indirect", "w_fp"): 3.7e-2,
+                     ("direct", "w_fn"): 2.6e-1, ("indirect", "w_fn"): 2.6e-1}
+
+
+def _print_thresholds(thresholds) -> None:
+    typer.echo(f"{'method':<10}{'model':<8}{'threshold':<11}{'this run':>12}{'paper':>10}")
+    for row in thresholds.to_pylist():
+        for name in ("w_fp", "w_fn"):
+            if row[name] is None:
+                continue
+            paper = _PAPER_THRESHOLDS.get((row["method"], name))
+            paper_text = f"{paper:.2g}" if paper is not None else "-"
+            typer.echo(f"{row['method']:<10}{row['model']:<8}{name.upper():<11}{row[name]:>12.4g}{paper_text:>10}")
+    first = thresholds.to_pylist()[0] if thresholds.num_rows else None
+    if first:
+        typer.echo(f"W_AIC = {first['w_aic']:.4g}, W_BIC = {first['w_bic']:.4g} (Nf = {first['nf']})")
+
+
+@app.command("run")
+@_user_errors
+def run_all(config: ConfigArg, run: RunOpt = None, jobs: JobsOpt = 2, backend: BackendOpt = "loky",
+            scheduler: SchedulerOpt = None, quiet: QuietOpt = False):
+    """Simulate, identify both methods and sweep W, skipping what is already done."""
+    import time
+
+    from hcid.config import load_config
+    from hcid.pipeline import identify_study, simulate_study, sweep_study
+
+    cfg = load_config(config)
+    run_dir = _run_dir(run, cfg)
+    start = time.perf_counter()
+    if not (run_dir / "simulations.parquet").exists():
+        _print_simulation_summary(simulate_study(cfg, run_dir, jobs=jobs, show_progress=not quiet))
+    _print_identify_summary(identify_study(cfg, run_dir, jobs=jobs, backend=backend,
+                                           scheduler=scheduler, show_progress=not quiet))
+    _print_thresholds(sweep_study(cfg, run_dir).thresholds)
+    typer.echo(f"done in {time.perf_counter() - start:.1f} s; tables in {run_dir}")
 
 
 def _print_simulation_summary(result) -> None:

@@ -1,0 +1,194 @@
+"""The identify / sweep-w pipeline on configs/ci.yaml: determinism, resume, backends, bad data."""
+
+import shutil
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from typer.testing import CliRunner
+
+from hcid import pipeline, results, selection
+from hcid.cli import app
+
+from .conftest import CI_CONFIG
+
+runner = CliRunner()
+TABLES = ("frontier.parquet", "stage1.parquet", "selection.parquet", "breakpoints.parquet",
+          "thresholds.parquet")
+
+
+def _run(args):
+    result = runner.invoke(app, [*args, "--quiet"] if args[0] != "sweep-w" else args)
+    assert result.exit_code == 0, result.output
+    return result
+
+
+@pytest.fixture(scope="module")
+def ci_runs(tmp_path_factory):
+    """configs/ci.yaml run end to end with --jobs 1 and --jobs 2."""
+    base = tmp_path_factory.mktemp("pipe")
+    runs = {}
+    for jobs in (1, 2):
+        run = base / f"jobs{jobs}"
+        _run(["run", str(CI_CONFIG), "--run", str(run), "--jobs", str(jobs)])
+        runs[jobs] = run
+    return runs
+
+
+def test_tables_written(ci_runs, ci_config):
+    run = ci_runs[1]
+    frontier = pq.read_table(run / "frontier.parquet")
+    g = ci_config.identify.direct.grid
+    triples = (g.na[1] - g.na[0] + 1) * (g.nb1[1] - g.nb1[0] + 1) * (g.nb2[1] - g.nb2[0] + 1)
+    # one row per model, seed, method and (na, nb_ft, nb_e)
+    assert frontier.num_rows == 2 * 3 * 2 * triples
+    assert pq.read_table(run / "stage1.parquet").num_rows == 2 * 3
+    assert pq.read_table(run / "selection.parquet").num_rows == 2 * 3 * 2 * len(ci_config.w_grid)
+    thresholds = pq.read_table(run / "thresholds.parquet").to_pylist()
+    assert {(r["method"], r["model"]) for r in thresholds} == {
+        (m, mo) for m in ("direct", "indirect") for mo in ("FB", "FF")}
+
+
+@pytest.mark.parametrize("name", TABLES)
+def test_identical_across_jobs(ci_runs, name):
+    assert (ci_runs[1] / name).read_bytes() == (ci_runs[2] / name).read_bytes()
+
+
+def test_selection_table_is_brute_force_argmin(ci_runs, ci_config):
+    # Every stored selection equals the row-by-row argmin of log V + W d over the frontier.
+    run = ci_runs[1]
+    frontier = results.split_by_key(pq.read_table(run / "frontier.parquet"), results.KEY_COLUMNS)
+    chosen = pq.read_table(run / "selection.parquet").to_pandas() if False else \
+        pq.read_table(run / "selection.parquet").to_pylist()
+    cols = ("na", "nb_ft", "nb_e", "nk_ft", "nk_e")
+    for row in chosen[::7]:
+        t = frontier[(row["model"], row["seed"], row["method"])]
+        d = t.column("d").to_numpy()
+        v = t.column("v").to_numpy()
+        orders = np.column_stack([t.column(c).to_numpy() for c in cols])
+        i = selection.select_brute_force(d, v, orders, row["w"])
+        assert tuple(orders[i]) == tuple(row[c] for c in cols)
+
+
+def test_thresholds_match_fine_grid(ci_runs):
+    # W_FP / W_FN from exact breakpoints bracket the values seen on a fine W grid.
+    run = ci_runs[1]
+    frontier = results.split_by_key(pq.read_table(run / "frontier.parquet"), results.KEY_COLUMNS)
+    w = np.geomspace(1e-5, 20, 3000)
+    thresholds = {(r["method"], r["model"]): r for r in pq.read_table(run / "thresholds.parquet").to_pylist()}
+    cols = ("na", "nb_ft", "nb_e", "nk_ft", "nk_e")
+    for method in ("direct", "indirect"):
+        nb = {}
+        for (model, _seed, m), t in frontier.items():
+            if m != method:
+                continue
+            d, v = t.column("d").to_numpy(), t.column("v").to_numpy()
+            orders = np.column_stack([t.column(c).to_numpy() for c in cols])
+            nb.setdefault(model, []).append(
+                np.array([orders[selection.select_brute_force(d, v, orders, x), 1] for x in w]))
+        fp = np.flatnonzero(np.any(np.array(nb["FB"]) > 0, axis=0))
+        w_fp = thresholds[(method, "FB")]["w_fp"]
+        if fp.size:
+            assert w[fp[-1]] < w_fp <= w[fp[-1] + 1]
+        fn = np.flatnonzero(np.mean(np.array(nb["FF"]), axis=0) < 2)
+        w_fn = thresholds[(method, "FF")]["w_fn"]
+        assert w[fn[0] - 1] < w_fn <= w[fn[0]]
+
+
+def test_resume_after_interruption_gives_identical_tables(ci_runs, tmp_path, monkeypatch, ci_config):
+    run = tmp_path / "resumed"
+    run.mkdir()
+    for name in ("simulations.parquet", "config.yaml"):
+        shutil.copy(ci_runs[1] / name, run / name)
+    real = pipeline._identify_task
+    calls = {"n": 0}
+
+    def interrupted(*args):
+        calls["n"] += 1
+        if calls["n"] > 5:
+            raise KeyboardInterrupt
+        return real(*args)
+
+    monkeypatch.setattr(pipeline, "_identify_task", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        pipeline.identify_study(ci_config, run, jobs=1, show_progress=False)
+    assert not (run / "frontier.parquet").exists()
+    assert len(list((run / ".parts").glob("*/*.frontier.parquet"))) == 5
+    monkeypatch.setattr(pipeline, "_identify_task", real)
+    resumed = pipeline.identify_study(ci_config, run, jobs=1, show_progress=False)
+    assert (resumed.computed, resumed.reused) == (7, 5)
+    for name in ("frontier.parquet", "stage1.parquet"):
+        assert (run / name).read_bytes() == (ci_runs[1] / name).read_bytes()
+    assert not (run / ".parts").exists()
+
+
+def test_done_realizations_are_not_recomputed(ci_runs, ci_config, monkeypatch):
+    def fail(*args):
+        raise AssertionError("recomputed a finished realization")
+
+    monkeypatch.setattr(pipeline, "_identify_task", fail)
+    again = pipeline.identify_study(ci_config, ci_runs[2], jobs=1, show_progress=False)
+    assert again.computed == 0
+
+
+def test_dask_local_cluster_gives_identical_tables(ci_runs, tmp_path):
+    pytest.importorskip("dask.distributed")
+    run = tmp_path / "dask"
+    run.mkdir()
+    for name in ("simulations.parquet", "config.yaml"):
+        shutil.copy(ci_runs[1] / name, run / name)
+    _run(["identify", str(CI_CONFIG), "--run", str(run), "--backend", "dask", "--jobs", "2"])
+    for name in ("frontier.parquet", "stage1.parquet"):
+        assert (run / name).read_bytes() == (ci_runs[1] / name).read_bytes()
+
+
+def _bad_run(tmp_path, ci_runs, damage):
+    run = tmp_path / "bad"
+    shutil.copytree(ci_runs[1], run)
+    (run / "frontier.parquet").unlink()
+    damage(run / "simulations.parquet")
+    return run
+
+
+@pytest.mark.parametrize("damage, message", [
+    (lambda p: p.write_bytes(b"not parquet at all"), "simulations.parquet: not a readable Parquet table"),
+    (lambda p: p.write_bytes(p.read_bytes()[: len(p.read_bytes()) // 2]), "not a readable Parquet table"),
+    (lambda p: pq.write_table(pq.read_table(p).drop_columns(["e"]), p), "missing columns ['e']"),
+    (lambda p: pq.write_table(
+        pq.read_table(p).set_column(6, "e", [np.where(np.arange(12288) == 77, np.nan,
+                                                       pq.read_table(p).column("e").to_numpy())]), p),
+     "column 'e' holds nan at model FB, seed 1, k 77"),
+])
+def test_corrupt_simulations_exit_2(tmp_path, ci_runs, damage, message):
+    run = _bad_run(tmp_path, ci_runs, damage)
+    result = runner.invoke(app, ["identify", str(CI_CONFIG), "--run", str(run), "--quiet"])
+    assert result.exit_code == 2
+    assert message in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not (run / "frontier.parquet").exists()
+
+
+def test_sweep_without_frontier_exit_2(tmp_path):
+    result = runner.invoke(app, ["sweep-w", str(CI_CONFIG), "--run", str(tmp_path / "empty")])
+    assert result.exit_code == 2
+    assert "frontier.parquet: missing; run `hcid identify` first" in result.stderr
+
+
+def test_identify_simulates_when_missing(tmp_path):
+    run = tmp_path / "fresh"
+    result = runner.invoke(app, ["identify", str(CI_CONFIG), "--run", str(run), "--method", "direct",
+                                 "--jobs", "1", "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert (run / "simulations.parquet").is_file()
+    methods = set(pq.read_table(run / "frontier.parquet").column("method").to_pylist())
+    assert methods == {"direct"}
+
+
+def test_other_config_in_same_run_dir_is_refused(ci_runs, tmp_path):
+    other = tmp_path / "other.yaml"
+    other.write_text(CI_CONFIG.read_text().replace("remnant_ratio: 0.15", "remnant_ratio: 0.2"))
+    before = (ci_runs[1] / "frontier.parquet").read_bytes()
+    result = runner.invoke(app, ["simulate", str(other), "--run", str(ci_runs[1]), "--quiet"])
+    assert result.exit_code == 2
+    assert "made with another config (loop.remnant_ratio differs)" in result.stderr
+    assert (ci_runs[1] / "frontier.parquet").read_bytes() == before
