@@ -191,6 +191,24 @@ def _print_simulation_summary(result) -> None:
     typer.echo(f"wrote {result.run_dir / 'simulations.parquet'}")
 
 
+@app.command()
+@_user_errors
+def report(run_dir: Annotated[Path, typer.Argument(help="Run directory.", show_default=False)],
+           out: Annotated[Path | None, typer.Option("--out", help="Output directory [default: RUN_DIR/report].")]
+           = None):
+    """Write RUN_DIR/report/report.md and report.html with the paper's figures and verdicts."""
+    from hcid.report import build_report
+
+    result = build_report(run_dir, out)
+    if result.missing:
+        typer.echo(f"missing stages: {', '.join(result.missing)} (reported what is there)")
+    width = max((len(v.claim) for v in result.verdicts), default=10)
+    for v in result.verdicts:
+        mark = {True: "holds", False: "DOES NOT HOLD", None: "not evaluated"}[v.holds]
+        typer.echo(f"{v.claim:<{width}}  {mark:<14} {v.this_run}")
+    typer.echo(f"report: {result.html}")
+
+
 def main() -> None:
     app()
 

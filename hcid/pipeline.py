@@ -8,6 +8,7 @@ are identical for any ``jobs``.
 from __future__ import annotations
 
 import contextlib
+import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -175,6 +176,7 @@ def simulate_study(
     ``simulation_summary.parquet`` in ``run_dir``, each atomically.
     """
     check_run_dir(config, run_dir, force=force)
+    start = time.perf_counter()
     kn = remnant_gain(config)
     tasks = [(config, m.name, seed, kn) for m in config.models for seed in config.seeds]
     pairs = list(parallel_map(_simulate_task, tasks, jobs=jobs, label="simulate",
@@ -185,6 +187,7 @@ def simulate_study(
     results.write_text(config.to_yaml(), run_dir / "config.yaml")
     results.write_table(simulations, run_dir / results.SIMULATIONS)
     results.write_table(summary, run_dir / results.SIMULATION_SUMMARY)
+    results.append_run_log(run_dir, "simulate", time.perf_counter() - start, jobs)
     return SimulationRun(simulations=simulations, summary=summary, kn=kn, run_dir=run_dir)
 
 
@@ -268,6 +271,7 @@ def identify_study(
     the first two are identical whatever ``jobs``, backend or interruptions.
     """
     check_run_dir(config, run_dir, force=False)
+    start = time.perf_counter()
     records = _load_records(config, run_dir)
     if force:
         results.clear_parts(run_dir)
@@ -303,6 +307,8 @@ def identify_study(
     else:
         stage1 = pa.table({})
     results.clear_parts(run_dir)
+    if tasks:
+        results.append_run_log(run_dir, f"identify ({len(tasks)} tasks)", time.perf_counter() - start, jobs)
     return IdentifyRun(frontier=frontier, stage1=stage1, log=log, computed=len(tasks),
                        reused=reused, run_dir=run_dir)
 

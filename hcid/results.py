@@ -269,3 +269,26 @@ def split_by_key(table: pa.Table, keys: Sequence[str]) -> dict[tuple, pa.Table]:
 def concat(tables: Sequence[pa.Table]) -> pa.Table:
     """Concatenate tables of one schema into a single-chunk table."""
     return pa.concat_tables(tables).combine_chunks()
+
+
+RUN_LOG = "run_log.parquet"
+
+
+def append_run_log(run_dir: Path, stage: str, seconds: float, jobs: int) -> None:
+    """Add one line (stage, wall seconds, workers, finish time) to the run's log.
+
+    The log holds wall times only; it is the one table that differs between
+    otherwise identical runs.
+    """
+    import datetime
+
+    path = Path(run_dir) / RUN_LOG
+    row = pa.table({
+        "stage": [stage], "seconds": [float(seconds)], "jobs": [int(jobs)],
+        "finished": [datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")],
+    })
+    try:
+        previous = pq.read_table(path) if path.is_file() else None
+    except (pa.ArrowException, OSError):
+        previous = None  # a damaged log is replaced, never a reason to fail a run
+    write_table(row if previous is None else pa.concat_tables([previous, row]), path)

@@ -1,0 +1,337 @@
+"""The run report: Markdown and self-contained HTML with PNG figures, from a run's tables.
+
+:func:`build_report` reads what the run directory holds, computes (in
+:mod:`hcid.report.compute`), draws (in :mod:`hcid.report.figures`) and writes
+``report.md``, ``report.html`` (figures embedded) and the PNGs beside them.
+Stages that have not run are named as missing; what is there is reported.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import importlib.metadata
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import yaml
+
+from hcid import results
+from hcid.config import Config, parse_config
+from hcid.errors import DataError
+
+__all__ = ["Report", "build_report"]
+
+
+@dataclass
+class _Doc:
+    """Report being written: Markdown blocks and the figures they refer to."""
+
+    blocks: list[tuple[str, str]] = field(default_factory=list)  # (kind, text): md | figure | table
+    figures: list[str] = field(default_factory=list)
+
+    def text(self, md: str) -> None:
+        self.blocks.append(("md", md))
+
+    def table(self, header: list[str], rows: list[list[str]]) -> None:
+        self.blocks.append(("table", yaml.safe_dump({"header": header, "rows": rows})))
+
+    def figure(self, name: str, caption: str) -> None:
+        self.figures.append(name)
+        self.blocks.append(("figure", yaml.safe_dump({"name": name, "caption": caption})))
+
+
+@dataclass(frozen=True)
+class Report:
+    """Where the report went and what it holds."""
+
+    markdown: Path
+    html: Path
+    figures: tuple[Path, ...]
+    missing: tuple[str, ...]
+    verdicts: list
+
+
+def _read_optional(run_dir: Path, name: str) -> pa.Table | None:
+    path = run_dir / name
+    return results.read_table(path) if path.is_file() else None
+
+
+def _load_config(run_dir: Path) -> Config:
+    path = run_dir / "config.yaml"
+    if not path.is_file():
+        raise DataError(f"{path}: missing; is {run_dir} a run directory (made by `hcid simulate`)?")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise DataError(f"{path}: not valid YAML") from exc
+    return parse_config(data, run_dir.name)
+
+
+def _versions() -> str:
+    names = ["hcid", "numpy", "scipy", "control", "numba", "pyarrow", "joblib", "matplotlib"]
+    out = []
+    for n in names:
+        try:
+            out.append(f"{n} {importlib.metadata.version(n)}")
+        except importlib.metadata.PackageNotFoundError:
+            out.append(f"{n} -")
+    return ", ".join(out)
+
+
+def _fmt_range(r) -> str:
+    return f"{r[0]}..{r[1]}"
+
+
+def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Report:
+    """Write the report of ``run_dir`` into ``out_dir`` (default: ``run_dir/report``)."""
+    from hcid.report import compute, figures
+
+    run_dir = Path(run_dir)
+    out_dir = Path(out_dir) if out_dir is not None else run_dir / "report"
+    config = _load_config(run_dir)
+    summary = _read_optional(run_dir, results.SIMULATION_SUMMARY)
+    frontier = _read_optional(run_dir, results.FRONTIER)
+    log = _read_optional(run_dir, results.IDENTIFY_LOG)
+    stage1 = _read_optional(run_dir, results.STAGE1)
+    selection_table = _read_optional(run_dir, results.SELECTION)
+    thresholds = _read_optional(run_dir, results.THRESHOLDS)
+    runlog = _read_optional(run_dir, results.RUN_LOG)
+    missing = [name for name, t in (("simulation", summary), ("identification", frontier),
+                                    ("W sweep", selection_table)) if t is None]
+    out_dir.mkdir(parents=True, exist_ok=True)
+    figs: dict[str, object] = {}
+    doc = _Doc()
+
+    doc.text(f"# hcid report: {config.name}\n\nRun directory: `{run_dir}`.")
+    if missing:
+        doc.text("**Missing stages:** " + ", ".join(missing)
+                 + ". Run `hcid run CONFIG` to complete them; what is there is reported below.")
+
+    # 1. run facts
+    doc.text("## 1. Run facts")
+    g_d, g_1 = config.identify.direct.grid, config.identify.stage1.grid
+    facts = [
+        ["config", config.name],
+        ["models", ", ".join(m.name for m in config.models)],
+        ["seeds", f"{len(config.seeds)} ({config.seeds[0]}..{config.seeds[-1]})"],
+        ["direct / stage-2 grid", f"na {_fmt_range(g_d.na)}, nb_ft {_fmt_range(g_d.nb1)}, nb_e {_fmt_range(g_d.nb2)}, "
+                                  f"nk_ft {_fmt_range(g_d.nk1)}, nk_e {_fmt_range(g_d.nk2)}"],
+        ["stage-1 grid", f"na {_fmt_range(g_1.na)}, nb_ft {_fmt_range(g_1.nb1)}, nb_fd {_fmt_range(g_1.nb2)}, "
+                         f"nk_ft {_fmt_range(g_1.nk1)}, nk_fd {_fmt_range(g_1.nk2)}"],
+        ["W grid", f"{len(config.w_grid)} points, {config.w_grid[0]:.3g}..{config.w_grid[-1]:.3g} (log)"],
+    ]
+    if log is not None:
+        lg = log.to_pydict()
+        n_cand = sum(lg["n_candidates"]) + sum(lg["stage1_candidates"])
+        n_unst = sum(lg["n_unstable"]) + sum(lg["stage1_unstable"])
+        facts.append(["candidates fitted", f"{n_cand:,} ({n_unst:,} unstable, {n_unst / max(n_cand, 1):.1%})"])
+        for method in ("direct", "indirect"):
+            rows = [i for i, m in enumerate(lg["method"]) if m == method]
+            if rows:
+                s1 = sum(lg["seconds_stage1"][i] for i in rows)
+                tot = sum(lg["seconds"][i] for i in rows)
+                unst = sum(lg["n_unstable"][i] for i in rows)
+                text = f"{tot:.0f} s summed over tasks"
+                if method == "indirect":
+                    unst1 = sum(lg["stage1_unstable"][i] for i in rows)
+                    text += f" (stage 1 {s1:.0f} s, stage 2 {tot - s1:.0f} s); unstable: stage 1 {unst1:,}, stage 2 {unst:,}"
+                else:
+                    text += f"; unstable {unst:,}"
+                facts.append([f"{method} identification", text])
+    if runlog is not None:
+        for row in runlog.to_pylist():
+            facts.append([f"wall time: {row['stage']}", f"{row['seconds']:.1f} s on {row['jobs']} worker(s), {row['finished']}"])
+    facts.append(["packages", _versions()])
+    doc.table(["item", "value"], facts)
+
+    # 2. simulation
+    doc.text("## 2. Simulation")
+    if summary is not None:
+        s = summary.to_pydict()
+        paper = {"FB": "2.43", "FF": "1.22"}
+        rows = []
+        for m in config.models:
+            idx = [i for i, n in enumerate(s["model"]) if n == m.name]
+            rms = np.array([s["rms_e_deg"][i] for i in idx])
+            ratio = np.array([s["noise_ratio_disturbance_only"][i] for i in idx])
+            rows.append([m.name, f"{m.Kpt:g}", f"{m.Kpe:g}", f"{m.TL:g}", f"{m.tau_pe:g}",
+                         f"{rms.mean():.3f} +- {rms.std(ddof=1) if rms.size > 1 else 0:.3f}",
+                         paper.get(m.name, "-"), f"{ratio.mean():.4f}", f"{s['kn'][idx[0]]:.5g}"])
+        doc.table(["model", "Kpt", "Kpe", "TL s", "tau_pe s", "RMS(e) deg (mean +- sd)", "paper Table 2",
+                   "var(n)/var(u) dist.-only", "Kn"], rows)
+        sims = _read_optional(run_dir, results.SIMULATIONS)
+        if sims is not None:
+            recs = results.records(sims, run_dir / results.SIMULATIONS)
+            key = next(((m.name, config.seeds[0]) for m in config.models if m.has_feedforward), next(iter(recs)))
+            rec = recs[key]
+            figs["signals.png"] = figures.plot_signals(rec["t"], rec, f"Record of model {key[0]}, seed {key[1]}")
+            doc.figure("signals.png", f"One simulated record (model {key[0]}, seed {key[1]}), 25 Hz.")
+    else:
+        doc.text("_Missing: `simulation_summary.parquet` (run `hcid simulate`)._")
+
+    # 3-4. curves over W
+    verdict_inputs = {"curves": None, "bic": None, "w047": None}
+    th_rows = thresholds.to_pylist() if thresholds is not None else []
+    w_aic = th_rows[0]["w_aic"] if th_rows else 2.0 / config.identify.direct.estimation.length
+    w_bic = th_rows[0]["w_bic"] if th_rows else float(np.log(config.identify.direct.estimation.length)
+                                                      / config.identify.direct.estimation.length)
+    doc.text("## 3. Model fit vs W (paper Fig. 5)")
+    if selection_table is not None:
+        curves = compute.compute_curves(selection_table)
+        verdict_inputs["curves"] = curves
+        figs["vaf_vs_w.png"] = figures.plot_vaf(curves, {"W_AIC": w_aic, "W_BIC": w_bic})
+        doc.figure("vaf_vs_w.png", "Mean VAF (estimation rows) +- one sd of the selected models over "
+                   "the realizations; dotted W_AIC, dashed W_BIC.")
+        doc.text("## 4. Feedforward found vs W (paper Fig. 6)")
+        marks = {}
+        for r in th_rows:
+            if r["w_fp"] is not None:
+                marks[f"W_FP {r['method']}"] = r["w_fp"]
+            if r["w_fn"] is not None:
+                marks[f"W_FN {r['method']}"] = r["w_fn"]
+        figs["nb_ft_vs_w.png"] = figures.plot_nb_ft(curves, marks)
+        doc.figure("nb_ft_vs_w.png", "Mean nb_ft of the selected models. FB: any nb_ft > 0 is a false "
+                   "positive; FF: a mean below 2 is a false negative.")
+        if th_rows:
+            doc.table(["method", "model", "W_AIC", "W_BIC", "W_FP", "W_FN", "paper"],
+                      [[r["method"], r["model"], f"{r['w_aic']:.3g}", f"{r['w_bic']:.3g}",
+                        "-" if r["w_fp"] is None else f"{r['w_fp']:.3g}",
+                        "-" if r["w_fn"] is None else f"{r['w_fn']:.3g}",
+                        {("direct", False): "W_FP 1.2e-2", ("indirect", False): "W_FP 3.7e-2"}.get(
+                            (r["method"], r["has_feedforward"]), "W_FN 0.26")]
+                       for r in th_rows])
+    else:
+        doc.text("_Missing: `selection.parquet` (run `hcid sweep-w`)._")
+
+    # 5-7. frequency responses
+    doc.text("## 5. Selected models at W_BIC (paper Figs. 7, 8)")
+    if frontier is not None:
+        bic = compute.compute_responses(frontier, config, w_bic)
+        w047 = compute.compute_responses(frontier, config, 0.47)
+        verdict_inputs.update(bic=bic, w047=w047)
+        omega = bic.omega
+        ref02 = compute.reference_feedforward(config, omega)
+        for m in config.models:
+            hft_true, he_true = compute.true_paths(config, m, omega)
+            refs = {}
+            if not m.has_feedforward and ref02 is not None:
+                refs = {"hft": [("FF feedforward, Kpt = 0.2", ref02)]}
+            name = f"bode_{m.name}_bic.png"
+            figs[name] = figures.plot_bode(bic, m.name, {"hft": hft_true, "he": he_true}, refs,
+                                           title=f"{m.name}: selected models at W_BIC = {w_bic:.3g}")
+            doc.figure(name, f"{m.name}: every realization's selected model at W_BIC (thin lines; "
+                       "the count of models with that path in the legend), the true paths (black), "
+                       "the disturbance band 0.23..17.33 rad/s (dashed).")
+        ff = next((m for m in config.models if m.has_feedforward), None)
+        if ff is not None:
+            doc.text("## 6. FF feedback path at W = 0.47 (paper Fig. 9)")
+            _, he_true = compute.true_paths(config, ff, w047.omega)
+            figs["bode_FF_w047.png"] = figures.plot_bode(w047, ff.name, {"he": he_true}, paths=("he",),
+                                                         title=f"{ff.name}: feedback path at W = 0.47")
+            doc.figure("bode_FF_w047.png", "Feedback path of the models selected at W = 0.47.")
+            doc.text("## 7. Errors at W_BIC, direct vs indirect (paper Fig. 10)")
+            hft_true, he_true = compute.true_paths(config, ff, omega)
+            errors = {}
+            for path, true in (("hft", hft_true), ("he", he_true)):
+                for method in ("direct", "indirect"):
+                    h = getattr(bic, path).get((ff.name, method))
+                    if h is not None:
+                        errors[(path, method)] = compute.compute_errors(h, true)
+            figs["errors_bic.png"] = figures.plot_errors(omega, errors, f"{ff.name}: errors at W_BIC, "
+                                                         "mean (solid) and max (dashed) over realizations")
+            doc.figure("errors_bic.png", "Magnitude and phase errors (paper eq. 11-12) of the FF model.")
+        if stage1 is not None:
+            s1 = stage1.to_pydict()
+            combos = {}
+            for i in range(stage1.num_rows):
+                k = (s1["na"][i], s1["nb_ft"][i], s1["nb_fd"][i], s1["nk_ft"][i], s1["nk_fd"][i])
+                combos[k] = combos.get(k, 0) + 1
+            doc.text("Stage-1 choices of the indirect method (na, nb_ft, nb_fd, nk_ft, nk_fd): "
+                     + ", ".join(f"{k} x{v}" for k, v in sorted(combos.items(), key=lambda x: -x[1])[:6]) + ".")
+    else:
+        doc.text("_Missing: `frontier.parquet` (run `hcid identify`)._")
+
+    # 8. verdicts
+    doc.text("## 8. Verdicts: the paper's claims (SPEC section 6) against this run")
+    verdicts = compute.compute_verdicts(config, summary, verdict_inputs["curves"], thresholds,
+                                        verdict_inputs["bic"], verdict_inputs["w047"])
+    doc.table(["claim", "paper", "this run", "holds", "rule"],
+              [[v.claim, v.paper, v.this_run,
+                {True: "holds", False: "does not hold", None: "not evaluated"}[v.holds], v.rule]
+               for v in verdicts])
+
+    written = []
+    for name, fig in figs.items():
+        figures.save(fig, out_dir / name)
+        written.append(out_dir / name)
+    md_path, html_path = out_dir / "report.md", out_dir / "report.html"
+    results.write_text(_markdown(doc), md_path)
+    results.write_text(_html(doc, out_dir, config.name), html_path)
+    return Report(md_path, html_path, tuple(written), tuple(missing), verdicts)
+
+
+def _markdown(doc: _Doc) -> str:
+    parts = []
+    for kind, text in doc.blocks:
+        if kind == "md":
+            parts.append(text)
+        elif kind == "figure":
+            f = yaml.safe_load(text)
+            parts.append(f"![{f['caption']}]({f['name']})\n\n_{f['caption']}_")
+        else:
+            t = yaml.safe_load(text)
+            lines = ["| " + " | ".join(t["header"]) + " |", "|" + "---|" * len(t["header"])]
+            lines += ["| " + " | ".join(str(c).replace("|", "/") for c in row) + " |" for row in t["rows"]]
+            parts.append("\n".join(lines))
+    return "\n\n".join(parts) + "\n"
+
+
+def _inline_md(text: str) -> str:
+    import re
+
+    out = html.escape(text)
+    out = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", out)
+    out = re.sub(r"`(.+?)`", r"<code>\1</code>", out)
+    out = re.sub(r"(?<!\w)_(.+?)_(?!\w)", r"<i>\1</i>", out)
+    return out
+
+
+def _html(doc: _Doc, out_dir: Path, title: str) -> str:
+    body = []
+    for kind, text in doc.blocks:
+        if kind == "md":
+            for para in text.split("\n\n"):
+                if para.startswith("## "):
+                    body.append(f"<h2>{_inline_md(para[3:])}</h2>")
+                elif para.startswith("# "):
+                    body.append(f"<h1>{_inline_md(para[2:])}</h1>")
+                else:
+                    body.append(f"<p>{_inline_md(para)}</p>")
+        elif kind == "figure":
+            f = yaml.safe_load(text)
+            data = base64.b64encode((out_dir / f["name"]).read_bytes()).decode("ascii") \
+                if (out_dir / f["name"]).is_file() else ""
+            body.append(f'<figure><img alt="{html.escape(f["name"])}" src="data:image/png;base64,{data}">'
+                        f"<figcaption>{_inline_md(f['caption'])}</figcaption></figure>")
+        else:
+            t = yaml.safe_load(text)
+            head = "".join(f"<th>{html.escape(h)}</th>" for h in t["header"])
+            rows = "".join(
+                "<tr>" + "".join(f'<td class="{_cell_class(c)}">{html.escape(str(c))}</td>' for c in row) + "</tr>"
+                for row in t["rows"])
+            body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>")
+    style = ("body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;line-height:1.4}"
+             "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 8px;"
+             "vertical-align:top;font-size:0.9em}th{background:#f0f0f0}img{max-width:100%}"
+             "figcaption{font-size:0.9em;color:#444}.holds{background:#e6f4e6}.fails{background:#fbe3e3}"
+             ".na{background:#f4f4f4}")
+    return (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>hcid report: "
+            f"{html.escape(title)}</title><style>{style}</style></head><body>\n" + "\n".join(body)
+            + "\n</body></html>\n")
+
+
+def _cell_class(cell) -> str:
+    return {"holds": "holds", "does not hold": "fails", "not evaluated": "na"}.get(str(cell), "")

@@ -1,0 +1,180 @@
+"""Figures of the report, drawn with matplotlib from :mod:`hcid.report.compute` data.
+
+Each ``plot_*`` takes computed data and draws it; nothing here computes results.
+"""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from hcid.report.compute import DISTURBANCE_BAND, Curves, Responses  # noqa: E402
+
+__all__ = ["plot_bode", "plot_errors", "plot_nb_ft", "plot_signals", "plot_vaf", "save"]
+
+COLORS = {"direct": "tab:blue", "indirect": "tab:orange"}
+STYLES = {0: "-", 1: "--"}
+DPI = 110
+
+
+def save(fig, path) -> None:
+    fig.savefig(path, dpi=DPI, bbox_inches="tight")
+    plt.close(fig)
+
+
+def _key_label(model: str, method: str) -> str:
+    return f"{model} {method}"
+
+
+def _w_lines(ax, marks: dict[str, float]) -> None:
+    for i, (label, w) in enumerate(marks.items()):
+        if w is not None and np.isfinite(w) and w > 0:
+            ax.axvline(w, color="0.3", ls=[":", "--", "-.", (0, (1, 3))][i % 4], lw=1.0, label=label)
+
+
+def plot_vaf(curves: Curves, marks: dict[str, float]):
+    """Paper Fig. 5: mean VAF +- sd of the selected models vs W, small-W and full-range panels."""
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    models = sorted({k[0] for k in curves.vaf_mean})
+    for ax, (lo, hi) in zip(axes, [(curves.w[0], 0.1), (curves.w[0], curves.w[-1])], strict=True):
+        sel = (curves.w >= lo) & (curves.w <= hi)
+        for (model, method), mean in sorted(curves.vaf_mean.items()):
+            sd = curves.vaf_sd[(model, method)]
+            ls = STYLES[models.index(model) % 2]
+            ax.plot(curves.w[sel], mean[sel], ls, color=COLORS.get(method), label=_key_label(model, method))
+            ax.fill_between(curves.w[sel], (mean - sd)[sel], (mean + sd)[sel], color=COLORS.get(method), alpha=0.15)
+        _w_lines(ax, marks)
+        ax.set_xscale("log")
+        ax.set_xlabel("W (penalty per parameter, -)")
+        ax.set_ylabel("VAF of selected model (%)")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_title("(a) small W: VAF, mean +- sd")
+    axes[1].set_title("(b) full range")
+    lows = [m[(curves.w < 0.1)].min() for m in curves.vaf_mean.values()]
+    axes[0].set_ylim(min(lows) - 2 if lows else 90, 100.5)
+    axes[1].legend(fontsize=8, loc="lower left")
+    return fig
+
+
+def plot_nb_ft(curves: Curves, marks: dict[str, float]):
+    """Paper Fig. 6: mean nb_ft of the selected models vs W, with W_FP and W_FN."""
+    fig, ax = plt.subplots(figsize=(8, 4.2))
+    models = sorted({k[0] for k in curves.nb_ft_mean})
+    for (model, method), mean in sorted(curves.nb_ft_mean.items()):
+        ls = STYLES[models.index(model) % 2]
+        ax.plot(curves.w, mean, ls, color=COLORS.get(method), label=_key_label(model, method))
+    _w_lines(ax, marks)
+    ax.axhline(2.0, color="0.6", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_xlabel("W (penalty per parameter, -)")
+    ax.set_ylabel("mean nb_ft of selected models (-)")
+    ax.set_title("Feedforward found vs W (nb_ft = 0: no feedforward; >= 2 needed for a differentiator)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig
+
+
+def _bode_axes(ax_mag, ax_ph, omega, h, color, label, alpha):
+    for i, row in enumerate(h):
+        ax_mag.loglog(omega, np.abs(row), color=color, lw=0.6, alpha=alpha, label=label if i == 0 else None)
+        ax_ph.semilogx(omega, np.degrees(np.unwrap(np.angle(row))), color=color, lw=0.6, alpha=alpha)
+
+
+def plot_bode(responses: Responses, model: str, truths: dict[str, np.ndarray],
+              references: dict[str, tuple[str, np.ndarray]] | None = None,
+              paths: tuple[str, ...] = ("hft", "he"), title: str = ""):
+    """Paper Figs. 7-9: selected models of every realization (thin lines) against the truth.
+
+    ``truths[path]`` is the true response of ``path`` ('hft' or 'he');
+    ``references`` adds other dashed curves, e.g. the FF feedforward with Kpt = 0.2.
+    """
+    names = {"hft": "feedforward Hft (u per ft)", "he": "feedback He (u per e)"}
+    fig, axes = plt.subplots(2, len(paths), figsize=(5.5 * len(paths), 6.5), sharex=True, squeeze=False)
+    omega = responses.omega
+    for col, path in enumerate(paths):
+        ax_mag, ax_ph = axes[0, col], axes[1, col]
+        for method in ("direct", "indirect"):
+            h = getattr(responses, path).get((model, method))
+            if h is None:
+                continue
+            keep = np.any(np.abs(h) > 0, axis=1)
+            if keep.any():
+                _bode_axes(ax_mag, ax_ph, omega, h[keep], COLORS[method], f"{method} ({int(keep.sum())})", 0.5)
+        true = truths.get(path)
+        if true is not None and np.any(np.abs(true) > 0):
+            ax_mag.loglog(omega, np.abs(true), "k", lw=2, label="true")
+            ax_ph.semilogx(omega, np.degrees(np.unwrap(np.angle(true))), "k", lw=2)
+        for label, ref in (references or {}).get(path, []):
+            ax_mag.loglog(omega, np.abs(ref), "k--", lw=1.5, label=label)
+            ax_ph.semilogx(omega, np.degrees(np.unwrap(np.angle(ref))), "k--", lw=1.5)
+        for ax in (ax_mag, ax_ph):
+            for w in DISTURBANCE_BAND:
+                ax.axvline(w, color="0.5", ls="--", lw=0.8)
+            ax.grid(True, which="both", alpha=0.3)
+        ax_mag.set_title(names[path])
+        ax_mag.set_ylabel("magnitude (-)")
+        ax_ph.set_ylabel("phase (deg)")
+        ax_ph.set_xlabel("frequency (rad/s)")
+        ax_mag.legend(fontsize=8, loc="best")
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def plot_errors(omega: np.ndarray, errors: dict[tuple[str, str], dict[str, np.ndarray]], title: str):
+    """Paper Fig. 10: mean and max magnitude and phase errors, direct vs indirect.
+
+    ``errors[(path, method)]`` comes from :func:`hcid.report.compute.compute_errors`.
+    """
+    fig, axes = plt.subplots(2, 2, figsize=(11, 6.5), sharex=True)
+    names = {"hft": "feedforward", "he": "feedback"}
+    for col, path in enumerate(("hft", "he")):
+        for method in ("direct", "indirect"):
+            err = errors.get((path, method))
+            if err is None:
+                continue
+            c = COLORS[method]
+            axes[0, col].loglog(omega, err["mag_mean"], color=c, label=f"{method} mean")
+            axes[0, col].loglog(omega, err["mag_max"], color=c, ls="--", label=f"{method} max")
+            axes[1, col].semilogx(omega, err["phase_mean"], color=c)
+            axes[1, col].semilogx(omega, err["phase_max"], color=c, ls="--")
+        axes[0, col].set_title(f"{names[path]} path")
+        axes[0, col].set_ylabel("| |H| - |Htrue| | (-)")
+        axes[1, col].set_ylabel("|phase error| (deg)")
+        axes[1, col].set_xlabel("frequency (rad/s)")
+        axes[1, col].set_ylim(0, 180)
+        for ax in axes[:, col]:
+            for w in DISTURBANCE_BAND:
+                ax.axvline(w, color="0.5", ls="--", lw=0.8)
+            ax.grid(True, which="both", alpha=0.3)
+        axes[0, col].legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def plot_signals(t: np.ndarray, channels: dict[str, np.ndarray], title: str):
+    """One record: target, system output, error and control, in deg."""
+    fig, axes = plt.subplots(2, 1, figsize=(11, 5.5), sharex=True)
+    for name in ("ft", "theta", "e"):
+        if name in channels:
+            axes[0].plot(t, np.degrees(channels[name]), lw=0.9, label=name)
+    if "fd" in channels:
+        axes[0].plot(t, 3 * np.degrees(channels["fd"]), lw=0.7, label="fd x 3")
+    axes[0].set_ylabel("angle (deg)")
+    axes[0].legend(fontsize=8, ncol=4, loc="upper right")
+    axes[1].plot(t, np.degrees(channels["u"]), lw=0.7, label="u")
+    if "n" in channels:
+        axes[1].plot(t, np.degrees(channels["n"]), lw=0.7, label="remnant n")
+    axes[1].set_ylabel("control (deg)")
+    axes[1].set_xlabel("time (s)")
+    axes[1].legend(fontsize=8, loc="upper right")
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
