@@ -12,7 +12,8 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/hcid simulate configs/paper.yaml
+	$(BIN)/hcid run configs/paper.yaml
+	$(BIN)/hcid report runs/paper
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -m "not slow" tests

@@ -93,7 +93,8 @@ def plot_bode(responses: Responses, model: str, truths: dict[str, np.ndarray],
     ``references`` adds other dashed curves, e.g. the FF feedforward with Kpt = 0.2.
     """
     names = {"hft": "feedforward Hft (u per ft)", "he": "feedback He (u per e)"}
-    fig, axes = plt.subplots(2, len(paths), figsize=(5.5 * len(paths), 6.5), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(2, len(paths), figsize=(max(8.0, 5.5 * len(paths)), 6.5), sharex=True,
+                             squeeze=False)
     omega = responses.omega
     for col, path in enumerate(paths):
         ax_mag, ax_ph = axes[0, col], axes[1, col]
