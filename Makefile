@@ -16,10 +16,10 @@ run: $(STAMP)
 	$(BIN)/hcid report runs/paper
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -m "not slow" tests
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -q -m "not slow" tests
 
 test-all: $(STAMP)
-	$(BIN)/python -m pytest -q tests
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -q tests
 
 lint: $(STAMP)
 	$(BIN)/ruff check hcid tests benchmarks

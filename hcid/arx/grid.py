@@ -205,19 +205,13 @@ def candidates(grid: Grid) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarr
         Lexicographic in ``(na, nb1, nb2, nk1, nk2)``; a dropped input
         (``nb = 0``) has ``nk = 0``.
     """
-    block_na, block_nb1, block_nb2, _, size = order_blocks(grid)
+    block_na, block_nb1, block_nb2, start, size = order_blocks(grid)
     na = np.repeat(block_na, size)
     nb1 = np.repeat(block_nb1, size)
     nb2 = np.repeat(block_nb2, size)
-    nk1_parts, nk2_parts = [], []
-    k1_all = np.arange(grid.nk1[0], grid.nk1[1] + 1, dtype=np.int64)
-    k2_all = np.arange(grid.nk2[0], grid.nk2[1] + 1, dtype=np.int64)
-    zero = np.zeros(1, dtype=np.int64)
-    for b1, b2 in zip(block_nb1, block_nb2, strict=True):
-        k1 = k1_all if b1 > 0 else zero
-        k2 = k2_all if b2 > 0 else zero
-        nk1_parts.append(np.repeat(k1, k2.size))
-        nk2_parts.append(np.tile(k2, k1.size))
-    nk1 = np.concatenate(nk1_parts)
-    nk2 = np.concatenate(nk2_parts)
-    return na, nb1, nb2, nk1, nk2
+    # Position inside the block, nk1 slowest; a dropped input has one "delay".
+    within = np.arange(size.sum(), dtype=np.int64) - np.repeat(start, size)
+    n_delays2 = np.where(nb2 > 0, grid.nk2[1] - grid.nk2[0] + 1, 1)
+    nk1 = np.where(nb1 > 0, grid.nk1[0] + within // n_delays2, 0)
+    nk2 = np.where(nb2 > 0, grid.nk2[0] + within % n_delays2, 0)
+    return na, nb1, nb2, nk1.astype(np.int64), nk2.astype(np.int64)

@@ -1,0 +1,27 @@
+"""One realistic record for the benchmarks: the paper config, FF model, seed 1.
+
+Mirrors the ``paper_record`` fixture of ``tests/conftest.py`` (kept here, not
+in ``hcid``, because only benchmarks need it).
+"""
+
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER_CONFIG = ROOT / "configs" / "paper.yaml"
+
+
+def paper_record(model: str = "FF", seed: int = 1) -> dict[str, np.ndarray]:
+    """ft_s, fd, e, u (rad) of one paper record at 25 Hz, 2048 samples.
+
+    ``ft_s(k) = ft(k + 25)``, zeros after the record (SPEC section 3).
+    """
+    from hcid.config import load_config
+    from hcid.simulate import remnant_gain, simulate_realization
+
+    config = load_config(PAPER_CONFIG)
+    r = simulate_realization(config, config.model(model), seed, remnant_gain(config))
+    shift = config.identify.shift_samples(config.timing.output_rate)
+    ft_s = np.concatenate([r.ft[shift:], np.zeros(shift)])
+    return {"ft_s": ft_s, "fd": r.fd, "e": r.e, "u": r.u}

@@ -1,0 +1,20 @@
+"""MISO ARX identification over candidate grids (SPEC sections 3 and 4).
+
+:mod:`hcid.arx.grid` defines the grids, :mod:`hcid.arx.engine` fits them,
+:mod:`hcid.arx.reference` is the slow, obvious twin the tests compare with.
+"""
+
+from hcid.arx.engine import GridFit, best, fit_grid, simulate
+from hcid.arx.grid import Grid, candidates, max_lag, n_candidates, n_parameters
+
+__all__ = [
+    "Grid",
+    "GridFit",
+    "best",
+    "candidates",
+    "fit_grid",
+    "max_lag",
+    "n_candidates",
+    "n_parameters",
+    "simulate",
+]

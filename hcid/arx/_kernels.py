@@ -1,0 +1,352 @@
+"""Numba kernels of the ARX grid engine (private; see :mod:`hcid.arx.engine`).
+
+Storage convention: a triangular factor is kept *transposed*, one row per
+column of R, so that a column is contiguous: ``f[j, i] = R[i, j]``. The
+right-hand side ``c = Q^T o`` is stored as one more row, ``f[n_cols, :]``.
+
+Column layout of the record factor (built by the wrapper): first the i1 lags
+``nk1_lo .. nk1_hi + nb1_hi - 1``, then the i2 lags ``nk2_lo .. nk2_hi +
+nb2_hi - 1`` (an input with ``nb_hi = 0`` has none), then the output lags
+``1 .. na_hi`` (columns ``-o(k - i)``, so their coefficients are ``a_i``).
+
+A work unit is one delay pair ``(k1, k2)``; ``-1`` marks a dropped input.
+Unit ``(k1, k2)`` owns every candidate with those delays and
+``nb1 > 0`` (``k1 >= 0``) or ``nb1 = 0`` (``k1 = -1``), likewise for input
+2, so every candidate belongs to exactly one unit and units write disjoint
+rows of the outputs.
+
+``bounds`` is an int64 array of shape (5, 2): the inclusive ranges of na,
+nb1, nb2, nk1, nk2 in that order.
+"""
+
+import numpy as np
+from numba import njit, prange
+
+# Samples simulated between two finiteness checks.
+_BLOCK = 256
+
+
+@njit(cache=True)
+def select_qr(src, n_src, cols, n_cols, dst):
+    """Triangular factor of a column subset of a triangular factor.
+
+    ``src`` (transposed, rhs at row ``n_src``) holds R_src and c_src;
+    ``cols`` (increasing, length >= n_cols) picks columns. On return
+    ``dst[:n_cols]`` holds the transposed triangular factor of
+    ``R_src[:, cols]`` and ``dst[n_cols, :n_cols]`` the transformed rhs, so
+    that ``min ||R_src[:, cols] th - c_src||`` has the same minimiser as
+    ``min ||R_dst th - c_dst||``. Column j of the subset is zero below row
+    ``cols[j]``, so its Householder reflector spans rows ``j .. cols[j]``
+    only: removing columns from a QR factor costs little.
+    """
+    top = cols[n_cols - 1] + 1
+    for j in range(n_cols):
+        cj = cols[j]
+        for i in range(cj + 1):
+            dst[j, i] = src[cj, i]
+    for i in range(top):
+        dst[n_cols, i] = src[n_src, i]
+    for j in range(n_cols):
+        last = cols[j]
+        s = 0.0
+        for i in range(j + 1, last + 1):
+            s += dst[j, i] * dst[j, i]
+        if s == 0.0:
+            continue
+        alpha = dst[j, j]
+        beta = -np.copysign(np.sqrt(alpha * alpha + s), alpha)
+        tau = (beta - alpha) / beta
+        scale = 1.0 / (alpha - beta)
+        for i in range(j + 1, last + 1):
+            dst[j, i] *= scale
+        dst[j, j] = beta
+        for k in range(j + 1, n_cols + 1):
+            w = dst[k, j]
+            for i in range(j + 1, last + 1):
+                w += dst[j, i] * dst[k, i]
+            w *= tau
+            dst[k, j] -= w
+            for i in range(j + 1, last + 1):
+                dst[k, i] -= w * dst[j, i]
+
+
+@njit(cache=True)
+def back_substitute(f, n_f, k, theta, tmp):
+    """Solve the leading k x k block of a transposed triangular factor.
+
+    ``f[:n_f]`` is the factor, ``f[n_f]`` the rhs. Writes ``theta[:k]``.
+    Returns False (theta undefined) if a diagonal entry is exactly zero.
+    """
+    for i in range(k):
+        tmp[i] = f[n_f, i]
+    for j in range(k - 1, -1, -1):
+        diag = f[j, j]
+        if diag == 0.0:
+            return False
+        t = tmp[j] / diag
+        theta[j] = t
+        for i in range(j):
+            tmp[i] -= t * f[j, i]
+    return True
+
+
+@njit(cache=True)
+def is_stable(a, na, work):
+    """Schur-Cohn step-down test of A = a[0] + ... + a[na] z^-na, a[0] = 1.
+
+    True iff every root of A lies strictly inside the unit circle, i.e.
+    every reflection coefficient has magnitude < 1. NaN coefficients give
+    False.
+    """
+    for i in range(na + 1):
+        work[i] = a[i]
+    for m in range(na, 0, -1):
+        k = work[m]
+        if not abs(k) < 1.0:
+            return False
+        den = 1.0 - k * k
+        for j in range(1, m // 2 + 1):
+            lo = work[j]
+            hi = work[m - j]
+            work[j] = (lo - k * hi) / den
+            work[m - j] = (hi - k * lo) / den
+    return True
+
+
+@njit(cache=True)
+def simulate_into(a, na, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, x, yp, ypad):
+    """Simulate ``A o_hat = B1 i1(k - nk1) + B2 i2(k - nk2)`` from rest.
+
+    ``i1p``/``i2p`` are the inputs with ``pad`` leading zeros (``pad`` at
+    least the largest input lag), ``x`` (length n) is scratch for the input
+    part, ``yp`` receives ``o_hat`` at ``yp[ypad:ypad + n]`` and must hold
+    zeros in ``yp[:ypad]`` (``ypad >= na``). Checks finiteness every
+    ``_BLOCK`` samples and returns the number of samples simulated; the
+    simulation is finite iff that is n and ``yp[ypad + n - 1]`` is finite
+    (a non-finite output value stays non-finite in the recursion).
+    """
+    n = x.shape[0]
+    for k in range(n):
+        x[k] = 0.0
+    # Slices indexed by range() variables: numba then knows the indices are
+    # non-negative and drops its negative-index wraparound, which would keep
+    # LLVM from vectorising (3x slower).
+    for j in range(nb1):
+        c = b1[j]
+        base = pad - nk1 - j
+        src = i1p[base : base + n]
+        for k in range(n):
+            x[k] += c * src[k]
+    for j in range(nb2):
+        c = b2[j]
+        base = pad - nk2 - j
+        src = i2p[base : base + n]
+        for k in range(n):
+            x[k] += c * src[k]
+    # Lags 1 and 2 are kept in registers (y1, y2): read back from memory
+    # they would add a store-to-load delay to the loop-carried path.
+    a1 = a[1]
+    a2 = a[2] if na >= 2 else 0.0
+    y1 = 0.0
+    y2 = 0.0
+    for start in range(0, n, _BLOCK):
+        stop = min(start + _BLOCK, n)
+        for k in range(start, stop):
+            # Older lags first, in two interleaved partial sums (two short
+            # add chains instead of one long one), so the y(k-1) term, the
+            # only one on the shortest loop-carried path, comes last.
+            # Unsigned indices: no wraparound code either (1.5x at na = 7).
+            base = np.uint64(ypad + k)
+            s0 = 0.0
+            s1 = 0.0
+            i = na
+            while i > 3:
+                s0 += a[i] * yp[base - np.uint64(i)]
+                s1 += a[i - 1] * yp[base - np.uint64(i - 1)]
+                i -= 2
+            if i == 3:
+                s0 += a[3] * yp[base - np.uint64(3)]
+            y = ((x[k] - (s0 + s1)) - a2 * y2) - a1 * y1
+            yp[base] = y
+            y2 = y1
+            y1 = y
+        if not abs(y1) < np.inf:
+            return stop
+    return n
+
+
+@njit(cache=True)
+def _validation_mse(yp, ypad, o, start, stop):
+    # Four partial sums: a fixed order of additions, so the same result on
+    # every call, and shorter add latency chains.
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    k = start
+    while k + 4 <= stop:
+        e0 = yp[ypad + k] - o[k]
+        e1 = yp[ypad + k + 1] - o[k + 1]
+        e2 = yp[ypad + k + 2] - o[k + 2]
+        e3 = yp[ypad + k + 3] - o[k + 3]
+        s0 += e0 * e0
+        s1 += e1 * e1
+        s2 += e2 * e2
+        s3 += e3 * e3
+        k += 4
+    while k < stop:
+        e0 = yp[ypad + k] - o[k]
+        s0 += e0 * e0
+        k += 1
+    return ((s0 + s1) + (s2 + s3)) / (stop - start)
+
+
+@njit(cache=True)
+def _fit_unit(k1, k2, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset, v_out, theta_out):
+    """Fit, test and simulate every candidate of work unit (k1, k2)."""
+    na_lo, na_hi = bounds[0, 0], bounds[0, 1]
+    nb1_lo, nb1_hi = bounds[1, 0], bounds[1, 1]
+    nb2_lo, nb2_hi = bounds[2, 0], bounds[2, 1]
+    nk1_lo, nk1_hi = bounds[3, 0], bounds[3, 1]
+    nk2_lo, nk2_hi = bounds[4, 0], bounds[4, 1]
+    n1 = nk1_hi - nk1_lo + nb1_hi if nb1_hi > 0 else 0
+    n2 = nk2_hi - nk2_lo + nb2_hi if nb2_hi > 0 else 0
+    p = n1 + n2 + na_hi
+    n = o.shape[0]
+
+    m1 = nb1_hi if k1 >= 0 else 0
+    m2 = nb2_hi if k2 >= 0 else 0
+    m_u = m1 + m2 + na_hi
+    cols = np.empty(m_u, dtype=np.int64)
+    for j in range(m1):
+        cols[j] = k1 - nk1_lo + j
+    for j in range(m2):
+        cols[m1 + j] = n1 + k2 - nk2_lo + j
+    for i in range(na_hi):
+        cols[m1 + m2 + i] = n1 + n2 + i
+    unit = np.empty((m_u + 1, p))
+    select_qr(rt, p, cols, m_u, unit)
+
+    if k1 >= 0 and k2 >= 0:
+        within = (k1 - nk1_lo) * (nk2_hi - nk2_lo + 1) + (k2 - nk2_lo)
+    elif k1 >= 0:
+        within = k1 - nk1_lo
+    elif k2 >= 0:
+        within = k2 - nk2_lo
+    else:
+        within = 0
+    g1_lo, g1_hi = (max(nb1_lo, 1), nb1_hi) if k1 >= 0 else (0, 0)
+    g2_lo, g2_hi = (max(nb2_lo, 1), nb2_hi) if k2 >= 0 else (0, 0)
+    nk1 = k1 if k1 >= 0 else 0
+    nk2 = k2 if k2 >= 0 else 0
+
+    group = np.empty((m_u + 1, m_u))
+    theta = np.empty(m_u)
+    tmp = np.empty(m_u)
+    a = np.empty(na_hi + 1)
+    a[0] = 1.0
+    jury = np.empty(na_hi + 1)
+    b1 = np.empty(max(nb1_hi, 1))
+    b2 = np.empty(max(nb2_hi, 1))
+    x = np.empty(n)
+    yp = np.zeros(na_hi + n)
+
+    for g1 in range(g1_lo, g1_hi + 1):
+        for g2 in range(g2_lo, g2_hi + 1):
+            # Subset [i1 lags 1..g1, i2 lags 1..g2, o lags 1..na_hi]: every
+            # na of the range is a prefix of this one factorisation.
+            m_g = g1 + g2 + na_hi
+            for j in range(g1):
+                cols[j] = j
+            for j in range(g2):
+                cols[g1 + j] = m1 + j
+            for i in range(na_hi):
+                cols[g1 + g2 + i] = m1 + m2 + i
+            select_qr(unit, m_u, cols, m_g, group)
+            for na in range(na_lo, na_hi + 1):
+                k = g1 + g2 + na
+                idx = offset[na - na_lo, g1 - nb1_lo, g2 - nb2_lo] + within
+                solved = back_substitute(group, m_g, k, theta, tmp)
+                finite = solved
+                if solved:
+                    for j in range(k):
+                        if not abs(theta[j]) < np.inf:
+                            finite = False
+                if not finite:
+                    for j in range(k):
+                        theta_out[idx, j] = np.nan
+                    v_out[idx] = np.inf
+                    continue
+                for j in range(g1):
+                    b1[j] = theta[j]
+                for j in range(g2):
+                    b2[j] = theta[g1 + j]
+                for i in range(na):
+                    a[i + 1] = theta[g1 + g2 + i]
+                for i in range(na):
+                    theta_out[idx, i] = a[i + 1]
+                for j in range(g1):
+                    theta_out[idx, na + j] = b1[j]
+                for j in range(g2):
+                    theta_out[idx, na + g1 + j] = b2[j]
+                v = np.inf
+                if is_stable(a, na, jury):
+                    done = simulate_into(a, na, b1, g1, nk1, b2, g2, nk2, i1p, i2p, pad, x, yp, na_hi)
+                    if done == n and abs(yp[na_hi + n - 1]) < np.inf:
+                        v = _validation_mse(yp, na_hi, o, val_start, val_stop)
+                        if not v < np.inf:
+                            v = np.inf
+                v_out[idx] = v
+
+
+@njit(cache=True)
+def fit_units(units, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset, v_out, theta_out):
+    """Serial driver: every work unit, in order, on the calling thread.
+
+    Parameters
+    ----------
+    units : int64 array, shape (n_units, 2)
+        Work units ``(k1, k2)``, -1 for a dropped input.
+    rt : float64 array, shape (p + 1, p)
+        Transposed R and rhs c of the record's lagged matrix (module doc).
+    bounds : int64 array, shape (5, 2)
+        Grid ranges of na, nb1, nb2, nk1, nk2.
+    i1p, i2p : float64 arrays, shape (pad + n,)
+        Inputs after ``pad`` zeros (pad = the grid's largest lag).
+    pad : int
+    o : float64 array, shape (n,)
+        Output.
+    val_start, val_stop : int
+        Validation rows of V.
+    offset : int64 array, shape (n_na, n_nb1, n_nb2)
+        Index of each order triple's first candidate in the candidate order
+        of :func:`hcid.arx.grid.candidates`; a unit adds its delay position.
+    v_out : float64 array, shape (n_candidates,)
+        Out: V per candidate, inf if unstable.
+    theta_out : float64 array, shape (n_candidates, na_hi + nb1_hi + nb2_hi)
+        Out: ``[a1..a_na, b1_0.., b2_0..]`` per candidate, zero-padded
+        (NaN if the regression was singular).
+    """
+    for u in range(units.shape[0]):
+        _fit_unit(
+            units[u, 0], units[u, 1], rt, bounds, i1p, i2p, pad, o,
+            val_start, val_stop, offset, v_out, theta_out,
+        )  # fmt: skip
+
+
+@njit(cache=True, parallel=True)
+def fit_units_parallel(
+    units, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset, v_out, theta_out, n_threads
+):
+    """Parallel driver: thread t takes units t, t + n_threads, ...
+
+    Every unit writes only its own candidates' rows of v_out and theta_out,
+    and computes them exactly as :func:`fit_units` does.
+    """
+    n_units = units.shape[0]
+    for t in prange(n_threads):
+        for u in range(t, n_units, n_threads):
+            _fit_unit(
+                units[u, 0], units[u, 1], rt, bounds, i1p, i2p, pad, o,
+                val_start, val_stop, offset, v_out, theta_out,
+            )  # fmt: skip
