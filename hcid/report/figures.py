@@ -31,9 +31,11 @@ def _key_label(model: str, method: str) -> str:
 
 
 def _w_lines(ax, marks: dict[str, float]) -> None:
+    """Vertical lines at marked W values; a method's marks take its colour."""
     for i, (label, w) in enumerate(marks.items()):
         if w is not None and np.isfinite(w) and w > 0:
-            ax.axvline(w, color="0.3", ls=[":", "--", "-.", (0, (1, 3))][i % 4], lw=1.0, label=label)
+            color = next((c for m, c in COLORS.items() if m in label), "0.3")
+            ax.axvline(w, color=color, ls=[":", "--", "-.", (0, (3, 1, 1, 1))][i % 4], lw=1.2, label=label)
 
 
 def plot_vaf(curves: Curves, marks: dict[str, float]):
