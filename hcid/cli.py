@@ -93,17 +93,24 @@ def _methods(method: str) -> tuple[str, ...]:
 @_user_errors
 def identify(config: ConfigArg, method: MethodOpt = "both", run: RunOpt = None, jobs: JobsOpt = 2,
              backend: BackendOpt = "loky", scheduler: SchedulerOpt = None, force: ForceOpt = False,
-             quiet: QuietOpt = False):
-    """Identify every model x seed of CONFIG; writes RUN/frontier.parquet (and stage1.parquet)."""
+             quiet: QuietOpt = False,
+             data: Annotated[Path | None, typer.Option(
+                 "--data", help="Measured data (.csv, .parquet or .mat) to identify instead of "
+                                "simulations; columns mapped by the config's data section.")] = None):
+    """Identify every model x seed of CONFIG (or every run of --data); writes RUN/frontier.parquet."""
     from hcid.config import load_config
-    from hcid.pipeline import identify_study, simulate_study
+    from hcid.pipeline import identify_study, import_data, simulate_study
 
     cfg = load_config(config)
     methods = _methods(method)
     run_dir = _run_dir(run, cfg)
-    if not (run_dir / "simulations.parquet").exists():
+    records = None
+    if data is not None:
+        records = import_data(cfg, run_dir, data)
+        typer.echo(f"read {len(records)} run(s) of {cfg.data.name} from {data}")
+    elif not (run_dir / "simulations.parquet").exists():
         _print_simulation_summary(simulate_study(cfg, run_dir, jobs=jobs, show_progress=not quiet))
-    result = identify_study(cfg, run_dir, methods, jobs=jobs, force=force, backend=backend,
+    result = identify_study(cfg, run_dir, methods, data=records, jobs=jobs, force=force, backend=backend,
                             scheduler=scheduler, show_progress=not quiet)
     _print_identify_summary(result)
 
@@ -189,6 +196,30 @@ def _print_simulation_summary(result) -> None:
             f"{paper_text:>8}{ratio.mean():>26.4f}"
         )
     typer.echo(f"wrote {result.run_dir / 'simulations.parquet'}")
+
+
+@app.command("calibrate-w")
+@_user_errors
+def calibrate_w(config: ConfigArg, run: RunOpt = None, jobs: JobsOpt = 2, backend: BackendOpt = "loky",
+                scheduler: SchedulerOpt = None, quiet: QuietOpt = False):
+    """Calibrate W on simulations of the config's FB and FF twins: rates, safe interval, recommended W."""
+    from hcid.config import load_config
+    from hcid.pipeline import calibrate_study, sweep_study
+
+    cfg = load_config(config)
+    run_dir = _run_dir(run, cfg)
+    result = calibrate_study(cfg, run_dir, jobs=jobs, backend=backend, scheduler=scheduler,
+                             show_progress=not quiet)
+    sweep_study(cfg, run_dir)
+    typer.echo(f"target rate {cfg.target_rate:g} for false positives (FB twin) and false negatives (FF twin)")
+    for cal in result.calibrations:
+        if cal.has_safe_interval:
+            typer.echo(f"{cal.method:<9} safe W in [{cal.safe_low:.4g}, {cal.safe_high:.4g}), "
+                       f"recommended W = {cal.recommended:.4g} (geometric midpoint)")
+        else:
+            typer.echo(f"{cal.method:<9} no safe W: false positives up to {cal.safe_low:.4g}, "
+                       f"false negatives from {cal.safe_high:.4g}")
+    typer.echo(f"wrote {run_dir / 'calibration.parquet'}")
 
 
 @app.command()

@@ -26,6 +26,7 @@ from hcid.errors import ConfigError
 
 __all__ = [
     "Config",
+    "DataConfig",
     "Disturbance",
     "GridRange",
     "HCModel",
@@ -198,6 +199,22 @@ class IdentifyConfig:
 
 
 @dataclass(frozen=True)
+class DataConfig:
+    """How to read measured data: a label and the names of the columns (or .mat variables).
+
+    ``columns`` maps ft, fd, e, u, time, run and rate to names in the file;
+    ``w_report`` are the W values at which the report shows the data's models.
+    """
+
+    name: str
+    columns: dict[str, str]
+    w_report: tuple[float, ...]
+
+
+_DATA_COLUMNS = {"ft": "ft", "fd": "fd", "e": "e", "u": "u", "time": "t", "run": "run", "rate": "rate"}
+
+
+@dataclass(frozen=True)
 class Config:
     """A whole study."""
 
@@ -210,7 +227,9 @@ class Config:
     seeds: tuple[int, ...]
     identify: IdentifyConfig
     w_grid: tuple[float, ...]
-    raw: dict[str, Any] = field(repr=False, compare=False, hash=False)
+    target_rate: float = 0.0
+    data: DataConfig | None = None
+    raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False, hash=False)
 
     def model(self, name: str) -> HCModel:
         for m in self.models:
@@ -542,9 +561,11 @@ def parse_config(data: Any, name: str) -> Config:
     w_max = wg.number("max", 0.0, 1e3, open_lo=True)
     points = wg.integer("points", 2, 100_000)
     wg.done()
+    target_rate = sel.number("target_rate", 0.0, 0.5, 0.0)
     sel.done()
     if w_max <= w_min:
         raise ConfigError(f"selection.w_grid.max: must be > selection.w_grid.min ({w_min:g}), got {w_max:g}")
+    data_cfg = _data(top.get("data", None), [m.name for m in models])
     top.done()
 
     w_grid = tuple(
@@ -559,11 +580,36 @@ def parse_config(data: Any, name: str) -> Config:
         "stage1": _stage_raw(stage1),
         "stage2": _stage_raw(stage2),
     }
-    raw["selection"] = {"w_grid": {"min": w_min, "max": w_max, "points": points}}
+    raw["selection"] = {"w_grid": {"min": w_min, "max": w_max, "points": points}, "target_rate": target_rate}
     return Config(
         name=study_name, models=models, loop=loop, disturbance=disturbance, target=target,
-        timing=timing, seeds=seeds, identify=identify, w_grid=w_grid, raw=raw,
+        timing=timing, seeds=seeds, identify=identify, w_grid=w_grid, target_rate=target_rate,
+        data=data_cfg, raw=raw,
     )
+
+
+def _data(value: Any, model_names: list[str]) -> DataConfig | None:
+    if value is None:
+        return None
+    s = _Section(value, "data")
+    name = s.get("name", "data")
+    if not isinstance(name, str) or not name.isidentifier() or name in model_names:
+        raise ConfigError(f"data.name: must be an identifier other than the model names {model_names}, "
+                          f"got {_fmt(name)}")
+    cs = s.section("columns", {})
+    columns = {}
+    for key, default in _DATA_COLUMNS.items():
+        col = cs.get(key, default)
+        if not isinstance(col, str) or not col:
+            raise ConfigError(f"data.columns.{key}: must be a column or variable name, got {_fmt(col)}")
+        columns[key] = col
+    cs.done()
+    w_raw = s.get("w_report", [0.00715, 0.47])
+    if not isinstance(w_raw, list) or not w_raw or not all(
+            isinstance(w, int | float) and not isinstance(w, bool) and w > 0 for w in w_raw):
+        raise ConfigError(f"data.w_report: must be a non-empty list of W > 0, got {_fmt(w_raw)}")
+    s.done()
+    return DataConfig(name=name, columns=columns, w_report=tuple(float(w) for w in w_raw))
 
 
 def _stage_raw(stage: StageConfig) -> dict:

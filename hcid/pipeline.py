@@ -24,11 +24,14 @@ from hcid.identify import METHODS, identify
 from hcid.simulate import remnant_gain, simulate_realization
 
 __all__ = [
+    "CalibrationRun",
     "IdentifyRun",
     "SimulationRun",
     "SweepRun",
     "check_run_dir",
+    "calibrate_study",
     "identify_study",
+    "import_data",
     "parallel_map",
     "simulate_study",
     "sweep_study",
@@ -257,6 +260,7 @@ def identify_study(
     run_dir: Path,
     methods: Sequence[str] = METHODS,
     *,
+    data: dict[int, dict[str, np.ndarray]] | None = None,
     jobs: int = 2,
     force: bool = False,
     backend: str = "loky",
@@ -269,33 +273,40 @@ def identify_study(
     interrupted run, in ``.parts/``) are not recomputed unless ``force``.
     Writes ``frontier.parquet``, ``stage1.parquet`` and ``identify_log.parquet``;
     the first two are identical whatever ``jobs``, backend or interruptions.
+
+    With ``data`` (measured runs from :func:`hcid.measured.load_data`), those
+    runs are identified instead, under model name ``config.data.name`` and
+    seed = run number, beside any simulated realizations already in the tables.
     """
     check_run_dir(config, run_dir, force=False)
     start = time.perf_counter()
-    records = _load_records(config, run_dir)
+    if data is None:
+        records = _load_records(config, run_dir)
+        keys = [(m.name, s) for m in config.models for s in config.seeds]
+    else:
+        name = config.data.name
+        records = {(name, run): rec for run, rec in data.items()}
+        keys = list(records)
     if force:
         results.clear_parts(run_dir)
-        done = {k: v for k, v in _existing(run_dir).items() if k[2] not in methods} \
-            if (run_dir / results.FRONTIER).is_file() else {}
+        redo = {(*k, me) for k in keys for me in methods}
+        done = {k: v for k, v in _existing(run_dir).items() if k not in redo}
     else:
         done = _existing(run_dir)
         done.update(results.read_parts(run_dir))
     rate = config.timing.output_rate
     tasks = [
-        (config.identify, rate, m.name, seed, method, records[(m.name, seed)])
-        for m in config.models for seed in config.seeds for method in methods
-        if (m.name, seed, method) not in done
+        (config.identify, rate, model, seed, method, records[(model, seed)])
+        for model, seed in keys for method in methods if (model, seed, method) not in done
     ]
-    reused = sum(1 for m in config.models for s in config.seeds for me in methods
-                 if (m.name, s, me) in done)
+    reused = sum(1 for k in keys for me in methods if (*k, me) in done)
     for key, tables in parallel_map(_identify_task, tasks, jobs=jobs, label="identify",
                                     show_progress=show_progress, backend=backend,
                                     scheduler=scheduler):
         results.write_part(run_dir, *key, tables)
     done.update(results.read_parts(run_dir))
 
-    order = [(m.name, s, me) for m in config.models for s in config.seeds for me in METHODS
-             if (m.name, s, me) in done]
+    order = _canonical_order(config, done)
     frontier = results.concat([done[k]["frontier"] for k in order])
     log = results.concat([done[k]["log"] for k in order])
     stage1_parts = [done[k]["stage1"] for k in order if k[2] == "indirect"]
@@ -311,6 +322,26 @@ def identify_study(
         results.append_run_log(run_dir, f"identify ({len(tasks)} tasks)", time.perf_counter() - start, jobs)
     return IdentifyRun(frontier=frontier, stage1=stage1, log=log, computed=len(tasks),
                        reused=reused, run_dir=run_dir)
+
+
+def _canonical_order(config: Config, done: dict) -> list[tuple[str, int, str]]:
+    """Simulated realizations in config order, then measured runs, each by method."""
+    simulated = [(m.name, s, me) for m in config.models for s in config.seeds for me in METHODS]
+    order = [k for k in simulated if k in done]
+    rest = sorted((k for k in done if k not in set(order)), key=lambda k: (k[0], k[1], METHODS.index(k[2])))
+    return order + rest
+
+
+def import_data(config: Config, run_dir: Path, path: Path) -> dict[int, dict[str, np.ndarray]]:
+    """Read and check a measured-data file and keep a copy in ``run_dir/measured.parquet``."""
+    from hcid import measured
+
+    records = measured.load_data(path, config)
+    check_run_dir(config, run_dir, force=False)
+    if not (run_dir / "config.yaml").is_file():
+        results.write_text(config.to_yaml(), run_dir / "config.yaml")
+    results.write_table(measured.records_table(config.data.name, records), run_dir / results.MEASURED)
+    return records
 
 
 # --------------------------------------------------------------------------- W sweep
@@ -346,13 +377,7 @@ def sweep_study(config: Config, run_dir: Path) -> SweepRun:
     sel_parts, bp_parts = [], []
     segments: dict[tuple[str, str], list] = {}
     nb_ft: dict[tuple[str, str], list] = {}
-    for (model, seed, method), t in results.split_by_key(frontier, results.KEY_COLUMNS).items():
-        cols = {c: t.column(c).to_numpy() for c in _SELECTED_COLUMNS}
-        orders = np.column_stack([cols[c] for c in _ORDER_COLUMNS])
-        try:
-            seg = selection.breakpoints(cols["d"], cols["v"], orders)
-        except ValueError as exc:
-            raise DataError(f"{path}: model {model}, seed {seed}, {method}: {exc}") from exc
+    for (model, seed, method), (seg, cols) in _selections(frontier, path).items():
         segments.setdefault((model, method), []).append(seg)
         nb_ft.setdefault((model, method), []).append(cols["nb_ft"])
         chosen = seg.at(w)
@@ -366,6 +391,19 @@ def sweep_study(config: Config, run_dir: Path) -> SweepRun:
     results.write_table(breakpoints_table, run_dir / results.BREAKPOINTS)
     results.write_table(thresholds, run_dir / results.THRESHOLDS)
     return SweepRun(selection_table, breakpoints_table, thresholds, run_dir)
+
+
+def _selections(frontier: pa.Table, path: Path) -> dict[tuple[str, int, str], tuple]:
+    """Per realization and method: its selection over W and its frontier columns."""
+    out = {}
+    for (model, seed, method), t in results.split_by_key(frontier, results.KEY_COLUMNS).items():
+        cols = {c: t.column(c).to_numpy() for c in _SELECTED_COLUMNS}
+        orders = np.column_stack([cols[c] for c in _ORDER_COLUMNS])
+        try:
+            out[(model, seed, method)] = (selection.breakpoints(cols["d"], cols["v"], orders), cols)
+        except ValueError as exc:
+            raise DataError(f"{path}: model {model}, seed {seed}, {method}: {exc}") from exc
+    return out
 
 
 def _rows_table(model, seed, method, w_columns: dict, cols: dict, rows: np.ndarray) -> pa.Table:
@@ -399,3 +437,46 @@ def _thresholds(config: Config, segments: dict, nb_ft: dict) -> pa.Table:
                         ("nf", pa.int64()), ("w_aic", pa.float64()), ("w_bic", pa.float64()),
                         ("w_fp", pa.float64()), ("w_fn", pa.float64())])
     return pa.Table.from_pylist(rows, schema=schema)
+
+
+# --------------------------------------------------------------------------- W calibration
+
+
+@dataclass(frozen=True)
+class CalibrationRun:
+    """Calibration of W per method from the config's FB and FF twins."""
+
+    calibrations: list
+    run_dir: Path
+
+
+def calibrate_study(config: Config, run_dir: Path, *, jobs: int = 2, backend: str = "loky",
+                    scheduler: str | None = None, show_progress: bool = True) -> CalibrationRun:
+    """Simulate and identify the config's HC hypothesis (what is not done yet), then
+    compute false-positive and false-negative rates over W and the safe interval.
+
+    Writes ``calibration.parquet`` (one row per method and W of the grid, with the
+    safe interval and recommended W repeated on every row).
+    """
+    from hcid.calibration import calibrate
+
+    fb = next((m for m in config.models if not m.has_feedforward), None)
+    ff = next((m for m in config.models if m.has_feedforward), None)
+    if fb is None or ff is None:
+        raise DataError("models: calibration needs a feedback-only model (Kpt = 0) and a feedforward "
+                        f"model (Kpt > 0), got {[m.name for m in config.models]}")
+    if not (run_dir / results.SIMULATIONS).is_file():
+        simulate_study(config, run_dir, jobs=jobs, show_progress=show_progress)
+    identify_study(config, run_dir, jobs=jobs, backend=backend, scheduler=scheduler,
+                   show_progress=show_progress)
+    path = run_dir / results.FRONTIER
+    chosen = _selections(results.read_table(path), path)
+    out = []
+    for method in METHODS:
+        twins = []
+        for model in (fb, ff):
+            keys = [(model.name, s, method) for s in config.seeds]
+            twins.append(([chosen[k][0] for k in keys], [chosen[k][1]["nb_ft"] for k in keys]))
+        out.append(calibrate(method, twins[0], twins[1], np.asarray(config.w_grid), config.target_rate))
+    results.write_table(results.concat([c.to_arrow() for c in out]), run_dir / results.CALIBRATION)
+    return CalibrationRun(out, run_dir)

@@ -175,6 +175,8 @@ SELECTION = "selection.parquet"
 BREAKPOINTS = "breakpoints.parquet"
 THRESHOLDS = "thresholds.parquet"
 PARTS = ".parts"
+MEASURED = "measured.parquet"
+CALIBRATION = "calibration.parquet"
 
 #: Engine column names -> table column names (input 1 is ft, input 2 is e).
 FRONTIER_NAMES = {"nb1": "nb_ft", "nb2": "nb_e", "nk1": "nk_ft", "nk2": "nk_e", "b1": "b_ft", "b2": "b_e"}

@@ -1,0 +1,126 @@
+"""W calibration from simulations of an HC hypothesis (paper section 6, first recommendation).
+
+A feedback-only twin (FB) and a feedforward twin (FF) of the expected HC are
+simulated and identified; the false-positive rate (FB realizations selecting
+nb_ft > 0) and the false-negative rate (FF realizations selecting nb_ft < 2)
+are then functions of W, known exactly from each realization's breakpoints.
+The safe interval is where both rates are at most the target rate; the
+recommended W is its geometric midpoint, the point farthest from both ends
+on the log-W axis on which W acts.
+
+Pure functions; no I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pyarrow as pa
+from scipy import stats
+
+from hcid.selection import Segments
+
+__all__ = ["Calibration", "calibrate", "clopper_pearson"]
+
+
+def clopper_pearson(k: np.ndarray, n: int, level: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
+    """Exact binomial confidence interval of a rate k/n (Clopper and Pearson 1934)."""
+    k = np.asarray(k, dtype=np.float64)
+    alpha = 1.0 - level
+    low = np.where(k > 0, stats.beta.ppf(alpha / 2, k, n - k + 1), 0.0)
+    high = np.where(k < n, stats.beta.ppf(1 - alpha / 2, k + 1, n - k), 1.0)
+    return low, high
+
+
+def _counts(segments: list[Segments], nb_ft: list[np.ndarray], w: np.ndarray, positive) -> np.ndarray:
+    return np.sum([positive(nb[s.at(w)]) for s, nb in zip(segments, nb_ft, strict=True)], axis=0)
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """False-positive and false-negative rates over W for one method, and the safe interval.
+
+    ``safe_low <= W < safe_high`` keeps both rates at most ``target_rate``;
+    ``safe_low >= safe_high`` means there is no safe W (``recommended`` is NaN).
+    """
+
+    method: str
+    w: np.ndarray
+    fp_rate: np.ndarray
+    fp_low: np.ndarray
+    fp_high: np.ndarray
+    fn_rate: np.ndarray
+    fn_low: np.ndarray
+    fn_high: np.ndarray
+    n_fb: int
+    n_ff: int
+    target_rate: float
+    safe_low: float
+    safe_high: float
+    recommended: float
+
+    @property
+    def has_safe_interval(self) -> bool:
+        return bool(self.safe_low < self.safe_high)
+
+    def to_arrow(self) -> pa.Table:
+        n = self.w.size
+        return pa.table({
+            "method": pa.array([self.method] * n, pa.string()),
+            "w": self.w, "fp_rate": self.fp_rate, "fp_low": self.fp_low, "fp_high": self.fp_high,
+            "fn_rate": self.fn_rate, "fn_low": self.fn_low, "fn_high": self.fn_high,
+            "n_fb": pa.array([self.n_fb] * n, pa.int64()), "n_ff": pa.array([self.n_ff] * n, pa.int64()),
+            "target_rate": np.full(n, self.target_rate), "safe_low": np.full(n, self.safe_low),
+            "safe_high": np.full(n, self.safe_high), "recommended": np.full(n, self.recommended),
+        })
+
+
+def calibrate(method: str, fb: tuple[list[Segments], list[np.ndarray]],
+              ff: tuple[list[Segments], list[np.ndarray]], w: np.ndarray,
+              target_rate: float = 0.0) -> Calibration:
+    """Rates over the W grid and the exact safe interval from the breakpoints.
+
+    Parameters
+    ----------
+    method : str
+    fb, ff : (segments, nb_ft) per realization
+        Selections over W of the feedback-only and feedforward twins, and the
+        nb_ft of every frontier row (indexed by the segments).
+    w : ndarray
+        W grid for the rate curves.
+    target_rate : float
+        Largest acceptable rate; 0 asks for no false result in any realization,
+        which makes ``safe_low`` equal to W_FP.
+    """
+    w = np.asarray(w, dtype=np.float64)
+    n_fb, n_ff = len(fb[0]), len(ff[0])
+    fp_k = _counts(*fb, w, lambda nb: nb > 0)
+    fn_k = _counts(*ff, w, lambda nb: nb < 2)
+    fp_low, fp_high = clopper_pearson(fp_k, n_fb)
+    fn_low, fn_high = clopper_pearson(fn_k, n_ff)
+
+    # Exact ends: the rates only change at breakpoints, so evaluate them there.
+    fp_at = np.unique(np.concatenate([s.w_from for s in fb[0]]))
+    fp_rate_at = _counts(*fb, fp_at, lambda nb: nb > 0) / n_fb
+    too_many = np.flatnonzero(fp_rate_at > target_rate)
+    safe_low = 0.0 if too_many.size == 0 else (
+        float(fp_at[too_many[-1] + 1]) if too_many[-1] + 1 < fp_at.size else np.inf)
+    fn_at = np.unique(np.concatenate([s.w_from for s in ff[0]]))
+    fn_rate_at = _counts(*ff, fn_at, lambda nb: nb < 2) / n_ff
+    over = np.flatnonzero(fn_rate_at > target_rate)
+    safe_high = float(fn_at[over[0]]) if over.size else np.inf
+
+    if safe_low < safe_high and np.isfinite(safe_high) and safe_low > 0:
+        recommended = float(np.sqrt(safe_low * safe_high))
+    elif safe_low < safe_high and np.isfinite(safe_high):
+        recommended = safe_high / 10.0  # no lower bound: a decade below the upper end
+    elif safe_low < safe_high:
+        recommended = safe_low * 10.0  # no upper bound: a decade above the lower end
+    else:
+        recommended = float("nan")
+    return Calibration(
+        method=method, w=w, fp_rate=fp_k / n_fb, fp_low=fp_low, fp_high=fp_high,
+        fn_rate=fn_k / n_ff, fn_low=fn_low, fn_high=fn_high, n_fb=n_fb, n_ff=n_ff,
+        target_rate=target_rate, safe_low=safe_low, safe_high=safe_high, recommended=recommended,
+    )

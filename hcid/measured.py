@@ -1,0 +1,174 @@
+"""Measured human-in-the-loop data: read CSV, Parquet or MATLAB files into records.
+
+Part of the results layer (it reads files). A data file holds one or more runs
+of one subject and condition, each with ft, fd, e and u (rad) and either a
+time column or a sample rate. Names are mapped by the config's ``data``
+section. Every check fails with one line naming the file and what is wrong:
+missing columns, unequal lengths, a non-uniform or wrong sample rate, NaN or
+inf, or a record too short for the identification windows.
+
+Layouts:
+
+- CSV / Parquet: one row per sample, a column per signal; several runs are
+  told apart by the ``run`` column (integers), else the file is one run.
+- MATLAB ``.mat``: one variable per signal, a vector (one run) or a
+  samples x runs matrix; the rate as a scalar variable (``rate`` mapping) or
+  a time vector (``time`` mapping).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+
+from hcid.config import Config, DataConfig
+from hcid.errors import DataError
+
+__all__ = ["SIGNALS", "load_data", "records_table"]
+
+SIGNALS = ("ft", "fd", "e", "u")
+
+
+def _read_columns(path: Path, data: DataConfig) -> dict[str, np.ndarray]:
+    suffix = path.suffix.lower()
+    wanted = {name: data.columns[name] for name in (*SIGNALS, "time", "run", "rate") if name in data.columns}
+    try:
+        if suffix == ".csv":
+            import pyarrow.csv as pacsv
+
+            table = pacsv.read_csv(path)
+        elif suffix in (".parquet", ".pq"):
+            import pyarrow.parquet as pq
+
+            table = pq.read_table(path)
+        elif suffix == ".mat":
+            return _read_mat(path, wanted)
+        else:
+            raise DataError(f"{path}: unknown data format {suffix!r} (use .csv, .parquet or .mat)")
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        if isinstance(exc, DataError):
+            raise
+        raise DataError(f"{path}: cannot read ({str(exc).splitlines()[0]})") from exc
+    out = {}
+    for name, column in wanted.items():
+        if column in table.column_names:
+            try:
+                out[name] = table.column(column).to_numpy(zero_copy_only=False).astype(np.float64)
+            except (pa.ArrowException, ValueError) as exc:
+                raise DataError(f"{path}: column {column!r} is not numeric") from exc
+    return out
+
+
+def _read_mat(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
+    import scipy.io
+
+    try:
+        mat = scipy.io.loadmat(path)
+    except (ValueError, OSError, NotImplementedError) as exc:
+        raise DataError(f"{path}: not a readable MATLAB file ({str(exc).splitlines()[0]})") from exc
+    out = {}
+    for name, var in wanted.items():
+        if var in mat:
+            try:
+                out[name] = np.asarray(mat[var], dtype=np.float64)
+            except (TypeError, ValueError) as exc:
+                raise DataError(f"{path}: variable {var!r} is not numeric") from exc
+    return out
+
+
+def _split_runs(path: Path, cols: dict[str, np.ndarray], data: DataConfig) -> list[dict[str, np.ndarray]]:
+    lengths = {name: v.shape[0] for name, v in cols.items() if name != "rate" and v.ndim >= 1}
+    if len(set(lengths.values())) > 1:
+        described = ", ".join(f"{data.columns[n]} {n_}" for n, n_ in lengths.items())
+        raise DataError(f"{path}: signals of unequal length ({described})")
+    if any(v.ndim == 2 and v.shape[1] > 1 for v in cols.values()):
+        widths = {v.shape[1] if v.ndim == 2 else 1 for n, v in cols.items() if n not in ("rate", "run")}
+        if len(widths) > 1:
+            raise DataError(f"{path}: signals hold different numbers of runs ({sorted(widths)})")
+        n_runs = widths.pop()
+        return [{n: (v[:, r] if v.ndim == 2 and v.shape[1] > 1 else v.ravel()) for n, v in cols.items()}
+                for r in range(n_runs)]
+    flat = {n: v.ravel() for n, v in cols.items()}
+    if "run" not in flat:
+        return [flat]
+    runs = flat.pop("run")
+    out = []
+    for value in np.unique(runs):
+        rows = runs == value
+        out.append({n: v if n == "rate" else v[rows] for n, v in flat.items()})
+    return out
+
+
+def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarray]]:
+    """Read and check a measured-data file; one record per run, keyed by run number (1, 2, ...).
+
+    Each record holds ``t`` (s, from 0), ``ft``, ``fd``, ``e``, ``u`` (rad) at
+    ``config.timing.output_rate``.
+
+    Raises
+    ------
+    DataError
+        One line naming the file and the problem.
+    """
+    path = Path(path)
+    data = config.data
+    if data is None:
+        raise DataError(f"{path}: the config has no 'data' section to map its columns")
+    if not path.is_file():
+        raise DataError(f"{path}: missing")
+    cols = _read_columns(path, data)
+    missing = [data.columns[n] for n in SIGNALS if n not in cols]
+    if missing:
+        raise DataError(f"{path}: missing columns {missing} (mapped in the config's data.columns)")
+    if "time" not in cols and "rate" not in cols:
+        raise DataError(f"{path}: needs a time column '{data.columns['time']}' or a rate "
+                        f"'{data.columns['rate']}'")
+    rate = config.timing.output_rate
+    need = max(s.validation.last for s in (config.identify.direct, config.identify.stage1,
+                                            config.identify.stage2))
+    need = max(need, *(s.estimation.last for s in (config.identify.direct, config.identify.stage1,
+                                                     config.identify.stage2)))
+    records = {}
+    for i, run in enumerate(_split_runs(path, cols, data), start=1):
+        where = f"{path}: run {i}"
+        for name in (*SIGNALS, "time"):
+            if name in run:
+                bad = ~np.isfinite(run[name])
+                if bad.any():
+                    k = int(np.argmax(bad))
+                    raise DataError(f"{where}: {data.columns[name]} holds {run[name][k]} at sample {k}")
+        n = run["ft"].size
+        if "time" in run:
+            steps = np.diff(run["time"])
+            if steps.size and not np.allclose(steps, steps[0], rtol=1e-6, atol=1e-9):
+                k = int(np.argmax(np.abs(steps - steps[0]) > 1e-6 * abs(steps[0]) + 1e-9))
+                raise DataError(f"{where}: time is not uniformly sampled (step {steps[k]:.6g} s at sample "
+                                f"{k + 1}, first step {steps[0]:.6g} s)")
+            found = 1.0 / steps[0] if steps.size else rate
+        else:
+            found = float(np.ravel(run["rate"])[0])
+        if not np.isclose(found, rate, rtol=1e-6):
+            raise DataError(f"{where}: sample rate {found:.6g} Hz, the config's timing.output_rate is "
+                            f"{rate:g} Hz (set it, and the windows in samples, to the data's rate)")
+        if n < need:
+            raise DataError(f"{where}: {n} samples, the identification windows need {need}")
+        records[i] = {"t": np.arange(n) / rate, **{s: run[s] for s in SIGNALS}}
+    if not records:
+        raise DataError(f"{path}: holds no samples")
+    return records
+
+
+def records_table(name: str, records: dict[int, dict[str, np.ndarray]]) -> pa.Table:
+    """The imported runs as a table: model (the data name), seed (the run), k, t, ft, fd, e, u."""
+    parts = {c: [] for c in ("model", "seed", "k", "t", *SIGNALS)}
+    for run, rec in records.items():
+        n = rec["ft"].size
+        parts["model"].append(np.full(n, name, dtype=object))
+        parts["seed"].append(np.full(n, run, dtype=np.int64))
+        parts["k"].append(np.arange(n, dtype=np.int64))
+        for c in ("t", *SIGNALS):
+            parts[c].append(rec[c])
+    return pa.table({c: np.concatenate(v) if c != "model" else pa.array(np.concatenate(v), pa.string())
+                     for c, v in parts.items()})
