@@ -72,9 +72,11 @@ def _read_mat(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
     for name, var in wanted.items():
         if var in mat:
             try:
-                out[name] = np.asarray(mat[var], dtype=np.float64)
+                value = np.asarray(mat[var], dtype=np.float64)
             except (TypeError, ValueError) as exc:
                 raise DataError(f"{path}: variable {var!r} is not numeric") from exc
+            # MATLAB stores vectors as 1 x n or n x 1 matrices.
+            out[name] = value.ravel() if value.ndim == 2 and 1 in value.shape else value
     return out
 
 

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute  # noqa: F401  (pa.compute)
 import yaml
 
 from hcid import results
@@ -256,12 +257,67 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
 
     # 8. verdicts
     doc.text("## 8. Verdicts: the paper's claims (SPEC section 6) against this run")
+    if summary is None:
+        doc.text("_No simulation in this run: the paper's claims are not evaluated._")
     verdicts = compute.compute_verdicts(config, summary, verdict_inputs["curves"], thresholds,
                                         verdict_inputs["bic"], verdict_inputs["w047"])
     doc.table(["claim", "paper", "this run", "holds", "rule"],
               [[v.claim, v.paper, v.this_run,
                 {True: "holds", False: "does not hold", None: "not evaluated"}[v.holds], v.rule]
                for v in verdicts])
+
+    # 9-10. calibration and measured data (paper section 6's two recommendations)
+    calibration = _read_optional(run_dir, results.CALIBRATION)
+    recommended = {}
+    if calibration is not None:
+        doc.text("## 9. W calibration on the HC hypothesis")
+        figs["calibration.png"] = figures.plot_calibration(calibration, config.name)
+        doc.figure("calibration.png", "False-positive rate of the FB twin and false-negative rate of the FF "
+                   "twin over W, with exact 95% (Clopper-Pearson) bands over realizations; green: the safe "
+                   "interval where both rates are at most the target rate, and the recommended W, its "
+                   "geometric midpoint.")
+        rows = []
+        for method in ("direct", "indirect"):
+            r = [x for x in calibration.to_pylist() if x["method"] == method]
+            if r:
+                r = r[0]
+                recommended[method] = r["recommended"]
+                rows.append([method, f"{r['target_rate']:g}", f"{r['safe_low']:.4g}", f"{r['safe_high']:.4g}",
+                             f"{r['recommended']:.4g}" if np.isfinite(r["recommended"]) else "no safe W"])
+        doc.table(["method", "target rate", "safe from W", "safe below W", "recommended W"], rows)
+    data_cfg = config.data
+    if data_cfg is not None and frontier is not None and data_cfg.name in set(frontier.column("model").to_pylist()):
+        doc.text(f"## 10. Measured data: {data_cfg.name}")
+        doc.text("No true dynamics are known for measured data: the report shows the selected structure and "
+                 "fit as functions of W, and the models at chosen W values"
+                 + (", the calibrated W marked as the answer." if recommended else
+                    "; run `hcid calibrate-w` to mark a calibrated W."))
+        if selection_table is not None:
+            structure = compute.compute_data_structure(selection_table, data_cfg.name)
+            if structure is not None:
+                marks = {"W_BIC": w_bic, **{f"calibrated {m}": w for m, w in recommended.items()}}
+                figs["data_structure.png"] = figures.plot_data_structure(structure, marks, data_cfg.name)
+                doc.figure("data_structure.png", "Selected nb_ft, d and VAF of every run vs W.")
+        w_values = sorted(set(data_cfg.w_report) | {w for w in recommended.values() if np.isfinite(w)})
+        doc.table(["run", "method", "W", "na", "nb_ft", "nb_e", "nk_ft", "nk_e", "VAF est. %", "VAF val. %"],
+                  compute.data_summary_rows(frontier, data_cfg.name, w_values))
+        doc.text(f"nk_ft includes the {config.identify.target_shift:g} s target shift: the ft delay is "
+                 f"nk_ft - {config.identify.shift_samples(config.timing.output_rate)} samples "
+                 "(negative: anticipation).")
+        for w in w_values:
+            resp = compute.compute_responses(
+                frontier.filter(pa.compute.equal(frontier.column("model"), data_cfg.name)), config, w)
+            per_run = {}
+            for (_model, method), h in resp.hft.items():
+                per_run[method] = h
+            name = f"bode_data_w{w:.3g}.png".replace("+", "")
+            answer_for = [m for m, r in recommended.items() if np.isclose(w, r)]
+            is_answer = bool(answer_for)
+            title = f"{data_cfg.name}: selected models at W = {w:.3g}" + (
+                f" (calibrated for the {' and '.join(answer_for)} method)" if is_answer else "")
+            figs[name] = figures.plot_bode(resp, data_cfg.name, {}, title=title)
+            doc.figure(name, f"Every run's selected model at W = {w:.3g}"
+                       + (", the calibrated W: the answer." if is_answer else "."))
 
     written = []
     for name, fig in figs.items():

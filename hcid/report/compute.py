@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute  # noqa: F401  (pa.compute)
 
 from hcid import selection
 from hcid.config import Config, HCModel
@@ -19,6 +20,9 @@ from hcid.results import KEY_COLUMNS, split_by_key
 
 __all__ = [
     "DISTURBANCE_BAND",
+    "DataStructure",
+    "compute_data_structure",
+    "data_summary_rows",
     "Curves",
     "Responses",
     "Verdict",
@@ -271,7 +275,9 @@ def compute_verdicts(config: Config, summary: pa.Table | None, curves: Curves | 
 def _response_verdicts(config, fb, ff, bic: Responses | None, w047: Responses | None) -> list[Verdict]:
     out = []
     methods = ("direct", "indirect")
-    if bic is None or fb is None or ff is None:
+    have = bic is not None and fb is not None and ff is not None and all(
+        (m.name, me) in bic.hft for m in (fb, ff) for me in methods)
+    if not have:
         return [Verdict("Frequency-response claims (Figs. 7-10)", "see paper", "-", None,
                         "needs the frontier of both models")]
     omega = bic.omega
@@ -318,7 +324,7 @@ def _response_verdicts(config, fb, ff, bic: Responses | None, w047: Responses | 
         bool(all(v >= 1.2 for v in peaks.values())), "median over realizations of max |H|/|Htrue| on 3..17 rad/s >= 1.2"))
 
     # FF at W = 0.47
-    if w047 is not None:
+    if w047 is not None and all((ff.name, me) in w047.he for me in methods):
         no_ff = {me: float(np.mean(w047.nb_ft[(ff.name, me)] == 0)) for me in methods}
         lo, mid = np.argmin(np.abs(w047.omega - 0.1)), np.argmin(np.abs(w047.omega - 1.0))
         slope = {me: float(np.median(np.abs(w047.he[(ff.name, me)][:, lo]) / np.abs(w047.he[(ff.name, me)][:, mid])))
@@ -344,4 +350,47 @@ def _response_verdicts(config, fb, ff, bic: Responses | None, w047: Responses | 
             f"direct below indirect for w < {hi:g} rad/s",
             f"direct mean magnitude error lower at {share:.0%} of frequencies 0.23..{hi:g} rad/s",
             bool(share >= 0.8), "direct's mean magnitude error <= indirect's at >= 80% of the frequencies"))
+    return out
+
+
+# --------------------------------------------------------------------------- measured data
+
+
+@dataclass(frozen=True)
+class DataStructure:
+    """Selected structure of every measured run over W: ``values[(run, method)][column]``."""
+
+    w: np.ndarray
+    values: dict[tuple[int, str], dict[str, np.ndarray]]
+
+
+def compute_data_structure(selection_table: pa.Table, name: str) -> DataStructure | None:
+    """The measured runs' selections from ``selection.parquet``, or None if it has none."""
+    mask = pa.compute.equal(selection_table.column("model"), name)
+    rows = selection_table.filter(mask)
+    if rows.num_rows == 0:
+        return None
+    values = {}
+    for (seed, method), t in split_by_key(rows, ("seed", "method")).items():
+        values[(seed, method)] = {c: t.column(c).to_numpy() for c in
+                                  ("w", "na", "nb_ft", "nb_e", "nk_ft", "nk_e", "d", "vaf_estimation")}
+    w = next(iter(values.values()))["w"]
+    return DataStructure(w=w, values=values)
+
+
+def data_summary_rows(frontier: pa.Table, name: str, w_values: list[float]) -> list[list[str]]:
+    """One row per run, method and W: the selected orders, delays (true ft delay in samples) and VAF."""
+    mask = pa.compute.equal(frontier.column("model"), name)
+    out = []
+    for (_m, seed, method), t in split_by_key(frontier.filter(mask), KEY_COLUMNS).items():
+        d = t.column("d").to_numpy()
+        v = t.column("v").to_numpy()
+        orders = np.column_stack([t.column(c).to_numpy() for c in _ORDERS])
+        for w in w_values:
+            row = int(selection.select_at(d, v, orders, np.array([w]))[0])
+            na, nbf, nbe, nkf, nke = (int(x) for x in orders[row])
+            out.append([str(seed), method, f"{w:.3g}", str(na), str(nbf), str(nbe),
+                        f"{nkf}" if nbf else "-", f"{nke}" if nbe else "-",
+                        f"{t.column('vaf_estimation')[row].as_py():.1f}",
+                        f"{t.column('vaf_validation')[row].as_py():.1f}"])
     return out

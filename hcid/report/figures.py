@@ -14,7 +14,10 @@ import numpy as np  # noqa: E402
 
 from hcid.report.compute import DISTURBANCE_BAND, Curves, Responses  # noqa: E402
 
-__all__ = ["plot_bode", "plot_errors", "plot_nb_ft", "plot_signals", "plot_vaf", "save"]
+__all__ = [
+    "plot_bode", "plot_calibration", "plot_data_structure", "plot_errors", "plot_nb_ft", "plot_signals",
+    "plot_vaf", "save",
+]
 
 COLORS = {"direct": "tab:blue", "indirect": "tab:orange"}
 STYLES = {0: "-", 1: "--"}
@@ -122,7 +125,8 @@ def plot_bode(responses: Responses, model: str, truths: dict[str, np.ndarray],
         ax_mag.set_ylabel("magnitude (-)")
         ax_ph.set_ylabel("phase (deg)")
         ax_ph.set_xlabel("frequency (rad/s)")
-        ax_mag.legend(fontsize=8, loc="best")
+        if ax_mag.get_legend_handles_labels()[0]:
+            ax_mag.legend(fontsize=8, loc="best")
     fig.suptitle(title)
     fig.tight_layout()
     return fig
@@ -154,7 +158,8 @@ def plot_errors(omega: np.ndarray, errors: dict[tuple[str, str], dict[str, np.nd
             for w in DISTURBANCE_BAND:
                 ax.axvline(w, color="0.5", ls="--", lw=0.8)
             ax.grid(True, which="both", alpha=0.3)
-        axes[0, col].legend(fontsize=8)
+        if axes[0, col].get_legend_handles_labels()[0]:
+            axes[0, col].legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
     return fig
@@ -179,5 +184,64 @@ def plot_signals(t: np.ndarray, channels: dict[str, np.ndarray], title: str):
     for ax in axes:
         ax.grid(True, alpha=0.3)
     fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def plot_data_structure(data, marks: dict[str, float], name: str):
+    """Measured runs: selected nb_ft, d and VAF vs W, per method (lines per run)."""
+    fig, axes = plt.subplots(3, 2, figsize=(11, 8), sharex=True, squeeze=False)
+    runs = sorted({k[0] for k in data.values})
+    for col, method in enumerate(("direct", "indirect")):
+        for i, run in enumerate(runs):
+            v = data.values.get((run, method))
+            if v is None:
+                continue
+            style = dict(lw=1.2, color=plt.cm.viridis(i / max(len(runs) - 1, 1)), label=f"run {run}")
+            axes[0, col].step(v["w"], v["nb_ft"], where="post", **style)
+            axes[1, col].step(v["w"], v["d"], where="post", **style)
+            axes[2, col].plot(v["w"], v["vaf_estimation"], **style)
+        axes[0, col].set_title(f"{name}: {method} method")
+        axes[0, col].set_ylabel("selected nb_ft (-)")
+        axes[1, col].set_ylabel("selected d (-)")
+        axes[2, col].set_ylabel("VAF (%)")
+        axes[2, col].set_xlabel("W (penalty per parameter, -)")
+        for ax in axes[:, col]:
+            ax.set_xscale("log")
+            ax.grid(True, which="both", alpha=0.3)
+            _w_lines(ax, {k: w for k, w in marks.items() if method in k or "BIC" in k})
+        axes[0, col].legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def plot_calibration(table, name: str):
+    """False-positive (FB twin) and false-negative (FF twin) rates vs W with 95% bands,
+    the safe interval shaded and the recommended W marked, one panel per method."""
+    methods = [m for m in ("direct", "indirect") if m in set(table.column("method").to_pylist())]
+    fig, axes = plt.subplots(1, len(methods), figsize=(5.8 * len(methods), 4.3), squeeze=False)
+    rows = table.to_pylist()
+    for ax, method in zip(axes[0], methods, strict=True):
+        r = [x for x in rows if x["method"] == method]
+        w = np.array([x["w"] for x in r])
+        for prefix, color, label in (("fp", "tab:red", "false-positive rate (FB twin)"),
+                                     ("fn", "tab:purple", "false-negative rate (FF twin)")):
+            rate = np.array([x[f"{prefix}_rate"] for x in r])
+            ax.step(w, rate, where="post", color=color, label=label)
+            ax.fill_between(w, [x[f"{prefix}_low"] for x in r], [x[f"{prefix}_high"] for x in r],
+                            step="post", color=color, alpha=0.15)
+        lo, hi, rec = r[0]["safe_low"], r[0]["safe_high"], r[0]["recommended"]
+        if lo < hi:
+            ax.axvspan(max(lo, w[0]), min(hi, w[-1]), color="tab:green", alpha=0.12, label="safe interval")
+        if np.isfinite(rec):
+            ax.axvline(rec, color="tab:green", lw=2, label=f"recommended W = {rec:.3g}")
+        ax.axhline(r[0]["target_rate"], color="0.4", lw=0.8, ls=":")
+        ax.set_xscale("log")
+        ax.set_ylim(-0.02, 1.02)
+        ax.set_xlabel("W (penalty per parameter, -)")
+        ax.set_ylabel("rate over realizations (-)")
+        ax.set_title(f"{name}: {method} method ({r[0]['n_fb']} + {r[0]['n_ff']} realizations)")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8, loc="center left")
     fig.tight_layout()
     return fig

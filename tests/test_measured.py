@@ -1,0 +1,187 @@
+"""Measured data: import checks, file formats, mapped names, and W calibration."""
+
+import copy
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute  # noqa: F401  (pa.compute)
+import pyarrow.csv as pacsv
+import pyarrow.parquet as pq
+import pytest
+import scipy.io
+import yaml
+from typer.testing import CliRunner
+
+from hcid.cli import app
+from hcid.config import parse_config
+from hcid.errors import DataError
+from hcid.measured import load_data
+
+from .conftest import CI_CONFIG, ROOT
+
+runner = CliRunner()
+EXAMPLE = ROOT / "configs" / "example_data" / "subject_synthetic.csv"
+COLUMNS = {"time": "time_s", "ft": "target", "fd": "disturbance", "e": "error", "u": "stick", "run": "trial"}
+
+
+@pytest.fixture(scope="module")
+def data_config_path(tmp_path_factory):
+    """configs/ci.yaml plus a data section mapping the example file's column names."""
+    raw = yaml.safe_load(CI_CONFIG.read_text())
+    raw["name"] = "ci_data"
+    raw["data"] = {"name": "subject01", "columns": COLUMNS, "w_report": [0.00715]}
+    path = tmp_path_factory.mktemp("cfg") / "ci_data.yaml"
+    path.write_text(yaml.safe_dump(raw, sort_keys=False))
+    return path
+
+
+@pytest.fixture(scope="module")
+def data_config(data_config_path):
+    return parse_config(yaml.safe_load(data_config_path.read_text()), "ci_data")
+
+
+@pytest.fixture(scope="module")
+def example_table():
+    return pacsv.read_csv(EXAMPLE)
+
+
+def test_example_file_reads_as_three_runs(data_config):
+    records = load_data(EXAMPLE, data_config)
+    assert sorted(records) == [1, 2, 3]
+    assert all(r["u"].size == 2048 for r in records.values())
+
+
+def _write(table: pa.Table, path):
+    if path.suffix == ".csv":
+        pacsv.write_csv(table, path)
+    else:
+        pq.write_table(table, path)
+
+
+def _one_run(table):
+    return table.filter(pa.compute.equal(table.column("trial"), 1))
+
+
+@pytest.mark.parametrize("damage, message", [
+    (lambda t: t.drop_columns(["stick"]), "missing columns ['stick']"),
+    (lambda t: t.set_column(4, "error", [np.where(np.arange(t.num_rows) == 9, np.inf,
+                                                   t.column("error").to_numpy())]),
+     "run 1: error holds inf at sample 9"),
+    (lambda t: t.set_column(1, "time_s", [t.column("time_s").to_numpy()
+                                           + np.where(np.arange(t.num_rows) >= 100, 0.01, 0.0)]),
+     "time is not uniformly sampled"),
+    (lambda t: t.set_column(1, "time_s", [t.column("time_s").to_numpy() * 2]),
+     "sample rate 12.5 Hz, the config's timing.output_rate is 25 Hz"),
+    (lambda t: t.slice(0, 1500), "1500 samples, the identification windows need 2048"),
+])
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_bad_data_exit_2_nothing_written(tmp_path, data_config_path, example_table, damage, message, suffix):
+    bad = tmp_path / f"bad{suffix}"
+    _write(damage(_one_run(example_table)), bad)
+    run = tmp_path / "run"
+    result = runner.invoke(app, ["identify", str(data_config_path), "--data", str(bad), "--run", str(run),
+                                 "--quiet"])
+    assert result.exit_code == 2, result.output
+    assert message in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not run.exists()
+
+
+def test_unequal_lengths_in_mat(tmp_path, data_config):
+    path = tmp_path / "bad.mat"
+    scipy.io.savemat(path, {"target": np.zeros(2048), "disturbance": np.zeros(2048), "error": np.zeros(2048),
+                            "stick": np.zeros(2000), "rate": 25.0})
+    with pytest.raises(DataError, match="signals of unequal length"):
+        load_data(path, data_config)
+
+
+def test_missing_and_corrupt_files(tmp_path, data_config):
+    with pytest.raises(DataError, match="missing"):
+        load_data(tmp_path / "none.csv", data_config)
+    junk = tmp_path / "junk.parquet"
+    junk.write_bytes(b"PAR1 not really")
+    with pytest.raises(DataError, match="cannot read"):
+        load_data(junk, data_config)
+    with pytest.raises(DataError, match="unknown data format '.txt'"):
+        (tmp_path / "x.txt").write_text("1")
+        load_data(tmp_path / "x.txt", data_config)
+
+
+@pytest.fixture(scope="module")
+def three_formats(tmp_path_factory, data_config_path, example_table):
+    """The same two runs as CSV, Parquet and .mat (samples x runs matrices and a rate)."""
+    base = tmp_path_factory.mktemp("formats")
+    two = example_table.filter(pa.compute.less_equal(example_table.column("trial"), 2))
+    _write(two, base / "d.csv")
+    _write(two, base / "d.parquet")
+    cols = {c: two.column(c).to_numpy().reshape(2, -1).T for c in ("target", "disturbance", "error", "stick")}
+    scipy.io.savemat(base / "d.mat", {**cols, "rate": 25.0})
+    frontiers = {}
+    for name in ("d.csv", "d.parquet", "d.mat"):
+        run = base / f"run_{name}"
+        result = runner.invoke(app, ["identify", str(data_config_path), "--data", str(base / name),
+                                     "--run", str(run), "--jobs", "1", "--quiet"])
+        assert result.exit_code == 0, result.output
+        frontiers[name] = run
+    return frontiers
+
+
+def test_three_formats_give_identical_frontiers(three_formats):
+    # CSV round-trips float64 exactly (shortest representation), so all three are the same data.
+    ref = (three_formats["d.parquet"] / "frontier.parquet").read_bytes()
+    assert (three_formats["d.csv"] / "frontier.parquet").read_bytes() == ref
+    assert (three_formats["d.mat"] / "frontier.parquet").read_bytes() == ref
+
+
+def test_mapped_names_identify_the_runs(three_formats):
+    t = pq.read_table(three_formats["d.csv"] / "frontier.parquet")
+    assert set(t.column("model").to_pylist()) == {"subject01"}
+    assert set(t.column("seed").to_pylist()) == {1, 2}
+
+
+def test_sweep_and_report_on_data_run(three_formats, data_config_path):
+    run = three_formats["d.csv"]
+    assert runner.invoke(app, ["sweep-w", str(data_config_path), "--run", str(run)]).exit_code == 0
+    sel = pq.read_table(run / "selection.parquet")
+    assert set(sel.column("model").to_pylist()) == {"subject01"}
+    assert pq.read_table(run / "thresholds.parquet").num_rows == 0  # no truth, no thresholds
+    result = runner.invoke(app, ["report", str(run)])
+    assert result.exit_code == 0, result.output
+    md = (run / "report" / "report.md").read_text()
+    assert "## 10. Measured data: subject01" in md
+    assert (run / "report" / "data_structure.png").is_file()
+    assert (run / "report" / "bode_data_w0.00715.png").is_file()
+    assert "true" not in (run / "report" / "report.md").read_text().split("## 10.")[1].lower().replace(
+        "no true dynamics", "")
+
+
+def test_calibrate_w_interval_from_thresholds(tmp_path, data_config_path):
+    run = tmp_path / "cal"
+    result = runner.invoke(app, ["calibrate-w", str(data_config_path), "--run", str(run), "--quiet"])
+    assert result.exit_code == 0, result.output
+    cal = pq.read_table(run / "calibration.parquet").to_pylist()
+    th = {(r["method"], r["model"]): r for r in pq.read_table(run / "thresholds.parquet").to_pylist()}
+    for method in ("direct", "indirect"):
+        row = next(r for r in cal if r["method"] == method)
+        # Target rate 0: the lower end is W_FP exactly (the same breakpoint); the upper end
+        # is where the first FF realization drops below nb_ft = 2, never after the mean does.
+        assert row["safe_low"] == th[(method, "FB")]["w_fp"]
+        assert row["safe_high"] <= th[(method, "FF")]["w_fn"]
+        if row["safe_low"] < row["safe_high"]:
+            assert row["recommended"] == pytest.approx(np.sqrt(row["safe_low"] * row["safe_high"]))
+    # 95% Clopper-Pearson band holds the rate
+    assert all(r["fp_low"] <= r["fp_rate"] <= r["fp_high"] for r in cal)
+
+
+def test_data_section_errors(data_config_path):
+    raw = yaml.safe_load(data_config_path.read_text())
+    bad = copy.deepcopy(raw)
+    bad["data"]["columns"]["speed"] = "x"
+    from hcid.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="data.columns.speed: unknown key"):
+        parse_config(bad, "x")
+    bad = copy.deepcopy(raw)
+    bad["data"]["name"] = "FB"
+    with pytest.raises(ConfigError, match="data.name: must be an identifier other than the model names"):
+        parse_config(bad, "x")
