@@ -22,7 +22,8 @@ test-all: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -q tests
 
 lint: $(STAMP)
-	$(BIN)/ruff check hcid tests benchmarks
+	$(BIN)/ruff check hcid tests benchmarks configs
+	$(BIN)/ruff format --check hcid tests benchmarks configs
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/arx_engine.py

@@ -66,19 +66,33 @@ class Calibration:
 
     def to_arrow(self) -> pa.Table:
         n = self.w.size
-        return pa.table({
-            "method": pa.array([self.method] * n, pa.string()),
-            "w": self.w, "fp_rate": self.fp_rate, "fp_low": self.fp_low, "fp_high": self.fp_high,
-            "fn_rate": self.fn_rate, "fn_low": self.fn_low, "fn_high": self.fn_high,
-            "n_fb": pa.array([self.n_fb] * n, pa.int64()), "n_ff": pa.array([self.n_ff] * n, pa.int64()),
-            "target_rate": np.full(n, self.target_rate), "safe_low": np.full(n, self.safe_low),
-            "safe_high": np.full(n, self.safe_high), "recommended": np.full(n, self.recommended),
-        })
+        return pa.table(
+            {
+                "method": pa.array([self.method] * n, pa.string()),
+                "w": self.w,
+                "fp_rate": self.fp_rate,
+                "fp_low": self.fp_low,
+                "fp_high": self.fp_high,
+                "fn_rate": self.fn_rate,
+                "fn_low": self.fn_low,
+                "fn_high": self.fn_high,
+                "n_fb": pa.array([self.n_fb] * n, pa.int64()),
+                "n_ff": pa.array([self.n_ff] * n, pa.int64()),
+                "target_rate": np.full(n, self.target_rate),
+                "safe_low": np.full(n, self.safe_low),
+                "safe_high": np.full(n, self.safe_high),
+                "recommended": np.full(n, self.recommended),
+            }
+        )
 
 
-def calibrate(method: str, fb: tuple[list[Segments], list[np.ndarray]],
-              ff: tuple[list[Segments], list[np.ndarray]], w: np.ndarray,
-              target_rate: float = 0.0) -> Calibration:
+def calibrate(
+    method: str,
+    fb: tuple[list[Segments], list[np.ndarray]],
+    ff: tuple[list[Segments], list[np.ndarray]],
+    w: np.ndarray,
+    target_rate: float = 0.0,
+) -> Calibration:
     """Rates over the W grid and the exact safe interval from the breakpoints.
 
     Parameters
@@ -104,8 +118,11 @@ def calibrate(method: str, fb: tuple[list[Segments], list[np.ndarray]],
     fp_at = np.unique(np.concatenate([s.w_from for s in fb[0]]))
     fp_rate_at = _counts(*fb, fp_at, lambda nb: nb > 0) / n_fb
     too_many = np.flatnonzero(fp_rate_at > target_rate)
-    safe_low = 0.0 if too_many.size == 0 else (
-        float(fp_at[too_many[-1] + 1]) if too_many[-1] + 1 < fp_at.size else np.inf)
+    safe_low = (
+        0.0
+        if too_many.size == 0
+        else (float(fp_at[too_many[-1] + 1]) if too_many[-1] + 1 < fp_at.size else np.inf)
+    )
     fn_at = np.unique(np.concatenate([s.w_from for s in ff[0]]))
     fn_rate_at = _counts(*ff, fn_at, lambda nb: nb < 2) / n_ff
     over = np.flatnonzero(fn_rate_at > target_rate)
@@ -120,7 +137,18 @@ def calibrate(method: str, fb: tuple[list[Segments], list[np.ndarray]],
     else:
         recommended = float("nan")
     return Calibration(
-        method=method, w=w, fp_rate=fp_k / n_fb, fp_low=fp_low, fp_high=fp_high,
-        fn_rate=fn_k / n_ff, fn_low=fn_low, fn_high=fn_high, n_fb=n_fb, n_ff=n_ff,
-        target_rate=target_rate, safe_low=safe_low, safe_high=safe_high, recommended=recommended,
+        method=method,
+        w=w,
+        fp_rate=fp_k / n_fb,
+        fp_low=fp_low,
+        fp_high=fp_high,
+        fn_rate=fn_k / n_ff,
+        fn_low=fn_low,
+        fn_high=fn_high,
+        n_fb=n_fb,
+        n_ff=n_ff,
+        target_rate=target_rate,
+        safe_low=safe_low,
+        safe_high=safe_high,
+        recommended=recommended,
     )

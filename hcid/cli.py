@@ -21,16 +21,13 @@ app = typer.Typer(
 )
 
 
-
 @app.callback()
 def _root() -> None:
     """hcid: identify human-controller models from closed-loop manual-control data."""
 
 
 ConfigArg = Annotated[Path, typer.Argument(help="Study config (YAML).", show_default=False)]
-RunOpt = Annotated[
-    Path | None, typer.Option("--run", help="Run directory [default: runs/<config name>].")
-]
+RunOpt = Annotated[Path | None, typer.Option("--run", help="Run directory [default: runs/<config name>].")]
 JobsOpt = Annotated[int, typer.Option("--jobs", min=1, max=256, help="Worker processes.")]
 QuietOpt = Annotated[bool, typer.Option("--quiet", help="No progress bar.")]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Recompute what is already done.")]
@@ -68,8 +65,9 @@ _PAPER_RMS_E = {"FB": 2.43, "FF": 1.22}
 
 @app.command()
 @_user_errors
-def simulate(config: ConfigArg, run: RunOpt = None, jobs: JobsOpt = 2, quiet: QuietOpt = False,
-             force: ForceOpt = False):
+def simulate(
+    config: ConfigArg, run: RunOpt = None, jobs: JobsOpt = 2, quiet: QuietOpt = False, force: ForceOpt = False
+):
     """Simulate every model x seed of CONFIG and write RUN/simulations.parquet."""
     from hcid.config import load_config
     from hcid.pipeline import simulate_study
@@ -91,12 +89,24 @@ def _methods(method: str) -> tuple[str, ...]:
 
 @app.command()
 @_user_errors
-def identify(config: ConfigArg, method: MethodOpt = "both", run: RunOpt = None, jobs: JobsOpt = 2,
-             backend: BackendOpt = "loky", scheduler: SchedulerOpt = None, force: ForceOpt = False,
-             quiet: QuietOpt = False,
-             data: Annotated[Path | None, typer.Option(
-                 "--data", help="Measured data (.csv, .parquet or .mat) to identify instead of "
-                                "simulations; columns mapped by the config's data section.")] = None):
+def identify(
+    config: ConfigArg,
+    method: MethodOpt = "both",
+    run: RunOpt = None,
+    jobs: JobsOpt = 2,
+    backend: BackendOpt = "loky",
+    scheduler: SchedulerOpt = None,
+    force: ForceOpt = False,
+    quiet: QuietOpt = False,
+    data: Annotated[
+        Path | None,
+        typer.Option(
+            "--data",
+            help="Measured data (.csv, .parquet or .mat) to identify instead of "
+            "simulations; columns mapped by the config's data section.",
+        ),
+    ] = None,
+):
     """Identify every model x seed of CONFIG (or every run of --data); writes RUN/frontier.parquet."""
     from hcid.config import load_config
     from hcid.pipeline import identify_study, import_data, simulate_study
@@ -110,8 +120,17 @@ def identify(config: ConfigArg, method: MethodOpt = "both", run: RunOpt = None, 
         typer.echo(f"read {len(records)} run(s) of {cfg.data.name} from {data}")
     elif not (run_dir / "simulations.parquet").exists():
         _print_simulation_summary(simulate_study(cfg, run_dir, jobs=jobs, show_progress=not quiet))
-    result = identify_study(cfg, run_dir, methods, data=records, jobs=jobs, force=force, backend=backend,
-                            scheduler=scheduler, show_progress=not quiet)
+    result = identify_study(
+        cfg,
+        run_dir,
+        methods,
+        data=records,
+        jobs=jobs,
+        force=force,
+        backend=backend,
+        scheduler=scheduler,
+        show_progress=not quiet,
+    )
     _print_identify_summary(result)
 
 
@@ -139,8 +158,12 @@ def sweep_w(config: ConfigArg, run: RunOpt = None):
 
 
 # Paper section 5.2, for the summary only.
-_PAPER_THRESHOLDS = {("direct", "w_fp"): 1.2e-2, ("indirect", "w_fp"): 3.7e-2,
-                     ("direct", "w_fn"): 2.6e-1, ("indirect", "w_fn"): 2.6e-1}
+_PAPER_THRESHOLDS = {
+    ("direct", "w_fp"): 1.2e-2,
+    ("indirect", "w_fp"): 3.7e-2,
+    ("direct", "w_fn"): 2.6e-1,
+    ("indirect", "w_fn"): 2.6e-1,
+}
 
 
 def _print_thresholds(thresholds) -> None:
@@ -151,7 +174,9 @@ def _print_thresholds(thresholds) -> None:
                 continue
             paper = _PAPER_THRESHOLDS.get((row["method"], name))
             paper_text = f"{paper:.2g}" if paper is not None else "-"
-            typer.echo(f"{row['method']:<10}{row['model']:<8}{name.upper():<11}{row[name]:>12.4g}{paper_text:>10}")
+            typer.echo(
+                f"{row['method']:<10}{row['model']:<8}{name.upper():<11}{row[name]:>12.4g}{paper_text:>10}"
+            )
     first = thresholds.to_pylist()[0] if thresholds.num_rows else None
     if first:
         typer.echo(f"W_AIC = {first['w_aic']:.4g}, W_BIC = {first['w_bic']:.4g} (Nf = {first['nf']})")
@@ -159,8 +184,14 @@ def _print_thresholds(thresholds) -> None:
 
 @app.command("run")
 @_user_errors
-def run_all(config: ConfigArg, run: RunOpt = None, jobs: JobsOpt = 2, backend: BackendOpt = "loky",
-            scheduler: SchedulerOpt = None, quiet: QuietOpt = False):
+def run_all(
+    config: ConfigArg,
+    run: RunOpt = None,
+    jobs: JobsOpt = 2,
+    backend: BackendOpt = "loky",
+    scheduler: SchedulerOpt = None,
+    quiet: QuietOpt = False,
+):
     """Simulate, identify both methods and sweep W, skipping what is already done."""
     import time
 
@@ -172,8 +203,9 @@ def run_all(config: ConfigArg, run: RunOpt = None, jobs: JobsOpt = 2, backend: B
     start = time.perf_counter()
     if not (run_dir / "simulations.parquet").exists():
         _print_simulation_summary(simulate_study(cfg, run_dir, jobs=jobs, show_progress=not quiet))
-    _print_identify_summary(identify_study(cfg, run_dir, jobs=jobs, backend=backend,
-                                           scheduler=scheduler, show_progress=not quiet))
+    _print_identify_summary(
+        identify_study(cfg, run_dir, jobs=jobs, backend=backend, scheduler=scheduler, show_progress=not quiet)
+    )
     _print_thresholds(sweep_study(cfg, run_dir).thresholds)
     typer.echo(f"done in {time.perf_counter() - start:.1f} s; tables in {run_dir}")
 
@@ -184,7 +216,9 @@ def _print_simulation_summary(result) -> None:
     summary = result.summary.to_pydict()
     models = list(dict.fromkeys(summary["model"]))
     typer.echo(f"Kn = {result.kn:.6g} (remnant gain, from var(n)/var(u) in the disturbance-only task)")
-    typer.echo(f"{'model':<8}{'seeds':>6}{'RMS(e) deg mean +- sd':>24}{'paper':>8}{'var(n)/var(u) dist-only':>26}")
+    typer.echo(
+        f"{'model':<8}{'seeds':>6}{'RMS(e) deg mean +- sd':>24}{'paper':>8}{'var(n)/var(u) dist-only':>26}"
+    )
     for m in models:
         rows = [i for i, name in enumerate(summary["model"]) if name == m]
         rms = np.array([summary["rms_e_deg"][i] for i in rows])
@@ -200,33 +234,47 @@ def _print_simulation_summary(result) -> None:
 
 @app.command("calibrate-w")
 @_user_errors
-def calibrate_w(config: ConfigArg, run: RunOpt = None, jobs: JobsOpt = 2, backend: BackendOpt = "loky",
-                scheduler: SchedulerOpt = None, quiet: QuietOpt = False):
+def calibrate_w(
+    config: ConfigArg,
+    run: RunOpt = None,
+    jobs: JobsOpt = 2,
+    backend: BackendOpt = "loky",
+    scheduler: SchedulerOpt = None,
+    quiet: QuietOpt = False,
+):
     """Calibrate W on simulations of the config's FB and FF twins: rates, safe interval, recommended W."""
     from hcid.config import load_config
     from hcid.pipeline import calibrate_study, sweep_study
 
     cfg = load_config(config)
     run_dir = _run_dir(run, cfg)
-    result = calibrate_study(cfg, run_dir, jobs=jobs, backend=backend, scheduler=scheduler,
-                             show_progress=not quiet)
+    result = calibrate_study(
+        cfg, run_dir, jobs=jobs, backend=backend, scheduler=scheduler, show_progress=not quiet
+    )
     sweep_study(cfg, run_dir)
     typer.echo(f"target rate {cfg.target_rate:g} for false positives (FB twin) and false negatives (FF twin)")
     for cal in result.calibrations:
         if cal.has_safe_interval:
-            typer.echo(f"{cal.method:<9} safe W in [{cal.safe_low:.4g}, {cal.safe_high:.4g}), "
-                       f"recommended W = {cal.recommended:.4g} (geometric midpoint)")
+            typer.echo(
+                f"{cal.method:<9} safe W in [{cal.safe_low:.4g}, {cal.safe_high:.4g}), "
+                f"recommended W = {cal.recommended:.4g} (geometric midpoint)"
+            )
         else:
-            typer.echo(f"{cal.method:<9} no safe W: false positives up to {cal.safe_low:.4g}, "
-                       f"false negatives from {cal.safe_high:.4g}")
+            typer.echo(
+                f"{cal.method:<9} no safe W: false positives up to {cal.safe_low:.4g}, "
+                f"false negatives from {cal.safe_high:.4g}"
+            )
     typer.echo(f"wrote {run_dir / 'calibration.parquet'}")
 
 
 @app.command()
 @_user_errors
-def report(run_dir: Annotated[Path, typer.Argument(help="Run directory.", show_default=False)],
-           out: Annotated[Path | None, typer.Option("--out", help="Output directory [default: RUN_DIR/report].")]
-           = None):
+def report(
+    run_dir: Annotated[Path, typer.Argument(help="Run directory.", show_default=False)],
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Output directory [default: RUN_DIR/report].")
+    ] = None,
+):
     """Write RUN_DIR/report/report.md and report.html with the paper's figures and verdicts."""
     from hcid.report import build_report
 

@@ -270,8 +270,7 @@ class _Section:
             return default
         return self.data[name]
 
-    def number(self, name: str, lo: float, hi: float, default: Any = ..., *,
-               open_lo: bool = False) -> float:
+    def number(self, name: str, lo: float, hi: float, default: Any = ..., *, open_lo: bool = False) -> float:
         value = self.get(name, default)
         key = self.key(name)
         bracket = "(" if open_lo else "["
@@ -315,8 +314,7 @@ def _int_range(section: _Section, name: str, lo: int, hi: int, default: Any = ..
     )
     if not ok:
         raise ConfigError(
-            f"{key}: must be an integer range [lo, hi] with {lo} <= lo <= hi <= {hi}, "
-            f"got {_fmt(value)}"
+            f"{key}: must be an integer range [lo, hi] with {lo} <= lo <= hi <= {hi}, got {_fmt(value)}"
         )
     return int(value[0]), int(value[1])
 
@@ -337,12 +335,22 @@ def _number_list(section: _Section, name: str, n: int | None = None) -> tuple[fl
 # --------------------------------------------------------------------------- sections
 
 _PAPER_DIRECT = {
-    "na": [1, 7], "nb1": [0, 7], "nb2": [0, 7], "nk1": [1, 50], "nk2": [1, 10],
-    "estimation": [129, 1088], "validation": [1089, 2048],
+    "na": [1, 7],
+    "nb1": [0, 7],
+    "nb2": [0, 7],
+    "nk1": [1, 50],
+    "nk2": [1, 10],
+    "estimation": [129, 1088],
+    "validation": [1089, 2048],
 }
 _PAPER_STAGE1 = {
-    "na": [1, 10], "nb1": [0, 25], "nb2": [0, 10], "nk1": [1, 5], "nk2": [1, 5],
-    "estimation": "auto", "validation": "auto",
+    "na": [1, 10],
+    "nb1": [0, 25],
+    "nb2": [0, 10],
+    "nk1": [1, 5],
+    "nk2": [1, 5],
+    "estimation": "auto",
+    "validation": "auto",
 }
 
 
@@ -425,7 +433,9 @@ def _seeds(value: Any) -> tuple[int, ...]:
         s.done()
         return tuple(range(first, first + count))
     if not isinstance(value, list) or not value:
-        raise ConfigError(f"seeds: must be a non-empty list of integers or {{first, count}}, got {_fmt(value)}")
+        raise ConfigError(
+            f"seeds: must be a non-empty list of integers or {{first, count}}, got {_fmt(value)}"
+        )
     seeds = tuple(_integer(v, f"seeds[{i}]", 0, 2**31 - 1) for i, v in enumerate(value))
     if len(set(seeds)) != len(seeds):
         raise ConfigError(f"seeds: must not repeat a seed, got {list(seeds)}")
@@ -454,7 +464,9 @@ def parse_config(data: Any, name: str) -> Config:
 
     models_raw = top.get("models")
     if not isinstance(models_raw, dict) or not models_raw:
-        raise ConfigError(f"models: must be a non-empty mapping of model name to parameters, got {_fmt(models_raw)}")
+        raise ConfigError(
+            f"models: must be a non-empty mapping of model name to parameters, got {_fmt(models_raw)}"
+        )
     models = tuple(_model(k, v) for k, v in models_raw.items())
 
     ls = top.section("loop")
@@ -488,12 +500,17 @@ def parse_config(data: Any, name: str) -> Config:
     gain_deg = ts.number("gain_deg", 0.0, 180.0)
     segs_raw = ts.get("segments")
     if not isinstance(segs_raw, list) or not segs_raw:
-        raise ConfigError(f"signals.target.segments: must be a non-empty list of [kind, seconds, step], got {_fmt(segs_raw)}")
+        raise ConfigError(
+            f"signals.target.segments: must be a non-empty list of [kind, seconds, step], "
+            f"got {_fmt(segs_raw)}"
+        )
     segments = []
     for i, seg in enumerate(segs_raw):
         key = f"signals.target.segments[{i}]"
         ok = (
-            isinstance(seg, list) and len(seg) == 3 and seg[0] in ("c", "p")
+            isinstance(seg, list)
+            and len(seg) == 3
+            and seg[0] in ("c", "p")
             and all(isinstance(v, int | float) and not isinstance(v, bool) for v in seg[1:])
             and seg[1] > 0
         )
@@ -525,9 +542,7 @@ def parse_config(data: Any, name: str) -> Config:
         if abs(secs * timing.sim_rate - round(secs * timing.sim_rate)) > 1e-6:
             raise ConfigError(f"timing.{key}: must be whole samples at sim_rate, got {secs:g} s")
     if timing.window_samples % timing.decimation:
-        raise ConfigError(
-            f"timing.window: must be whole samples at output_rate, got {timing.window:g} s"
-        )
+        raise ConfigError(f"timing.window: must be whole samples at output_rate, got {timing.window:g} s")
     segment_total = sum(s.duration for s in segments)
     if segment_total > timing.window + 1e-9:
         raise ConfigError(
@@ -582,9 +597,18 @@ def parse_config(data: Any, name: str) -> Config:
     }
     raw["selection"] = {"w_grid": {"min": w_min, "max": w_max, "points": points}, "target_rate": target_rate}
     return Config(
-        name=study_name, models=models, loop=loop, disturbance=disturbance, target=target,
-        timing=timing, seeds=seeds, identify=identify, w_grid=w_grid, target_rate=target_rate,
-        data=data_cfg, raw=raw,
+        name=study_name,
+        models=models,
+        loop=loop,
+        disturbance=disturbance,
+        target=target,
+        timing=timing,
+        seeds=seeds,
+        identify=identify,
+        w_grid=w_grid,
+        target_rate=target_rate,
+        data=data_cfg,
+        raw=raw,
     )
 
 
@@ -594,8 +618,9 @@ def _data(value: Any, model_names: list[str]) -> DataConfig | None:
     s = _Section(value, "data")
     name = s.get("name", "data")
     if not isinstance(name, str) or not name.isidentifier() or name in model_names:
-        raise ConfigError(f"data.name: must be an identifier other than the model names {model_names}, "
-                          f"got {_fmt(name)}")
+        raise ConfigError(
+            f"data.name: must be an identifier other than the model names {model_names}, got {_fmt(name)}"
+        )
     cs = s.section("columns", {})
     columns = {}
     for key, default in _DATA_COLUMNS.items():
@@ -605,8 +630,11 @@ def _data(value: Any, model_names: list[str]) -> DataConfig | None:
         columns[key] = col
     cs.done()
     w_raw = s.get("w_report", [0.00715, 0.47])
-    if not isinstance(w_raw, list) or not w_raw or not all(
-            isinstance(w, int | float) and not isinstance(w, bool) and w > 0 for w in w_raw):
+    if (
+        not isinstance(w_raw, list)
+        or not w_raw
+        or not all(isinstance(w, int | float) and not isinstance(w, bool) and w > 0 for w in w_raw)
+    ):
         raise ConfigError(f"data.w_report: must be a non-empty list of W > 0, got {_fmt(w_raw)}")
     s.done()
     return DataConfig(name=name, columns=columns, w_report=tuple(float(w) for w in w_raw))
@@ -615,8 +643,11 @@ def _data(value: Any, model_names: list[str]) -> DataConfig | None:
 def _stage_raw(stage: StageConfig) -> dict:
     g = stage.grid
     return {
-        "na": list(g.na), "nb1": list(g.nb1), "nb2": list(g.nb2),
-        "nk1": list(g.nk1), "nk2": list(g.nk2),
+        "na": list(g.na),
+        "nb1": list(g.nb1),
+        "nb2": list(g.nb2),
+        "nk1": list(g.nk1),
+        "nk2": list(g.nk2),
         "estimation": [stage.estimation.first, stage.estimation.last],
         "validation": [stage.validation.first, stage.validation.last],
     }

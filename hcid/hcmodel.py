@@ -60,7 +60,9 @@ def remnant_filter(loop: Loop) -> control.TransferFunction:
     return control.tf([w**3], np.polymul([1.0, 2 * z * w, w**2], [1.0, w]))
 
 
-def discretise(sys: control.TransferFunction, dt: float, method: str = "zoh") -> tuple[np.ndarray, np.ndarray]:
+def discretise(
+    sys: control.TransferFunction, dt: float, method: str = "zoh"
+) -> tuple[np.ndarray, np.ndarray]:
     """Discretise with python-control; returns ``(b, a)`` for ``scipy.signal.lfilter``."""
     d = control.sample_system(sys, dt, method=method)
     num = np.atleast_1d(np.squeeze(np.asarray(d.num[0][0], dtype=np.float64)))
@@ -100,7 +102,8 @@ class DiscreteLoop:
         return cls(
             dt=dt,
             feedforward=discretise(feedforward_path(model, loop), dt, PATH_METHOD)
-            if model.has_feedforward else (np.zeros(1), np.ones(1)),
+            if model.has_feedforward
+            else (np.zeros(1), np.ones(1)),
             feedback=discretise(feedback_path(model, loop), dt, PATH_METHOD),
             plant=discretise(plant(loop), dt, PATH_METHOD),
             remnant=discretise(remnant_filter(loop), dt),
@@ -111,8 +114,12 @@ class DiscreteLoop:
 
     def response(self, which: str, w: np.ndarray) -> np.ndarray:
         """Frequency response of a discrete path with its delay at w (rad/s)."""
-        b, a = {"feedforward": self.feedforward, "feedback": self.feedback,
-                "plant": self.plant, "remnant": self.remnant}[which]
+        b, a = {
+            "feedforward": self.feedforward,
+            "feedback": self.feedback,
+            "plant": self.plant,
+            "remnant": self.remnant,
+        }[which]
         delay = {"feedforward": self.delay_ft, "feedback": self.delay_e}.get(which, 0)
         z = np.exp(1j * np.asarray(w) * self.dt)
         return np.polyval(b, z) / np.polyval(a, z) * z ** (-float(delay))

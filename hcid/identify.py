@@ -60,13 +60,22 @@ class MethodResult:
 
 def _fit(stage: StageConfig, i1, i2, o, threads: int) -> GridFit:
     return fit_grid(
-        i1, i2, o, Grid(**asdict(stage.grid)),
-        stage.estimation.rows(), stage.validation.rows(), threads=threads,
+        i1,
+        i2,
+        o,
+        Grid(**asdict(stage.grid)),
+        stage.estimation.rows(),
+        stage.validation.rows(),
+        threads=threads,
     )
 
 
 def identify(
-    record: dict[str, np.ndarray], settings: IdentifyConfig, method: str, *, rate: float,
+    record: dict[str, np.ndarray],
+    settings: IdentifyConfig,
+    method: str,
+    *,
+    rate: float,
     threads: int = 1,
 ) -> MethodResult:
     """Identify one record by one method.
@@ -97,12 +106,24 @@ def identify(
 
     stage1 = _fit(settings.stage1, ft_s, record["fd"], record["e"], threads)
     row = best(stage1)
-    e_r = simulate(stage1.a[row], stage1.b1[row], stage1.b2[row], int(stage1.nk1[row]),
-                   int(stage1.nk2[row]), ft_s, record["fd"])
+    e_r = simulate(
+        stage1.a[row],
+        stage1.b1[row],
+        stage1.b2[row],
+        int(stage1.nk1[row]),
+        int(stage1.nk2[row]),
+        ft_s,
+        record["fd"],
+    )
     choice = Stage1Choice(
-        na=int(stage1.na[row]), nb1=int(stage1.nb1[row]), nb2=int(stage1.nb2[row]),
-        nk1=int(stage1.nk1[row]), nk2=int(stage1.nk2[row]), v=float(stage1.v[row]),
-        n_candidates=stage1.n_candidates, n_unstable=stage1.n_unstable_total,
+        na=int(stage1.na[row]),
+        nb1=int(stage1.nb1[row]),
+        nb2=int(stage1.nb2[row]),
+        nk1=int(stage1.nk1[row]),
+        nk2=int(stage1.nk2[row]),
+        v=float(stage1.v[row]),
+        n_candidates=stage1.n_candidates,
+        n_unstable=stage1.n_unstable_total,
         seconds=time.perf_counter() - start,
     )
     fit = _fit(settings.stage2, ft_s, e_r, record["u"], threads)

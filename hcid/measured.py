@@ -90,8 +90,10 @@ def _split_runs(path: Path, cols: dict[str, np.ndarray], data: DataConfig) -> li
         if len(widths) > 1:
             raise DataError(f"{path}: signals hold different numbers of runs ({sorted(widths)})")
         n_runs = widths.pop()
-        return [{n: (v[:, r] if v.ndim == 2 and v.shape[1] > 1 else v.ravel()) for n, v in cols.items()}
-                for r in range(n_runs)]
+        return [
+            {n: (v[:, r] if v.ndim == 2 and v.shape[1] > 1 else v.ravel()) for n, v in cols.items()}
+            for r in range(n_runs)
+        ]
     flat = {n: v.ravel() for n, v in cols.items()}
     if "run" not in flat:
         return [flat]
@@ -125,13 +127,20 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
     if missing:
         raise DataError(f"{path}: missing columns {missing} (mapped in the config's data.columns)")
     if "time" not in cols and "rate" not in cols:
-        raise DataError(f"{path}: needs a time column '{data.columns['time']}' or a rate "
-                        f"'{data.columns['rate']}'")
+        raise DataError(
+            f"{path}: needs a time column '{data.columns['time']}' or a rate '{data.columns['rate']}'"
+        )
     rate = config.timing.output_rate
-    need = max(s.validation.last for s in (config.identify.direct, config.identify.stage1,
-                                            config.identify.stage2))
-    need = max(need, *(s.estimation.last for s in (config.identify.direct, config.identify.stage1,
-                                                     config.identify.stage2)))
+    need = max(
+        s.validation.last for s in (config.identify.direct, config.identify.stage1, config.identify.stage2)
+    )
+    need = max(
+        need,
+        *(
+            s.estimation.last
+            for s in (config.identify.direct, config.identify.stage1, config.identify.stage2)
+        ),
+    )
     records = {}
     for i, run in enumerate(_split_runs(path, cols, data), start=1):
         where = f"{path}: run {i}"
@@ -146,14 +155,18 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
             steps = np.diff(run["time"])
             if steps.size and not np.allclose(steps, steps[0], rtol=1e-6, atol=1e-9):
                 k = int(np.argmax(np.abs(steps - steps[0]) > 1e-6 * abs(steps[0]) + 1e-9))
-                raise DataError(f"{where}: time is not uniformly sampled (step {steps[k]:.6g} s at sample "
-                                f"{k + 1}, first step {steps[0]:.6g} s)")
+                raise DataError(
+                    f"{where}: time is not uniformly sampled (step {steps[k]:.6g} s at sample "
+                    f"{k + 1}, first step {steps[0]:.6g} s)"
+                )
             found = 1.0 / steps[0] if steps.size else rate
         else:
             found = float(np.ravel(run["rate"])[0])
         if not np.isclose(found, rate, rtol=1e-6):
-            raise DataError(f"{where}: sample rate {found:.6g} Hz, the config's timing.output_rate is "
-                            f"{rate:g} Hz (set it, and the windows in samples, to the data's rate)")
+            raise DataError(
+                f"{where}: sample rate {found:.6g} Hz, the config's timing.output_rate is "
+                f"{rate:g} Hz (set it, and the windows in samples, to the data's rate)"
+            )
         if n < need:
             raise DataError(f"{where}: {n} samples, the identification windows need {need}")
         records[i] = {"t": np.arange(n) / rate, **{s: run[s] for s in SIGNALS}}
@@ -172,5 +185,9 @@ def records_table(name: str, records: dict[int, dict[str, np.ndarray]]) -> pa.Ta
         parts["k"].append(np.arange(n, dtype=np.int64))
         for c in ("t", *SIGNALS):
             parts[c].append(rec[c])
-    return pa.table({c: np.concatenate(v) if c != "model" else pa.array(np.concatenate(v), pa.string())
-                     for c, v in parts.items()})
+    return pa.table(
+        {
+            c: np.concatenate(v) if c != "model" else pa.array(np.concatenate(v), pa.string())
+            for c, v in parts.items()
+        }
+    )

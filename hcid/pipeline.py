@@ -114,10 +114,16 @@ def parallel_map(
         return
     with contextlib.ExitStack() as stack:
         stream = _stream(func, tasks, jobs, backend, scheduler, stack)
-        progress = stack.enter_context(Progress(
-            "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
-            TimeElapsedColumn(), TimeRemainingColumn(), disable=not show_progress,
-        ))
+        progress = stack.enter_context(
+            Progress(
+                "[progress.description]{task.description}",
+                BarColumn(),
+                MofNCompleteColumn(),
+                TimeElapsedColumn(),
+                TimeRemainingColumn(),
+                disable=not show_progress,
+            )
+        )
         bar = progress.add_task(label, total=len(tasks))
         for result in stream:
             progress.advance(bar)
@@ -140,15 +146,21 @@ def _stream(func, tasks, jobs, backend, scheduler, stack: contextlib.ExitStack) 
             except OSError as exc:
                 raise HcidError(f"--scheduler: cannot reach {scheduler} ({exc})") from exc
         else:
-            cluster = stack.enter_context(LocalCluster(
-                n_workers=jobs, threads_per_worker=1, processes=True,
-                dashboard_address=None, host="127.0.0.1",
-            ))
+            cluster = stack.enter_context(
+                LocalCluster(
+                    n_workers=jobs,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=None,
+                    host="127.0.0.1",
+                )
+            )
             client = stack.enter_context(Client(cluster))
         del client
         stack.enter_context(parallel_config(backend="dask"))
-    return Parallel(n_jobs=jobs, backend=None if backend == "dask" else backend,
-                    return_as="generator")(delayed(func)(*task) for task in tasks)
+    return Parallel(n_jobs=jobs, backend=None if backend == "dask" else backend, return_as="generator")(
+        delayed(func)(*task) for task in tasks
+    )
 
 
 def _simulate_task(config: Config, model_name: str, seed: int, kn: float):
@@ -170,7 +182,11 @@ class SimulationRun:
 
 
 def simulate_study(
-    config: Config, run_dir: Path, *, jobs: int = 2, show_progress: bool = True,
+    config: Config,
+    run_dir: Path,
+    *,
+    jobs: int = 2,
+    show_progress: bool = True,
     force: bool = False,
 ) -> SimulationRun:
     """Simulate every model x seed of ``config`` and write the run's tables.
@@ -182,8 +198,9 @@ def simulate_study(
     start = time.perf_counter()
     kn = remnant_gain(config)
     tasks = [(config, m.name, seed, kn) for m in config.models for seed in config.seeds]
-    pairs = list(parallel_map(_simulate_task, tasks, jobs=jobs, label="simulate",
-                              show_progress=show_progress))
+    pairs = list(
+        parallel_map(_simulate_task, tasks, jobs=jobs, label="simulate", show_progress=show_progress)
+    )
     realizations = [p[0] for p in pairs]
     simulations = results.realizations_table(realizations)
     summary = results.summary_table(realizations, [p[1] for p in pairs])
@@ -197,8 +214,9 @@ def simulate_study(
 # --------------------------------------------------------------------------- identification
 
 
-def _identify_task(settings: IdentifyConfig, rate: float, model: str, seed: int, method: str,
-                   record: dict[str, np.ndarray]):
+def _identify_task(
+    settings: IdentifyConfig, rate: float, model: str, seed: int, method: str, record: dict[str, np.ndarray]
+):
     result = identify(record, settings, method, rate=rate, threads=1)
     return (model, seed, method), results.frontier_part(model, seed, result)
 
@@ -224,8 +242,11 @@ def _existing(run_dir: Path) -> dict[tuple[str, int, str], dict[str, pa.Table]]:
     frontier = results.read_table(path, results.KEY_COLUMNS, hint=hint)
     log = results.read_table(run_dir / results.IDENTIFY_LOG, results.KEY_COLUMNS, hint=hint)
     stage1_path = run_dir / results.STAGE1
-    stage1 = results.split_by_key(results.read_table(stage1_path, ("model", "seed"), hint=hint),
-                                   ("model", "seed")) if stage1_path.is_file() else {}
+    stage1 = (
+        results.split_by_key(results.read_table(stage1_path, ("model", "seed"), hint=hint), ("model", "seed"))
+        if stage1_path.is_file()
+        else {}
+    )
     logs = results.split_by_key(log, results.KEY_COLUMNS)
     out = {}
     for key, table in results.split_by_key(frontier, results.KEY_COLUMNS).items():
@@ -249,9 +270,13 @@ def _load_records(config: Config, run_dir: Path) -> dict[tuple[str, int], dict[s
         for seed in config.seeds:
             rec = recs.get((m.name, seed))
             if rec is None:
-                raise DataError(f"{path}: has no record of model {m.name}, seed {seed}; rerun `hcid simulate`")
+                raise DataError(
+                    f"{path}: has no record of model {m.name}, seed {seed}; rerun `hcid simulate`"
+                )
             if rec["e"].size != n:
-                raise DataError(f"{path}: model {m.name}, seed {seed} has {rec['e'].size} samples, expected {n}")
+                raise DataError(
+                    f"{path}: model {m.name}, seed {seed} has {rec['e'].size} samples, expected {n}"
+                )
     return recs
 
 
@@ -297,12 +322,20 @@ def identify_study(
     rate = config.timing.output_rate
     tasks = [
         (config.identify, rate, model, seed, method, records[(model, seed)])
-        for model, seed in keys for method in methods if (model, seed, method) not in done
+        for model, seed in keys
+        for method in methods
+        if (model, seed, method) not in done
     ]
     reused = sum(1 for k in keys for me in methods if (*k, me) in done)
-    for key, tables in parallel_map(_identify_task, tasks, jobs=jobs, label="identify",
-                                    show_progress=show_progress, backend=backend,
-                                    scheduler=scheduler):
+    for key, tables in parallel_map(
+        _identify_task,
+        tasks,
+        jobs=jobs,
+        label="identify",
+        show_progress=show_progress,
+        backend=backend,
+        scheduler=scheduler,
+    ):
         results.write_part(run_dir, *key, tables)
     done.update(results.read_parts(run_dir))
 
@@ -320,8 +353,9 @@ def identify_study(
     results.clear_parts(run_dir)
     if tasks:
         results.append_run_log(run_dir, f"identify ({len(tasks)} tasks)", time.perf_counter() - start, jobs)
-    return IdentifyRun(frontier=frontier, stage1=stage1, log=log, computed=len(tasks),
-                       reused=reused, run_dir=run_dir)
+    return IdentifyRun(
+        frontier=frontier, stage1=stage1, log=log, computed=len(tasks), reused=reused, run_dir=run_dir
+    )
 
 
 def _canonical_order(config: Config, done: dict) -> list[tuple[str, int, str]]:
@@ -371,8 +405,9 @@ def sweep_study(config: Config, run_dir: Path) -> SweepRun:
     """
     check_run_dir(config, run_dir, force=False)
     path = run_dir / results.FRONTIER
-    frontier = results.read_table(path, (*results.KEY_COLUMNS, *_SELECTED_COLUMNS),
-                                  hint="run `hcid identify` first")
+    frontier = results.read_table(
+        path, (*results.KEY_COLUMNS, *_SELECTED_COLUMNS), hint="run `hcid identify` first"
+    )
     w = np.asarray(config.w_grid)
     sel_parts, bp_parts = [], []
     segments: dict[tuple[str, str], list] = {}
@@ -382,8 +417,9 @@ def sweep_study(config: Config, run_dir: Path) -> SweepRun:
         nb_ft.setdefault((model, method), []).append(cols["nb_ft"])
         chosen = seg.at(w)
         sel_parts.append(_rows_table(model, seed, method, {"w": w}, cols, chosen))
-        bp_parts.append(_rows_table(model, seed, method,
-                                    {"w_from": seg.w_from, "w_to": seg.w_to}, cols, seg.index))
+        bp_parts.append(
+            _rows_table(model, seed, method, {"w_from": seg.w_from, "w_to": seg.w_to}, cols, seg.index)
+        )
     selection_table = results.concat(sel_parts)
     breakpoints_table = results.concat(bp_parts)
     thresholds = _thresholds(config, segments, nb_ft)
@@ -408,8 +444,11 @@ def _selections(frontier: pa.Table, path: Path) -> dict[tuple[str, int, str], tu
 
 def _rows_table(model, seed, method, w_columns: dict, cols: dict, rows: np.ndarray) -> pa.Table:
     n = rows.size
-    data = {"model": pa.array([model] * n, pa.string()), "seed": pa.array([seed] * n, pa.int64()),
-            "method": pa.array([method] * n, pa.string())}
+    data = {
+        "model": pa.array([model] * n, pa.string()),
+        "seed": pa.array([seed] * n, pa.int64()),
+        "method": pa.array([method] * n, pa.string()),
+    }
     data.update({k: pa.array(v, pa.float64()) for k, v in w_columns.items()})
     data.update({c: pa.array(cols[c][rows]) for c in _SELECTED_COLUMNS})
     return pa.table(data)
@@ -425,17 +464,32 @@ def _thresholds(config: Config, segments: dict, nb_ft: dict) -> pa.Table:
             stage = config.identify.direct if method == "direct" else config.identify.stage2
             nf = stage.estimation.length
             ff = model.has_feedforward
-            rows.append({
-                "method": method, "model": model.name, "has_feedforward": ff,
-                "n_realizations": len(segments[key]), "nf": nf,
-                "w_aic": selection.w_aic(nf), "w_bic": selection.w_bic(nf),
-                "w_fp": None if ff else selection.false_positive_threshold(segments[key], nb_ft[key]),
-                "w_fn": selection.false_negative_threshold(segments[key], nb_ft[key]) if ff else None,
-            })
-    schema = pa.schema([("method", pa.string()), ("model", pa.string()),
-                        ("has_feedforward", pa.bool_()), ("n_realizations", pa.int64()),
-                        ("nf", pa.int64()), ("w_aic", pa.float64()), ("w_bic", pa.float64()),
-                        ("w_fp", pa.float64()), ("w_fn", pa.float64())])
+            rows.append(
+                {
+                    "method": method,
+                    "model": model.name,
+                    "has_feedforward": ff,
+                    "n_realizations": len(segments[key]),
+                    "nf": nf,
+                    "w_aic": selection.w_aic(nf),
+                    "w_bic": selection.w_bic(nf),
+                    "w_fp": None if ff else selection.false_positive_threshold(segments[key], nb_ft[key]),
+                    "w_fn": selection.false_negative_threshold(segments[key], nb_ft[key]) if ff else None,
+                }
+            )
+    schema = pa.schema(
+        [
+            ("method", pa.string()),
+            ("model", pa.string()),
+            ("has_feedforward", pa.bool_()),
+            ("n_realizations", pa.int64()),
+            ("nf", pa.int64()),
+            ("w_aic", pa.float64()),
+            ("w_bic", pa.float64()),
+            ("w_fp", pa.float64()),
+            ("w_fn", pa.float64()),
+        ]
+    )
     return pa.Table.from_pylist(rows, schema=schema)
 
 
@@ -450,8 +504,15 @@ class CalibrationRun:
     run_dir: Path
 
 
-def calibrate_study(config: Config, run_dir: Path, *, jobs: int = 2, backend: str = "loky",
-                    scheduler: str | None = None, show_progress: bool = True) -> CalibrationRun:
+def calibrate_study(
+    config: Config,
+    run_dir: Path,
+    *,
+    jobs: int = 2,
+    backend: str = "loky",
+    scheduler: str | None = None,
+    show_progress: bool = True,
+) -> CalibrationRun:
     """Simulate and identify the config's HC hypothesis (what is not done yet), then
     compute false-positive and false-negative rates over W and the safe interval.
 
@@ -463,12 +524,15 @@ def calibrate_study(config: Config, run_dir: Path, *, jobs: int = 2, backend: st
     fb = next((m for m in config.models if not m.has_feedforward), None)
     ff = next((m for m in config.models if m.has_feedforward), None)
     if fb is None or ff is None:
-        raise DataError("models: calibration needs a feedback-only model (Kpt = 0) and a feedforward "
-                        f"model (Kpt > 0), got {[m.name for m in config.models]}")
+        raise DataError(
+            "models: calibration needs a feedback-only model (Kpt = 0) and a feedforward "
+            f"model (Kpt > 0), got {[m.name for m in config.models]}"
+        )
     if not (run_dir / results.SIMULATIONS).is_file():
         simulate_study(config, run_dir, jobs=jobs, show_progress=show_progress)
-    identify_study(config, run_dir, jobs=jobs, backend=backend, scheduler=scheduler,
-                   show_progress=show_progress)
+    identify_study(
+        config, run_dir, jobs=jobs, backend=backend, scheduler=scheduler, show_progress=show_progress
+    )
     path = run_dir / results.FRONTIER
     chosen = _selections(results.read_table(path), path)
     out = []

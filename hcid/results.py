@@ -113,9 +113,7 @@ def realizations_table(realizations: Sequence[Realization]) -> pa.Table:
     return pa.Table.from_arrays(arrays, schema=_SIMULATION_SCHEMA)
 
 
-def summary_table(
-    realizations: Sequence[Realization], disturbance_only: Sequence[Realization]
-) -> pa.Table:
+def summary_table(realizations: Sequence[Realization], disturbance_only: Sequence[Realization]) -> pa.Table:
     """Per model and seed: RMS(e) in deg, var(n)/var(u), the same ratio in the
     disturbance-only task, and Kn."""
     return pa.table(
@@ -124,9 +122,7 @@ def summary_table(
             "seed": pa.array([r.seed for r in realizations], pa.int64()),
             "rms_e_deg": pa.array([r.rms_e_deg for r in realizations], pa.float64()),
             "noise_ratio": pa.array([r.noise_ratio for r in realizations], pa.float64()),
-            "noise_ratio_disturbance_only": pa.array(
-                [r.noise_ratio for r in disturbance_only], pa.float64()
-            ),
+            "noise_ratio_disturbance_only": pa.array([r.noise_ratio for r in disturbance_only], pa.float64()),
             "kn": pa.array([r.kn for r in realizations], pa.float64()),
         }
     )
@@ -199,21 +195,36 @@ def frontier_part(model: str, seed: int, result) -> dict[str, pa.Table]:
     ]
     frontier = pa.Table.from_arrays(keys + fit.columns, names=[*KEY_COLUMNS, *fit.column_names])
     log = {
-        "model": [model], "seed": [seed], "method": [result.method],
-        "n_candidates": [result.fit.n_candidates], "n_unstable": [result.fit.n_unstable_total],
-        "stage1_candidates": [0], "stage1_unstable": [0],
-        "seconds_stage1": [0.0], "seconds": [result.seconds],
+        "model": [model],
+        "seed": [seed],
+        "method": [result.method],
+        "n_candidates": [result.fit.n_candidates],
+        "n_unstable": [result.fit.n_unstable_total],
+        "stage1_candidates": [0],
+        "stage1_unstable": [0],
+        "seconds_stage1": [0.0],
+        "seconds": [result.seconds],
     }
     tables = {"frontier": frontier}
     s1 = result.stage1
     if s1 is not None:
-        tables["stage1"] = pa.table({
-            "model": [model], "seed": [seed], "na": [s1.na], "nb_ft": [s1.nb1], "nb_fd": [s1.nb2],
-            "nk_ft": [s1.nk1], "nk_fd": [s1.nk2], "v": [s1.v],
-            "n_candidates": [s1.n_candidates], "n_unstable": [s1.n_unstable],
-        })
-        log.update(stage1_candidates=[s1.n_candidates], stage1_unstable=[s1.n_unstable],
-                   seconds_stage1=[s1.seconds])
+        tables["stage1"] = pa.table(
+            {
+                "model": [model],
+                "seed": [seed],
+                "na": [s1.na],
+                "nb_ft": [s1.nb1],
+                "nb_fd": [s1.nb2],
+                "nk_ft": [s1.nk1],
+                "nk_fd": [s1.nk2],
+                "v": [s1.v],
+                "n_candidates": [s1.n_candidates],
+                "n_unstable": [s1.n_unstable],
+            }
+        )
+        log.update(
+            stage1_candidates=[s1.n_candidates], stage1_unstable=[s1.n_unstable], seconds_stage1=[s1.seconds]
+        )
     tables["log"] = pa.table(log)
     return tables
 
@@ -285,10 +296,14 @@ def append_run_log(run_dir: Path, stage: str, seconds: float, jobs: int) -> None
     import datetime
 
     path = Path(run_dir) / RUN_LOG
-    row = pa.table({
-        "stage": [stage], "seconds": [float(seconds)], "jobs": [int(jobs)],
-        "finished": [datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")],
-    })
+    row = pa.table(
+        {
+            "stage": [stage],
+            "seconds": [float(seconds)],
+            "jobs": [int(jobs)],
+            "finished": [datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")],
+        }
+    )
     try:
         previous = pq.read_table(path) if path.is_file() else None
     except (pa.ArrowException, OSError):

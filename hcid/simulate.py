@@ -100,7 +100,7 @@ def simulate_loop(
     if dloop.has_feedforward:
         b, a = dloop.feedforward
         u_ff = sps.lfilter(b, a, ft)
-        u_open[dloop.delay_ft:] += u_ff[: m - dloop.delay_ft]
+        u_open[dloop.delay_ft :] += u_ff[: m - dloop.delay_ft]
 
     b_fb, a_fb = dloop.feedback
     b_c, a_c = dloop.plant
@@ -111,7 +111,7 @@ def simulate_loop(
     theta = np.empty(m)
     for k0 in range(0, m, block):
         k1 = min(k0 + block, m)
-        u_fb, z_fb = sps.lfilter(b_fb, a_fb, e[k0 : k1], zi=z_fb)
+        u_fb, z_fb = sps.lfilter(b_fb, a_fb, e[k0:k1], zi=z_fb)
         u[k0:k1] = u_fb + u_open[k0:k1]
         y, z_c = sps.lfilter(b_c, a_c, u[k0:k1], zi=z_c)
         theta[k0:k1] = y + fd[k0:k1]

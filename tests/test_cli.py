@@ -19,8 +19,9 @@ def simulated(tmp_path_factory):
     out = {}
     for jobs in (1, 2):
         run = base / f"jobs{jobs}"
-        result = runner.invoke(app, ["simulate", str(CI_CONFIG), "--run", str(run),
-                                     "--jobs", str(jobs), "--quiet"])
+        result = runner.invoke(
+            app, ["simulate", str(CI_CONFIG), "--run", str(run), "--jobs", str(jobs), "--quiet"]
+        )
         assert result.exit_code == 0, result.output
         out[jobs] = (run, result.output)
     return out
@@ -47,9 +48,13 @@ def test_simulate_identical_across_jobs(simulated, name):
     [
         (("seeds: [1, 2, 3]", "seeds: []"), "seeds: must be a non-empty list"),
         (("zeta_n: 0.26", "zeta_n: 0.26\n  extra: 1"), "loop.extra: unknown key"),
-        (("estimation: [129, 1088], validation: [1089, 2048]}\n  stage1",
-          "estimation: [129, 1088], validation: [1089, 3000]}\n  stage1"),
-         "identify.direct.validation"),
+        (
+            (
+                "estimation: [129, 1088], validation: [1089, 2048]}\n  stage1",
+                "estimation: [129, 1088], validation: [1089, 3000]}\n  stage1",
+            ),
+            "identify.direct.validation",
+        ),
         (("Kc: 2.75", "Kc: [2.75]"), "loop.Kc: must be a number"),
     ],
 )

@@ -62,25 +62,39 @@ def _one_run(table):
     return table.filter(pa.compute.equal(table.column("trial"), 1))
 
 
-@pytest.mark.parametrize("damage, message", [
-    (lambda t: t.drop_columns(["stick"]), "missing columns ['stick']"),
-    (lambda t: t.set_column(4, "error", [np.where(np.arange(t.num_rows) == 9, np.inf,
-                                                   t.column("error").to_numpy())]),
-     "run 1: error holds inf at sample 9"),
-    (lambda t: t.set_column(1, "time_s", [t.column("time_s").to_numpy()
-                                           + np.where(np.arange(t.num_rows) >= 100, 0.01, 0.0)]),
-     "time is not uniformly sampled"),
-    (lambda t: t.set_column(1, "time_s", [t.column("time_s").to_numpy() * 2]),
-     "sample rate 12.5 Hz, the config's timing.output_rate is 25 Hz"),
-    (lambda t: t.slice(0, 1500), "1500 samples, the identification windows need 2048"),
-])
+@pytest.mark.parametrize(
+    "damage, message",
+    [
+        (lambda t: t.drop_columns(["stick"]), "missing columns ['stick']"),
+        (
+            lambda t: t.set_column(
+                4, "error", [np.where(np.arange(t.num_rows) == 9, np.inf, t.column("error").to_numpy())]
+            ),
+            "run 1: error holds inf at sample 9",
+        ),
+        (
+            lambda t: t.set_column(
+                1,
+                "time_s",
+                [t.column("time_s").to_numpy() + np.where(np.arange(t.num_rows) >= 100, 0.01, 0.0)],
+            ),
+            "time is not uniformly sampled",
+        ),
+        (
+            lambda t: t.set_column(1, "time_s", [t.column("time_s").to_numpy() * 2]),
+            "sample rate 12.5 Hz, the config's timing.output_rate is 25 Hz",
+        ),
+        (lambda t: t.slice(0, 1500), "1500 samples, the identification windows need 2048"),
+    ],
+)
 @pytest.mark.parametrize("suffix", [".csv", ".parquet"])
 def test_bad_data_exit_2_nothing_written(tmp_path, data_config_path, example_table, damage, message, suffix):
     bad = tmp_path / f"bad{suffix}"
     _write(damage(_one_run(example_table)), bad)
     run = tmp_path / "run"
-    result = runner.invoke(app, ["identify", str(data_config_path), "--data", str(bad), "--run", str(run),
-                                 "--quiet"])
+    result = runner.invoke(
+        app, ["identify", str(data_config_path), "--data", str(bad), "--run", str(run), "--quiet"]
+    )
     assert result.exit_code == 2, result.output
     assert message in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
@@ -89,8 +103,16 @@ def test_bad_data_exit_2_nothing_written(tmp_path, data_config_path, example_tab
 
 def test_unequal_lengths_in_mat(tmp_path, data_config):
     path = tmp_path / "bad.mat"
-    scipy.io.savemat(path, {"target": np.zeros(2048), "disturbance": np.zeros(2048), "error": np.zeros(2048),
-                            "stick": np.zeros(2000), "rate": 25.0})
+    scipy.io.savemat(
+        path,
+        {
+            "target": np.zeros(2048),
+            "disturbance": np.zeros(2048),
+            "error": np.zeros(2048),
+            "stick": np.zeros(2000),
+            "rate": 25.0,
+        },
+    )
     with pytest.raises(DataError, match="signals of unequal length"):
         load_data(path, data_config)
 
@@ -119,8 +141,20 @@ def three_formats(tmp_path_factory, data_config_path, example_table):
     frontiers = {}
     for name in ("d.csv", "d.parquet", "d.mat"):
         run = base / f"run_{name}"
-        result = runner.invoke(app, ["identify", str(data_config_path), "--data", str(base / name),
-                                     "--run", str(run), "--jobs", "1", "--quiet"])
+        result = runner.invoke(
+            app,
+            [
+                "identify",
+                str(data_config_path),
+                "--data",
+                str(base / name),
+                "--run",
+                str(run),
+                "--jobs",
+                "1",
+                "--quiet",
+            ],
+        )
         assert result.exit_code == 0, result.output
         frontiers[name] = run
     return frontiers
@@ -152,7 +186,8 @@ def test_sweep_and_report_on_data_run(three_formats, data_config_path):
     assert (run / "report" / "data_structure.png").is_file()
     assert (run / "report" / "bode_data_w0.00715.png").is_file()
     assert "true" not in (run / "report" / "report.md").read_text().split("## 10.")[1].lower().replace(
-        "no true dynamics", "")
+        "no true dynamics", ""
+    )
 
 
 def test_calibrate_w_interval_from_thresholds(tmp_path, data_config_path):

@@ -13,8 +13,13 @@ from hcid.cli import app
 from .conftest import CI_CONFIG
 
 runner = CliRunner()
-TABLES = ("frontier.parquet", "stage1.parquet", "selection.parquet", "breakpoints.parquet",
-          "thresholds.parquet")
+TABLES = (
+    "frontier.parquet",
+    "stage1.parquet",
+    "selection.parquet",
+    "breakpoints.parquet",
+    "thresholds.parquet",
+)
 
 
 def _run(args):
@@ -46,7 +51,8 @@ def test_tables_written(ci_runs, ci_config):
     assert pq.read_table(run / "selection.parquet").num_rows == 2 * 3 * 2 * len(ci_config.w_grid)
     thresholds = pq.read_table(run / "thresholds.parquet").to_pylist()
     assert {(r["method"], r["model"]) for r in thresholds} == {
-        (m, mo) for m in ("direct", "indirect") for mo in ("FB", "FF")}
+        (m, mo) for m in ("direct", "indirect") for mo in ("FB", "FF")
+    }
 
 
 @pytest.mark.parametrize("name", TABLES)
@@ -58,8 +64,11 @@ def test_selection_table_is_brute_force_argmin(ci_runs, ci_config):
     # Every stored selection equals the row-by-row argmin of log V + W d over the frontier.
     run = ci_runs[1]
     frontier = results.split_by_key(pq.read_table(run / "frontier.parquet"), results.KEY_COLUMNS)
-    chosen = pq.read_table(run / "selection.parquet").to_pandas() if False else \
-        pq.read_table(run / "selection.parquet").to_pylist()
+    chosen = (
+        pq.read_table(run / "selection.parquet").to_pandas()
+        if False
+        else pq.read_table(run / "selection.parquet").to_pylist()
+    )
     cols = ("na", "nb_ft", "nb_e", "nk_ft", "nk_e")
     for row in chosen[::7]:
         t = frontier[(row["model"], row["seed"], row["method"])]
@@ -85,7 +94,8 @@ def test_thresholds_match_fine_grid(ci_runs):
             d, v = t.column("d").to_numpy(), t.column("v").to_numpy()
             orders = np.column_stack([t.column(c).to_numpy() for c in cols])
             nb.setdefault(model, []).append(
-                np.array([orders[selection.select_brute_force(d, v, orders, x), 1] for x in w]))
+                np.array([orders[selection.select_brute_force(d, v, orders, x), 1] for x in w])
+            )
         fp = np.flatnonzero(np.any(np.array(nb["FB"]) > 0, axis=0))
         w_fp = thresholds[(method, "FB")]["w_fp"]
         if fp.size:
@@ -150,15 +160,25 @@ def _bad_run(tmp_path, ci_runs, damage):
     return run
 
 
-@pytest.mark.parametrize("damage, message", [
-    (lambda p: p.write_bytes(b"not parquet at all"), "simulations.parquet: not a readable Parquet table"),
-    (lambda p: p.write_bytes(p.read_bytes()[: len(p.read_bytes()) // 2]), "not a readable Parquet table"),
-    (lambda p: pq.write_table(pq.read_table(p).drop_columns(["e"]), p), "missing columns ['e']"),
-    (lambda p: pq.write_table(
-        pq.read_table(p).set_column(6, "e", [np.where(np.arange(12288) == 77, np.nan,
-                                                       pq.read_table(p).column("e").to_numpy())]), p),
-     "column 'e' holds nan at model FB, seed 1, k 77"),
-])
+@pytest.mark.parametrize(
+    "damage, message",
+    [
+        (lambda p: p.write_bytes(b"not parquet at all"), "simulations.parquet: not a readable Parquet table"),
+        (lambda p: p.write_bytes(p.read_bytes()[: len(p.read_bytes()) // 2]), "not a readable Parquet table"),
+        (lambda p: pq.write_table(pq.read_table(p).drop_columns(["e"]), p), "missing columns ['e']"),
+        (
+            lambda p: pq.write_table(
+                pq.read_table(p).set_column(
+                    6,
+                    "e",
+                    [np.where(np.arange(12288) == 77, np.nan, pq.read_table(p).column("e").to_numpy())],
+                ),
+                p,
+            ),
+            "column 'e' holds nan at model FB, seed 1, k 77",
+        ),
+    ],
+)
 def test_corrupt_simulations_exit_2(tmp_path, ci_runs, damage, message):
     run = _bad_run(tmp_path, ci_runs, damage)
     result = runner.invoke(app, ["identify", str(CI_CONFIG), "--run", str(run), "--quiet"])
@@ -176,8 +196,9 @@ def test_sweep_without_frontier_exit_2(tmp_path):
 
 def test_identify_simulates_when_missing(tmp_path):
     run = tmp_path / "fresh"
-    result = runner.invoke(app, ["identify", str(CI_CONFIG), "--run", str(run), "--method", "direct",
-                                 "--jobs", "1", "--quiet"])
+    result = runner.invoke(
+        app, ["identify", str(CI_CONFIG), "--run", str(run), "--method", "direct", "--jobs", "1", "--quiet"]
+    )
     assert result.exit_code == 0, result.output
     assert (run / "simulations.parquet").is_file()
     methods = set(pq.read_table(run / "frontier.parquet").column("method").to_pylist())

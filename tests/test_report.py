@@ -15,8 +15,15 @@ from hcid.report import build_report
 from .conftest import CI_CONFIG
 
 runner = CliRunner()
-FIGURES = ("signals.png", "vaf_vs_w.png", "nb_ft_vs_w.png", "bode_FB_bic.png", "bode_FF_bic.png",
-           "bode_FF_w047.png", "errors_bic.png")
+FIGURES = (
+    "signals.png",
+    "vaf_vs_w.png",
+    "nb_ft_vs_w.png",
+    "bode_FB_bic.png",
+    "bode_FF_bic.png",
+    "bode_FF_w047.png",
+    "errors_bic.png",
+)
 
 
 @pytest.fixture(scope="module")
@@ -56,9 +63,16 @@ def test_report_from_tables_alone(ci_run, tmp_path):
     result = build_report(only, tmp_path / "out")
     assert not result.missing
     md = (tmp_path / "out" / "report.md").read_text()
-    for section in ("## 1. Run facts", "## 2. Simulation", "## 3. Model fit vs W", "## 4. Feedforward found",
-                    "## 5. Selected models at W_BIC", "## 6. FF feedback path", "## 7. Errors at W_BIC",
-                    "## 8. Verdicts"):
+    for section in (
+        "## 1. Run facts",
+        "## 2. Simulation",
+        "## 3. Model fit vs W",
+        "## 4. Feedforward found",
+        "## 5. Selected models at W_BIC",
+        "## 6. FF feedback path",
+        "## 7. Errors at W_BIC",
+        "## 8. Verdicts",
+    ):
         assert section in md
     html = (tmp_path / "out" / "report.html").read_text()
     assert html.count("data:image/png;base64,iVBOR") == len(FIGURES)  # embedded, self-contained
@@ -66,10 +80,21 @@ def test_report_from_tables_alone(ci_run, tmp_path):
 
 def test_verdict_rows_cover_spec_section_6(report):
     claims = [v.claim for v in report.verdicts]
-    for fragment in ("RMS(e) FB", "RMS(e) FF", "VAF of selected models", "VAF collapses", "W_FP direct",
-                     "W_FP indirect", "FF mean nb_ft >= 2", "AIC and BIC below W_FP",
-                     "FB false positives at W_BIC", "FF feedforward at W_BIC accurate",
-                     "FF at W = 0.47: no feedforward", "leaky integrator", "errors at W_BIC"):
+    for fragment in (
+        "RMS(e) FB",
+        "RMS(e) FF",
+        "VAF of selected models",
+        "VAF collapses",
+        "W_FP direct",
+        "W_FP indirect",
+        "FF mean nb_ft >= 2",
+        "AIC and BIC below W_FP",
+        "FB false positives at W_BIC",
+        "FF feedforward at W_BIC accurate",
+        "FF at W = 0.47: no feedforward",
+        "leaky integrator",
+        "errors at W_BIC",
+    ):
         assert any(fragment in c for c in claims), fragment
 
 
@@ -118,11 +143,23 @@ def test_html_opens_in_headless_chromium(report, tmp_path):
         pytest.skip("Chromium is not installed")
     shot = tmp_path / "shot.png"
     proc = subprocess.run(
-        [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-         "--disable-component-update", "--disable-sync", "--no-first-run",
-         f"--user-data-dir={tmp_path / 'profile'}", "--window-size=1200,3000",
-         f"--screenshot={shot}", report.html.as_uri()],
-        capture_output=True, text=True, timeout=120,
+        [
+            chromium,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--no-first-run",
+            f"--user-data-dir={tmp_path / 'profile'}",
+            "--window-size=1200,3000",
+            f"--screenshot={shot}",
+            report.html.as_uri(),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert proc.returncode == 0, proc.stderr
     _png_size(shot)

@@ -61,8 +61,9 @@ def test_aic_bic_penalties():
 def test_false_positive_threshold_is_last_positive_interval_end():
     # Two realizations: nb_ft > 0 selected below W = 0.02 and below W = 0.05.
     seg_a = selection.Segments(np.array([0, 1]), np.array([0.0, 0.02]), np.array([0.02, np.inf]))
-    seg_b = selection.Segments(np.array([0, 1, 2]), np.array([0.0, 0.01, 0.05]),
-                               np.array([0.01, 0.05, np.inf]))
+    seg_b = selection.Segments(
+        np.array([0, 1, 2]), np.array([0.0, 0.01, 0.05]), np.array([0.01, 0.05, np.inf])
+    )
     nb = np.array([3, 2, 0])
     nb_a = np.array([3, 0])
     assert selection.false_positive_threshold([seg_a, seg_b], [nb_a, nb]) == 0.05

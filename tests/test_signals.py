@@ -54,13 +54,15 @@ def test_parabola_position_and_velocity_continuous(paper_config):
     velocity = np.diff(ft) / 1e-4
     accel_max = max(  # |a| = 4 |S| / T^2 per parabola segment
         4 * abs(seg.step) * paper_config.target.gain / seg.duration**2
-        for seg in paper_config.target.segments if seg.kind == "p"
+        for seg in paper_config.target.segments
+        if seg.kind == "p"
     )
     assert np.max(np.abs(np.diff(ft))) <= np.max(np.abs(velocity)) * 1e-4 + 1e-12
     assert np.max(np.abs(np.diff(velocity))) <= accel_max * 1e-4 * 1.01
     # Peak velocity of a step S over T is 2|S|/T (at the midpoint).
     peak = max(
         2 * abs(seg.step) * paper_config.target.gain / seg.duration
-        for seg in paper_config.target.segments if seg.kind == "p"
+        for seg in paper_config.target.segments
+        if seg.kind == "p"
     )
     assert np.max(np.abs(velocity)) == pytest.approx(peak, rel=1e-3)

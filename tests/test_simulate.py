@@ -62,10 +62,13 @@ def fifty_seeds(paper_config):
     kn = remnant_gain(paper_config)
     out = {}
     for name in ("FB", "FF"):
-        out[name] = [simulate_realization(paper_config, paper_config.model(name), s, kn)
-                     for s in paper_config.seeds]
-    out["dist"] = [simulate_realization(paper_config, paper_config.model("FB"), s, kn,
-                                        disturbance_only=True) for s in paper_config.seeds]
+        out[name] = [
+            simulate_realization(paper_config, paper_config.model(name), s, kn) for s in paper_config.seeds
+        ]
+    out["dist"] = [
+        simulate_realization(paper_config, paper_config.model("FB"), s, kn, disturbance_only=True)
+        for s in paper_config.seeds
+    ]
     return out
 
 

@@ -100,16 +100,22 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
     selection_table = _read_optional(run_dir, results.SELECTION)
     thresholds = _read_optional(run_dir, results.THRESHOLDS)
     runlog = _read_optional(run_dir, results.RUN_LOG)
-    missing = [name for name, t in (("simulation", summary), ("identification", frontier),
-                                    ("W sweep", selection_table)) if t is None]
+    missing = [
+        name
+        for name, t in (("simulation", summary), ("identification", frontier), ("W sweep", selection_table))
+        if t is None
+    ]
     out_dir.mkdir(parents=True, exist_ok=True)
     figs: dict[str, object] = {}
     doc = _Doc()
 
     doc.text(f"# hcid report: {config.name}\n\nRun directory: `{run_dir}`.")
     if missing:
-        doc.text("**Missing stages:** " + ", ".join(missing)
-                 + ". Run `hcid run CONFIG` to complete them; what is there is reported below.")
+        doc.text(
+            "**Missing stages:** "
+            + ", ".join(missing)
+            + ". Run `hcid run CONFIG` to complete them; what is there is reported below."
+        )
 
     # 1. run facts
     doc.text("## 1. Run facts")
@@ -118,17 +124,25 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
         ["config", config.name],
         ["models", ", ".join(m.name for m in config.models)],
         ["seeds", f"{len(config.seeds)} ({config.seeds[0]}..{config.seeds[-1]})"],
-        ["direct / stage-2 grid", f"na {_fmt_range(g_d.na)}, nb_ft {_fmt_range(g_d.nb1)}, nb_e {_fmt_range(g_d.nb2)}, "
-                                  f"nk_ft {_fmt_range(g_d.nk1)}, nk_e {_fmt_range(g_d.nk2)}"],
-        ["stage-1 grid", f"na {_fmt_range(g_1.na)}, nb_ft {_fmt_range(g_1.nb1)}, nb_fd {_fmt_range(g_1.nb2)}, "
-                         f"nk_ft {_fmt_range(g_1.nk1)}, nk_fd {_fmt_range(g_1.nk2)}"],
+        [
+            "direct / stage-2 grid",
+            f"na {_fmt_range(g_d.na)}, nb_ft {_fmt_range(g_d.nb1)}, nb_e {_fmt_range(g_d.nb2)}, "
+            f"nk_ft {_fmt_range(g_d.nk1)}, nk_e {_fmt_range(g_d.nk2)}",
+        ],
+        [
+            "stage-1 grid",
+            f"na {_fmt_range(g_1.na)}, nb_ft {_fmt_range(g_1.nb1)}, nb_fd {_fmt_range(g_1.nb2)}, "
+            f"nk_ft {_fmt_range(g_1.nk1)}, nk_fd {_fmt_range(g_1.nk2)}",
+        ],
         ["W grid", f"{len(config.w_grid)} points, {config.w_grid[0]:.3g}..{config.w_grid[-1]:.3g} (log)"],
     ]
     if log is not None:
         lg = log.to_pydict()
         n_cand = sum(lg["n_candidates"]) + sum(lg["stage1_candidates"])
         n_unst = sum(lg["n_unstable"]) + sum(lg["stage1_unstable"])
-        facts.append(["candidates fitted", f"{n_cand:,} ({n_unst:,} unstable, {n_unst / max(n_cand, 1):.1%})"])
+        facts.append(
+            ["candidates fitted", f"{n_cand:,} ({n_unst:,} unstable, {n_unst / max(n_cand, 1):.1%})"]
+        )
         for method in ("direct", "indirect"):
             rows = [i for i, m in enumerate(lg["method"]) if m == method]
             if rows:
@@ -138,13 +152,21 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
                 text = f"{tot:.0f} s summed over tasks"
                 if method == "indirect":
                     unst1 = sum(lg["stage1_unstable"][i] for i in rows)
-                    text += f" (stage 1 {s1:.0f} s, stage 2 {tot - s1:.0f} s); unstable: stage 1 {unst1:,}, stage 2 {unst:,}"
+                    text += (
+                        f" (stage 1 {s1:.0f} s, stage 2 {tot - s1:.0f} s); "
+                        f"unstable: stage 1 {unst1:,}, stage 2 {unst:,}"
+                    )
                 else:
                     text += f"; unstable {unst:,}"
                 facts.append([f"{method} identification", text])
     if runlog is not None:
         for row in runlog.to_pylist():
-            facts.append([f"wall time: {row['stage']}", f"{row['seconds']:.1f} s on {row['jobs']} worker(s), {row['finished']}"])
+            facts.append(
+                [
+                    f"wall time: {row['stage']}",
+                    f"{row['seconds']:.1f} s on {row['jobs']} worker(s), {row['finished']}",
+                ]
+            )
     facts.append(["packages", _versions()])
     doc.table(["item", "value"], facts)
 
@@ -158,17 +180,43 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
             idx = [i for i, n in enumerate(s["model"]) if n == m.name]
             rms = np.array([s["rms_e_deg"][i] for i in idx])
             ratio = np.array([s["noise_ratio_disturbance_only"][i] for i in idx])
-            rows.append([m.name, f"{m.Kpt:g}", f"{m.Kpe:g}", f"{m.TL:g}", f"{m.tau_pe:g}",
-                         f"{rms.mean():.3f} +- {rms.std(ddof=1) if rms.size > 1 else 0:.3f}",
-                         paper.get(m.name, "-"), f"{ratio.mean():.4f}", f"{s['kn'][idx[0]]:.5g}"])
-        doc.table(["model", "Kpt", "Kpe", "TL s", "tau_pe s", "RMS(e) deg (mean +- sd)", "paper Table 2",
-                   "var(n)/var(u) dist.-only", "Kn"], rows)
+            rows.append(
+                [
+                    m.name,
+                    f"{m.Kpt:g}",
+                    f"{m.Kpe:g}",
+                    f"{m.TL:g}",
+                    f"{m.tau_pe:g}",
+                    f"{rms.mean():.3f} +- {rms.std(ddof=1) if rms.size > 1 else 0:.3f}",
+                    paper.get(m.name, "-"),
+                    f"{ratio.mean():.4f}",
+                    f"{s['kn'][idx[0]]:.5g}",
+                ]
+            )
+        doc.table(
+            [
+                "model",
+                "Kpt",
+                "Kpe",
+                "TL s",
+                "tau_pe s",
+                "RMS(e) deg (mean +- sd)",
+                "paper Table 2",
+                "var(n)/var(u) dist.-only",
+                "Kn",
+            ],
+            rows,
+        )
         sims = _read_optional(run_dir, results.SIMULATIONS)
         if sims is not None:
             recs = results.records(sims, run_dir / results.SIMULATIONS)
-            key = next(((m.name, config.seeds[0]) for m in config.models if m.has_feedforward), next(iter(recs)))
+            key = next(
+                ((m.name, config.seeds[0]) for m in config.models if m.has_feedforward), next(iter(recs))
+            )
             rec = recs[key]
-            figs["signals.png"] = figures.plot_signals(rec["t"], rec, f"Record of model {key[0]}, seed {key[1]}")
+            figs["signals.png"] = figures.plot_signals(
+                rec["t"], rec, f"Record of model {key[0]}, seed {key[1]}"
+            )
             doc.figure("signals.png", f"One simulated record (model {key[0]}, seed {key[1]}), 25 Hz.")
     else:
         doc.text("_Missing: `simulation_summary.parquet` (run `hcid simulate`)._")
@@ -177,15 +225,23 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
     verdict_inputs = {"curves": None, "bic": None, "w047": None}
     th_rows = thresholds.to_pylist() if thresholds is not None else []
     w_aic = th_rows[0]["w_aic"] if th_rows else 2.0 / config.identify.direct.estimation.length
-    w_bic = th_rows[0]["w_bic"] if th_rows else float(np.log(config.identify.direct.estimation.length)
-                                                      / config.identify.direct.estimation.length)
+    w_bic = (
+        th_rows[0]["w_bic"]
+        if th_rows
+        else float(
+            np.log(config.identify.direct.estimation.length) / config.identify.direct.estimation.length
+        )
+    )
     doc.text("## 3. Model fit vs W (paper Fig. 5)")
     if selection_table is not None:
         curves = compute.compute_curves(selection_table)
         verdict_inputs["curves"] = curves
         figs["vaf_vs_w.png"] = figures.plot_vaf(curves, {"W_AIC": w_aic, "W_BIC": w_bic})
-        doc.figure("vaf_vs_w.png", "Mean VAF (estimation rows) +- one sd of the selected models over "
-                   "the realizations; dotted W_AIC, dashed W_BIC.")
+        doc.figure(
+            "vaf_vs_w.png",
+            "Mean VAF (estimation rows) +- one sd of the selected models over "
+            "the realizations; dotted W_AIC, dashed W_BIC.",
+        )
         doc.text("## 4. Feedforward found vs W (paper Fig. 6)")
         marks = {}
         for r in th_rows:
@@ -194,16 +250,29 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
             if r["w_fn"] is not None:
                 marks[f"W_FN {r['method']}"] = r["w_fn"]
         figs["nb_ft_vs_w.png"] = figures.plot_nb_ft(curves, marks)
-        doc.figure("nb_ft_vs_w.png", "Mean nb_ft of the selected models. FB: any nb_ft > 0 is a false "
-                   "positive; FF: a mean below 2 is a false negative.")
+        doc.figure(
+            "nb_ft_vs_w.png",
+            "Mean nb_ft of the selected models. FB: any nb_ft > 0 is a false "
+            "positive; FF: a mean below 2 is a false negative.",
+        )
         if th_rows:
-            doc.table(["method", "model", "W_AIC", "W_BIC", "W_FP", "W_FN", "paper"],
-                      [[r["method"], r["model"], f"{r['w_aic']:.3g}", f"{r['w_bic']:.3g}",
+            doc.table(
+                ["method", "model", "W_AIC", "W_BIC", "W_FP", "W_FN", "paper"],
+                [
+                    [
+                        r["method"],
+                        r["model"],
+                        f"{r['w_aic']:.3g}",
+                        f"{r['w_bic']:.3g}",
                         "-" if r["w_fp"] is None else f"{r['w_fp']:.3g}",
                         "-" if r["w_fn"] is None else f"{r['w_fn']:.3g}",
                         {("direct", False): "W_FP 1.2e-2", ("indirect", False): "W_FP 3.7e-2"}.get(
-                            (r["method"], r["has_feedforward"]), "W_FN 0.26")]
-                       for r in th_rows])
+                            (r["method"], r["has_feedforward"]), "W_FN 0.26"
+                        ),
+                    ]
+                    for r in th_rows
+                ],
+            )
     else:
         doc.text("_Missing: `selection.parquet` (run `hcid sweep-w`)._")
 
@@ -221,17 +290,26 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
             if not m.has_feedforward and ref02 is not None:
                 refs = {"hft": [("FF feedforward, Kpt = 0.2", ref02)]}
             name = f"bode_{m.name}_bic.png"
-            figs[name] = figures.plot_bode(bic, m.name, {"hft": hft_true, "he": he_true}, refs,
-                                           title=f"{m.name}: selected models at W_BIC = {w_bic:.3g}")
-            doc.figure(name, f"{m.name}: every realization's selected model at W_BIC (thin lines; "
-                       "the count of models with that path in the legend), the true paths (black), "
-                       "the disturbance band 0.23..17.33 rad/s (dashed).")
+            figs[name] = figures.plot_bode(
+                bic,
+                m.name,
+                {"hft": hft_true, "he": he_true},
+                refs,
+                title=f"{m.name}: selected models at W_BIC = {w_bic:.3g}",
+            )
+            doc.figure(
+                name,
+                f"{m.name}: every realization's selected model at W_BIC (thin lines; "
+                "the count of models with that path in the legend), the true paths (black), "
+                "the disturbance band 0.23..17.33 rad/s (dashed).",
+            )
         ff = next((m for m in config.models if m.has_feedforward), None)
         if ff is not None:
             doc.text("## 6. FF feedback path at W = 0.47 (paper Fig. 9)")
             _, he_true = compute.true_paths(config, ff, w047.omega)
-            figs["bode_FF_w047.png"] = figures.plot_bode(w047, ff.name, {"he": he_true}, paths=("he",),
-                                                         title=f"{ff.name}: feedback path at W = 0.47")
+            figs["bode_FF_w047.png"] = figures.plot_bode(
+                w047, ff.name, {"he": he_true}, paths=("he",), title=f"{ff.name}: feedback path at W = 0.47"
+            )
             doc.figure("bode_FF_w047.png", "Feedback path of the models selected at W = 0.47.")
             doc.text("## 7. Errors at W_BIC, direct vs indirect (paper Fig. 10)")
             hft_true, he_true = compute.true_paths(config, ff, omega)
@@ -241,8 +319,9 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
                     h = getattr(bic, path).get((ff.name, method))
                     if h is not None:
                         errors[(path, method)] = compute.compute_errors(h, true)
-            figs["errors_bic.png"] = figures.plot_errors(omega, errors, f"{ff.name}: errors at W_BIC, "
-                                                         "mean (solid) and max (dashed) over realizations")
+            figs["errors_bic.png"] = figures.plot_errors(
+                omega, errors, f"{ff.name}: errors at W_BIC, mean (solid) and max (dashed) over realizations"
+            )
             doc.figure("errors_bic.png", "Magnitude and phase errors (paper eq. 11-12) of the FF model.")
         if stage1 is not None:
             s1 = stage1.to_pydict()
@@ -250,8 +329,11 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
             for i in range(stage1.num_rows):
                 k = (s1["na"][i], s1["nb_ft"][i], s1["nb_fd"][i], s1["nk_ft"][i], s1["nk_fd"][i])
                 combos[k] = combos.get(k, 0) + 1
-            doc.text("Stage-1 choices of the indirect method (na, nb_ft, nb_fd, nk_ft, nk_fd): "
-                     + ", ".join(f"{k} x{v}" for k, v in sorted(combos.items(), key=lambda x: -x[1])[:6]) + ".")
+            doc.text(
+                "Stage-1 choices of the indirect method (na, nb_ft, nb_fd, nk_ft, nk_fd): "
+                + ", ".join(f"{k} x{v}" for k, v in sorted(combos.items(), key=lambda x: -x[1])[:6])
+                + "."
+            )
     else:
         doc.text("_Missing: `frontier.parquet` (run `hcid identify`)._")
 
@@ -259,12 +341,22 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
     doc.text("## 8. Verdicts: the paper's claims (SPEC section 6) against this run")
     if summary is None:
         doc.text("_No simulation in this run: the paper's claims are not evaluated._")
-    verdicts = compute.compute_verdicts(config, summary, verdict_inputs["curves"], thresholds,
-                                        verdict_inputs["bic"], verdict_inputs["w047"])
-    doc.table(["claim", "paper", "this run", "holds", "rule"],
-              [[v.claim, v.paper, v.this_run,
-                {True: "holds", False: "does not hold", None: "not evaluated"}[v.holds], v.rule]
-               for v in verdicts])
+    verdicts = compute.compute_verdicts(
+        config, summary, verdict_inputs["curves"], thresholds, verdict_inputs["bic"], verdict_inputs["w047"]
+    )
+    doc.table(
+        ["claim", "paper", "this run", "holds", "rule"],
+        [
+            [
+                v.claim,
+                v.paper,
+                v.this_run,
+                {True: "holds", False: "does not hold", None: "not evaluated"}[v.holds],
+                v.rule,
+            ]
+            for v in verdicts
+        ],
+    )
 
     # 9-10. calibration and measured data (paper section 6's two recommendations)
     calibration = _read_optional(run_dir, results.CALIBRATION)
@@ -272,26 +364,45 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
     if calibration is not None:
         doc.text("## 9. W calibration on the HC hypothesis")
         figs["calibration.png"] = figures.plot_calibration(calibration, config.name)
-        doc.figure("calibration.png", "False-positive rate of the FB twin and false-negative rate of the FF "
-                   "twin over W, with exact 95% (Clopper-Pearson) bands over realizations; green: the safe "
-                   "interval where both rates are at most the target rate, and the recommended W, its "
-                   "geometric midpoint.")
+        doc.figure(
+            "calibration.png",
+            "False-positive rate of the FB twin and false-negative rate of the FF "
+            "twin over W, with exact 95% (Clopper-Pearson) bands over realizations; green: the safe "
+            "interval where both rates are at most the target rate, and the recommended W, its "
+            "geometric midpoint.",
+        )
         rows = []
         for method in ("direct", "indirect"):
             r = [x for x in calibration.to_pylist() if x["method"] == method]
             if r:
                 r = r[0]
                 recommended[method] = r["recommended"]
-                rows.append([method, f"{r['target_rate']:g}", f"{r['safe_low']:.4g}", f"{r['safe_high']:.4g}",
-                             f"{r['recommended']:.4g}" if np.isfinite(r["recommended"]) else "no safe W"])
+                rows.append(
+                    [
+                        method,
+                        f"{r['target_rate']:g}",
+                        f"{r['safe_low']:.4g}",
+                        f"{r['safe_high']:.4g}",
+                        f"{r['recommended']:.4g}" if np.isfinite(r["recommended"]) else "no safe W",
+                    ]
+                )
         doc.table(["method", "target rate", "safe from W", "safe below W", "recommended W"], rows)
     data_cfg = config.data
-    if data_cfg is not None and frontier is not None and data_cfg.name in set(frontier.column("model").to_pylist()):
+    if (
+        data_cfg is not None
+        and frontier is not None
+        and data_cfg.name in set(frontier.column("model").to_pylist())
+    ):
         doc.text(f"## 10. Measured data: {data_cfg.name}")
-        doc.text("No true dynamics are known for measured data: the report shows the selected structure and "
-                 "fit as functions of W, and the models at chosen W values"
-                 + (", the calibrated W marked as the answer." if recommended else
-                    "; run `hcid calibrate-w` to mark a calibrated W."))
+        doc.text(
+            "No true dynamics are known for measured data: the report shows the selected structure and "
+            "fit as functions of W, and the models at chosen W values"
+            + (
+                ", the calibrated W marked as the answer."
+                if recommended
+                else "; run `hcid calibrate-w` to mark a calibrated W."
+            )
+        )
         if selection_table is not None:
             structure = compute.compute_data_structure(selection_table, data_cfg.name)
             if structure is not None:
@@ -299,14 +410,19 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
                 figs["data_structure.png"] = figures.plot_data_structure(structure, marks, data_cfg.name)
                 doc.figure("data_structure.png", "Selected nb_ft, d and VAF of every run vs W.")
         w_values = sorted(set(data_cfg.w_report) | {w for w in recommended.values() if np.isfinite(w)})
-        doc.table(["run", "method", "W", "na", "nb_ft", "nb_e", "nk_ft", "nk_e", "VAF est. %", "VAF val. %"],
-                  compute.data_summary_rows(frontier, data_cfg.name, w_values))
-        doc.text(f"nk_ft includes the {config.identify.target_shift:g} s target shift: the ft delay is "
-                 f"nk_ft - {config.identify.shift_samples(config.timing.output_rate)} samples "
-                 "(negative: anticipation).")
+        doc.table(
+            ["run", "method", "W", "na", "nb_ft", "nb_e", "nk_ft", "nk_e", "VAF est. %", "VAF val. %"],
+            compute.data_summary_rows(frontier, data_cfg.name, w_values),
+        )
+        doc.text(
+            f"nk_ft includes the {config.identify.target_shift:g} s target shift: the ft delay is "
+            f"nk_ft - {config.identify.shift_samples(config.timing.output_rate)} samples "
+            "(negative: anticipation)."
+        )
         for w in w_values:
             resp = compute.compute_responses(
-                frontier.filter(pa.compute.equal(frontier.column("model"), data_cfg.name)), config, w)
+                frontier.filter(pa.compute.equal(frontier.column("model"), data_cfg.name)), config, w
+            )
             per_run = {}
             for (_model, method), h in resp.hft.items():
                 per_run[method] = h
@@ -314,10 +430,14 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
             answer_for = [m for m, r in recommended.items() if np.isclose(w, r)]
             is_answer = bool(answer_for)
             title = f"{data_cfg.name}: selected models at W = {w:.3g}" + (
-                f" (calibrated for the {' and '.join(answer_for)} method)" if is_answer else "")
+                f" (calibrated for the {' and '.join(answer_for)} method)" if is_answer else ""
+            )
             figs[name] = figures.plot_bode(resp, data_cfg.name, {}, title=title)
-            doc.figure(name, f"Every run's selected model at W = {w:.3g}"
-                       + (", the calibrated W: the answer." if is_answer else "."))
+            doc.figure(
+                name,
+                f"Every run's selected model at W = {w:.3g}"
+                + (", the calibrated W: the answer." if is_answer else "."),
+            )
 
     written = []
     for name, fig in figs.items():
@@ -368,25 +488,38 @@ def _html(doc: _Doc, out_dir: Path, title: str) -> str:
                     body.append(f"<p>{_inline_md(para)}</p>")
         elif kind == "figure":
             f = yaml.safe_load(text)
-            data = base64.b64encode((out_dir / f["name"]).read_bytes()).decode("ascii") \
-                if (out_dir / f["name"]).is_file() else ""
-            body.append(f'<figure><img alt="{html.escape(f["name"])}" src="data:image/png;base64,{data}">'
-                        f"<figcaption>{_inline_md(f['caption'])}</figcaption></figure>")
+            data = (
+                base64.b64encode((out_dir / f["name"]).read_bytes()).decode("ascii")
+                if (out_dir / f["name"]).is_file()
+                else ""
+            )
+            body.append(
+                f'<figure><img alt="{html.escape(f["name"])}" src="data:image/png;base64,{data}">'
+                f"<figcaption>{_inline_md(f['caption'])}</figcaption></figure>"
+            )
         else:
             t = yaml.safe_load(text)
             head = "".join(f"<th>{html.escape(h)}</th>" for h in t["header"])
             rows = "".join(
-                "<tr>" + "".join(f'<td class="{_cell_class(c)}">{html.escape(str(c))}</td>' for c in row) + "</tr>"
-                for row in t["rows"])
+                "<tr>"
+                + "".join(f'<td class="{_cell_class(c)}">{html.escape(str(c))}</td>' for c in row)
+                + "</tr>"
+                for row in t["rows"]
+            )
             body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>")
-    style = ("body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;line-height:1.4}"
-             "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 8px;"
-             "vertical-align:top;font-size:0.9em}th{background:#f0f0f0}img{max-width:100%}"
-             "figcaption{font-size:0.9em;color:#444}.holds{background:#e6f4e6}.fails{background:#fbe3e3}"
-             ".na{background:#f4f4f4}")
-    return (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>hcid report: "
-            f"{html.escape(title)}</title><style>{style}</style></head><body>\n" + "\n".join(body)
-            + "\n</body></html>\n")
+    style = (
+        "body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;line-height:1.4}"
+        "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 8px;"
+        "vertical-align:top;font-size:0.9em}th{background:#f0f0f0}img{max-width:100%}"
+        "figcaption{font-size:0.9em;color:#444}.holds{background:#e6f4e6}.fails{background:#fbe3e3}"
+        ".na{background:#f4f4f4}"
+    )
+    return (
+        f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>hcid report: '
+        f"{html.escape(title)}</title><style>{style}</style></head><body>\n"
+        + "\n".join(body)
+        + "\n</body></html>\n"
+    )
 
 
 def _cell_class(cell) -> str:

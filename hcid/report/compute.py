@@ -106,8 +106,9 @@ class Responses:
     nb_ft: dict[tuple[str, str], np.ndarray]
 
 
-def compute_responses(frontier: pa.Table, config: Config, w_penalty: float,
-                      omega: np.ndarray | None = None) -> Responses:
+def compute_responses(
+    frontier: pa.Table, config: Config, w_penalty: float, omega: np.ndarray | None = None
+) -> Responses:
     """Frequency responses of the models selected at ``w_penalty`` for every realization."""
     omega = frequency_grid() if omega is None else omega
     dt = 1.0 / config.timing.output_rate
@@ -124,12 +125,12 @@ def compute_responses(frontier: pa.Table, config: Config, w_penalty: float,
         b_ft = t.column("b_ft")[row].as_py()
         b_e = t.column("b_e")[row].as_py()
         key = (model, method)
-        hft.setdefault(key, []).append(
-            arx_response(a, b_ft, int(orders[row, 3]), omega, dt, advance=shift))
+        hft.setdefault(key, []).append(arx_response(a, b_ft, int(orders[row, 3]), omega, dt, advance=shift))
         he.setdefault(key, []).append(arx_response(a, b_e, int(orders[row, 4]), omega, dt))
         nb.setdefault(key, []).append(int(orders[row, 1]))
     return Responses(
-        w_penalty=w_penalty, omega=omega,
+        w_penalty=w_penalty,
+        omega=omega,
         hft={k: np.array(v) for k, v in hft.items()},
         he={k: np.array(v) for k, v in he.items()},
         nb_ft={k: np.array(v) for k, v in nb.items()},
@@ -154,8 +155,12 @@ def compute_errors(h_id: np.ndarray, h_true: np.ndarray) -> dict[str, np.ndarray
     mean and max over realizations (rows of ``h_id``)."""
     mag = np.abs(np.abs(h_id) - np.abs(h_true)[None, :])
     phase = np.abs(np.degrees(np.angle(h_id * np.conj(h_true)[None, :])))
-    return {"mag_mean": mag.mean(axis=0), "mag_max": mag.max(axis=0),
-            "phase_mean": phase.mean(axis=0), "phase_max": phase.max(axis=0)}
+    return {
+        "mag_mean": mag.mean(axis=0),
+        "mag_max": mag.max(axis=0),
+        "phase_mean": phase.mean(axis=0),
+        "phase_max": phase.max(axis=0),
+    }
 
 
 # --------------------------------------------------------------------------- verdicts
@@ -188,9 +193,14 @@ def _within_factor(x: float, ref: float, factor: float = 2.0) -> bool:
     return bool(np.isfinite(x) and x > 0 and ref / factor <= x <= ref * factor)
 
 
-def compute_verdicts(config: Config, summary: pa.Table | None, curves: Curves | None,
-                     thresholds: pa.Table | None, bic: Responses | None,
-                     w047: Responses | None) -> list[Verdict]:
+def compute_verdicts(
+    config: Config,
+    summary: pa.Table | None,
+    curves: Curves | None,
+    thresholds: pa.Table | None,
+    bic: Responses | None,
+    w047: Responses | None,
+) -> list[Verdict]:
     """Decide every row of SPEC section 6 by a stated rule. Missing inputs give ``holds=None``."""
     out: list[Verdict] = []
     fb = _find_model(config, False)
@@ -205,66 +215,113 @@ def compute_verdicts(config: Config, summary: pa.Table | None, curves: Curves | 
             if m is None or m.name not in paper_rms:
                 continue
             vals = np.array([r for r, n in zip(s["rms_e_deg"], s["model"], strict=True) if n == m.name])
-            out.append(Verdict(
-                f"RMS(e) {m.name}", f"{paper_rms[m.name]:.2f} deg", f"{vals.mean():.3f} deg",
-                bool(abs(vals.mean() - paper_rms[m.name]) <= 0.05), "|mean - paper| <= 0.05 deg"))
+            out.append(
+                Verdict(
+                    f"RMS(e) {m.name}",
+                    f"{paper_rms[m.name]:.2f} deg",
+                    f"{vals.mean():.3f} deg",
+                    bool(abs(vals.mean() - paper_rms[m.name]) <= 0.05),
+                    "|mean - paper| <= 0.05 deg",
+                )
+            )
     else:
         out.append(Verdict("RMS(e) FB / FF", "2.43 / 1.22 deg", "-", None, "needs the simulation"))
 
-    have_curves = curves is not None and fb is not None and ff is not None and all(
-        (m.name, me) in curves.vaf_mean for m in (fb, ff) for me in methods)
+    have_curves = (
+        curves is not None
+        and fb is not None
+        and ff is not None
+        and all((m.name, me) in curves.vaf_mean for m in (fb, ff) for me in methods)
+    )
     if have_curves:
         means = {(m.name, me): _mean_over_w(curves, (m.name, me), 0.1) for m in (fb, ff) for me in methods}
         low = curves.w < 0.1
-        above = all(np.all(curves.vaf_mean[(m.name, "direct")][low]
-                           >= curves.vaf_mean[(m.name, "indirect")][low]) for m in (fb, ff))
+        above = all(
+            np.all(curves.vaf_mean[(m.name, "direct")][low] >= curves.vaf_mean[(m.name, "indirect")][low])
+            for m in (fb, ff)
+        )
         figure = ", ".join(f"{k[0]}-{k[1][0].upper()} {v:.1f}%" for k, v in means.items())
-        out.append(Verdict(
-            "VAF of selected models for W < 0.1", "about 98%, direct above indirect",
-            figure + ("; direct >= indirect" if above else "; direct NOT always >= indirect"),
-            bool(all(95.0 <= v <= 100.0 for v in means.values()) and above),
-            "mean VAF in [95, 100]% for all four, and direct >= indirect at every W < 0.1"))
+        out.append(
+            Verdict(
+                "VAF of selected models for W < 0.1",
+                "about 98%, direct above indirect",
+                figure + ("; direct >= indirect" if above else "; direct NOT always >= indirect"),
+                bool(all(95.0 <= v <= 100.0 for v in means.values()) and above),
+                "mean VAF in [95, 100]% for all four, and direct >= indirect at every W < 0.1",
+            )
+        )
         collapse = {}
         for key, vaf in curves.vaf_mean.items():
             below = np.flatnonzero(vaf < 90.0)
             collapse[key] = float(curves.w[below[0]]) if below.size else np.inf
         figure = ", ".join(f"{k[0]}-{k[1][0].upper()} {v:.2g}" for k, v in collapse.items())
-        out.append(Verdict(
-            "VAF collapses", "for W > 0.5", "first W with mean VAF < 90%: " + figure,
-            bool(all(0.5 < v <= curves.w[-1] for v in collapse.values())),
-            "mean VAF >= 90% up to W = 0.5 and < 90% somewhere above it, for all four"))
+        out.append(
+            Verdict(
+                "VAF collapses",
+                "for W > 0.5",
+                "first W with mean VAF < 90%: " + figure,
+                bool(all(0.5 < v <= curves.w[-1] for v in collapse.values())),
+                "mean VAF >= 90% up to W = 0.5 and < 90% somewhere above it, for all four",
+            )
+        )
     else:
-        out.append(Verdict("VAF of selected models", "about 98% for W < 0.1; collapses for W > 0.5",
-                           "-", None, "needs sweep-w on both models and methods"))
+        out.append(
+            Verdict(
+                "VAF of selected models",
+                "about 98% for W < 0.1; collapses for W > 0.5",
+                "-",
+                None,
+                "needs sweep-w on both models and methods",
+            )
+        )
 
     th = {(r["method"], r["model"]): r for r in thresholds.to_pylist()} if thresholds is not None else {}
     paper_fp = {"direct": 1.2e-2, "indirect": 3.7e-2}
     if fb is not None and all((me, fb.name) in th for me in methods):
         w_fp = {me: th[(me, fb.name)]["w_fp"] for me in methods}
         for me in methods:
-            out.append(Verdict(
-                f"W_FP {me}", f"{paper_fp[me]:.2g}", f"{w_fp[me]:.3g}",
-                _within_factor(w_fp[me], paper_fp[me]), "within a factor 2 of the paper"))
-        out.append(Verdict(
-            "W_FP indirect above direct", "3.7e-2 > 1.2e-2",
-            f"{w_fp['indirect']:.3g} vs {w_fp['direct']:.3g}",
-            bool(w_fp["indirect"] > w_fp["direct"]), "W_FP(indirect) > W_FP(direct)"))
+            out.append(
+                Verdict(
+                    f"W_FP {me}",
+                    f"{paper_fp[me]:.2g}",
+                    f"{w_fp[me]:.3g}",
+                    _within_factor(w_fp[me], paper_fp[me]),
+                    "within a factor 2 of the paper",
+                )
+            )
+        out.append(
+            Verdict(
+                "W_FP indirect above direct",
+                "3.7e-2 > 1.2e-2",
+                f"{w_fp['indirect']:.3g} vs {w_fp['direct']:.3g}",
+                bool(w_fp["indirect"] > w_fp["direct"]),
+                "W_FP(indirect) > W_FP(direct)",
+            )
+        )
         w_bic_value = th[("direct", fb.name)]["w_bic"]
         w_aic_value = th[("direct", fb.name)]["w_aic"]
-        out.append(Verdict(
-            "AIC and BIC below W_FP", "both below: neither prevents false positives",
-            f"W_AIC {w_aic_value:.3g}, W_BIC {w_bic_value:.3g}, W_FP min {min(w_fp.values()):.3g}",
-            bool(max(w_aic_value, w_bic_value) < min(w_fp.values())),
-            "W_AIC and W_BIC < W_FP of both methods"))
+        out.append(
+            Verdict(
+                "AIC and BIC below W_FP",
+                "both below: neither prevents false positives",
+                f"W_AIC {w_aic_value:.3g}, W_BIC {w_bic_value:.3g}, W_FP min {min(w_fp.values()):.3g}",
+                bool(max(w_aic_value, w_bic_value) < min(w_fp.values())),
+                "W_AIC and W_BIC < W_FP of both methods",
+            )
+        )
     else:
         out.append(Verdict("W_FP direct / indirect", "1.2e-2 / 3.7e-2", "-", None, "needs sweep-w on FB"))
     if ff is not None and all((me, ff.name) in th for me in methods):
         w_fn = {me: th[(me, ff.name)]["w_fn"] for me in methods}
-        out.append(Verdict(
-            "FF mean nb_ft >= 2", "up to W = 0.26, both methods",
-            ", ".join(f"{me} up to {w_fn[me]:.3g}" for me in methods),
-            bool(all(_within_factor(w_fn[me], 0.26) for me in methods)),
-            "W_FN of both methods within a factor 2 of 0.26"))
+        out.append(
+            Verdict(
+                "FF mean nb_ft >= 2",
+                "up to W = 0.26, both methods",
+                ", ".join(f"{me} up to {w_fn[me]:.3g}" for me in methods),
+                bool(all(_within_factor(w_fn[me], 0.26) for me in methods)),
+                "W_FN of both methods within a factor 2 of 0.26",
+            )
+        )
     else:
         out.append(Verdict("FF mean nb_ft >= 2", "up to W = 0.26", "-", None, "needs sweep-w on FF"))
 
@@ -275,11 +332,22 @@ def compute_verdicts(config: Config, summary: pa.Table | None, curves: Curves | 
 def _response_verdicts(config, fb, ff, bic: Responses | None, w047: Responses | None) -> list[Verdict]:
     out = []
     methods = ("direct", "indirect")
-    have = bic is not None and fb is not None and ff is not None and all(
-        (m.name, me) in bic.hft for m in (fb, ff) for me in methods)
+    have = (
+        bic is not None
+        and fb is not None
+        and ff is not None
+        and all((m.name, me) in bic.hft for m in (fb, ff) for me in methods)
+    )
     if not have:
-        return [Verdict("Frequency-response claims (Figs. 7-10)", "see paper", "-", None,
-                        "needs the frontier of both models")]
+        return [
+            Verdict(
+                "Frequency-response claims (Figs. 7-10)",
+                "see paper",
+                "-",
+                None,
+                "needs the frontier of both models",
+            )
+        ]
     omega = bic.omega
     band = _band(omega, DISTURBANCE_BAND[0], 3.0)
 
@@ -296,15 +364,27 @@ def _response_verdicts(config, fb, ff, bic: Responses | None, w047: Responses | 
             phases.append(np.median(np.abs(np.degrees(np.angle(h * np.conj(ref[band]))))))
     if n_fp:
         ratio, phase = float(np.median(ratios)), float(np.median(phases))
-        out.append(Verdict(
-            "FB false positives at W_BIC", "magnitude like FF feedforward with Kpt ~ 0.2, phase 180 deg off",
-            f"{n_fp} false positives; median |H|/|H(Kpt=0.2)| {ratio:.2f}, median phase offset {phase:.0f} deg "
-            "(0.23-3 rad/s)",
-            bool(0.5 <= ratio <= 2.0 and phase >= 135.0),
-            "median magnitude ratio in [0.5, 2] and median phase offset >= 135 deg, 0.23..3 rad/s"))
+        out.append(
+            Verdict(
+                "FB false positives at W_BIC",
+                "magnitude like FF feedforward with Kpt ~ 0.2, phase 180 deg off",
+                f"{n_fp} false positives; median |H|/|H(Kpt=0.2)| {ratio:.2f}, "
+                f"median phase offset {phase:.0f} deg "
+                "(0.23-3 rad/s)",
+                bool(0.5 <= ratio <= 2.0 and phase >= 135.0),
+                "median magnitude ratio in [0.5, 2] and median phase offset >= 135 deg, 0.23..3 rad/s",
+            )
+        )
     else:
-        out.append(Verdict("FB false positives at W_BIC", "magnitude like Kpt ~ 0.2, phase 180 deg off",
-                           "no false positive at W_BIC", None, "needs a false positive to compare"))
+        out.append(
+            Verdict(
+                "FB false positives at W_BIC",
+                "magnitude like Kpt ~ 0.2, phase 180 deg off",
+                "no false positive at W_BIC",
+                None,
+                "needs a false positive to compare",
+            )
+        )
 
     # FF feedforward at W_BIC: accurate below 3 rad/s, NMS-like peak above
     hft_true, he_true = true_paths(config, ff, omega)
@@ -312,44 +392,76 @@ def _response_verdicts(config, fb, ff, bic: Responses | None, w047: Responses | 
     high = _band(omega, 3.0, DISTURBANCE_BAND[1])
     for me in methods:
         h = bic.hft[(ff.name, me)]
-        rel_err[me] = float(np.mean(np.abs(np.abs(h[:, band]) - np.abs(hft_true[band])) / np.abs(hft_true[band])))
+        rel_err[me] = float(
+            np.mean(np.abs(np.abs(h[:, band]) - np.abs(hft_true[band])) / np.abs(hft_true[band]))
+        )
         peaks[me] = float(np.median(np.max(np.abs(h[:, high]) / np.abs(hft_true[high]), axis=1)))
-    out.append(Verdict(
-        "FF feedforward at W_BIC accurate below 3 rad/s", "accurate below 3 rad/s",
-        ", ".join(f"{me} mean rel. magnitude error {rel_err[me]:.1%}" for me in methods),
-        bool(all(v <= 0.2 for v in rel_err.values())), "mean relative magnitude error <= 20% on 0.23..3 rad/s"))
-    out.append(Verdict(
-        "FF feedforward at W_BIC: NMS-like peak above 3 rad/s", "peak not in the true path",
-        ", ".join(f"{me} median peak |H|/|Htrue| {peaks[me]:.2f}" for me in methods),
-        bool(all(v >= 1.2 for v in peaks.values())), "median over realizations of max |H|/|Htrue| on 3..17 rad/s >= 1.2"))
+    out.append(
+        Verdict(
+            "FF feedforward at W_BIC accurate below 3 rad/s",
+            "accurate below 3 rad/s",
+            ", ".join(f"{me} mean rel. magnitude error {rel_err[me]:.1%}" for me in methods),
+            bool(all(v <= 0.2 for v in rel_err.values())),
+            "mean relative magnitude error <= 20% on 0.23..3 rad/s",
+        )
+    )
+    out.append(
+        Verdict(
+            "FF feedforward at W_BIC: NMS-like peak above 3 rad/s",
+            "peak not in the true path",
+            ", ".join(f"{me} median peak |H|/|Htrue| {peaks[me]:.2f}" for me in methods),
+            bool(all(v >= 1.2 for v in peaks.values())),
+            "median over realizations of max |H|/|Htrue| on 3..17 rad/s >= 1.2",
+        )
+    )
 
     # FF at W = 0.47
     if w047 is not None and all((ff.name, me) in w047.he for me in methods):
         no_ff = {me: float(np.mean(w047.nb_ft[(ff.name, me)] == 0)) for me in methods}
         lo, mid = np.argmin(np.abs(w047.omega - 0.1)), np.argmin(np.abs(w047.omega - 1.0))
-        slope = {me: float(np.median(np.abs(w047.he[(ff.name, me)][:, lo]) / np.abs(w047.he[(ff.name, me)][:, mid])))
-                 for me in methods}
+        slope = {
+            me: float(
+                np.median(np.abs(w047.he[(ff.name, me)][:, lo]) / np.abs(w047.he[(ff.name, me)][:, mid]))
+            )
+            for me in methods
+        }
         true_slope = float(np.abs(he_true[lo]) / np.abs(he_true[mid]))
-        out.append(Verdict(
-            "FF at W = 0.47: no feedforward", "no feedforward selected",
-            ", ".join(f"{me} {no_ff[me]:.0%} without" for me in methods),
-            bool(all(v >= 0.5 for v in no_ff.values())), "at least half of the realizations select nb_ft = 0"))
-        out.append(Verdict(
-            "FF at W = 0.47: feedback a leaky integrator at low frequency", "leaky integrator",
-            ", ".join(f"{me} |He(0.1)|/|He(1)| {slope[me]:.2f}" for me in methods) + f" (true {true_slope:.2f})",
-            bool(all(v >= 2.0 for v in slope.values())),
-            "median |He(0.1 rad/s)| / |He(1 rad/s)| >= 2 (a gain gives ~1)"))
+        out.append(
+            Verdict(
+                "FF at W = 0.47: no feedforward",
+                "no feedforward selected",
+                ", ".join(f"{me} {no_ff[me]:.0%} without" for me in methods),
+                bool(all(v >= 0.5 for v in no_ff.values())),
+                "at least half of the realizations select nb_ft = 0",
+            )
+        )
+        out.append(
+            Verdict(
+                "FF at W = 0.47: feedback a leaky integrator at low frequency",
+                "leaky integrator",
+                ", ".join(f"{me} |He(0.1)|/|He(1)| {slope[me]:.2f}" for me in methods)
+                + f" (true {true_slope:.2f})",
+                bool(all(v >= 2.0 for v in slope.values())),
+                "median |He(0.1 rad/s)| / |He(1 rad/s)| >= 2 (a gain gives ~1)",
+            )
+        )
 
     # Errors at W_BIC: direct below indirect at low frequency
     for path, hi, h_true, attr in (("feedforward", 8.0, hft_true, "hft"), ("feedback", 7.0, he_true, "he")):
         sel = _band(omega, DISTURBANCE_BAND[0], hi)
-        err = {me: compute_errors(getattr(bic, attr)[(ff.name, me)], h_true)["mag_mean"][sel] for me in methods}
+        err = {
+            me: compute_errors(getattr(bic, attr)[(ff.name, me)], h_true)["mag_mean"][sel] for me in methods
+        }
         share = float(np.mean(err["direct"] <= err["indirect"]))
-        out.append(Verdict(
-            f"FF {path} errors at W_BIC: direct below indirect for w < {hi:g} rad/s",
-            f"direct below indirect for w < {hi:g} rad/s",
-            f"direct mean magnitude error lower at {share:.0%} of frequencies 0.23..{hi:g} rad/s",
-            bool(share >= 0.8), "direct's mean magnitude error <= indirect's at >= 80% of the frequencies"))
+        out.append(
+            Verdict(
+                f"FF {path} errors at W_BIC: direct below indirect for w < {hi:g} rad/s",
+                f"direct below indirect for w < {hi:g} rad/s",
+                f"direct mean magnitude error lower at {share:.0%} of frequencies 0.23..{hi:g} rad/s",
+                bool(share >= 0.8),
+                "direct's mean magnitude error <= indirect's at >= 80% of the frequencies",
+            )
+        )
     return out
 
 
@@ -372,8 +484,10 @@ def compute_data_structure(selection_table: pa.Table, name: str) -> DataStructur
         return None
     values = {}
     for (seed, method), t in split_by_key(rows, ("seed", "method")).items():
-        values[(seed, method)] = {c: t.column(c).to_numpy() for c in
-                                  ("w", "na", "nb_ft", "nb_e", "nk_ft", "nk_e", "d", "vaf_estimation")}
+        values[(seed, method)] = {
+            c: t.column(c).to_numpy()
+            for c in ("w", "na", "nb_ft", "nb_e", "nk_ft", "nk_e", "d", "vaf_estimation")
+        }
     w = next(iter(values.values()))["w"]
     return DataStructure(w=w, values=values)
 
@@ -389,8 +503,18 @@ def data_summary_rows(frontier: pa.Table, name: str, w_values: list[float]) -> l
         for w in w_values:
             row = int(selection.select_at(d, v, orders, np.array([w]))[0])
             na, nbf, nbe, nkf, nke = (int(x) for x in orders[row])
-            out.append([str(seed), method, f"{w:.3g}", str(na), str(nbf), str(nbe),
-                        f"{nkf}" if nbf else "-", f"{nke}" if nbe else "-",
-                        f"{t.column('vaf_estimation')[row].as_py():.1f}",
-                        f"{t.column('vaf_validation')[row].as_py():.1f}"])
+            out.append(
+                [
+                    str(seed),
+                    method,
+                    f"{w:.3g}",
+                    str(na),
+                    str(nbf),
+                    str(nbe),
+                    f"{nkf}" if nbf else "-",
+                    f"{nke}" if nbe else "-",
+                    f"{t.column('vaf_estimation')[row].as_py():.1f}",
+                    f"{t.column('vaf_validation')[row].as_py():.1f}",
+                ]
+            )
     return out

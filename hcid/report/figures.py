@@ -15,8 +15,14 @@ import numpy as np  # noqa: E402
 from hcid.report.compute import DISTURBANCE_BAND, Curves, Responses  # noqa: E402
 
 __all__ = [
-    "plot_bode", "plot_calibration", "plot_data_structure", "plot_errors", "plot_nb_ft", "plot_signals",
-    "plot_vaf", "save",
+    "plot_bode",
+    "plot_calibration",
+    "plot_data_structure",
+    "plot_errors",
+    "plot_nb_ft",
+    "plot_signals",
+    "plot_vaf",
+    "save",
 ]
 
 COLORS = {"direct": "tab:blue", "indirect": "tab:orange"}
@@ -51,7 +57,9 @@ def plot_vaf(curves: Curves, marks: dict[str, float]):
             sd = curves.vaf_sd[(model, method)]
             ls = STYLES[models.index(model) % 2]
             ax.plot(curves.w[sel], mean[sel], ls, color=COLORS.get(method), label=_key_label(model, method))
-            ax.fill_between(curves.w[sel], (mean - sd)[sel], (mean + sd)[sel], color=COLORS.get(method), alpha=0.15)
+            ax.fill_between(
+                curves.w[sel], (mean - sd)[sel], (mean + sd)[sel], color=COLORS.get(method), alpha=0.15
+            )
         _w_lines(ax, marks)
         ax.set_xscale("log")
         ax.set_xlabel("W (penalty per parameter, -)")
@@ -89,17 +97,23 @@ def _bode_axes(ax_mag, ax_ph, omega, h, color, label, alpha):
         ax_ph.semilogx(omega, np.degrees(np.unwrap(np.angle(row))), color=color, lw=0.6, alpha=alpha)
 
 
-def plot_bode(responses: Responses, model: str, truths: dict[str, np.ndarray],
-              references: dict[str, tuple[str, np.ndarray]] | None = None,
-              paths: tuple[str, ...] = ("hft", "he"), title: str = ""):
+def plot_bode(
+    responses: Responses,
+    model: str,
+    truths: dict[str, np.ndarray],
+    references: dict[str, tuple[str, np.ndarray]] | None = None,
+    paths: tuple[str, ...] = ("hft", "he"),
+    title: str = "",
+):
     """Paper Figs. 7-9: selected models of every realization (thin lines) against the truth.
 
     ``truths[path]`` is the true response of ``path`` ('hft' or 'he');
     ``references`` adds other dashed curves, e.g. the FF feedforward with Kpt = 0.2.
     """
     names = {"hft": "feedforward Hft (u per ft)", "he": "feedback He (u per e)"}
-    fig, axes = plt.subplots(2, len(paths), figsize=(max(8.0, 5.5 * len(paths)), 6.5), sharex=True,
-                             squeeze=False)
+    fig, axes = plt.subplots(
+        2, len(paths), figsize=(max(8.0, 5.5 * len(paths)), 6.5), sharex=True, squeeze=False
+    )
     omega = responses.omega
     for col, path in enumerate(paths):
         ax_mag, ax_ph = axes[0, col], axes[1, col]
@@ -109,7 +123,9 @@ def plot_bode(responses: Responses, model: str, truths: dict[str, np.ndarray],
                 continue
             keep = np.any(np.abs(h) > 0, axis=1)
             if keep.any():
-                _bode_axes(ax_mag, ax_ph, omega, h[keep], COLORS[method], f"{method} ({int(keep.sum())})", 0.5)
+                _bode_axes(
+                    ax_mag, ax_ph, omega, h[keep], COLORS[method], f"{method} ({int(keep.sum())})", 0.5
+                )
         true = truths.get(path)
         if true is not None and np.any(np.abs(true) > 0):
             ax_mag.loglog(omega, np.abs(true), "k", lw=2, label="true")
@@ -224,12 +240,20 @@ def plot_calibration(table, name: str):
     for ax, method in zip(axes[0], methods, strict=True):
         r = [x for x in rows if x["method"] == method]
         w = np.array([x["w"] for x in r])
-        for prefix, color, label in (("fp", "tab:red", "false-positive rate (FB twin)"),
-                                     ("fn", "tab:purple", "false-negative rate (FF twin)")):
+        for prefix, color, label in (
+            ("fp", "tab:red", "false-positive rate (FB twin)"),
+            ("fn", "tab:purple", "false-negative rate (FF twin)"),
+        ):
             rate = np.array([x[f"{prefix}_rate"] for x in r])
             ax.step(w, rate, where="post", color=color, label=label)
-            ax.fill_between(w, [x[f"{prefix}_low"] for x in r], [x[f"{prefix}_high"] for x in r],
-                            step="post", color=color, alpha=0.15)
+            ax.fill_between(
+                w,
+                [x[f"{prefix}_low"] for x in r],
+                [x[f"{prefix}_high"] for x in r],
+                step="post",
+                color=color,
+                alpha=0.15,
+            )
         lo, hi, rec = r[0]["safe_low"], r[0]["safe_high"], r[0]["recommended"]
         if lo < hi:
             ax.axvspan(max(lo, w[0]), min(hi, w[-1]), color="tab:green", alpha=0.12, label="safe interval")
