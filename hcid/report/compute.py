@@ -250,18 +250,27 @@ def compute_verdicts(
                 "mean VAF in [95, 100]% for all four, and direct >= indirect at every W < 0.1",
             )
         )
-        collapse = {}
-        for key, vaf in curves.vaf_mean.items():
-            below = np.flatnonzero(vaf < 90.0)
-            collapse[key] = float(curves.w[below[0]]) if below.size else np.inf
+
+        # "Reduces dramatically" read as: the mean VAF falls below half. The paper's own
+        # section 5.4 calls the FF models of 0.4 < W < 1 (about 90% VAF) similar in fit,
+        # so a 10-point dip is not the collapse; its first W is shown for reference.
+        def first_below(level):
+            out = {}
+            for key, vaf in curves.vaf_mean.items():
+                below = np.flatnonzero(vaf < level)
+                out[key] = float(curves.w[below[0]]) if below.size else np.inf
+            return out
+
+        collapse, dip = first_below(50.0), first_below(90.0)
         figure = ", ".join(f"{k[0]}-{k[1][0].upper()} {v:.2g}" for k, v in collapse.items())
+        figure_dip = ", ".join(f"{k[0]}-{k[1][0].upper()} {v:.2g}" for k, v in dip.items())
         out.append(
             Verdict(
                 "VAF collapses",
                 "for W > 0.5",
-                "first W with mean VAF < 90%: " + figure,
+                f"first W with mean VAF < 50%: {figure} (< 90%: {figure_dip})",
                 bool(all(0.5 < v <= curves.w[-1] for v in collapse.values())),
-                "mean VAF >= 90% up to W = 0.5 and < 90% somewhere above it, for all four",
+                "mean VAF >= 50% up to W = 0.5 and < 50% somewhere above it, for all four",
             )
         )
     else:
