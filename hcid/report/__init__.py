@@ -460,7 +460,7 @@ def _markdown(doc: _Doc) -> str:
         else:
             t = yaml.safe_load(text)
             lines = ["| " + " | ".join(t["header"]) + " |", "|" + "---|" * len(t["header"])]
-            lines += ["| " + " | ".join(str(c).replace("|", "/") for c in row) + " |" for row in t["rows"]]
+            lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in t["rows"]]
             parts.append("\n".join(lines))
     return "\n\n".join(parts) + "\n"
 
