@@ -132,7 +132,7 @@ def calibrate(
         recommended = float(np.sqrt(safe_low * safe_high))
     elif safe_low < safe_high and np.isfinite(safe_high):
         recommended = safe_high / 10.0  # no lower bound: a decade below the upper end
-    elif safe_low < safe_high:
+    elif safe_low < safe_high and safe_low > 0:
         recommended = safe_low * 10.0  # no upper bound: a decade above the lower end
     else:
         recommended = float("nan")

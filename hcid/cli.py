@@ -8,11 +8,17 @@ stderr and exit code 2, here and nowhere else.
 from __future__ import annotations
 
 import functools
+import os
 import sys
 from pathlib import Path
 from typing import Annotated
 
 import typer
+
+# One level of parallelism (the worker processes) and bit-identical results whatever
+# --jobs: BLAS runs single-threaded. Set before numpy is first imported (typer does not).
+for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
 
 app = typer.Typer(
     add_completion=False,
@@ -53,6 +59,14 @@ def _user_errors(func):
             raise typer.Exit(code=2) from None
 
     return wrapper
+
+
+def _check_backend(backend: str) -> None:
+    from hcid.errors import HcidError
+    from hcid.pipeline import BACKENDS
+
+    if backend not in BACKENDS:
+        raise HcidError(f"--backend: must be one of {', '.join(BACKENDS)}, got {backend!r}")
 
 
 def _run_dir(run: Path | None, config) -> Path:
@@ -113,6 +127,7 @@ def identify(
 
     cfg = load_config(config)
     methods = _methods(method)
+    _check_backend(backend)
     run_dir = _run_dir(run, cfg)
     records = None
     if data is not None:
@@ -199,6 +214,7 @@ def run_all(
     from hcid.pipeline import identify_study, simulate_study, sweep_study
 
     cfg = load_config(config)
+    _check_backend(backend)
     run_dir = _run_dir(run, cfg)
     start = time.perf_counter()
     if not (run_dir / "simulations.parquet").exists():
@@ -247,6 +263,7 @@ def calibrate_w(
     from hcid.pipeline import calibrate_study, sweep_study
 
     cfg = load_config(config)
+    _check_backend(backend)
     run_dir = _run_dir(run, cfg)
     result = calibrate_study(
         cfg, run_dir, jobs=jobs, backend=backend, scheduler=scheduler, show_progress=not quiet

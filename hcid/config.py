@@ -16,6 +16,7 @@ output rate (``[129, 1088]``); :meth:`Window.rows` gives the Python slice
 from __future__ import annotations
 
 import math
+import operator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,7 +29,7 @@ __all__ = [
     "Config",
     "DataConfig",
     "Disturbance",
-    "GridRange",
+    "Grid",
     "HCModel",
     "IdentifyConfig",
     "Loop",
@@ -140,10 +141,17 @@ class Timing:
 
 
 @dataclass(frozen=True)
-class GridRange:
-    """Inclusive integer ranges of orders and delays of one candidate grid.
+class Grid:
+    """Inclusive integer ranges ``(lo, hi)`` of the five ARX structure integers.
 
-    Input 1 is the shifted target ft; input 2 is e (direct, stage 2) or fd (stage 1).
+    Input 1 is the shifted target ft; input 2 is e (direct, stage 2) or fd
+    (stage 1). ``na >= 1``; ``nb >= 0`` (0 drops the input); ``nk >= 0``.
+
+    Raises
+    ------
+    ConfigError
+        If a range is not two integers ``lo <= hi`` or ``lo`` is below the
+        smallest allowed value; the message names the field.
     """
 
     na: tuple[int, int]
@@ -152,13 +160,44 @@ class GridRange:
     nk1: tuple[int, int]
     nk2: tuple[int, int]
 
+    def __post_init__(self) -> None:
+        for name, lowest in _GRID_LOWEST.items():
+            object.__setattr__(self, name, _checked_grid_range(name, getattr(self, name), lowest))
+
     @property
     def max_lag(self) -> int:
-        return max(
-            self.na[1],
-            self.nk1[1] + self.nb1[1] - 1,
-            self.nk2[1] + self.nb2[1] - 1,
-        )
+        """Largest lag (samples) any candidate uses; an input counts only when its nb_hi > 0.
+
+        The first row whose regressors all lie inside the record (SPEC 3: 29 for
+        the paper's stage-1 grid).
+        """
+        lag = self.na[1]
+        if self.nb1[1] > 0:
+            lag = max(lag, self.nk1[1] + self.nb1[1] - 1)
+        if self.nb2[1] > 0:
+            lag = max(lag, self.nk2[1] + self.nb2[1] - 1)
+        return lag
+
+
+# Smallest allowed lower bound of each range: A always has a coefficient, inputs
+# may be dropped, delays may be zero (a direct feed-through from i(k)).
+_GRID_LOWEST = {"na": 1, "nb1": 0, "nb2": 0, "nk1": 0, "nk2": 0}
+
+
+def _checked_grid_range(name: str, value: object, lowest: int) -> tuple[int, int]:
+    message = f"Grid.{name}: must be two integers lo <= hi with lo >= {lowest}, got {value!r}"
+    try:
+        if isinstance(value, str | bytes) or len(value) != 2:  # type: ignore[arg-type]
+            raise ConfigError(message)
+        lo, hi = value  # type: ignore[misc]
+        if isinstance(lo, bool) or isinstance(hi, bool):
+            raise ConfigError(message)
+        lo, hi = operator.index(lo), operator.index(hi)
+    except TypeError as exc:
+        raise ConfigError(message) from exc
+    if lo > hi or lo < lowest:
+        raise ConfigError(message)
+    return (lo, hi)
 
 
 @dataclass(frozen=True)
@@ -180,7 +219,7 @@ class Window:
 class StageConfig:
     """One identification step: its grid, estimation and validation windows."""
 
-    grid: GridRange
+    grid: Grid
     estimation: Window
     validation: Window
 
@@ -400,7 +439,7 @@ def _stage(data: Any, path: str, defaults: dict, n_record: int) -> StageConfig:
             raise ConfigError(f"{path}: must be a mapping, got {_fmt(data)}")
         merged.update(data)
     s = _Section(merged, path)
-    grid = GridRange(
+    grid = Grid(
         na=_int_range(s, "na", 1, 30),
         nb1=_int_range(s, "nb1", 0, 60),
         nb2=_int_range(s, "nb2", 0, 60),
@@ -512,6 +551,7 @@ def parse_config(data: Any, name: str) -> Config:
             and len(seg) == 3
             and seg[0] in ("c", "p")
             and all(isinstance(v, int | float) and not isinstance(v, bool) for v in seg[1:])
+            and all(math.isfinite(v) for v in seg[1:])
             and seg[1] > 0
         )
         if not ok:
@@ -562,6 +602,11 @@ def parse_config(data: Any, name: str) -> Config:
     n_record = timing.record_samples
     ids = top.section("identify", {})
     target_shift = ids.number("target_shift", 0.0, 10.0, 1.0)
+    if abs(target_shift * timing.output_rate - round(target_shift * timing.output_rate)) > 1e-9:
+        raise ConfigError(
+            f"identify.target_shift: must be whole samples at timing.output_rate "
+            f"({timing.output_rate:g} Hz), got {target_shift:g} s"
+        )
     direct = _stage(ids.get("direct", None), "identify.direct", _PAPER_DIRECT, n_record)
     stage1 = _stage(ids.get("stage1", None), "identify.stage1", _PAPER_STAGE1, n_record)
     stage2_raw = ids.get("stage2", None)

@@ -12,12 +12,11 @@ Each returns the frontier of its final grid (:class:`hcid.arx.GridFit`).
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
 from hcid.arx.engine import GridFit, best, fit_grid, simulate
-from hcid.arx.grid import Grid
 from hcid.config import IdentifyConfig, StageConfig
 from hcid.errors import IdentificationError
 
@@ -63,7 +62,7 @@ def _fit(stage: StageConfig, i1, i2, o, threads: int) -> GridFit:
         i1,
         i2,
         o,
-        Grid(**asdict(stage.grid)),
+        stage.grid,
         stage.estimation.rows(),
         stage.validation.rows(),
         threads=threads,

@@ -86,7 +86,9 @@ def _split_runs(path: Path, cols: dict[str, np.ndarray], data: DataConfig) -> li
         described = ", ".join(f"{data.columns[n]} {n_}" for n, n_ in lengths.items())
         raise DataError(f"{path}: signals of unequal length ({described})")
     if any(v.ndim == 2 and v.shape[1] > 1 for v in cols.values()):
-        widths = {v.shape[1] if v.ndim == 2 else 1 for n, v in cols.items() if n not in ("rate", "run")}
+        widths = {
+            v.shape[1] if v.ndim == 2 else 1 for n, v in cols.items() if n not in ("rate", "run", "time")
+        }
         if len(widths) > 1:
             raise DataError(f"{path}: signals hold different numbers of runs ({sorted(widths)})")
         n_runs = widths.pop()

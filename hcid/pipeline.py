@@ -19,7 +19,7 @@ import pyarrow as pa
 
 from hcid import results, selection
 from hcid.config import Config, IdentifyConfig
-from hcid.errors import DataError, HcidError
+from hcid.errors import ConfigError, DataError, HcidError, IdentificationError
 from hcid.identify import METHODS, identify
 from hcid.simulate import remnant_gain, simulate_realization
 
@@ -53,34 +53,79 @@ def _first_difference(a: Any, b: Any, path: str = "") -> str | None:
     return None if a == b else (path or "<top>")
 
 
-def check_run_dir(config: Config, run_dir: Path, *, force: bool) -> None:
+#: Config sections each stage's tables depend on, and the tables that go stale with them.
+SIMULATION_SECTIONS = ("models", "loop", "signals", "timing", "seeds")
+IDENTIFICATION_SECTIONS = (*SIMULATION_SECTIONS, "identify", "data")
+_IDENTIFICATION_TABLES = (
+    results.FRONTIER,
+    results.STAGE1,
+    results.IDENTIFY_LOG,
+    results.SELECTION,
+    results.BREAKPOINTS,
+    results.THRESHOLDS,
+    results.CALIBRATION,
+    results.MEASURED,
+)
+
+
+def check_run_dir(config: Config, run_dir: Path, stage: str, *, force: bool = False) -> None:
     """Refuse to mix results of two configs in one run directory.
 
-    If ``run_dir/config.yaml`` exists and differs from ``config``, raise
-    :class:`DataError` naming the first differing key, unless ``force``, in
-    which case every table of the old run is removed.
+    ``stage`` is 'simulate', 'identify' or 'select'. If ``run_dir/config.yaml``
+    differs from ``config`` in a section the stage's inputs depend on, raise
+    :class:`DataError` naming the first differing key, unless ``force``: then
+    the tables made from the old sections are removed (simulate: every table;
+    identify: identification and later). A difference only in later sections
+    (e.g. the W grid for a sweep) is fine; the stage's caller records the new
+    config when it writes.
     """
     import yaml
 
+    if run_dir.exists() and not run_dir.is_dir():
+        raise DataError(f"{run_dir}: not a directory; choose another --run")
     path = run_dir / "config.yaml"
     if not path.is_file():
         return
     try:
         previous = yaml.safe_load(path.read_text())
-    except (yaml.YAMLError, OSError) as exc:
-        raise DataError(f"{path}: not a readable config; use --force to start the run afresh") from exc
+        if not isinstance(previous, dict):
+            raise TypeError
+    except (yaml.YAMLError, OSError, TypeError) as exc:
+        raise DataError(
+            f"{path}: not a readable config; remove the run directory or use another --run"
+        ) from exc
     current = yaml.safe_load(config.to_yaml())
-    key = _first_difference(previous, current)
+    if stage == "simulate":
+        sections, stale, redo = SIMULATION_SECTIONS, None, "hcid simulate --force"
+    elif stage == "identify":
+        sim_key = _first_difference(
+            {k: previous.get(k) for k in SIMULATION_SECTIONS},
+            {k: current.get(k) for k in SIMULATION_SECTIONS},
+        )
+        if sim_key is not None:
+            raise DataError(
+                f"{run_dir}: simulated with another config ({sim_key} differs); "
+                "use `hcid simulate --force` to redo it or --run for another directory"
+            )
+        sections, stale, redo = IDENTIFICATION_SECTIONS, _IDENTIFICATION_TABLES, "hcid identify --force"
+    else:
+        sections, stale, redo = IDENTIFICATION_SECTIONS, None, "hcid identify --force"
+    key = _first_difference({k: previous.get(k) for k in sections}, {k: current.get(k) for k in sections})
     if key is None:
         return
     if not force:
         raise DataError(
-            f"{run_dir}: made with another config ({key} differs); use --force to redo it "
-            f"or --run for another directory"
+            f"{run_dir}: made with another config ({key} differs); use `{redo}` to redo it "
+            "or --run for another directory"
         )
-    for table in run_dir.glob("*.parquet"):
-        table.unlink()
+    tables = run_dir.glob("*.parquet") if stale is None else (run_dir / name for name in stale)
+    for table in tables:
+        table.unlink(missing_ok=True)
     results.clear_parts(run_dir)
+
+
+def _record_config(config: Config, run_dir: Path) -> None:
+    results.write_text(config.to_yaml(), run_dir / "config.yaml")
 
 
 def parallel_map(
@@ -194,7 +239,7 @@ def simulate_study(
     Writes ``config.yaml``, ``simulations.parquet`` and
     ``simulation_summary.parquet`` in ``run_dir``, each atomically.
     """
-    check_run_dir(config, run_dir, force=force)
+    check_run_dir(config, run_dir, "simulate", force=force)
     start = time.perf_counter()
     kn = remnant_gain(config)
     tasks = [(config, m.name, seed, kn) for m in config.models for seed in config.seeds]
@@ -204,7 +249,7 @@ def simulate_study(
     realizations = [p[0] for p in pairs]
     simulations = results.realizations_table(realizations)
     summary = results.summary_table(realizations, [p[1] for p in pairs])
-    results.write_text(config.to_yaml(), run_dir / "config.yaml")
+    _record_config(config, run_dir)
     results.write_table(simulations, run_dir / results.SIMULATIONS)
     results.write_table(summary, run_dir / results.SIMULATION_SUMMARY)
     results.append_run_log(run_dir, "simulate", time.perf_counter() - start, jobs)
@@ -303,7 +348,7 @@ def identify_study(
     runs are identified instead, under model name ``config.data.name`` and
     seed = run number, beside any simulated realizations already in the tables.
     """
-    check_run_dir(config, run_dir, force=False)
+    check_run_dir(config, run_dir, "identify", force=force)
     start = time.perf_counter()
     if data is None:
         records = _load_records(config, run_dir)
@@ -315,10 +360,14 @@ def identify_study(
     if force:
         results.clear_parts(run_dir)
         redo = {(*k, me) for k in keys for me in methods}
-        done = {k: v for k, v in _existing(run_dir).items() if k not in redo}
+        try:
+            done = {k: v for k, v in _existing(run_dir).items() if k not in redo}
+        except DataError:
+            done = {}  # damaged tables: --force recomputes from the records
     else:
         done = _existing(run_dir)
         done.update(results.read_parts(run_dir))
+    _record_config(config, run_dir)
     rate = config.timing.output_rate
     tasks = [
         (config.identify, rate, model, seed, method, records[(model, seed)])
@@ -371,9 +420,8 @@ def import_data(config: Config, run_dir: Path, path: Path) -> dict[int, dict[str
     from hcid import measured
 
     records = measured.load_data(path, config)
-    check_run_dir(config, run_dir, force=False)
-    if not (run_dir / "config.yaml").is_file():
-        results.write_text(config.to_yaml(), run_dir / "config.yaml")
+    check_run_dir(config, run_dir, "identify")
+    _record_config(config, run_dir)
     results.write_table(measured.records_table(config.data.name, records), run_dir / results.MEASURED)
     return records
 
@@ -403,7 +451,7 @@ def sweep_study(config: Config, run_dir: Path) -> SweepRun:
     selection holds) and ``thresholds.parquet`` (W_AIC, W_BIC, W_FP, W_FN per
     method and model, computed from the breakpoints).
     """
-    check_run_dir(config, run_dir, force=False)
+    check_run_dir(config, run_dir, "select")
     path = run_dir / results.FRONTIER
     frontier = results.read_table(
         path, (*results.KEY_COLUMNS, *_SELECTED_COLUMNS), hint="run `hcid identify` first"
@@ -423,6 +471,7 @@ def sweep_study(config: Config, run_dir: Path) -> SweepRun:
     selection_table = results.concat(sel_parts)
     breakpoints_table = results.concat(bp_parts)
     thresholds = _thresholds(config, segments, nb_ft)
+    _record_config(config, run_dir)
     results.write_table(selection_table, run_dir / results.SELECTION)
     results.write_table(breakpoints_table, run_dir / results.BREAKPOINTS)
     results.write_table(thresholds, run_dir / results.THRESHOLDS)
@@ -437,7 +486,7 @@ def _selections(frontier: pa.Table, path: Path) -> dict[tuple[str, int, str], tu
         orders = np.column_stack([cols[c] for c in _ORDER_COLUMNS])
         try:
             out[(model, seed, method)] = (selection.breakpoints(cols["d"], cols["v"], orders), cols)
-        except ValueError as exc:
+        except IdentificationError as exc:
             raise DataError(f"{path}: model {model}, seed {seed}, {method}: {exc}") from exc
     return out
 
@@ -524,7 +573,7 @@ def calibrate_study(
     fb = next((m for m in config.models if not m.has_feedforward), None)
     ff = next((m for m in config.models if m.has_feedforward), None)
     if fb is None or ff is None:
-        raise DataError(
+        raise ConfigError(
             "models: calibration needs a feedback-only model (Kpt = 0) and a feedforward "
             f"model (Kpt > 0), got {[m.name for m in config.models]}"
         )

@@ -55,8 +55,11 @@ _UMASK = _current_umask()
 
 
 def _atomic(path: Path, write) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise DataError(f"{path}: cannot write ({exc.strerror or exc})") from exc
     os.close(fd)
     try:
         write(tmp)
@@ -139,6 +142,10 @@ def records(table: pa.Table, path: str | Path = SIMULATIONS) -> dict[tuple[str, 
     missing = [c for c in _SIMULATION_SCHEMA.names if c not in table.column_names]
     if missing:
         raise DataError(f"{path}: missing columns {missing}")
+    for field_ in _SIMULATION_SCHEMA:
+        found = table.schema.field(field_.name).type
+        if found != field_.type:
+            raise DataError(f"{path}: column {field_.name!r} is {found}, expected {field_.type}")
     model = table.column("model").to_numpy(zero_copy_only=False).astype(str)
     seed = table.column("seed").to_numpy()
     k = table.column("k").to_numpy()

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hcid.errors import IdentificationError
+
 __all__ = [
     "Segments",
     "breakpoints",
@@ -40,7 +42,7 @@ def w_bic(n_estimation: int) -> float:
 
 
 def _order_key(orders: np.ndarray) -> np.ndarray:
-    """Row order that sorts by d is done by the caller; this ranks orders/delays lexicographically."""
+    """Row indices in lexicographic order of (na, nb_ft, nb_e, nk_ft, nk_e), the last tie rule."""
     return np.lexsort(orders.T[::-1])
 
 
@@ -90,7 +92,7 @@ def breakpoints(d: np.ndarray, v: np.ndarray, orders: np.ndarray) -> Segments:
     v = np.asarray(v, dtype=np.float64)
     ranked = _ranked(d, v, np.asarray(orders))
     if ranked.size == 0:
-        raise ValueError("breakpoints: every frontier row is unstable")
+        raise IdentificationError("every frontier row is unstable: nothing can be selected")
     # Best row per d: the first in (d, log V, orders) order.
     first_of_d = np.concatenate([[True], np.diff(d[ranked]) != 0])
     best = ranked[first_of_d]

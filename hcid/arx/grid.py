@@ -18,12 +18,9 @@ triple, and inside a block ``nk1`` varies slowest.
 
 from __future__ import annotations
 
-import operator
-from dataclasses import dataclass
-
 import numpy as np
 
-from hcid.errors import ConfigError
+from hcid.config import Grid
 
 __all__ = [
     "Grid",
@@ -33,61 +30,6 @@ __all__ = [
     "n_parameters",
     "order_blocks",
 ]
-
-# Smallest allowed lower bound of each range: A always has a coefficient
-# (the output lag carries the dynamics), inputs may be dropped, delays may be
-# zero (a direct feed-through from i(k)).
-_LOWEST = {"na": 1, "nb1": 0, "nb2": 0, "nk1": 0, "nk2": 0}
-
-
-@dataclass(frozen=True)
-class Grid:
-    """Inclusive integer ranges of the five ARX structure integers.
-
-    Parameters
-    ----------
-    na : tuple of int
-        ``(lo, hi)`` number of A coefficients besides the leading 1,
-        ``lo >= 1``.
-    nb1, nb2 : tuple of int
-        ``(lo, hi)`` number of B1 / B2 coefficients, ``lo >= 0``; 0 drops
-        the input.
-    nk1, nk2 : tuple of int
-        ``(lo, hi)`` input delays in samples, ``lo >= 0``.
-
-    Raises
-    ------
-    hcid.errors.ConfigError
-        If a range is not two integers ``lo <= hi`` or ``lo`` is below the
-        smallest allowed value; the message names the field.
-    """
-
-    na: tuple[int, int]
-    nb1: tuple[int, int]
-    nb2: tuple[int, int]
-    nk1: tuple[int, int]
-    nk2: tuple[int, int]
-
-    def __post_init__(self) -> None:
-        for name, lowest in _LOWEST.items():
-            value = getattr(self, name)
-            object.__setattr__(self, name, _checked_range(name, value, lowest))
-
-
-def _checked_range(name: str, value: object, lowest: int) -> tuple[int, int]:
-    message = f"Grid.{name}: must be two integers lo <= hi with lo >= {lowest}, got {value!r}"
-    try:
-        if isinstance(value, str | bytes) or len(value) != 2:  # type: ignore[arg-type]
-            raise ConfigError(message)
-        lo, hi = value  # type: ignore[misc]
-        if isinstance(lo, bool) or isinstance(hi, bool):
-            raise ConfigError(message)
-        lo, hi = operator.index(lo), operator.index(hi)
-    except TypeError as exc:
-        raise ConfigError(message) from exc
-    if lo > hi or lo < lowest:
-        raise ConfigError(message)
-    return (lo, hi)
 
 
 def n_parameters(na, nb1, nb2):
@@ -113,27 +55,8 @@ def n_parameters(na, nb1, nb2):
 
 
 def max_lag(grid: Grid) -> int:
-    """Largest lag, in samples, that any candidate of ``grid`` uses.
-
-    ``max(na_hi, nk1_hi + nb1_hi - 1, nk2_hi + nb2_hi - 1)``, an input term
-    counting only when its ``nb_hi > 0``. The first row whose regressors all
-    lie inside the record is this lag (SPEC section 3: 29 for the paper's
-    stage-1 grid).
-
-    Parameters
-    ----------
-    grid : Grid
-
-    Returns
-    -------
-    int
-    """
-    lag = grid.na[1]
-    if grid.nb1[1] > 0:
-        lag = max(lag, grid.nk1[1] + grid.nb1[1] - 1)
-    if grid.nb2[1] > 0:
-        lag = max(lag, grid.nk2[1] + grid.nb2[1] - 1)
-    return lag
+    """Largest lag, in samples, that any candidate of ``grid`` uses (:attr:`Grid.max_lag`)."""
+    return grid.max_lag
 
 
 def _delay_count(nb: int, nk: tuple[int, int]) -> int:

@@ -22,26 +22,25 @@ import yaml
 from hcid import results
 from hcid.config import Config, parse_config
 from hcid.errors import DataError
+from hcid.hcmodel import true_response
 
 __all__ = ["Report", "build_report"]
 
 
 @dataclass
 class _Doc:
-    """Report being written: Markdown blocks and the figures they refer to."""
+    """Report being written: blocks of Markdown text, tables and figures, in order."""
 
-    blocks: list[tuple[str, str]] = field(default_factory=list)  # (kind, text): md | figure | table
-    figures: list[str] = field(default_factory=list)
+    blocks: list[tuple[str, dict]] = field(default_factory=list)
 
     def text(self, md: str) -> None:
-        self.blocks.append(("md", md))
+        self.blocks.append(("md", {"text": md}))
 
     def table(self, header: list[str], rows: list[list[str]]) -> None:
-        self.blocks.append(("table", yaml.safe_dump({"header": header, "rows": rows})))
+        self.blocks.append(("table", {"header": header, "rows": rows}))
 
     def figure(self, name: str, caption: str) -> None:
-        self.figures.append(name)
-        self.blocks.append(("figure", yaml.safe_dump({"name": name, "caption": caption})))
+        self.blocks.append(("figure", {"name": name, "caption": caption}))
 
 
 @dataclass(frozen=True)
@@ -55,9 +54,69 @@ class Report:
     verdicts: list
 
 
+_REQUIRED = {
+    results.SIMULATION_SUMMARY: ("model", "seed", "rms_e_deg", "noise_ratio_disturbance_only", "kn"),
+    results.FRONTIER: (
+        *results.KEY_COLUMNS,
+        "na",
+        "nb_ft",
+        "nb_e",
+        "nk_ft",
+        "nk_e",
+        "d",
+        "v",
+        "vaf_estimation",
+        "vaf_validation",
+        "a",
+        "b_ft",
+        "b_e",
+    ),
+    results.IDENTIFY_LOG: (
+        *results.KEY_COLUMNS,
+        "n_candidates",
+        "n_unstable",
+        "stage1_candidates",
+        "stage1_unstable",
+        "seconds_stage1",
+        "seconds",
+    ),
+    results.STAGE1: ("model", "seed", "na", "nb_ft", "nb_fd", "nk_ft", "nk_fd"),
+    results.SELECTION: (
+        *results.KEY_COLUMNS,
+        "w",
+        "na",
+        "nb_ft",
+        "nb_e",
+        "nk_ft",
+        "nk_e",
+        "d",
+        "vaf_estimation",
+    ),
+    results.THRESHOLDS: ("method", "model", "has_feedforward", "nf", "w_aic", "w_bic", "w_fp", "w_fn"),
+    results.RUN_LOG: ("stage", "seconds", "jobs", "finished"),
+    results.CALIBRATION: (
+        "method",
+        "w",
+        "fp_rate",
+        "fp_low",
+        "fp_high",
+        "fn_rate",
+        "fn_low",
+        "fn_high",
+        "n_fb",
+        "n_ff",
+        "target_rate",
+        "safe_low",
+        "safe_high",
+        "recommended",
+    ),
+}
+
+
 def _read_optional(run_dir: Path, name: str) -> pa.Table | None:
+    """A table of the run, checked for the columns the report reads, or None if absent."""
     path = run_dir / name
-    return results.read_table(path) if path.is_file() else None
+    return results.read_table(path, _REQUIRED.get(name, ())) if path.is_file() else None
 
 
 def _load_config(run_dir: Path) -> Config:
@@ -105,7 +164,6 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
         for name, t in (("simulation", summary), ("identification", frontier), ("W sweep", selection_table))
         if t is None
     ]
-    out_dir.mkdir(parents=True, exist_ok=True)
     figs: dict[str, object] = {}
     doc = _Doc()
 
@@ -285,7 +343,7 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
         omega = bic.omega
         ref02 = compute.reference_feedforward(config, omega)
         for m in config.models:
-            hft_true, he_true = compute.true_paths(config, m, omega)
+            hft_true, he_true = true_response(m, config.loop, omega)
             refs = {}
             if not m.has_feedforward and ref02 is not None:
                 refs = {"hft": [("FF feedforward, Kpt = 0.2", ref02)]}
@@ -306,13 +364,13 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
         ff = next((m for m in config.models if m.has_feedforward), None)
         if ff is not None:
             doc.text("## 6. FF feedback path at W = 0.47 (paper Fig. 9)")
-            _, he_true = compute.true_paths(config, ff, w047.omega)
+            _, he_true = true_response(ff, config.loop, w047.omega)
             figs["bode_FF_w047.png"] = figures.plot_bode(
                 w047, ff.name, {"he": he_true}, paths=("he",), title=f"{ff.name}: feedback path at W = 0.47"
             )
             doc.figure("bode_FF_w047.png", "Feedback path of the models selected at W = 0.47.")
             doc.text("## 7. Errors at W_BIC, direct vs indirect (paper Fig. 10)")
-            hft_true, he_true = compute.true_paths(config, ff, omega)
+            hft_true, he_true = true_response(ff, config.loop, omega)
             errors = {}
             for path, true in (("hft", hft_true), ("he", he_true)):
                 for method in ("direct", "indirect"):
@@ -423,10 +481,7 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
             resp = compute.compute_responses(
                 frontier.filter(pa.compute.equal(frontier.column("model"), data_cfg.name)), config, w
             )
-            per_run = {}
-            for (_model, method), h in resp.hft.items():
-                per_run[method] = h
-            name = f"bode_data_w{w:.3g}.png".replace("+", "")
+            name = f"bode_data_w{w:.4g}.png".replace("+", "")
             answer_for = [m for m, r in recommended.items() if np.isclose(w, r)]
             is_answer = bool(answer_for)
             title = f"{data_cfg.name}: selected models at W = {w:.3g}" + (
@@ -440,6 +495,10 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
             )
 
     written = []
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise DataError(f"{out_dir}: cannot write the report ({exc.strerror or exc})") from exc
     for name, fig in figs.items():
         figures.save(fig, out_dir / name)
         written.append(out_dir / name)
@@ -451,14 +510,14 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
 
 def _markdown(doc: _Doc) -> str:
     parts = []
-    for kind, text in doc.blocks:
+    for kind, block in doc.blocks:
         if kind == "md":
-            parts.append(text)
+            parts.append(block["text"])
         elif kind == "figure":
-            f = yaml.safe_load(text)
+            f = block
             parts.append(f"![{f['caption']}]({f['name']})\n\n_{f['caption']}_")
         else:
-            t = yaml.safe_load(text)
+            t = block
             lines = ["| " + " | ".join(t["header"]) + " |", "|" + "---|" * len(t["header"])]
             lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in t["rows"]]
             parts.append("\n".join(lines))
@@ -477,9 +536,9 @@ def _inline_md(text: str) -> str:
 
 def _html(doc: _Doc, out_dir: Path, title: str) -> str:
     body = []
-    for kind, text in doc.blocks:
+    for kind, block in doc.blocks:
         if kind == "md":
-            for para in text.split("\n\n"):
+            for para in block["text"].split("\n\n"):
                 if para.startswith("## "):
                     body.append(f"<h2>{_inline_md(para[3:])}</h2>")
                 elif para.startswith("# "):
@@ -487,7 +546,7 @@ def _html(doc: _Doc, out_dir: Path, title: str) -> str:
                 else:
                     body.append(f"<p>{_inline_md(para)}</p>")
         elif kind == "figure":
-            f = yaml.safe_load(text)
+            f = block
             data = (
                 base64.b64encode((out_dir / f["name"]).read_bytes()).decode("ascii")
                 if (out_dir / f["name"]).is_file()
@@ -498,7 +557,7 @@ def _html(doc: _Doc, out_dir: Path, title: str) -> str:
                 f"<figcaption>{_inline_md(f['caption'])}</figcaption></figure>"
             )
         else:
-            t = yaml.safe_load(text)
+            t = block
             head = "".join(f"<th>{html.escape(h)}</th>" for h in t["header"])
             rows = "".join(
                 "<tr>"

@@ -7,6 +7,7 @@ Pure functions over Arrow tables, arrays and the run's config; no drawing, no I/
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -137,11 +138,6 @@ def compute_responses(
     )
 
 
-def true_paths(config: Config, model: HCModel, omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """True Hft and He of a model (SPEC 1) on ``omega``."""
-    return true_response(model, config.loop, omega)
-
-
 def reference_feedforward(config: Config, omega: np.ndarray, kpt: float = 0.2) -> np.ndarray | None:
     """The FF model's feedforward with ``Kpt`` replaced (paper Fig. 7a: Kpt = 0.2)."""
     ff = next((m for m in config.models if m.has_feedforward), None)
@@ -154,13 +150,17 @@ def compute_errors(h_id: np.ndarray, h_true: np.ndarray) -> dict[str, np.ndarray
     """Paper eq. 11-12: magnitude error and wrapped phase error (deg, in [0, 180]),
     mean and max over realizations (rows of ``h_id``)."""
     mag = np.abs(np.abs(h_id) - np.abs(h_true)[None, :])
+    # An absent path (nb = 0) has no phase: it counts in the magnitude error only.
     phase = np.abs(np.degrees(np.angle(h_id * np.conj(h_true)[None, :])))
-    return {
-        "mag_mean": mag.mean(axis=0),
-        "mag_max": mag.max(axis=0),
-        "phase_mean": phase.mean(axis=0),
-        "phase_max": phase.max(axis=0),
-    }
+    phase[np.abs(h_id) == 0] = np.nan
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: no realization has the path
+        return {
+            "mag_mean": mag.mean(axis=0),
+            "mag_max": mag.max(axis=0),
+            "phase_mean": np.nanmean(phase, axis=0),
+            "phase_max": np.nanmax(phase, axis=0),
+        }
 
 
 # --------------------------------------------------------------------------- verdicts
@@ -396,7 +396,7 @@ def _response_verdicts(config, fb, ff, bic: Responses | None, w047: Responses | 
         )
 
     # FF feedforward at W_BIC: accurate below 3 rad/s, NMS-like peak above
-    hft_true, he_true = true_paths(config, ff, omega)
+    hft_true, he_true = true_response(ff, config.loop, omega)
     rel_err, peaks = {}, {}
     high = _band(omega, 3.0, DISTURBANCE_BAND[1])
     for me in methods:
