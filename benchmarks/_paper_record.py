@@ -18,10 +18,11 @@ def paper_record(model: str = "FF", seed: int = 1) -> dict[str, np.ndarray]:
     ``ft_s(k) = ft(k + 25)``, zeros after the record (SPEC section 3).
     """
     from hcid.config import load_config
+    from hcid.identify import shift_forward
     from hcid.simulate import remnant_gain, simulate_realization
 
     config = load_config(PAPER_CONFIG)
     r = simulate_realization(config, config.model(model), seed, remnant_gain(config))
     shift = config.identify.shift_samples(config.timing.output_rate)
-    ft_s = np.concatenate([r.ft[shift:], np.zeros(shift)])
+    ft_s = shift_forward(r.ft, shift)
     return {"ft_s": ft_s, "fd": r.fd, "e": r.e, "u": r.u}

@@ -73,10 +73,6 @@ def _run_dir(run: Path | None, config) -> Path:
     return run if run is not None else Path("runs") / config.name
 
 
-# Paper Table 2, RMS(e) in deg, for the summary only.
-_PAPER_RMS_E = {"FB": 2.43, "FF": 1.22}
-
-
 @app.command()
 @_user_errors
 def simulate(
@@ -172,22 +168,15 @@ def sweep_w(config: ConfigArg, run: RunOpt = None):
     typer.echo(f"wrote {result.run_dir / 'thresholds.parquet'}")
 
 
-# Paper section 5.2, for the summary only.
-_PAPER_THRESHOLDS = {
-    ("direct", "w_fp"): 1.2e-2,
-    ("indirect", "w_fp"): 3.7e-2,
-    ("direct", "w_fn"): 2.6e-1,
-    ("indirect", "w_fn"): 2.6e-1,
-}
-
-
 def _print_thresholds(thresholds) -> None:
+    from hcid import paper as PAPER
+
     typer.echo(f"{'method':<10}{'model':<8}{'threshold':<11}{'this run':>12}{'paper':>10}")
     for row in thresholds.to_pylist():
         for name in ("w_fp", "w_fn"):
             if row[name] is None:
                 continue
-            paper = _PAPER_THRESHOLDS.get((row["method"], name))
+            paper = PAPER.W_FP.get(row["method"]) if name == "w_fp" else PAPER.W_FN
             paper_text = f"{paper:.2g}" if paper is not None else "-"
             typer.echo(
                 f"{row['method']:<10}{row['model']:<8}{name.upper():<11}{row[name]:>12.4g}{paper_text:>10}"
@@ -229,6 +218,8 @@ def run_all(
 def _print_simulation_summary(result) -> None:
     import numpy as np
 
+    from hcid import paper as PAPER
+
     summary = result.summary.to_pydict()
     models = list(dict.fromkeys(summary["model"]))
     typer.echo(f"Kn = {result.kn:.6g} (remnant gain, from var(n)/var(u) in the disturbance-only task)")
@@ -239,7 +230,7 @@ def _print_simulation_summary(result) -> None:
         rows = [i for i, name in enumerate(summary["model"]) if name == m]
         rms = np.array([summary["rms_e_deg"][i] for i in rows])
         ratio = np.array([summary["noise_ratio_disturbance_only"][i] for i in rows])
-        paper = _PAPER_RMS_E.get(m)
+        paper = PAPER.RMS_E_DEG.get(m)
         paper_text = f"{paper:.2f}" if paper is not None else "-"
         typer.echo(
             f"{m:<8}{len(rows):>6}{rms.mean():>15.3f} +- {rms.std(ddof=1) if len(rows) > 1 else 0.0:.3f}"

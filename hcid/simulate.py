@@ -1,7 +1,8 @@
 """Closed-loop simulation of the HC model in the tracking task (SPEC sections 1, 2).
 
-The loop runs at the simulation rate with ZOH-discretised paths and
-whole-sample delays. Because the feedback path holds a delay of ``L`` samples,
+The loop runs at the simulation rate with discretised paths (Tustin for Hft,
+He and Yc, ZOH for the remnant filter; :mod:`hcid.hcmodel`) and whole-sample
+delays. Because the feedback path holds a delay of ``L`` samples,
 the loop is simulated in blocks of ``L`` samples: within a block the feedback
 input ``e(k - L)`` is already known, so each block is two short ``lfilter``
 calls with carried state, exact to rounding (no algebraic loop, no iteration).
@@ -11,6 +12,7 @@ brick-wall (zero phase) and decimated.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -130,6 +132,11 @@ def decimate(x: np.ndarray, factor: int) -> np.ndarray:
     return np.fft.irfft(spectrum, n=x.size)[::factor]
 
 
+def _feedback_only(model: HCModel) -> HCModel:
+    """The model without its feedforward path (the disturbance-only task)."""
+    return dataclasses.replace(model, Kpt=0.0, TI=0.0, tau_pt=0.0)
+
+
 def remnant_gain(config: Config) -> float:
     """Kn that gives ``var(n)/var(u) = remnant_ratio`` in the disturbance-only task.
 
@@ -143,9 +150,7 @@ def remnant_gain(config: Config) -> float:
 
     and ``Kn^2 = r var(u_fd) / (var(n1) - r var(n1 / (1 + Yc He)))``.
     """
-    model = config.models[0]
-    feedback_only = HCModel(model.name, 0.0, 0.0, 0.0, model.Kpe, model.TL, model.tau_pe)
-    dloop = DiscreteLoop.build(feedback_only, config.loop, config.timing.sim_dt)
+    dloop = DiscreteLoop.build(_feedback_only(config.models[0]), config.loop, config.timing.sim_dt)
     ratio = config.loop.remnant_ratio
     if ratio == 0.0:
         return 0.0
@@ -194,7 +199,7 @@ def simulate_realization(
     t = signals.simulation_time(timing)
     fd = signals.disturbance(t, config.disturbance)
     if disturbance_only:
-        model = HCModel(model.name, 0.0, 0.0, 0.0, model.Kpe, model.TL, model.tau_pe)
+        model = _feedback_only(model)
         ft = np.zeros_like(t)
     else:
         ft = signals.target(timing, config.target)

@@ -25,11 +25,12 @@ def ci_config():
 
 
 def _record(config, model_name: str, seed: int) -> dict[str, np.ndarray]:
+    from hcid.identify import shift_forward
     from hcid.simulate import remnant_gain, simulate_realization
 
     r = simulate_realization(config, config.model(model_name), seed, remnant_gain(config))
     shift = config.identify.shift_samples(config.timing.output_rate)
-    ft_s = np.concatenate([r.ft[shift:], np.zeros(shift)])  # SPEC 3: ft_s(k) = ft(k + 25)
+    ft_s = shift_forward(r.ft, shift)  # SPEC 3: ft_s(k) = ft(k + 25)
     return {"ft": r.ft, "ft_s": ft_s, "fd": r.fd, "e": r.e, "u": r.u, "theta": r.theta, "n": r.n}
 
 

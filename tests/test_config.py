@@ -100,3 +100,17 @@ def test_stage2_defaults_to_direct_grid(paper_raw):
     config = parse_config(data, "x")
     assert config.identify.stage2.grid.na == (1, 3)
     assert config.identify.stage2.grid.nk1 == (1, 50)
+
+
+def test_non_finite_target_step_refused(paper_raw):
+    data = _mutate(paper_raw, ("signals", "target", "segments"), [["c", 3, 0], ["p", 3.74, float("inf")]])
+    with pytest.raises(
+        ConfigError, match=r"signals.target.segments\[1\]: must be \[c\|p, seconds > 0, step\]"
+    ):
+        parse_config(data, "paper")
+
+
+def test_target_shift_must_be_whole_samples(paper_raw):
+    data = _mutate(paper_raw, ("identify", "target_shift"), 1.01)
+    with pytest.raises(ConfigError, match="identify.target_shift: must be whole samples"):
+        parse_config(data, "paper")

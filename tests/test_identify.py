@@ -80,7 +80,32 @@ def test_unknown_method_is_an_error(record, settings):
 
 
 def test_stage1_window_is_auto(settings):
-    # SPEC 3: stage 1 estimates and validates from the grid's largest lag on.
+    # SPEC 3: stage 1 estimates and validates from the grid's largest lag on. ci.yaml's
+    # stage-1 grid: max(na 4, nk_ft 3 + nb_ft 8 - 1, nk_fd 3 + nb_fd 4 - 1) = 10.
+    assert settings.stage1.estimation.rows() == slice(10, 2048)
+    assert settings.stage1.validation.rows() == slice(10, 2048)
+
+
+def test_dropped_input_does_not_count_in_max_lag():
+    # An input with nb_hi = 0 is dropped, so its delays do not push the window.
     raw = yaml.safe_load(CI_CONFIG.read_text())
+    raw["identify"]["stage1"].update(nb2=[0, 0], nk2=[1, 150])
     cfg = parse_config(copy.deepcopy(raw), "ci")
-    assert cfg.identify.stage1.estimation.rows() == slice(cfg.identify.stage1.grid.max_lag, 2048)
+    assert cfg.identify.stage1.estimation.rows() == slice(10, 2048)
+
+
+@pytest.mark.parametrize("method", ["direct", "indirect"])
+@pytest.mark.parametrize("w", [7.153e-3, 0.1])
+def test_nearly_noise_free_system_is_selected_at_small_w(record, settings, method, w):
+    # With white noise of 1e-6 of std(u) on u, log V is meaningful (no rounding scatter):
+    # from W_BIC (SPEC 4: 7.15e-3) on, the true orders and delays are selected, and the
+    # coefficients come back to within ~1e-6 (measured 1e-7). Below W_BIC (at W_AIC) an
+    # extra nb_ft term fitting the noise wins, as the paper's AIC finding would suggest.
+    rng = np.random.default_rng(8)
+    noisy = dict(record, u=record["u"] + 1e-6 * np.std(record["u"]) * rng.standard_normal(2048))
+    fit = identify(noisy, settings, method, rate=25.0).fit
+    orders = np.column_stack([fit.na, fit.nb1, fit.nb2, fit.nk1, fit.nk2])
+    row = selection.select_at(fit.d, fit.v, orders, np.array([w]))[0]
+    assert tuple(orders[row]) == (2, 2, 3, NK21, NK22)
+    np.testing.assert_allclose(fit.a[row], A2, atol=1e-5)
+    np.testing.assert_allclose(fit.b2[row], B22, atol=1e-5)

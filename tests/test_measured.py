@@ -220,3 +220,14 @@ def test_data_section_errors(data_config_path):
     bad["data"]["name"] = "FB"
     with pytest.raises(ConfigError, match="data.name: must be an identifier other than the model names"):
         parse_config(bad, "x")
+
+
+def test_mat_with_shared_time_vector(tmp_path, data_config, example_table):
+    # samples x runs matrices and one time vector for all runs (the documented .mat layout)
+    two = example_table.filter(pa.compute.less_equal(example_table.column("trial"), 2))
+    cols = {c: two.column(c).to_numpy().reshape(2, -1).T for c in ("target", "disturbance", "error", "stick")}
+    path = tmp_path / "shared_time.mat"
+    scipy.io.savemat(path, {**cols, "time_s": np.arange(2048) / 25.0})
+    records = load_data(path, data_config)
+    assert sorted(records) == [1, 2]
+    np.testing.assert_array_equal(records[2]["u"], cols["stick"][:, 1])

@@ -64,11 +64,7 @@ def test_selection_table_is_brute_force_argmin(ci_runs, ci_config):
     # Every stored selection equals the row-by-row argmin of log V + W d over the frontier.
     run = ci_runs[1]
     frontier = results.split_by_key(pq.read_table(run / "frontier.parquet"), results.KEY_COLUMNS)
-    chosen = (
-        pq.read_table(run / "selection.parquet").to_pandas()
-        if False
-        else pq.read_table(run / "selection.parquet").to_pylist()
-    )
+    chosen = pq.read_table(run / "selection.parquet").to_pylist()
     cols = ("na", "nb_ft", "nb_e", "nk_ft", "nk_e")
     for row in chosen[::7]:
         t = frontier[(row["model"], row["seed"], row["method"])]
@@ -102,6 +98,7 @@ def test_thresholds_match_fine_grid(ci_runs):
             assert w[fp[-1]] < w_fp <= w[fp[-1] + 1]
         fn = np.flatnonzero(np.mean(np.array(nb["FF"]), axis=0) < 2)
         w_fn = thresholds[(method, "FF")]["w_fn"]
+        assert fn[0] > 0  # the mean starts at 2 or more on this grid
         assert w[fn[0] - 1] < w_fn <= w[fn[0]]
 
 
@@ -213,3 +210,56 @@ def test_other_config_in_same_run_dir_is_refused(ci_runs, tmp_path):
     assert result.exit_code == 2
     assert "made with another config (loop.remnant_ratio differs)" in result.stderr
     assert (ci_runs[1] / "frontier.parquet").read_bytes() == before
+
+
+def test_sweep_with_a_new_w_grid_is_accepted(ci_runs, tmp_path):
+    run = tmp_path / "regrid"
+    shutil.copytree(ci_runs[1], run)
+    other = tmp_path / "ci.yaml"
+    other.write_text(CI_CONFIG.read_text().replace("points: 61", "points: 31"))
+    result = runner.invoke(app, ["sweep-w", str(other), "--run", str(run)])
+    assert result.exit_code == 0, result.output
+    assert pq.read_table(run / "selection.parquet").num_rows == 2 * 3 * 2 * 31
+    assert "points: 31" in (run / "config.yaml").read_text()
+
+
+def test_identify_force_recovers_damaged_tables(ci_runs, tmp_path):
+    run = tmp_path / "damaged"
+    shutil.copytree(ci_runs[1], run)
+    (run / "frontier.parquet").write_bytes(b"garbage")
+    result = runner.invoke(app, ["identify", str(CI_CONFIG), "--run", str(run), "--quiet"])
+    assert result.exit_code == 2
+    assert "frontier.parquet: not a readable Parquet table" in result.stderr
+    result = runner.invoke(app, ["identify", str(CI_CONFIG), "--run", str(run), "--force", "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert (run / "frontier.parquet").read_bytes() == (ci_runs[1] / "frontier.parquet").read_bytes()
+
+
+def test_wrong_column_type_in_simulations_exit_2(tmp_path, ci_runs):
+    run = _bad_run(
+        tmp_path,
+        ci_runs,
+        lambda p: pq.write_table(
+            pq.read_table(p).set_column(1, "seed", [pq.read_table(p).column("seed").cast("string")]), p
+        ),
+    )
+    result = runner.invoke(app, ["identify", str(CI_CONFIG), "--run", str(run), "--quiet"])
+    assert result.exit_code == 2
+    assert "column 'seed' is string, expected int64" in result.stderr
+
+
+def test_run_dir_that_is_a_file_exit_2(tmp_path):
+    target = tmp_path / "afile"
+    target.write_text("not a directory")
+    result = runner.invoke(app, ["simulate", str(CI_CONFIG), "--run", str(target), "--quiet"])
+    assert result.exit_code == 2
+    assert "not a directory" in result.stderr
+    assert target.read_text() == "not a directory"
+
+
+def test_bad_backend_exit_2_before_any_work(tmp_path):
+    run = tmp_path / "nothing"
+    result = runner.invoke(app, ["run", str(CI_CONFIG), "--run", str(run), "--backend", "spark", "--quiet"])
+    assert result.exit_code == 2
+    assert "--backend: must be one of loky, dask, got 'spark'" in result.stderr
+    assert not run.exists()

@@ -19,6 +19,7 @@ rows of the outputs.
 nb1, nb2, nk1, nk2 in that order.
 """
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -350,3 +351,18 @@ def fit_units_parallel(
                 units[u, 0], units[u, 1], rt, bounds, i1p, i2p, pad, o,
                 val_start, val_stop, offset, v_out, theta_out,
             )  # fmt: skip
+
+
+def max_threads() -> int:
+    """Most threads the parallel kernel can use (numba's pool size)."""
+    return numba.config.NUMBA_NUM_THREADS
+
+
+def run_parallel(args, threads: int) -> None:
+    """Run :func:`fit_units_parallel` on ``threads`` numba threads, restoring the pool size after."""
+    previous = numba.get_num_threads()
+    numba.set_num_threads(threads)
+    try:
+        fit_units_parallel(*args, threads)
+    finally:
+        numba.set_num_threads(previous)

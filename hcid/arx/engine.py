@@ -12,7 +12,6 @@ from __future__ import annotations
 import operator
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 import pyarrow as pa
 
@@ -313,12 +312,7 @@ def fit_grid(
         if threads == 1:
             _kernels.fit_units(*args)
         else:
-            previous = numba.get_num_threads()
-            numba.set_num_threads(threads)
-            try:
-                _kernels.fit_units_parallel(*args, threads)
-            finally:
-                numba.set_num_threads(previous)
+            _kernels.run_parallel(args, threads)
 
     # Frontier: lexsort is stable, so equal V keep the candidate order, in
     # which nk1 and then nk2 increase inside a block.
@@ -395,7 +389,7 @@ def _threads(threads) -> int:
         raise IdentificationError(f"threads: must be an integer >= 1, got {threads!r}") from exc
     if threads < 1:
         raise IdentificationError(f"threads: must be an integer >= 1, got {threads}")
-    return min(threads, numba.config.NUMBA_NUM_THREADS)
+    return min(threads, _kernels.max_threads())
 
 
 def _vaf(o: np.ndarray, o_hat: np.ndarray) -> float:

@@ -19,7 +19,8 @@ import pyarrow as pa
 import pyarrow.compute  # noqa: F401  (pa.compute)
 import yaml
 
-from hcid import results
+from hcid import paper as PAPER
+from hcid import results, selection
 from hcid.config import Config, parse_config
 from hcid.errors import DataError
 from hcid.hcmodel import true_response
@@ -232,7 +233,7 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
     doc.text("## 2. Simulation")
     if summary is not None:
         s = summary.to_pydict()
-        paper = {"FB": "2.43", "FF": "1.22"}
+        paper = {k: f"{v:.2f}" for k, v in PAPER.RMS_E_DEG.items()}
         rows = []
         for m in config.models:
             idx = [i for i, n in enumerate(s["model"]) if n == m.name]
@@ -282,14 +283,8 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
     # 3-4. curves over W
     verdict_inputs = {"curves": None, "bic": None, "w047": None}
     th_rows = thresholds.to_pylist() if thresholds is not None else []
-    w_aic = th_rows[0]["w_aic"] if th_rows else 2.0 / config.identify.direct.estimation.length
-    w_bic = (
-        th_rows[0]["w_bic"]
-        if th_rows
-        else float(
-            np.log(config.identify.direct.estimation.length) / config.identify.direct.estimation.length
-        )
-    )
+    nf = config.identify.direct.estimation.length
+    w_aic, w_bic = selection.w_aic(nf), selection.w_bic(nf)
     doc.text("## 3. Model fit vs W (paper Fig. 5)")
     if selection_table is not None:
         curves = compute.compute_curves(selection_table)
@@ -324,9 +319,9 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
                         f"{r['w_bic']:.3g}",
                         "-" if r["w_fp"] is None else f"{r['w_fp']:.3g}",
                         "-" if r["w_fn"] is None else f"{r['w_fn']:.3g}",
-                        {("direct", False): "W_FP 1.2e-2", ("indirect", False): "W_FP 3.7e-2"}.get(
-                            (r["method"], r["has_feedforward"]), "W_FN 0.26"
-                        ),
+                        f"W_FN {PAPER.W_FN:g}"
+                        if r["has_feedforward"]
+                        else f"W_FP {PAPER.W_FP[r['method']]:.2g}",
                     ]
                     for r in th_rows
                 ],

@@ -14,6 +14,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute  # noqa: F401  (pa.compute)
 
+from hcid import paper as PAPER
 from hcid import selection
 from hcid.config import Config, HCModel
 from hcid.hcmodel import true_response
@@ -208,7 +209,7 @@ def compute_verdicts(
     methods = ("direct", "indirect")
 
     # RMS(e)
-    paper_rms = {"FB": 2.43, "FF": 1.22}
+    paper_rms = PAPER.RMS_E_DEG
     if summary is not None:
         s = summary.to_pydict()
         for m in (fb, ff):
@@ -225,7 +226,15 @@ def compute_verdicts(
                 )
             )
     else:
-        out.append(Verdict("RMS(e) FB / FF", "2.43 / 1.22 deg", "-", None, "needs the simulation"))
+        out.append(
+            Verdict(
+                "RMS(e) FB / FF",
+                f"{PAPER.RMS_E_DEG['FB']} / {PAPER.RMS_E_DEG['FF']} deg",
+                "-",
+                None,
+                "needs the simulation",
+            )
+        )
 
     have_curves = (
         curves is not None
@@ -285,7 +294,7 @@ def compute_verdicts(
         )
 
     th = {(r["method"], r["model"]): r for r in thresholds.to_pylist()} if thresholds is not None else {}
-    paper_fp = {"direct": 1.2e-2, "indirect": 3.7e-2}
+    paper_fp = PAPER.W_FP
     if fb is not None and all((me, fb.name) in th for me in methods):
         w_fp = {me: th[(me, fb.name)]["w_fp"] for me in methods}
         for me in methods:
@@ -301,7 +310,7 @@ def compute_verdicts(
         out.append(
             Verdict(
                 "W_FP indirect above direct",
-                "3.7e-2 > 1.2e-2",
+                f"{paper_fp['indirect']:.2g} > {paper_fp['direct']:.2g}",
                 f"{w_fp['indirect']:.3g} vs {w_fp['direct']:.3g}",
                 bool(w_fp["indirect"] > w_fp["direct"]),
                 "W_FP(indirect) > W_FP(direct)",
@@ -319,20 +328,30 @@ def compute_verdicts(
             )
         )
     else:
-        out.append(Verdict("W_FP direct / indirect", "1.2e-2 / 3.7e-2", "-", None, "needs sweep-w on FB"))
+        out.append(
+            Verdict(
+                "W_FP direct / indirect",
+                f"{paper_fp['direct']:.2g} / {paper_fp['indirect']:.2g}",
+                "-",
+                None,
+                "needs sweep-w on FB",
+            )
+        )
     if ff is not None and all((me, ff.name) in th for me in methods):
         w_fn = {me: th[(me, ff.name)]["w_fn"] for me in methods}
         out.append(
             Verdict(
                 "FF mean nb_ft >= 2",
-                "up to W = 0.26, both methods",
+                f"up to W = {PAPER.W_FN:g}, both methods",
                 ", ".join(f"{me} up to {w_fn[me]:.3g}" for me in methods),
-                bool(all(_within_factor(w_fn[me], 0.26) for me in methods)),
-                "W_FN of both methods within a factor 2 of 0.26",
+                bool(all(_within_factor(w_fn[me], PAPER.W_FN) for me in methods)),
+                f"W_FN of both methods within a factor 2 of {PAPER.W_FN:g}",
             )
         )
     else:
-        out.append(Verdict("FF mean nb_ft >= 2", "up to W = 0.26", "-", None, "needs sweep-w on FF"))
+        out.append(
+            Verdict("FF mean nb_ft >= 2", f"up to W = {PAPER.W_FN:g}", "-", None, "needs sweep-w on FF")
+        )
 
     out.extend(_response_verdicts(config, fb, ff, bic, w047))
     return out
