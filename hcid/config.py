@@ -16,13 +16,21 @@ output rate (``[129, 1088]``); :meth:`Window.rows` gives the Python slice
 from __future__ import annotations
 
 import math
-import operator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
 
+from hcid._checks import (
+    GRID_LOWEST,
+    Section,
+    checked_grid_range,
+    fmt,
+    int_range,
+    integer,
+    number_list,
+)
 from hcid.errors import ConfigError
 
 __all__ = [
@@ -161,8 +169,8 @@ class Grid:
     nk2: tuple[int, int]
 
     def __post_init__(self) -> None:
-        for name, lowest in _GRID_LOWEST.items():
-            object.__setattr__(self, name, _checked_grid_range(name, getattr(self, name), lowest))
+        for name, lowest in GRID_LOWEST.items():
+            object.__setattr__(self, name, checked_grid_range(name, getattr(self, name), lowest))
 
     @property
     def max_lag(self) -> int:
@@ -177,27 +185,6 @@ class Grid:
         if self.nb2[1] > 0:
             lag = max(lag, self.nk2[1] + self.nb2[1] - 1)
         return lag
-
-
-# Smallest allowed lower bound of each range: A always has a coefficient, inputs
-# may be dropped, delays may be zero (a direct feed-through from i(k)).
-_GRID_LOWEST = {"na": 1, "nb1": 0, "nb2": 0, "nk1": 0, "nk2": 0}
-
-
-def _checked_grid_range(name: str, value: object, lowest: int) -> tuple[int, int]:
-    message = f"Grid.{name}: must be two integers lo <= hi with lo >= {lowest}, got {value!r}"
-    try:
-        if isinstance(value, str | bytes) or len(value) != 2:  # type: ignore[arg-type]
-            raise ConfigError(message)
-        lo, hi = value  # type: ignore[misc]
-        if isinstance(lo, bool) or isinstance(hi, bool):
-            raise ConfigError(message)
-        lo, hi = operator.index(lo), operator.index(hi)
-    except TypeError as exc:
-        raise ConfigError(message) from exc
-    if lo > hi or lo < lowest:
-        raise ConfigError(message)
-    return (lo, hi)
 
 
 @dataclass(frozen=True)
@@ -281,96 +268,6 @@ class Config:
         return yaml.safe_dump(self.raw, sort_keys=False)
 
 
-# --------------------------------------------------------------------------- checking helpers
-
-
-def _fmt(value: Any) -> str:
-    return repr(value) if isinstance(value, str) else str(value)
-
-
-class _Section:
-    """A mapping under a dotted path; every key taken is checked, leftovers are errors."""
-
-    def __init__(self, data: Any, path: str):
-        if not isinstance(data, dict):
-            raise ConfigError(f"{path or '<top>'}: must be a mapping, got {_fmt(data)}")
-        self.data = data
-        self.path = path
-        self.seen: set[str] = set()
-
-    def key(self, name: str) -> str:
-        return f"{self.path}.{name}" if self.path else name
-
-    def get(self, name: str, default: Any = ...) -> Any:
-        self.seen.add(name)
-        if name not in self.data:
-            if default is ...:
-                raise ConfigError(f"{self.key(name)}: missing")
-            return default
-        return self.data[name]
-
-    def number(self, name: str, lo: float, hi: float, default: Any = ..., *, open_lo: bool = False) -> float:
-        value = self.get(name, default)
-        key = self.key(name)
-        bracket = "(" if open_lo else "["
-        allowed = f"a number in {bracket}{lo:g}, {hi:g}]"
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(f"{key}: must be {allowed}, got {_fmt(value)}")
-        value = float(value)
-        if not math.isfinite(value) or value > hi or value < lo or (open_lo and value == lo):
-            raise ConfigError(f"{key}: must be {allowed}, got {_fmt(value)}")
-        return value
-
-    def integer(self, name: str, lo: int, hi: int, default: Any = ...) -> int:
-        value = self.get(name, default)
-        return _integer(value, self.key(name), lo, hi)
-
-    def section(self, name: str, default: Any = ...) -> _Section:
-        return _Section(self.get(name, default), self.key(name))
-
-    def done(self) -> None:
-        extra = sorted(set(self.data) - self.seen, key=str)
-        if extra:
-            raise ConfigError(
-                f"{self.key(str(extra[0]))}: unknown key (allowed: {', '.join(sorted(self.seen))})"
-            )
-
-
-def _integer(value: Any, key: str, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-        raise ConfigError(f"{key}: must be an integer in [{lo}, {hi}], got {_fmt(value)}")
-    return value
-
-
-def _int_range(section: _Section, name: str, lo: int, hi: int, default: Any = ...) -> tuple[int, int]:
-    value = section.get(name, default)
-    key = section.key(name)
-    ok = (
-        isinstance(value, list | tuple)
-        and len(value) == 2
-        and all(isinstance(v, int) and not isinstance(v, bool) for v in value)
-        and lo <= value[0] <= value[1] <= hi
-    )
-    if not ok:
-        raise ConfigError(
-            f"{key}: must be an integer range [lo, hi] with {lo} <= lo <= hi <= {hi}, got {_fmt(value)}"
-        )
-    return int(value[0]), int(value[1])
-
-
-def _number_list(section: _Section, name: str, n: int | None = None) -> tuple[float, ...]:
-    value = section.get(name)
-    key = section.key(name)
-    if not isinstance(value, list) or not value:
-        raise ConfigError(f"{key}: must be a non-empty list of numbers, got {_fmt(value)}")
-    for i, v in enumerate(value):
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise ConfigError(f"{key}[{i}]: must be a finite number, got {_fmt(v)}")
-    if n is not None and len(value) != n:
-        raise ConfigError(f"{key}: must have {n} entries (one per disturbance sine), got {len(value)}")
-    return tuple(float(v) for v in value)
-
-
 # --------------------------------------------------------------------------- sections
 
 _PAPER_DIRECT = {
@@ -395,8 +292,8 @@ _PAPER_STAGE1 = {
 
 def _model(name: Any, data: Any) -> HCModel:
     if not isinstance(name, str) or not name.isidentifier():
-        raise ConfigError(f"models: model names must be identifiers, got {_fmt(name)}")
-    s = _Section(data, f"models.{name}")
+        raise ConfigError(f"models: model names must be identifiers, got {fmt(name)}")
+    s = Section(data, f"models.{name}")
     Kpt = s.number("Kpt", 0.0, 10.0)
     model = HCModel(
         name=name,
@@ -413,7 +310,7 @@ def _model(name: Any, data: Any) -> HCModel:
     return model
 
 
-def _window(section: _Section, name: str, n_record: int, auto_first: int) -> Window:
+def _window(section: Section, name: str, n_record: int, auto_first: int) -> Window:
     value = section.get(name)
     key = section.key(name)
     if value == "auto":
@@ -427,7 +324,7 @@ def _window(section: _Section, name: str, n_record: int, auto_first: int) -> Win
     if not ok:
         raise ConfigError(
             f"{key}: must be 'auto' or a sample range [first, last] with "
-            f"1 <= first <= last <= {n_record} (1-based, inclusive), got {_fmt(value)}"
+            f"1 <= first <= last <= {n_record} (1-based, inclusive), got {fmt(value)}"
         )
     return Window(int(value[0]), int(value[1]))
 
@@ -436,15 +333,15 @@ def _stage(data: Any, path: str, defaults: dict, n_record: int) -> StageConfig:
     merged = dict(defaults)
     if data is not None:
         if not isinstance(data, dict):
-            raise ConfigError(f"{path}: must be a mapping, got {_fmt(data)}")
+            raise ConfigError(f"{path}: must be a mapping, got {fmt(data)}")
         merged.update(data)
-    s = _Section(merged, path)
+    s = Section(merged, path)
     grid = Grid(
-        na=_int_range(s, "na", 1, 30),
-        nb1=_int_range(s, "nb1", 0, 60),
-        nb2=_int_range(s, "nb2", 0, 60),
-        nk1=_int_range(s, "nk1", 0, 200),
-        nk2=_int_range(s, "nk2", 0, 200),
+        na=int_range(s, "na", 1, 30),
+        nb1=int_range(s, "nb1", 0, 60),
+        nb2=int_range(s, "nb2", 0, 60),
+        nk1=int_range(s, "nk1", 0, 200),
+        nk2=int_range(s, "nk2", 0, 200),
     )
     max_lag = grid.max_lag
     estimation = _window(s, "estimation", n_record, max_lag)
@@ -466,16 +363,16 @@ def _stage(data: Any, path: str, defaults: dict, n_record: int) -> StageConfig:
 
 def _seeds(value: Any) -> tuple[int, ...]:
     if isinstance(value, dict):
-        s = _Section(value, "seeds")
+        s = Section(value, "seeds")
         first = s.integer("first", 0, 2**31 - 1)
         count = s.integer("count", 1, 100_000)
         s.done()
         return tuple(range(first, first + count))
     if not isinstance(value, list) or not value:
         raise ConfigError(
-            f"seeds: must be a non-empty list of integers or {{first, count}}, got {_fmt(value)}"
+            f"seeds: must be a non-empty list of integers or {{first, count}}, got {fmt(value)}"
         )
-    seeds = tuple(_integer(v, f"seeds[{i}]", 0, 2**31 - 1) for i, v in enumerate(value))
+    seeds = tuple(integer(v, f"seeds[{i}]", 0, 2**31 - 1) for i, v in enumerate(value))
     if len(set(seeds)) != len(seeds):
         raise ConfigError(f"seeds: must not repeat a seed, got {list(seeds)}")
     return seeds
@@ -496,15 +393,15 @@ def parse_config(data: Any, name: str) -> Config:
     ConfigError
         On the first unknown key, wrong type or out-of-range value, naming it.
     """
-    top = _Section(data, "")
+    top = Section(data, "")
     study_name = top.get("name", name)
     if not isinstance(study_name, str) or not study_name or "/" in study_name:
-        raise ConfigError(f"name: must be a non-empty string without '/', got {_fmt(study_name)}")
+        raise ConfigError(f"name: must be a non-empty string without '/', got {fmt(study_name)}")
 
     models_raw = top.get("models")
     if not isinstance(models_raw, dict) or not models_raw:
         raise ConfigError(
-            f"models: must be a non-empty mapping of model name to parameters, got {_fmt(models_raw)}"
+            f"models: must be a non-empty mapping of model name to parameters, got {fmt(models_raw)}"
         )
     models = tuple(_model(k, v) for k, v in models_raw.items())
 
@@ -524,14 +421,14 @@ def parse_config(data: Any, name: str) -> Config:
     ds = sig.section("disturbance")
     k = ds.get("k")
     if not isinstance(k, list) or not k:
-        raise ConfigError(f"signals.disturbance.k: must be a non-empty list of integers, got {_fmt(k)}")
-    k_int = tuple(_integer(v, f"signals.disturbance.k[{i}]", 1, 100_000) for i, v in enumerate(k))
+        raise ConfigError(f"signals.disturbance.k: must be a non-empty list of integers, got {fmt(k)}")
+    k_int = tuple(integer(v, f"signals.disturbance.k[{i}]", 1, 100_000) for i, v in enumerate(k))
     disturbance = Disturbance(
         base_period=ds.number("base_period", 0.0, 1e5, open_lo=True),
         time_offset=ds.number("time_offset", -1e5, 1e5),
         k=k_int,
-        amplitude=_number_list(ds, "amplitude", len(k_int)),
-        phase=_number_list(ds, "phase", len(k_int)),
+        amplitude=number_list(ds, "amplitude", len(k_int)),
+        phase=number_list(ds, "phase", len(k_int)),
     )
     ds.done()
 
@@ -540,8 +437,7 @@ def parse_config(data: Any, name: str) -> Config:
     segs_raw = ts.get("segments")
     if not isinstance(segs_raw, list) or not segs_raw:
         raise ConfigError(
-            f"signals.target.segments: must be a non-empty list of [kind, seconds, step], "
-            f"got {_fmt(segs_raw)}"
+            f"signals.target.segments: must be a non-empty list of [kind, seconds, step], got {fmt(segs_raw)}"
         )
     segments = []
     for i, seg in enumerate(segs_raw):
@@ -555,7 +451,7 @@ def parse_config(data: Any, name: str) -> Config:
             and seg[1] > 0
         )
         if not ok:
-            raise ConfigError(f"{key}: must be [c|p, seconds > 0, step], got {_fmt(seg)}")
+            raise ConfigError(f"{key}: must be [c|p, seconds > 0, step], got {fmt(seg)}")
         if seg[0] == "c" and seg[2] != 0:
             raise ConfigError(f"{key}: a hold segment 'c' must have step 0, got {seg[2]}")
         segments.append(Segment(seg[0], float(seg[1]), float(seg[2])))
@@ -660,18 +556,18 @@ def parse_config(data: Any, name: str) -> Config:
 def _data(value: Any, model_names: list[str]) -> DataConfig | None:
     if value is None:
         return None
-    s = _Section(value, "data")
+    s = Section(value, "data")
     name = s.get("name", "data")
     if not isinstance(name, str) or not name.isidentifier() or name in model_names:
         raise ConfigError(
-            f"data.name: must be an identifier other than the model names {model_names}, got {_fmt(name)}"
+            f"data.name: must be an identifier other than the model names {model_names}, got {fmt(name)}"
         )
     cs = s.section("columns", {})
     columns = {}
     for key, default in _DATA_COLUMNS.items():
         col = cs.get(key, default)
         if not isinstance(col, str) or not col:
-            raise ConfigError(f"data.columns.{key}: must be a column or variable name, got {_fmt(col)}")
+            raise ConfigError(f"data.columns.{key}: must be a column or variable name, got {fmt(col)}")
         columns[key] = col
     cs.done()
     w_raw = s.get("w_report", [0.00715, 0.47])
@@ -680,7 +576,7 @@ def _data(value: Any, model_names: list[str]) -> DataConfig | None:
         or not w_raw
         or not all(isinstance(w, int | float) and not isinstance(w, bool) and w > 0 for w in w_raw)
     ):
-        raise ConfigError(f"data.w_report: must be a non-empty list of W > 0, got {_fmt(w_raw)}")
+        raise ConfigError(f"data.w_report: must be a non-empty list of W > 0, got {fmt(w_raw)}")
     s.done()
     return DataConfig(name=name, columns=columns, w_report=tuple(float(w) for w in w_raw))
 

@@ -8,8 +8,6 @@ Stages that have not run are named as missing; what is there is reported.
 
 from __future__ import annotations
 
-import base64
-import html
 import importlib.metadata
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,24 +22,9 @@ from hcid import results, selection
 from hcid.config import Config, parse_config
 from hcid.errors import DataError
 from hcid.hcmodel import true_response
+from hcid.report.document import Doc, to_html, to_markdown
 
 __all__ = ["Report", "build_report"]
-
-
-@dataclass
-class _Doc:
-    """Report being written: blocks of Markdown text, tables and figures, in order."""
-
-    blocks: list[tuple[str, dict]] = field(default_factory=list)
-
-    def text(self, md: str) -> None:
-        self.blocks.append(("md", {"text": md}))
-
-    def table(self, header: list[str], rows: list[list[str]]) -> None:
-        self.blocks.append(("table", {"header": header, "rows": rows}))
-
-    def figure(self, name: str, caption: str) -> None:
-        self.blocks.append(("figure", {"name": name, "caption": caption}))
 
 
 @dataclass(frozen=True)
@@ -146,35 +129,12 @@ def _fmt_range(r) -> str:
     return f"{r[0]}..{r[1]}"
 
 
-def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Report:
-    """Write the report of ``run_dir`` into ``out_dir`` (default: ``run_dir/report``)."""
-    from hcid.report import compute, figures
-
-    run_dir = Path(run_dir)
-    out_dir = Path(out_dir) if out_dir is not None else run_dir / "report"
-    config = _load_config(run_dir)
-    summary = _read_optional(run_dir, results.SIMULATION_SUMMARY)
-    frontier = _read_optional(run_dir, results.FRONTIER)
-    log = _read_optional(run_dir, results.IDENTIFY_LOG)
-    stage1 = _read_optional(run_dir, results.STAGE1)
-    selection_table = _read_optional(run_dir, results.SELECTION)
-    thresholds = _read_optional(run_dir, results.THRESHOLDS)
-    runlog = _read_optional(run_dir, results.RUN_LOG)
-    missing = [
-        name
-        for name, t in (("simulation", summary), ("identification", frontier), ("W sweep", selection_table))
-        if t is None
-    ]
-    figs: dict[str, object] = {}
-    doc = _Doc()
-
-    doc.text(f"# hcid report: {config.name}\n\nRun directory: `{run_dir}`.")
-    if missing:
-        doc.text(
-            "**Missing stages:** "
-            + ", ".join(missing)
-            + ". Run `hcid run CONFIG` to complete them; what is there is reported below."
-        )
+def _section_facts(b: _Build):
+    """1. Run facts: config, grids, candidates, unstable counts, wall times, versions."""
+    config = b.config
+    doc = b.doc
+    log = b.log
+    runlog = b.runlog
 
     # 1. run facts
     doc.text("## 1. Run facts")
@@ -229,6 +189,16 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
     facts.append(["packages", _versions()])
     doc.table(["item", "value"], facts)
 
+
+def _section_simulation(b: _Build):
+    """2. Simulation: RMS(e) and remnant ratio beside the paper's Table 2; a record."""
+    config = b.config
+    doc = b.doc
+    figs = b.figs
+    run_dir = b.run_dir
+    summary = b.summary
+    from hcid.report import figures
+
     # 2. simulation
     doc.text("## 2. Simulation")
     if summary is not None:
@@ -280,11 +250,19 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
     else:
         doc.text("_Missing: `simulation_summary.parquet` (run `hcid simulate`)._")
 
+
+def _section_curves(b: _Build):
+    """3-4. VAF and nb_ft of the selected models over W (paper Figs. 5, 6)."""
+    doc = b.doc
+    figs = b.figs
+    selection_table = b.selection
+    th_rows = b.th_rows
+    w_aic = b.w_aic
+    w_bic = b.w_bic
+    verdict_inputs = b.verdict_inputs
+    from hcid.report import compute, figures
+
     # 3-4. curves over W
-    verdict_inputs = {"curves": None, "bic": None, "w047": None}
-    th_rows = thresholds.to_pylist() if thresholds is not None else []
-    nf = config.identify.direct.estimation.length
-    w_aic, w_bic = selection.w_aic(nf), selection.w_bic(nf)
     doc.text("## 3. Model fit vs W (paper Fig. 5)")
     if selection_table is not None:
         curves = compute.compute_curves(selection_table)
@@ -328,6 +306,18 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
             )
     else:
         doc.text("_Missing: `selection.parquet` (run `hcid sweep-w`)._")
+
+
+def _section_responses(b: _Build):
+    """5-7. Selected models' frequency responses and errors (paper Figs. 7-10)."""
+    config = b.config
+    doc = b.doc
+    figs = b.figs
+    frontier = b.frontier
+    stage1 = b.stage1
+    w_bic = b.w_bic
+    verdict_inputs = b.verdict_inputs
+    from hcid.report import compute, figures
 
     # 5-7. frequency responses
     doc.text("## 5. Selected models at W_BIC (paper Figs. 7, 8)")
@@ -390,6 +380,16 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
     else:
         doc.text("_Missing: `frontier.parquet` (run `hcid identify`)._")
 
+
+def _section_verdicts(b: _Build) -> list:
+    """8. Verdicts on SPEC section 6."""
+    config = b.config
+    doc = b.doc
+    summary = b.summary
+    thresholds = b.thresholds
+    verdict_inputs = b.verdict_inputs
+    from hcid.report import compute
+
     # 8. verdicts
     doc.text("## 8. Verdicts: the paper's claims (SPEC section 6) against this run")
     if summary is None:
@@ -410,6 +410,20 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
             for v in verdicts
         ],
     )
+
+    return verdicts
+
+
+def _section_calibration_and_data(b: _Build):
+    """9-10. W calibration and measured data (paper section 6)."""
+    config = b.config
+    doc = b.doc
+    figs = b.figs
+    run_dir = b.run_dir
+    frontier = b.frontier
+    selection_table = b.selection
+    w_bic = b.w_bic
+    from hcid.report import compute, figures
 
     # 9-10. calibration and measured data (paper section 6's two recommendations)
     calibration = _read_optional(run_dir, results.CALIBRATION)
@@ -489,6 +503,74 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
                 + (", the calibrated W: the answer." if is_answer else "."),
             )
 
+
+@dataclass
+class _Build:
+    """What the report sections read (the run's tables) and share (figures, W marks)."""
+
+    run_dir: Path
+    config: Config
+    summary: pa.Table | None
+    frontier: pa.Table | None
+    log: pa.Table | None
+    stage1: pa.Table | None
+    selection: pa.Table | None
+    thresholds: pa.Table | None
+    runlog: pa.Table | None
+    doc: Doc = field(default_factory=Doc)
+    figs: dict[str, object] = field(default_factory=dict)
+    verdict_inputs: dict = field(default_factory=lambda: {"curves": None, "bic": None, "w047": None})
+
+    @property
+    def th_rows(self) -> list[dict]:
+        return self.thresholds.to_pylist() if self.thresholds is not None else []
+
+    @property
+    def w_aic(self) -> float:
+        return selection.w_aic(self.config.identify.direct.estimation.length)
+
+    @property
+    def w_bic(self) -> float:
+        return selection.w_bic(self.config.identify.direct.estimation.length)
+
+
+def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Report:
+    """Write the report of ``run_dir`` into ``out_dir`` (default: ``run_dir/report``)."""
+    from hcid.report import figures
+
+    run_dir = Path(run_dir)
+    out_dir = Path(out_dir) if out_dir is not None else run_dir / "report"
+    b = _Build(
+        run_dir=run_dir,
+        config=_load_config(run_dir),
+        summary=_read_optional(run_dir, results.SIMULATION_SUMMARY),
+        frontier=_read_optional(run_dir, results.FRONTIER),
+        log=_read_optional(run_dir, results.IDENTIFY_LOG),
+        stage1=_read_optional(run_dir, results.STAGE1),
+        selection=_read_optional(run_dir, results.SELECTION),
+        thresholds=_read_optional(run_dir, results.THRESHOLDS),
+        runlog=_read_optional(run_dir, results.RUN_LOG),
+    )
+    missing = [
+        name
+        for name, t in (("simulation", b.summary), ("identification", b.frontier), ("W sweep", b.selection))
+        if t is None
+    ]
+    b.doc.text(f"# hcid report: {b.config.name}\n\nRun directory: `{run_dir}`.")
+    if missing:
+        b.doc.text(
+            "**Missing stages:** "
+            + ", ".join(missing)
+            + ". Run `hcid run CONFIG` to complete them; what is there is reported below."
+        )
+    _section_facts(b)
+    _section_simulation(b)
+    _section_curves(b)
+    _section_responses(b)
+    verdicts = _section_verdicts(b)
+    _section_calibration_and_data(b)
+    doc, figs, config = b.doc, b.figs, b.config
+
     written = []
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -498,83 +580,6 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
         figures.save(fig, out_dir / name)
         written.append(out_dir / name)
     md_path, html_path = out_dir / "report.md", out_dir / "report.html"
-    results.write_text(_markdown(doc), md_path)
-    results.write_text(_html(doc, out_dir, config.name), html_path)
+    results.write_text(to_markdown(doc), md_path)
+    results.write_text(to_html(doc, out_dir, config.name), html_path)
     return Report(md_path, html_path, tuple(written), tuple(missing), verdicts)
-
-
-def _markdown(doc: _Doc) -> str:
-    parts = []
-    for kind, block in doc.blocks:
-        if kind == "md":
-            parts.append(block["text"])
-        elif kind == "figure":
-            f = block
-            parts.append(f"![{f['caption']}]({f['name']})\n\n_{f['caption']}_")
-        else:
-            t = block
-            lines = ["| " + " | ".join(t["header"]) + " |", "|" + "---|" * len(t["header"])]
-            lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in t["rows"]]
-            parts.append("\n".join(lines))
-    return "\n\n".join(parts) + "\n"
-
-
-def _inline_md(text: str) -> str:
-    import re
-
-    out = html.escape(text)
-    out = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", out)
-    out = re.sub(r"`(.+?)`", r"<code>\1</code>", out)
-    out = re.sub(r"(?<!\w)_(.+?)_(?!\w)", r"<i>\1</i>", out)
-    return out
-
-
-def _html(doc: _Doc, out_dir: Path, title: str) -> str:
-    body = []
-    for kind, block in doc.blocks:
-        if kind == "md":
-            for para in block["text"].split("\n\n"):
-                if para.startswith("## "):
-                    body.append(f"<h2>{_inline_md(para[3:])}</h2>")
-                elif para.startswith("# "):
-                    body.append(f"<h1>{_inline_md(para[2:])}</h1>")
-                else:
-                    body.append(f"<p>{_inline_md(para)}</p>")
-        elif kind == "figure":
-            f = block
-            data = (
-                base64.b64encode((out_dir / f["name"]).read_bytes()).decode("ascii")
-                if (out_dir / f["name"]).is_file()
-                else ""
-            )
-            body.append(
-                f'<figure><img alt="{html.escape(f["name"])}" src="data:image/png;base64,{data}">'
-                f"<figcaption>{_inline_md(f['caption'])}</figcaption></figure>"
-            )
-        else:
-            t = block
-            head = "".join(f"<th>{html.escape(h)}</th>" for h in t["header"])
-            rows = "".join(
-                "<tr>"
-                + "".join(f'<td class="{_cell_class(c)}">{html.escape(str(c))}</td>' for c in row)
-                + "</tr>"
-                for row in t["rows"]
-            )
-            body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>")
-    style = (
-        "body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;line-height:1.4}"
-        "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 8px;"
-        "vertical-align:top;font-size:0.9em}th{background:#f0f0f0}img{max-width:100%}"
-        "figcaption{font-size:0.9em;color:#444}.holds{background:#e6f4e6}.fails{background:#fbe3e3}"
-        ".na{background:#f4f4f4}"
-    )
-    return (
-        f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>hcid report: '
-        f"{html.escape(title)}</title><style>{style}</style></head><body>\n"
-        + "\n".join(body)
-        + "\n</body></html>\n"
-    )
-
-
-def _cell_class(cell) -> str:
-    return {"holds": "holds", "does not hold": "fails", "not evaluated": "na"}.get(str(cell), "")

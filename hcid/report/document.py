@@ -1,0 +1,102 @@
+"""The report as a document: Markdown text, tables and figures, rendered to Markdown and HTML."""
+
+from __future__ import annotations
+
+import base64
+import html
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+__all__ = ["Doc", "to_html", "to_markdown"]
+
+
+@dataclass
+class Doc:
+    """Report being written: blocks of Markdown text, tables and figures, in order."""
+
+    blocks: list[tuple[str, dict]] = field(default_factory=list)
+
+    def text(self, md: str) -> None:
+        self.blocks.append(("md", {"text": md}))
+
+    def table(self, header: list[str], rows: list[list[str]]) -> None:
+        self.blocks.append(("table", {"header": header, "rows": rows}))
+
+    def figure(self, name: str, caption: str) -> None:
+        self.blocks.append(("figure", {"name": name, "caption": caption}))
+
+
+def to_markdown(doc: Doc) -> str:
+    parts = []
+    for kind, block in doc.blocks:
+        if kind == "md":
+            parts.append(block["text"])
+        elif kind == "figure":
+            f = block
+            parts.append(f"![{f['caption']}]({f['name']})\n\n_{f['caption']}_")
+        else:
+            t = block
+            lines = ["| " + " | ".join(t["header"]) + " |", "|" + "---|" * len(t["header"])]
+            lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in t["rows"]]
+            parts.append("\n".join(lines))
+    return "\n\n".join(parts) + "\n"
+
+
+def _inline_md(text: str) -> str:
+    out = html.escape(text)
+    out = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", out)
+    out = re.sub(r"`(.+?)`", r"<code>\1</code>", out)
+    out = re.sub(r"(?<!\w)_(.+?)_(?!\w)", r"<i>\1</i>", out)
+    return out
+
+
+def to_html(doc: Doc, out_dir: Path, title: str) -> str:
+    body = []
+    for kind, block in doc.blocks:
+        if kind == "md":
+            for para in block["text"].split("\n\n"):
+                if para.startswith("## "):
+                    body.append(f"<h2>{_inline_md(para[3:])}</h2>")
+                elif para.startswith("# "):
+                    body.append(f"<h1>{_inline_md(para[2:])}</h1>")
+                else:
+                    body.append(f"<p>{_inline_md(para)}</p>")
+        elif kind == "figure":
+            f = block
+            data = (
+                base64.b64encode((out_dir / f["name"]).read_bytes()).decode("ascii")
+                if (out_dir / f["name"]).is_file()
+                else ""
+            )
+            body.append(
+                f'<figure><img alt="{html.escape(f["name"])}" src="data:image/png;base64,{data}">'
+                f"<figcaption>{_inline_md(f['caption'])}</figcaption></figure>"
+            )
+        else:
+            t = block
+            head = "".join(f"<th>{html.escape(h)}</th>" for h in t["header"])
+            rows = "".join(
+                "<tr>"
+                + "".join(f'<td class="{_cell_class(c)}">{html.escape(str(c))}</td>' for c in row)
+                + "</tr>"
+                for row in t["rows"]
+            )
+            body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>")
+    style = (
+        "body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;line-height:1.4}"
+        "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 8px;"
+        "vertical-align:top;font-size:0.9em}th{background:#f0f0f0}img{max-width:100%}"
+        "figcaption{font-size:0.9em;color:#444}.holds{background:#e6f4e6}.fails{background:#fbe3e3}"
+        ".na{background:#f4f4f4}"
+    )
+    return (
+        f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>hcid report: '
+        f"{html.escape(title)}</title><style>{style}</style></head><body>\n"
+        + "\n".join(body)
+        + "\n</body></html>\n"
+    )
+
+
+def _cell_class(cell) -> str:
+    return {"holds": "holds", "does not hold": "fails", "not evaluated": "na"}.get(str(cell), "")
