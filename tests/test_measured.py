@@ -231,3 +231,21 @@ def test_mat_with_shared_time_vector(tmp_path, data_config, example_table):
     records = load_data(path, data_config)
     assert sorted(records) == [1, 2]
     np.testing.assert_array_equal(records[2]["u"], cols["stick"][:, 1])
+
+
+def test_data_at_another_rate_with_matching_config(tmp_path, data_config_path, example_table):
+    # A 50 Hz file is accepted when timing.output_rate and the windows (in samples)
+    # match it: the config's record is then 81.92 s * 50 Hz = 4096 samples.
+    one = _one_run(example_table)
+    cols = {c: np.repeat(one.column(c).to_numpy(), 2) for c in ("target", "disturbance", "error", "stick")}
+    path = tmp_path / "fifty.csv"
+    _write(pa.table({"time_s": np.arange(4096) / 50.0, **cols}), path)
+    raw = yaml.safe_load(data_config_path.read_text())
+    raw["timing"]["output_rate"] = 50.0
+    for stage in ("direct", "stage2"):
+        raw["identify"][stage].update(estimation=[257, 2176], validation=[2177, 4096])
+    config = parse_config(raw, "fifty")
+    records = load_data(path, config)
+    assert records[1]["u"].size == 4096
+    with pytest.raises(DataError, match="sample rate 50 Hz, the config's timing.output_rate is 25 Hz"):
+        load_data(path, parse_config(yaml.safe_load(data_config_path.read_text()), "x"))
