@@ -131,18 +131,14 @@ def _fmt_range(r) -> str:
 
 def _section_facts(b: _Build):
     """1. Run facts: config, grids, candidates, unstable counts, wall times, versions."""
-    config = b.config
-    doc = b.doc
-    log = b.log
-    runlog = b.runlog
 
     # 1. run facts
-    doc.text("## 1. Run facts")
-    g_d, g_1 = config.identify.direct.grid, config.identify.stage1.grid
+    b.doc.text("## 1. Run facts")
+    g_d, g_1 = b.config.identify.direct.grid, b.config.identify.stage1.grid
     facts = [
-        ["config", config.name],
-        ["models", ", ".join(m.name for m in config.models)],
-        ["seeds", f"{len(config.seeds)} ({config.seeds[0]}..{config.seeds[-1]})"],
+        ["config", b.config.name],
+        ["models", ", ".join(m.name for m in b.config.models)],
+        ["seeds", f"{len(b.config.seeds)} ({b.config.seeds[0]}..{b.config.seeds[-1]})"],
         [
             "direct / stage-2 grid",
             f"na {_fmt_range(g_d.na)}, nb_ft {_fmt_range(g_d.nb1)}, nb_e {_fmt_range(g_d.nb2)}, "
@@ -153,10 +149,13 @@ def _section_facts(b: _Build):
             f"na {_fmt_range(g_1.na)}, nb_ft {_fmt_range(g_1.nb1)}, nb_fd {_fmt_range(g_1.nb2)}, "
             f"nk_ft {_fmt_range(g_1.nk1)}, nk_fd {_fmt_range(g_1.nk2)}",
         ],
-        ["W grid", f"{len(config.w_grid)} points, {config.w_grid[0]:.3g}..{config.w_grid[-1]:.3g} (log)"],
+        [
+            "W grid",
+            f"{len(b.config.w_grid)} points, {b.config.w_grid[0]:.3g}..{b.config.w_grid[-1]:.3g} (log)",
+        ],
     ]
-    if log is not None:
-        lg = log.to_pydict()
+    if b.log is not None:
+        lg = b.log.to_pydict()
         n_cand = sum(lg["n_candidates"]) + sum(lg["stage1_candidates"])
         n_unst = sum(lg["n_unstable"]) + sum(lg["stage1_unstable"])
         facts.append(
@@ -178,8 +177,8 @@ def _section_facts(b: _Build):
                 else:
                     text += f"; unstable {unst:,}"
                 facts.append([f"{method} identification", text])
-    if runlog is not None:
-        for row in runlog.to_pylist():
+    if b.runlog is not None:
+        for row in b.runlog.to_pylist():
             facts.append(
                 [
                     f"wall time: {row['stage']}",
@@ -187,25 +186,20 @@ def _section_facts(b: _Build):
                 ]
             )
     facts.append(["packages", _versions()])
-    doc.table(["item", "value"], facts)
+    b.doc.table(["item", "value"], facts)
 
 
 def _section_simulation(b: _Build):
     """2. Simulation: RMS(e) and remnant ratio beside the paper's Table 2; a record."""
-    config = b.config
-    doc = b.doc
-    figs = b.figs
-    run_dir = b.run_dir
-    summary = b.summary
     from hcid.report import figures
 
     # 2. simulation
-    doc.text("## 2. Simulation")
-    if summary is not None:
-        s = summary.to_pydict()
+    b.doc.text("## 2. Simulation")
+    if b.summary is not None:
+        s = b.summary.to_pydict()
         paper = {k: f"{v:.2f}" for k, v in PAPER.RMS_E_DEG.items()}
         rows = []
-        for m in config.models:
+        for m in b.config.models:
             idx = [i for i, n in enumerate(s["model"]) if n == m.name]
             rms = np.array([s["rms_e_deg"][i] for i in idx])
             ratio = np.array([s["noise_ratio_disturbance_only"][i] for i in idx])
@@ -222,7 +216,7 @@ def _section_simulation(b: _Build):
                     f"{s['kn'][idx[0]]:.5g}",
                 ]
             )
-        doc.table(
+        b.doc.table(
             [
                 "model",
                 "Kpt",
@@ -236,58 +230,51 @@ def _section_simulation(b: _Build):
             ],
             rows,
         )
-        sims = _read_optional(run_dir, results.SIMULATIONS)
+        sims = _read_optional(b.run_dir, results.SIMULATIONS)
         if sims is not None:
-            recs = results.records(sims, run_dir / results.SIMULATIONS)
+            recs = results.records(sims, b.run_dir / results.SIMULATIONS)
             key = next(
-                ((m.name, config.seeds[0]) for m in config.models if m.has_feedforward), next(iter(recs))
+                ((m.name, b.config.seeds[0]) for m in b.config.models if m.has_feedforward), next(iter(recs))
             )
             rec = recs[key]
-            figs["signals.png"] = figures.plot_signals(
+            b.figs["signals.png"] = figures.plot_signals(
                 rec["t"], rec, f"Record of model {key[0]}, seed {key[1]}"
             )
-            doc.figure("signals.png", f"One simulated record (model {key[0]}, seed {key[1]}), 25 Hz.")
+            b.doc.figure("signals.png", f"One simulated record (model {key[0]}, seed {key[1]}), 25 Hz.")
     else:
-        doc.text("_Missing: `simulation_summary.parquet` (run `hcid simulate`)._")
+        b.doc.text("_Missing: `simulation_summary.parquet` (run `hcid simulate`)._")
 
 
 def _section_curves(b: _Build):
     """3-4. VAF and nb_ft of the selected models over W (paper Figs. 5, 6)."""
-    doc = b.doc
-    figs = b.figs
-    selection_table = b.selection
-    th_rows = b.th_rows
-    w_aic = b.w_aic
-    w_bic = b.w_bic
-    verdict_inputs = b.verdict_inputs
     from hcid.report import compute, figures
 
     # 3-4. curves over W
-    doc.text("## 3. Model fit vs W (paper Fig. 5)")
-    if selection_table is not None:
-        curves = compute.compute_curves(selection_table)
-        verdict_inputs["curves"] = curves
-        figs["vaf_vs_w.png"] = figures.plot_vaf(curves, {"W_AIC": w_aic, "W_BIC": w_bic})
-        doc.figure(
+    b.doc.text("## 3. Model fit vs W (paper Fig. 5)")
+    if b.selection is not None:
+        curves = compute.compute_curves(b.selection)
+        b.verdict_inputs["curves"] = curves
+        b.figs["vaf_vs_w.png"] = figures.plot_vaf(curves, {"W_AIC": b.w_aic, "W_BIC": b.w_bic})
+        b.doc.figure(
             "vaf_vs_w.png",
             "Mean VAF (estimation rows) +- one sd of the selected models over "
             "the realizations; dotted W_AIC, dashed W_BIC.",
         )
-        doc.text("## 4. Feedforward found vs W (paper Fig. 6)")
+        b.doc.text("## 4. Feedforward found vs W (paper Fig. 6)")
         marks = {}
-        for r in th_rows:
+        for r in b.th_rows:
             if r["w_fp"] is not None:
                 marks[f"W_FP {r['method']}"] = r["w_fp"]
             if r["w_fn"] is not None:
                 marks[f"W_FN {r['method']}"] = r["w_fn"]
-        figs["nb_ft_vs_w.png"] = figures.plot_nb_ft(curves, marks)
-        doc.figure(
+        b.figs["nb_ft_vs_w.png"] = figures.plot_nb_ft(curves, marks)
+        b.doc.figure(
             "nb_ft_vs_w.png",
             "Mean nb_ft of the selected models. FB: any nb_ft > 0 is a false "
             "positive; FF: a mean below 2 is a false negative.",
         )
-        if th_rows:
-            doc.table(
+        if b.th_rows:
+            b.doc.table(
                 ["method", "model", "W_AIC", "W_BIC", "W_FP", "W_FN", "paper"],
                 [
                     [
@@ -301,103 +288,96 @@ def _section_curves(b: _Build):
                         if r["has_feedforward"]
                         else f"W_FP {PAPER.W_FP[r['method']]:.2g}",
                     ]
-                    for r in th_rows
+                    for r in b.th_rows
                 ],
             )
     else:
-        doc.text("_Missing: `selection.parquet` (run `hcid sweep-w`)._")
+        b.doc.text("_Missing: `selection.parquet` (run `hcid sweep-w`)._")
 
 
 def _section_responses(b: _Build):
     """5-7. Selected models' frequency responses and errors (paper Figs. 7-10)."""
-    config = b.config
-    doc = b.doc
-    figs = b.figs
-    frontier = b.frontier
-    stage1 = b.stage1
-    w_bic = b.w_bic
-    verdict_inputs = b.verdict_inputs
     from hcid.report import compute, figures
 
     # 5-7. frequency responses
-    doc.text("## 5. Selected models at W_BIC (paper Figs. 7, 8)")
-    if frontier is not None:
-        bic = compute.compute_responses(frontier, config, w_bic)
-        w047 = compute.compute_responses(frontier, config, 0.47)
-        verdict_inputs.update(bic=bic, w047=w047)
+    b.doc.text("## 5. Selected models at W_BIC (paper Figs. 7, 8)")
+    if b.frontier is not None:
+        bic = compute.compute_responses(b.frontier, b.config, b.w_bic)
+        w047 = compute.compute_responses(b.frontier, b.config, 0.47)
+        b.verdict_inputs.update(bic=bic, w047=w047)
         omega = bic.omega
-        ref02 = compute.reference_feedforward(config, omega)
-        for m in config.models:
-            hft_true, he_true = true_response(m, config.loop, omega)
+        ref02 = compute.reference_feedforward(b.config, omega)
+        for m in b.config.models:
+            hft_true, he_true = true_response(m, b.config.loop, omega)
             refs = {}
             if not m.has_feedforward and ref02 is not None:
                 refs = {"hft": [("FF feedforward, Kpt = 0.2", ref02)]}
             name = f"bode_{m.name}_bic.png"
-            figs[name] = figures.plot_bode(
+            b.figs[name] = figures.plot_bode(
                 bic,
                 m.name,
                 {"hft": hft_true, "he": he_true},
                 refs,
-                title=f"{m.name}: selected models at W_BIC = {w_bic:.3g}",
+                title=f"{m.name}: selected models at W_BIC = {b.w_bic:.3g}",
             )
-            doc.figure(
+            b.doc.figure(
                 name,
                 f"{m.name}: every realization's selected model at W_BIC (thin lines; "
                 "the count of models with that path in the legend), the true paths (black), "
                 "the disturbance band 0.23..17.33 rad/s (dashed).",
             )
-        ff = next((m for m in config.models if m.has_feedforward), None)
+        ff = next((m for m in b.config.models if m.has_feedforward), None)
         if ff is not None:
-            doc.text("## 6. FF feedback path at W = 0.47 (paper Fig. 9)")
-            _, he_true = true_response(ff, config.loop, w047.omega)
-            figs["bode_FF_w047.png"] = figures.plot_bode(
+            b.doc.text("## 6. FF feedback path at W = 0.47 (paper Fig. 9)")
+            _, he_true = true_response(ff, b.config.loop, w047.omega)
+            b.figs["bode_FF_w047.png"] = figures.plot_bode(
                 w047, ff.name, {"he": he_true}, paths=("he",), title=f"{ff.name}: feedback path at W = 0.47"
             )
-            doc.figure("bode_FF_w047.png", "Feedback path of the models selected at W = 0.47.")
-            doc.text("## 7. Errors at W_BIC, direct vs indirect (paper Fig. 10)")
-            hft_true, he_true = true_response(ff, config.loop, omega)
+            b.doc.figure("bode_FF_w047.png", "Feedback path of the models selected at W = 0.47.")
+            b.doc.text("## 7. Errors at W_BIC, direct vs indirect (paper Fig. 10)")
+            hft_true, he_true = true_response(ff, b.config.loop, omega)
             errors = {}
             for path, true in (("hft", hft_true), ("he", he_true)):
                 for method in ("direct", "indirect"):
                     h = getattr(bic, path).get((ff.name, method))
                     if h is not None:
                         errors[(path, method)] = compute.compute_errors(h, true)
-            figs["errors_bic.png"] = figures.plot_errors(
+            b.figs["errors_bic.png"] = figures.plot_errors(
                 omega, errors, f"{ff.name}: errors at W_BIC, mean (solid) and max (dashed) over realizations"
             )
-            doc.figure("errors_bic.png", "Magnitude and phase errors (paper eq. 11-12) of the FF model.")
-        if stage1 is not None:
-            s1 = stage1.to_pydict()
+            b.doc.figure("errors_bic.png", "Magnitude and phase errors (paper eq. 11-12) of the FF model.")
+        if b.stage1 is not None:
+            s1 = b.stage1.to_pydict()
             combos = {}
-            for i in range(stage1.num_rows):
+            for i in range(b.stage1.num_rows):
                 k = (s1["na"][i], s1["nb_ft"][i], s1["nb_fd"][i], s1["nk_ft"][i], s1["nk_fd"][i])
                 combos[k] = combos.get(k, 0) + 1
-            doc.text(
+            b.doc.text(
                 "Stage-1 choices of the indirect method (na, nb_ft, nb_fd, nk_ft, nk_fd): "
                 + ", ".join(f"{k} x{v}" for k, v in sorted(combos.items(), key=lambda x: -x[1])[:6])
                 + "."
             )
     else:
-        doc.text("_Missing: `frontier.parquet` (run `hcid identify`)._")
+        b.doc.text("_Missing: `frontier.parquet` (run `hcid identify`)._")
 
 
 def _section_verdicts(b: _Build) -> list:
     """8. Verdicts on SPEC section 6."""
-    config = b.config
-    doc = b.doc
-    summary = b.summary
-    thresholds = b.thresholds
-    verdict_inputs = b.verdict_inputs
     from hcid.report import compute
 
     # 8. verdicts
-    doc.text("## 8. Verdicts: the paper's claims (SPEC section 6) against this run")
-    if summary is None:
-        doc.text("_No simulation in this run: the paper's claims are not evaluated._")
+    b.doc.text("## 8. Verdicts: the paper's claims (SPEC section 6) against this run")
+    if b.summary is None:
+        b.doc.text("_No simulation in this run: the paper's claims are not evaluated._")
     verdicts = compute.compute_verdicts(
-        config, summary, verdict_inputs["curves"], thresholds, verdict_inputs["bic"], verdict_inputs["w047"]
+        b.config,
+        b.summary,
+        b.verdict_inputs["curves"],
+        b.thresholds,
+        b.verdict_inputs["bic"],
+        b.verdict_inputs["w047"],
     )
-    doc.table(
+    b.doc.table(
         ["claim", "paper", "this run", "holds", "rule"],
         [
             [
@@ -416,22 +396,15 @@ def _section_verdicts(b: _Build) -> list:
 
 def _section_calibration_and_data(b: _Build):
     """9-10. W calibration and measured data (paper section 6)."""
-    config = b.config
-    doc = b.doc
-    figs = b.figs
-    run_dir = b.run_dir
-    frontier = b.frontier
-    selection_table = b.selection
-    w_bic = b.w_bic
     from hcid.report import compute, figures
 
     # 9-10. calibration and measured data (paper section 6's two recommendations)
-    calibration = _read_optional(run_dir, results.CALIBRATION)
+    calibration = _read_optional(b.run_dir, results.CALIBRATION)
     recommended = {}
     if calibration is not None:
-        doc.text("## 9. W calibration on the HC hypothesis")
-        figs["calibration.png"] = figures.plot_calibration(calibration, config.name)
-        doc.figure(
+        b.doc.text("## 9. W calibration on the HC hypothesis")
+        b.figs["calibration.png"] = figures.plot_calibration(calibration, b.config.name)
+        b.doc.figure(
             "calibration.png",
             "False-positive rate of the FB twin and false-negative rate of the FF "
             "twin over W, with exact 95% (Clopper-Pearson) bands over realizations; green: the safe "
@@ -453,15 +426,15 @@ def _section_calibration_and_data(b: _Build):
                         f"{r['recommended']:.4g}" if np.isfinite(r["recommended"]) else "no safe W",
                     ]
                 )
-        doc.table(["method", "target rate", "safe from W", "safe below W", "recommended W"], rows)
-    data_cfg = config.data
+        b.doc.table(["method", "target rate", "safe from W", "safe below W", "recommended W"], rows)
+    data_cfg = b.config.data
     if (
         data_cfg is not None
-        and frontier is not None
-        and data_cfg.name in set(frontier.column("model").to_pylist())
+        and b.frontier is not None
+        and data_cfg.name in set(b.frontier.column("model").to_pylist())
     ):
-        doc.text(f"## 10. Measured data: {data_cfg.name}")
-        doc.text(
+        b.doc.text(f"## 10. Measured data: {data_cfg.name}")
+        b.doc.text(
             "No true dynamics are known for measured data: the report shows the selected structure and "
             "fit as functions of W, and the models at chosen W values"
             + (
@@ -470,25 +443,25 @@ def _section_calibration_and_data(b: _Build):
                 else "; run `hcid calibrate-w` to mark a calibrated W."
             )
         )
-        if selection_table is not None:
-            structure = compute.compute_data_structure(selection_table, data_cfg.name)
+        if b.selection is not None:
+            structure = compute.compute_data_structure(b.selection, data_cfg.name)
             if structure is not None:
-                marks = {"W_BIC": w_bic, **{f"calibrated {m}": w for m, w in recommended.items()}}
-                figs["data_structure.png"] = figures.plot_data_structure(structure, marks, data_cfg.name)
-                doc.figure("data_structure.png", "Selected nb_ft, d and VAF of every run vs W.")
+                marks = {"W_BIC": b.w_bic, **{f"calibrated {m}": w for m, w in recommended.items()}}
+                b.figs["data_structure.png"] = figures.plot_data_structure(structure, marks, data_cfg.name)
+                b.doc.figure("data_structure.png", "Selected nb_ft, d and VAF of every run vs W.")
         w_values = sorted(set(data_cfg.w_report) | {w for w in recommended.values() if np.isfinite(w)})
-        doc.table(
+        b.doc.table(
             ["run", "method", "W", "na", "nb_ft", "nb_e", "nk_ft", "nk_e", "VAF est. %", "VAF val. %"],
-            compute.data_summary_rows(frontier, data_cfg.name, w_values),
+            compute.data_summary_rows(b.frontier, data_cfg.name, w_values),
         )
-        doc.text(
-            f"nk_ft includes the {config.identify.target_shift:g} s target shift: the ft delay is "
-            f"nk_ft - {config.identify.shift_samples(config.timing.output_rate)} samples "
+        b.doc.text(
+            f"nk_ft includes the {b.config.identify.target_shift:g} s target shift: the ft delay is "
+            f"nk_ft - {b.config.identify.shift_samples(b.config.timing.output_rate)} samples "
             "(negative: anticipation)."
         )
         for w in w_values:
             resp = compute.compute_responses(
-                frontier.filter(pa.compute.equal(frontier.column("model"), data_cfg.name)), config, w
+                b.frontier.filter(pa.compute.equal(b.frontier.column("model"), data_cfg.name)), b.config, w
             )
             name = f"bode_data_w{w:.4g}.png".replace("+", "")
             answer_for = [m for m, r in recommended.items() if np.isclose(w, r)]
@@ -496,8 +469,8 @@ def _section_calibration_and_data(b: _Build):
             title = f"{data_cfg.name}: selected models at W = {w:.3g}" + (
                 f" (calibrated for the {' and '.join(answer_for)} method)" if is_answer else ""
             )
-            figs[name] = figures.plot_bode(resp, data_cfg.name, {}, title=title)
-            doc.figure(
+            b.figs[name] = figures.plot_bode(resp, data_cfg.name, {}, title=title)
+            b.doc.figure(
                 name,
                 f"Every run's selected model at W = {w:.3g}"
                 + (", the calibrated W: the answer." if is_answer else "."),
