@@ -163,3 +163,20 @@ def test_html_opens_in_headless_chromium(report, tmp_path):
     )
     assert proc.returncode == 0, proc.stderr
     _png_size(shot)
+
+
+def test_plots_draw_on_given_axes_and_colour_marks_by_method(ci_run):
+    # STYLE 9: plot_*(data, ax=None) draws on the caller's axes. W marks take their
+    # method's colour ("indirect" must not match "direct").
+    import matplotlib.pyplot as plt
+
+    from hcid.report import compute, figures
+
+    curves = compute.compute_curves(pq.read_table(ci_run / "selection.parquet"))
+    fig, ax = plt.subplots()
+    out = figures.plot_nb_ft(curves, {"W_FP direct": 0.01, "W_FP indirect": 0.02}, ax=ax)
+    assert out is fig
+    colours = {line.get_label(): line.get_color() for line in ax.get_lines()}
+    assert colours["W_FP direct"] == figures.COLORS["direct"]
+    assert colours["W_FP indirect"] == figures.COLORS["indirect"]
+    plt.close(fig)

@@ -35,6 +35,14 @@ def save(fig, path) -> None:
     plt.close(fig)
 
 
+def _figure(axes, rows: int, cols: int, **kwargs):
+    """``(figure, 2-D array of axes)``: new ones, or the caller's ``axes`` (rows x cols)."""
+    if axes is None:
+        return plt.subplots(rows, cols, squeeze=False, **kwargs)
+    axes = np.asarray(axes, dtype=object).reshape(rows, cols)
+    return axes.flat[0].figure, axes
+
+
 def _key_label(model: str, method: str) -> str:
     return f"{model} {method}"
 
@@ -43,13 +51,19 @@ def _w_lines(ax, marks: dict[str, float]) -> None:
     """Vertical lines at marked W values; a method's marks take its colour."""
     for i, (label, w) in enumerate(marks.items()):
         if w is not None and np.isfinite(w) and w > 0:
-            color = next((c for m, c in COLORS.items() if m in label), "0.3")
+            words = label.split()
+            color = next((c for m, c in COLORS.items() if m in words), "0.3")
             ax.axvline(w, color=color, ls=[":", "--", "-.", (0, (3, 1, 1, 1))][i % 4], lw=1.2, label=label)
 
 
-def plot_vaf(curves: Curves, marks: dict[str, float]):
-    """Paper Fig. 5: mean VAF +- sd of the selected models vs W, small-W and full-range panels."""
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+def plot_vaf(curves: Curves, marks: dict[str, float], axes=None):
+    """Paper Fig. 5: mean VAF +- sd of the selected models vs W, small-W and full-range panels.
+
+    Draws on ``axes`` (two) when given, else on a new figure; returns the figure. Every
+    ``plot_*`` here takes its axes the same way.
+    """
+    fig, axes = _figure(axes, 1, 2, figsize=(11, 4.2))
+    axes = axes.ravel()
     models = sorted({k[0] for k in curves.vaf_mean})
     for ax, (lo, hi) in zip(axes, [(curves.w[0], 0.1), (curves.w[0], curves.w[-1])], strict=True):
         sel = (curves.w >= lo) & (curves.w <= hi)
@@ -73,9 +87,10 @@ def plot_vaf(curves: Curves, marks: dict[str, float]):
     return fig
 
 
-def plot_nb_ft(curves: Curves, marks: dict[str, float]):
+def plot_nb_ft(curves: Curves, marks: dict[str, float], ax=None):
     """Paper Fig. 6: mean nb_ft of the selected models vs W, with W_FP and W_FN."""
-    fig, ax = plt.subplots(figsize=(8, 4.2))
+    fig, ax = _figure(ax, 1, 1, figsize=(8, 4.2))
+    ax = ax.ravel()[0]
     models = sorted({k[0] for k in curves.nb_ft_mean})
     for (model, method), mean in sorted(curves.nb_ft_mean.items()):
         ls = STYLES[models.index(model) % 2]
@@ -104,6 +119,7 @@ def plot_bode(
     references: dict[str, tuple[str, np.ndarray]] | None = None,
     paths: tuple[str, ...] = ("hft", "he"),
     title: str = "",
+    axes=None,
 ):
     """Paper Figs. 7-9: selected models of every realization (thin lines) against the truth.
 
@@ -111,9 +127,7 @@ def plot_bode(
     ``references`` adds other dashed curves, e.g. the FF feedforward with Kpt = 0.2.
     """
     names = {"hft": "feedforward Hft (u per ft)", "he": "feedback He (u per e)"}
-    fig, axes = plt.subplots(
-        2, len(paths), figsize=(max(8.0, 5.5 * len(paths)), 6.5), sharex=True, squeeze=False
-    )
+    fig, axes = _figure(axes, 2, len(paths), figsize=(max(8.0, 5.5 * len(paths)), 6.5), sharex=True)
     omega = responses.omega
     for col, path in enumerate(paths):
         ax_mag, ax_ph = axes[0, col], axes[1, col]
@@ -148,12 +162,14 @@ def plot_bode(
     return fig
 
 
-def plot_errors(omega: np.ndarray, errors: dict[tuple[str, str], dict[str, np.ndarray]], title: str):
+def plot_errors(
+    omega: np.ndarray, errors: dict[tuple[str, str], dict[str, np.ndarray]], title: str, axes=None
+):
     """Paper Fig. 10: mean and max magnitude and phase errors, direct vs indirect.
 
     ``errors[(path, method)]`` comes from :func:`hcid.report.compute.compute_errors`.
     """
-    fig, axes = plt.subplots(2, 2, figsize=(11, 6.5), sharex=True)
+    fig, axes = _figure(axes, 2, 2, figsize=(11, 6.5), sharex=True)
     names = {"hft": "feedforward", "he": "feedback"}
     for col, path in enumerate(("hft", "he")):
         for method in ("direct", "indirect"):
@@ -181,9 +197,10 @@ def plot_errors(omega: np.ndarray, errors: dict[tuple[str, str], dict[str, np.nd
     return fig
 
 
-def plot_signals(t: np.ndarray, channels: dict[str, np.ndarray], title: str):
+def plot_signals(t: np.ndarray, channels: dict[str, np.ndarray], title: str, axes=None):
     """One record: target, system output, error and control, in deg."""
-    fig, axes = plt.subplots(2, 1, figsize=(11, 5.5), sharex=True)
+    fig, axes = _figure(axes, 2, 1, figsize=(11, 5.5), sharex=True)
+    axes = axes.ravel()
     for name in ("ft", "theta", "e"):
         if name in channels:
             axes[0].plot(t, np.degrees(channels[name]), lw=0.9, label=name)
@@ -204,9 +221,9 @@ def plot_signals(t: np.ndarray, channels: dict[str, np.ndarray], title: str):
     return fig
 
 
-def plot_data_structure(data, marks: dict[str, float], name: str):
+def plot_data_structure(data, marks: dict[str, float], name: str, axes=None):
     """Measured runs: selected nb_ft, d and VAF vs W, per method (lines per run)."""
-    fig, axes = plt.subplots(3, 2, figsize=(11, 8), sharex=True, squeeze=False)
+    fig, axes = _figure(axes, 3, 2, figsize=(11, 8), sharex=True)
     runs = sorted({k[0] for k in data.values})
     for col, method in enumerate(("direct", "indirect")):
         for i, run in enumerate(runs):
@@ -231,11 +248,11 @@ def plot_data_structure(data, marks: dict[str, float], name: str):
     return fig
 
 
-def plot_calibration(table, name: str):
+def plot_calibration(table, name: str, axes=None):
     """False-positive (FB twin) and false-negative (FF twin) rates vs W with 95% bands,
     the safe interval shaded and the recommended W marked, one panel per method."""
     methods = [m for m in ("direct", "indirect") if m in set(table.column("method").to_pylist())]
-    fig, axes = plt.subplots(1, len(methods), figsize=(5.8 * len(methods), 4.3), squeeze=False)
+    fig, axes = _figure(axes, 1, len(methods), figsize=(5.8 * len(methods), 4.3))
     rows = table.to_pylist()
     for ax, method in zip(axes[0], methods, strict=True):
         r = [x for x in rows if x["method"] == method]
