@@ -25,7 +25,7 @@ def ci_config():
 
 
 def _record(config, model_name: str, seed: int) -> dict[str, np.ndarray]:
-    from hcid.identify import shift_forward
+    from hcid.methods import shift_forward
     from hcid.simulate import remnant_gain, simulate_realization
 
     r = simulate_realization(config, config.model(model_name), seed, remnant_gain(config))

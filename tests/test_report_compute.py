@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
+from hcid.arx.response import path_response as arx_response
 from hcid.calibration import clopper_pearson
-from hcid.report.compute import arx_response, compute_errors
+from hcid.report.compute import compute_errors
 
 
 def test_shift_is_undone_exactly():

@@ -9,7 +9,7 @@ from scipy import signal as sps
 
 from hcid import selection
 from hcid.config import parse_config
-from hcid.identify import identify, shift_forward
+from hcid.methods import identify, shift_forward
 
 from .conftest import CI_CONFIG
 
@@ -62,7 +62,7 @@ def test_noise_free_system_is_selected_exactly(record, settings, method, w):
     assert fit.vaf_validation[row] == pytest.approx(100.0, abs=1e-9)
     if method == "indirect":
         # Stage 1 reproduces e exactly, so its V is at rounding level.
-        assert result.stage1.v < 1e-20
+        assert result.choices[0].v < 1e-20
 
 
 def test_target_shift_is_one_second(settings):
@@ -82,8 +82,8 @@ def test_unknown_method_is_an_error(record, settings):
 def test_stage1_window_is_auto(settings):
     # SPEC 3: stage 1 estimates and validates from the grid's largest lag on. ci.yaml's
     # stage-1 grid: max(na 4, nk_ft 3 + nb_ft 8 - 1, nk_fd 3 + nb_fd 4 - 1) = 10.
-    assert settings.stage1.estimation.rows() == slice(10, 2048)
-    assert settings.stage1.validation.rows() == slice(10, 2048)
+    assert settings.stage("stage1").estimation.rows() == slice(10, 2048)
+    assert settings.stage("stage1").validation.rows() == slice(10, 2048)
 
 
 def test_dropped_input_does_not_count_in_max_lag():
@@ -91,7 +91,7 @@ def test_dropped_input_does_not_count_in_max_lag():
     raw = yaml.safe_load(CI_CONFIG.read_text())
     raw["identify"]["stage1"].update(nb2=[0, 0], nk2=[1, 150])
     cfg = parse_config(copy.deepcopy(raw), "ci")
-    assert cfg.identify.stage1.estimation.rows() == slice(10, 2048)
+    assert cfg.identify.stage("stage1").estimation.rows() == slice(10, 2048)
 
 
 @pytest.mark.parametrize("method", ["direct", "indirect"])
