@@ -37,8 +37,8 @@ def w_bic(nf: int) -> float:
 
     Examples
     --------
-    >>> round(w_bic(960), 6)
-    0.00715
+    >>> round(w_bic(960), 6)  # SPEC 4: 7.15e-3
+    0.007153
     """
     return math.log(nf) / nf
 

@@ -44,3 +44,13 @@ def paper_record(paper_config):
 def paper_record_fb(paper_config):
     """FB model, seed 1, of configs/paper.yaml."""
     return _record(paper_config, "FB", 1)
+
+
+@pytest.fixture()
+def ci_raw():
+    """configs/ci.yaml as a YAML document, reduced to seed 1 (a fresh copy per test)."""
+    import yaml
+
+    raw = yaml.safe_load(CI_CONFIG.read_text())
+    raw["seeds"] = [1]
+    return raw
