@@ -361,7 +361,7 @@ def fit_units(
 def fit_units_parallel(
     units, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset, v_out, theta_out, score_out, simulate,
     n_threads,
-):
+):  # fmt: skip
     """Parallel driver: thread t takes units t, t + n_threads, ...
 
     Every unit writes only its own candidates' rows of v_out and theta_out,
