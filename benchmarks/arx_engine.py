@@ -1,9 +1,12 @@
-"""Benchmark of hcid.arx.fit_grid against the slow reference (``make bench``).
+"""Benchmark of hcid.arx.fit_grid against its old kernel and the slow reference (``make bench``).
 
-On one paper record (FF, seed 1): the full direct grid (174,447 candidates)
-with threads=1, the reference loop (lstsq + lfilter + roots) on a random
-sample of the same grid, then threads=2 and the stage-1 grid. Targets: the
-direct grid in <= 2 s on one core, >= 25x the reference per candidate.
+On one paper record (FF, seed 1), on one core, side by side in one run:
+the engine (pruned, four candidates per lane batch), the old kernel (one
+candidate at a time, every candidate simulated in full; the engine's twin
+in the tests) and the reference loop (lstsq + lfilter + roots) on a random
+sample of the same grid; then the stage-1 grid. Repeats alternate between
+the engine and the old kernel so that load from other work on the machine
+hits both alike. Frontiers of the engine and the old kernel must be equal.
 """
 
 import os
@@ -12,13 +15,13 @@ import os
 for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_name] = "1"
 
-import statistics  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 from _paper_record import paper_record  # noqa: E402
 
-from hcid.arx import Grid, candidates, fit_grid  # noqa: E402
+from hcid.arx import Grid, candidates  # noqa: E402
+from hcid.arx.engine import _fit_grid  # noqa: E402
 from hcid.arx.reference import fit_reference  # noqa: E402
 
 # SPEC section 3.
@@ -27,26 +30,46 @@ STAGE1_GRID = Grid(na=(1, 10), nb1=(0, 25), nb2=(0, 10), nk1=(1, 5), nk2=(1, 5))
 DIRECT_ROWS = (slice(128, 1088), slice(1088, 2048))
 STAGE1_ROWS = (slice(29, 2048), slice(29, 2048))
 REPEATS = 3
-REFERENCE_SAMPLE = 2000
+REFERENCE_SAMPLE = 1000
 
 
-def _time(function, repeats=REPEATS):
-    """Seconds of each of ``repeats`` calls, and the last result."""
-    seconds = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        result = function()
-        seconds.append(time.perf_counter() - start)
-    return seconds, result
+def _fit(signals, grid, rows, legacy, keep=False):
+    return _fit_grid(*signals, grid, *rows, 1, keep, legacy=legacy)
 
 
-def _report(label, seconds, n):
-    best, median = min(seconds), statistics.median(seconds)
-    print(
-        f"{label:<34} best {best:7.3f} s  median {median:7.3f} s  "
-        f"{n / best:12,.0f} candidates/s  ({n:,} candidates)"
-    )
-    return n / best
+def _same_frontier(one, two) -> bool:
+    names = ("na", "nb1", "nb2", "nk1", "nk2", "v", "vaf_estimation", "vaf_validation", "n_unstable")
+    same = all(np.array_equal(getattr(one, n), getattr(two, n), equal_nan=True) for n in names)
+    for name in ("a", "b1", "b2"):
+        same &= all(np.array_equal(x, y) for x, y in zip(getattr(one, name), getattr(two, name), strict=True))
+    return bool(same and one.n_unstable_total == two.n_unstable_total)
+
+
+def _side_by_side(label, signals, grid, rows):
+    """Best of REPEATS for the engine and the old kernel, alternating; their frontiers compared."""
+    seconds = {"engine": [], "old kernel": []}
+    for _ in range(REPEATS):
+        for name, legacy in (("engine", False), ("old kernel", True)):
+            start = time.perf_counter()
+            fit, counts = _fit(signals, grid, rows, legacy)
+            seconds[name].append(time.perf_counter() - start)
+            if legacy:
+                old = fit
+            else:
+                new, new_counts = fit, counts
+    n = new.n_candidates
+    for name, values in seconds.items():
+        best = min(values)
+        print(f"{label + ', ' + name:<34} best {best:7.3f} s  {best / n * 1e6:6.2f} us/candidate  "
+              f"({n:,} candidates)")  # fmt: skip
+    ratio = min(seconds["old kernel"]) / min(seconds["engine"])
+    full, pruned, samples = new_counts.sum(axis=0)
+    stable = n - new.n_unstable_total
+    same = _same_frontier(new, old)
+    print(f"{label + ', engine vs old kernel':<34} {ratio:7.2f} x   frontier identical: {same}")
+    print(f"{label + ', simulated':<34} {full:,} in full, {pruned:,} pruned of {stable:,} stable; "
+          f"{samples / stable:,.0f} samples per stable candidate (old: {len(signals[0]):,})")  # fmt: skip
+    return n / min(seconds["engine"]), n / min(seconds["old kernel"])
 
 
 def main():
@@ -54,25 +77,25 @@ def main():
     direct = (record["ft_s"], record["e"], record["u"])
     stage1 = (record["ft_s"], record["fd"], record["e"])
 
-    # Warm-up: compile (or load from the cache) both kernels.
+    # Warm-up: compile (or load from the cache) every kernel.
     small = Grid(na=(1, 2), nb1=(0, 2), nb2=(0, 2), nk1=(1, 2), nk2=(1, 2))
-    for threads in (1, 2):
-        fit_grid(*direct, small, *DIRECT_ROWS, threads=threads)
+    for legacy in (False, True):
+        _fit(direct, small, DIRECT_ROWS, legacy)
 
-    seconds, fit = _time(
-        lambda: fit_grid(*direct, DIRECT_GRID, *DIRECT_ROWS, threads=1, keep_candidates=True)
-    )
-    engine_rate = _report("fit_grid direct, threads=1", seconds, fit.n_candidates)
+    engine_rate, old_rate = _side_by_side("direct", direct, DIRECT_GRID, DIRECT_ROWS)
 
     columns = candidates(DIRECT_GRID)
     pick = np.random.default_rng(0).choice(columns[0].size, REFERENCE_SAMPLE, replace=False)
-    ref_seconds, ref = _time(
-        lambda: fit_reference(*direct, *(c[pick] for c in columns), *DIRECT_ROWS), repeats=1
-    )
-    reference_rate = _report("reference loop, direct sample", ref_seconds, REFERENCE_SAMPLE)
-    print(f"{'speed-up per candidate':<34} {engine_rate / reference_rate:7.1f} x")
+    start = time.perf_counter()
+    ref = fit_reference(*direct, *(c[pick] for c in columns), *DIRECT_ROWS)
+    reference_rate = REFERENCE_SAMPLE / (time.perf_counter() - start)
+    print(f"{'direct, reference loop (sample)':<34} {1e6 / reference_rate:10.1f} us/candidate  "
+          f"({REFERENCE_SAMPLE:,} candidates)")  # fmt: skip
+    print(f"{'per candidate vs reference loop':<34} engine {engine_rate / reference_rate:6.1f} x   "
+          f"old kernel {old_rate / reference_rate:6.1f} x")  # fmt: skip
 
-    v = fit.candidates["v"].to_numpy()[pick]
+    full, _ = _fit(direct, DIRECT_GRID, DIRECT_ROWS, False, keep=True)
+    v = full.candidates["v"].to_numpy()[pick]
     both = np.isfinite(v) & ~ref.unstable
     rel = np.abs(v[both] - ref.v[both]) / ref.v[both]
     print(
@@ -81,14 +104,8 @@ def main():
         f"{rel.max():.1e}"
     )
 
-    seconds, _ = _time(lambda: fit_grid(*direct, DIRECT_GRID, *DIRECT_ROWS, threads=2))
-    _report("fit_grid direct, threads=2", seconds, fit.n_candidates)
-    for threads in (1, 2):
-        seconds, fit1 = _time(
-            lambda threads=threads: fit_grid(*stage1, STAGE1_GRID, *STAGE1_ROWS, threads=threads)
-        )
-        _report(f"fit_grid stage 1, threads={threads}", seconds, fit1.n_candidates)
-    print(f"{'stage-1 unstable candidates':<34} {fit1.n_unstable_total:,} of {fit1.n_candidates:,}")
+    stage1_rate, _ = _side_by_side("stage 1", stage1, STAGE1_GRID, STAGE1_ROWS)
+    print(f"{'stage 1 vs direct per candidate':<34} {stage1_rate / engine_rate:7.2f} x the direct rate")
 
 
 if __name__ == "__main__":

@@ -12,7 +12,7 @@ import pytest
 from scipy.signal import lfilter
 
 from hcid.arx import _kernels
-from hcid.arx.engine import GridFit, best, fit_grid, simulate
+from hcid.arx.engine import GridFit, _fit_grid, best, fit_grid, simulate
 from hcid.arx.grid import Grid, candidates, n_parameters
 from hcid.arx.reference import fit_reference
 from hcid.errors import DataError, IdentificationError
@@ -464,3 +464,158 @@ def test_threads_give_bit_identical_results_stage1(paper_record, stage1_fit):
     two = fit_grid(*_stage1(paper_record), STAGE1_GRID, *STAGE1_ROWS, threads=2, keep_candidates=True)
     _assert_same_fit(stage1_fit, two)
     assert numba.get_num_threads() == numba.config.NUMBA_NUM_THREADS  # restored
+
+
+# --- lanes and pruning against the old kernel -------------------------------------
+
+
+def _random_candidate(rng, na, nb1, nb2):
+    """A stable A (roots inside 0.95) and random B: a candidate as the grid loop would fit it."""
+    roots = rng.uniform(0.1, 0.95, na) * np.exp(1j * rng.uniform(0, np.pi, na))
+    half = na // 2
+    roots = np.r_[roots[:half], roots[:half].conj(), rng.uniform(-0.95, 0.95, na - 2 * half)]
+    a = np.real(np.poly(roots))
+    return a, rng.standard_normal(nb1), rng.standard_normal(nb2)
+
+
+@pytest.mark.parametrize(
+    ("n", "rows"),
+    [
+        (2048, (1088, 2048)),  # the direct validation window
+        (2048, (29, 2048)),  # stage 1: 2019 rows, a tail of 3 after the quadruples
+        (301, (7, 290)),  # a record shorter than two chunks, rows that stop early
+    ],
+)
+def test_lanes_are_bit_identical_to_the_single_candidate_kernel(n, rows):
+    # simulate_lanes must do simulate_into's and _validation_mse's arithmetic
+    # exactly, lane by lane (STYLE 4: the fast path against its slow twin).
+    rng = np.random.default_rng(n + rows[0])
+    pad = 40
+    i1p = np.r_[np.zeros(pad), rng.standard_normal(n)]
+    i2p = np.r_[np.zeros(pad), rng.standard_normal(n)]
+    o = rng.standard_normal(n)
+    for na, nb1, nb2 in [(1, 0, 1), (2, 3, 0), (3, 2, 2), (4, 1, 3), (7, 5, 4), (10, 4, 0)]:
+        lanes = [_random_candidate(rng, na, nb1, nb2) for _ in range(4)]
+        nk1 = rng.integers(0, 10, 4)
+        nk2 = rng.integers(0, 10, 4)
+        coef = np.zeros((max(na, 2) + 1) * 4)
+        b1 = np.zeros((4, max(nb1, 1)))
+        b2 = np.zeros((4, max(nb2, 1)))
+        for lane, (a, c1, c2) in enumerate(lanes):
+            coef[lane : (na + 1) * 4 : 4] = a
+            b1[lane, :nb1] = c1
+            b2[lane, :nb2] = c2
+        v = np.empty(4)
+        pruned = np.empty(4, dtype=np.bool_)
+        yh = np.empty((na + n) * 4)
+        xs = np.empty((4, _kernels._CHUNK))
+        done = _kernels.simulate_lanes(
+            coef, na, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, o, *rows, np.inf, xs, yh, v, pruned
+        )
+        assert done == n and not pruned.any()
+        for lane, (a, c1, c2) in enumerate(lanes):
+            a_k = np.r_[a, 0.0] if na == 1 else a
+            x = np.empty(n)
+            yp = np.zeros(na + n)
+            one = _kernels.simulate_into(
+                a_k, na, np.r_[c1, 0.0], nb1, nk1[lane], np.r_[c2, 0.0], nb2, nk2[lane],
+                i1p, i2p, pad, x, yp, na,
+            )  # fmt: skip
+            assert one == n
+            np.testing.assert_array_equal(yh[na * 4 + lane :: 4], yp[na:])
+            assert v[lane] == _kernels._validation_mse(yp, na, o, *rows)
+
+
+def test_lanes_prune_only_above_the_bound_and_flag_unstable_lanes():
+    # A pruned lane's V is a lower bound strictly above `bound` and at most
+    # its true V; a lane at or below the bound runs in full; a lane whose
+    # output overflows gets inf (like simulate_into + fit_grid).
+    rng = np.random.default_rng(5)
+    n, pad, rows = 2048, 20, (1088, 2048)
+    i1p = np.r_[np.zeros(pad), rng.standard_normal(n)]
+    o = rng.standard_normal(n)
+    scale = np.array([1.0, 3.0, 0.2, 1.0])
+    coef = np.zeros(3 * 4)
+    coef[:4] = 1.0
+    coef[4:8] = [-0.5, -0.5, -0.5, -2.0]  # lane 3: y(k) = 2 y(k-1) + ..., overflows
+    b1 = scale[:, None] * np.ones((4, 2))
+    args = (coef, 1, b1, 2, np.array([1, 1, 1, 1]), np.zeros((4, 1)), 0, np.zeros(4, dtype=np.int64),
+            i1p, i1p, pad, o, *rows)  # fmt: skip
+    xs = np.empty((4, _kernels._CHUNK))
+    yh = np.empty((1 + n) * 4)
+    full = np.empty(4)
+    flags = np.empty(4, dtype=np.bool_)
+    with np.errstate(over="ignore", invalid="ignore"):
+        _kernels.simulate_lanes(*args, np.inf, xs, yh, full, flags)
+        assert full[3] == np.inf and np.all(np.isfinite(full[:3]))
+        bound = full[0]  # lane 1 (3x the output) is worse, lane 2 better
+        assert full[1] > bound > full[2]
+        v = np.empty(4)
+        _kernels.simulate_lanes(*args, bound, xs, yh, v, flags)
+    assert flags[1] and bound < v[1] <= full[1]
+    assert not flags[0] and not flags[2] and not flags[3]
+    assert v[0] == full[0] and v[2] == full[2] and v[3] == np.inf
+
+
+def _assert_same_frontier(one: GridFit, two: GridFit):
+    for name in ("na", "nb1", "nb2", "nk1", "nk2", "d", "v", "n_unstable"):
+        np.testing.assert_array_equal(getattr(one, name), getattr(two, name), err_msg=name)
+    for name in ("vaf_estimation", "vaf_validation"):
+        np.testing.assert_array_equal(getattr(one, name), getattr(two, name), err_msg=name)
+    for name in ("a", "b1", "b2"):
+        for x, y in zip(getattr(one, name), getattr(two, name), strict=True):
+            np.testing.assert_array_equal(x, y, err_msg=name)
+    assert one.n_unstable_total == two.n_unstable_total
+
+
+def _legacy(*args, keep_candidates=False):
+    return _fit_grid(*args, 1, keep_candidates, legacy=True)[0]
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_pruned_frontier_equals_the_old_kernel_on_random_records(seed):
+    # Random ARX-like records (a noisy second-order system) and random small
+    # grids: the pruned engine's frontier must be the unpruned old kernel's,
+    # bit for bit, and keep_candidates=True must give every old V.
+    rng = np.random.default_rng(seed)
+    n = 400
+    i1 = rng.standard_normal(n)
+    i2 = rng.standard_normal(n)
+    o = lfilter([0, 0, 0.4, 0.2], [1, -1.2, 0.5], i1) + lfilter([0, 0.3], [1, -0.6], i2)
+    o += 0.3 * rng.standard_normal(n)
+    na_hi, nb1_hi, nb2_hi = (int(x) for x in rng.integers(2, 4, 3))
+    grid = Grid(na=(1, na_hi), nb1=(0, nb1_hi), nb2=(0, nb2_hi), nk1=(0, 3), nk2=(1, 3))
+    rows = (slice(20, 200), slice(int(rng.integers(150, 250)), n))
+    pruned, counts = _fit_grid(i1, i2, o, grid, *rows, 1, False, legacy=False)
+    old = _legacy(i1, i2, o, grid, *rows, keep_candidates=True)
+    _assert_same_frontier(pruned, old)
+    assert counts[:, 1].sum() > 0  # something was pruned
+    assert counts[:, :2].sum() == pruned.n_candidates - pruned.n_unstable_total
+    full = fit_grid(i1, i2, o, grid, *rows, keep_candidates=True)
+    assert full.candidates.equals(old.candidates)
+    _assert_same_frontier(full, old)
+
+
+def test_pruned_frontier_with_two_threads(paper_record):
+    grid = Grid(na=(1, 3), nb1=(0, 2), nb2=(0, 2), nk1=(20, 21), nk2=(4, 5))
+    one, counts1 = _fit_grid(*_direct(paper_record), grid, *DIRECT_ROWS, 1, False, legacy=False)
+    two, counts2 = _fit_grid(*_direct(paper_record), grid, *DIRECT_ROWS, 2, False, legacy=False)
+    _assert_same_frontier(one, two)
+    np.testing.assert_array_equal(counts1, counts2)  # each triple prunes alone
+    _assert_same_frontier(one, _legacy(*_direct(paper_record), grid, *DIRECT_ROWS))
+
+
+@needs_jit
+@pytest.mark.parametrize("which", ["direct", "stage1"])
+def test_pruned_paper_frontiers_equal_the_old_kernel(paper_record, which, direct_fit, stage1_fit):
+    # The issue's acceptance: the frontier tables identical to the old
+    # kernel's on a paper record, and the unstable counts too.
+    grid, rows, signals, full = {
+        "direct": (DIRECT_GRID, DIRECT_ROWS, _direct(paper_record), direct_fit),
+        "stage1": (STAGE1_GRID, STAGE1_ROWS, _stage1(paper_record), stage1_fit),
+    }[which]
+    old = _legacy(*signals, grid, *rows, keep_candidates=True)
+    pruned = fit_grid(*signals, grid, *rows)
+    _assert_same_frontier(pruned, old)
+    _assert_same_frontier(full, old)
+    assert full.candidates.equals(old.candidates)

@@ -25,6 +25,9 @@ from numba import njit, prange
 
 # Samples simulated between two finiteness checks.
 _BLOCK = 256
+# Samples of one step of simulate_lanes: input part, recursion, then a
+# pruning check on the validation rows.
+_CHUNK = 128
 
 
 @njit(cache=True)
@@ -203,8 +206,16 @@ def _validation_mse(yp, ypad, o, start, stop):
 
 
 @njit(cache=True)
-def _fit_unit(k1, k2, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset, v_out, theta_out):
-    """Fit, test and simulate every candidate of work unit (k1, k2)."""
+def _fit_unit(
+    k1, k2, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset, v_out, theta_out, score_out, simulate
+):
+    """Fit and test every candidate of work unit (k1, k2); simulate it if ``simulate``.
+
+    With ``simulate`` False a stable candidate gets ``v_out = NaN`` (to be
+    simulated by :func:`simulate_blocks`) and ``score_out`` its explained
+    sum of squares on the estimation rows, ``||c[:k]||^2`` (larger = smaller
+    prediction error); unstable and singular ones get ``inf`` as before.
+    """
     na_lo, na_hi = bounds[0, 0], bounds[0, 1]
     nb1_lo, nb1_hi = bounds[1, 0], bounds[1, 1]
     nb2_lo, nb2_hi = bounds[2, 0], bounds[2, 1]
@@ -264,9 +275,14 @@ def _fit_unit(k1, k2, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset,
             for i in range(na_hi):
                 cols[g1 + g2 + i] = m1 + m2 + i
             select_qr(unit, m_u, cols, m_g, group)
+            explained = 0.0
+            for i in range(g1 + g2 + na_lo - 1):
+                explained += group[m_g, i] * group[m_g, i]
             for na in range(na_lo, na_hi + 1):
                 k = g1 + g2 + na
                 idx = offset[na - na_lo, g1 - nb1_lo, g2 - nb2_lo] + within
+                explained += group[m_g, k - 1] * group[m_g, k - 1]
+                score_out[idx] = explained
                 solved = back_substitute(group, m_g, k, theta, tmp)
                 finite = solved
                 if solved:
@@ -291,7 +307,11 @@ def _fit_unit(k1, k2, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset,
                 for j in range(g2):
                     theta_out[idx, na + g1 + j] = b2[j]
                 v = np.inf
-                if is_stable(a, na, jury):
+                if not is_stable(a, na, jury):
+                    pass
+                elif not simulate:
+                    v = np.nan
+                else:
                     done = simulate_into(a, na, b1, g1, nk1, b2, g2, nk2, i1p, i2p, pad, x, yp, na_hi)
                     if done == n and abs(yp[na_hi + n - 1]) < np.inf:
                         v = _validation_mse(yp, na_hi, o, val_start, val_stop)
@@ -301,7 +321,9 @@ def _fit_unit(k1, k2, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset,
 
 
 @njit(cache=True)
-def fit_units(units, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset, v_out, theta_out):
+def fit_units(
+    units, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset, v_out, theta_out, score_out, simulate
+):
     """Serial driver: every work unit, in order, on the calling thread.
 
     Parameters
@@ -331,14 +353,15 @@ def fit_units(units, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset, 
     for u in range(units.shape[0]):
         _fit_unit(
             units[u, 0], units[u, 1], rt, bounds, i1p, i2p, pad, o,
-            val_start, val_stop, offset, v_out, theta_out,
+            val_start, val_stop, offset, v_out, theta_out, score_out, simulate,
         )  # fmt: skip
 
 
 @njit(cache=True, parallel=True)
 def fit_units_parallel(
-    units, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset, v_out, theta_out, n_threads
-):
+    units, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset, v_out, theta_out, score_out, simulate,
+    n_threads,
+):  # fmt: skip
     """Parallel driver: thread t takes units t, t + n_threads, ...
 
     Every unit writes only its own candidates' rows of v_out and theta_out,
@@ -349,7 +372,357 @@ def fit_units_parallel(
         for u in range(t, n_units, n_threads):
             _fit_unit(
                 units[u, 0], units[u, 1], rt, bounds, i1p, i2p, pad, o,
-                val_start, val_stop, offset, v_out, theta_out,
+                val_start, val_stop, offset, v_out, theta_out, score_out, simulate,
+            )  # fmt: skip
+
+
+@njit(cache=True)
+def inputs_into(b, nb, nk, ip, pad, k0, k1, x):
+    """Add ``B i(k - nk)`` to ``x[k - k0]`` for ``k0 <= k < k1``, term after term.
+
+    The order of :func:`simulate_into`'s input part (``x`` starts at 0, then
+    ``b[0]``, ``b[1]``, ... of input 1, then of input 2), so each ``x[k]``
+    is the same sum of the same products, bit for bit.
+    """
+    m = k1 - k0
+    for j in range(nb):
+        c = b[j]
+        base = pad - nk - j + k0
+        src = ip[base : base + m]
+        for k in range(m):
+            x[k] += c * src[k]
+
+
+@njit(cache=True)
+def simulate_lanes(
+    coef, na, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, o, val_start, val_stop, bound, xs, yh, v_out,
+    pruned,
+):  # fmt: skip
+    """Simulate four candidates of one order triple side by side, pruning on V.
+
+    Lane l is the candidate ``a = coef[l::4]`` (``coef[i * 4 + l]`` holds
+    a_i, length ``(na + 1) * 4``, ``a_2 = 0`` padded when na = 1),
+    ``b1[l, :nb1]``, ``b2[l, :nb2]``, delays ``nk1[l]``, ``nk2[l]``. Each
+    lane does exactly the arithmetic of :func:`simulate_into` and
+    :func:`_validation_mse` (same operations, same order), so an unpruned
+    lane's V is bit-identical to theirs; the four lanes are independent
+    chains that keep the floating-point units busy while one waits on its
+    loop-carried multiply-add (``y(k-1)``).
+
+    Pruning: at the end of each ``_CHUNK`` of validation rows a lane whose
+    partial V, ``((s0 + s1) + (s2 + s3)) / n_val`` over the rows so far,
+    exceeds ``bound`` stops: its final V could only be larger (sums of
+    squares grow, rounding is monotone), so ``v_out[l]`` receives that
+    partial V, a lower bound strictly above ``bound``. A lane whose output
+    stops being finite gets ``inf``, as in :func:`simulate_into`. The batch
+    ends when every lane has stopped or the record ends.
+
+    Parameters
+    ----------
+    xs : float64 array, shape (4, _CHUNK)
+        Scratch for the input part.
+    yh : float64 array, shape ((na + n) * 4,)
+        Scratch: the outputs, interleaved by lane after ``na`` rows of zeros.
+    v_out : float64 array, shape (4,)
+        Out: V, a pruned lane's lower bound, or inf.
+    pruned : bool array, shape (4,)
+        Out: which lanes were pruned.
+
+    Returns
+    -------
+    int
+        Number of samples simulated (the same for every lane).
+    """
+    n = o.shape[0]
+    n_val = val_stop - val_start
+    quad_end = val_start + 4 * (n_val // 4)
+    for k in range(na * 4):
+        yh[k] = 0.0
+    # a_1, a_2 in registers, like simulate_into.
+    a1_0, a1_1, a1_2, a1_3 = coef[4], coef[5], coef[6], coef[7]
+    a2_0, a2_1, a2_2, a2_3 = coef[8], coef[9], coef[10], coef[11]
+    y1_0 = y1_1 = y1_2 = y1_3 = 0.0
+    y2_0 = y2_1 = y2_2 = y2_3 = 0.0
+    # Validation sums per lane: four partial sums, as in _validation_mse.
+    e00 = e01 = e02 = e03 = 0.0
+    e10 = e11 = e12 = e13 = 0.0
+    e20 = e21 = e22 = e23 = 0.0
+    e30 = e31 = e32 = e33 = 0.0
+    live0 = live1 = live2 = live3 = True
+    for lane in range(4):
+        v_out[lane] = np.inf
+        pruned[lane] = False
+    k0 = 0
+    while k0 < n:
+        # Chunks end on val_start + multiples of _CHUNK, so the pruning
+        # checks fall on whole quadruples of validation rows.
+        r = (val_start - k0) % _CHUNK
+        k1 = min(k0 + (r if r > 0 else _CHUNK), n)
+        m = k1 - k0
+        for lane in range(4):
+            for k in range(m):
+                xs[lane, k] = 0.0
+            inputs_into(b1[lane], nb1, nk1[lane], i1p, pad, k0, k1, xs[lane])
+            inputs_into(b2[lane], nb2, nk2[lane], i2p, pad, k0, k1, xs[lane])
+        for k in range(k0, k1):
+            q = np.uint64(k - k0)
+            base = np.uint64((na + k) * 4)
+            s00 = s01 = s02 = s03 = 0.0
+            s10 = s11 = s12 = s13 = 0.0
+            i = na
+            while i > 3:
+                c0 = np.uint64(i * 4)
+                c1 = np.uint64((i - 1) * 4)
+                s00 += coef[c0] * yh[base - c0]
+                s01 += coef[c0 + np.uint64(1)] * yh[base - c0 + np.uint64(1)]
+                s02 += coef[c0 + np.uint64(2)] * yh[base - c0 + np.uint64(2)]
+                s03 += coef[c0 + np.uint64(3)] * yh[base - c0 + np.uint64(3)]
+                s10 += coef[c1] * yh[base - c1]
+                s11 += coef[c1 + np.uint64(1)] * yh[base - c1 + np.uint64(1)]
+                s12 += coef[c1 + np.uint64(2)] * yh[base - c1 + np.uint64(2)]
+                s13 += coef[c1 + np.uint64(3)] * yh[base - c1 + np.uint64(3)]
+                i -= 2
+            if i == 3:
+                s00 += coef[12] * yh[base - np.uint64(12)]
+                s01 += coef[13] * yh[base - np.uint64(11)]
+                s02 += coef[14] * yh[base - np.uint64(10)]
+                s03 += coef[15] * yh[base - np.uint64(9)]
+            y_0 = ((xs[0, q] - (s00 + s10)) - a2_0 * y2_0) - a1_0 * y1_0
+            y_1 = ((xs[1, q] - (s01 + s11)) - a2_1 * y2_1) - a1_1 * y1_1
+            y_2 = ((xs[2, q] - (s02 + s12)) - a2_2 * y2_2) - a1_2 * y1_2
+            y_3 = ((xs[3, q] - (s03 + s13)) - a2_3 * y2_3) - a1_3 * y1_3
+            yh[base] = y_0
+            yh[base + np.uint64(1)] = y_1
+            yh[base + np.uint64(2)] = y_2
+            yh[base + np.uint64(3)] = y_3
+            y2_0, y2_1, y2_2, y2_3 = y1_0, y1_1, y1_2, y1_3
+            y1_0, y1_1, y1_2, y1_3 = y_0, y_1, y_2, y_3
+        # Validation rows of this chunk: whole quadruples, then the tail
+        # (rows from quad_end on) into the first partial sum.
+        k = max(k0, val_start)
+        stop = min(k1, val_stop)
+        while k + 4 <= min(stop, quad_end):
+            b = (na + k) * 4
+            d = yh[b] - o[k]
+            e00 += d * d
+            d = yh[b + 4] - o[k + 1]
+            e01 += d * d
+            d = yh[b + 8] - o[k + 2]
+            e02 += d * d
+            d = yh[b + 12] - o[k + 3]
+            e03 += d * d
+            d = yh[b + 1] - o[k]
+            e10 += d * d
+            d = yh[b + 5] - o[k + 1]
+            e11 += d * d
+            d = yh[b + 9] - o[k + 2]
+            e12 += d * d
+            d = yh[b + 13] - o[k + 3]
+            e13 += d * d
+            d = yh[b + 2] - o[k]
+            e20 += d * d
+            d = yh[b + 6] - o[k + 1]
+            e21 += d * d
+            d = yh[b + 10] - o[k + 2]
+            e22 += d * d
+            d = yh[b + 14] - o[k + 3]
+            e23 += d * d
+            d = yh[b + 3] - o[k]
+            e30 += d * d
+            d = yh[b + 7] - o[k + 1]
+            e31 += d * d
+            d = yh[b + 11] - o[k + 2]
+            e32 += d * d
+            d = yh[b + 15] - o[k + 3]
+            e33 += d * d
+            k += 4
+        while k < stop:
+            b = (na + k) * 4
+            d = yh[b] - o[k]
+            e00 += d * d
+            d = yh[b + 1] - o[k]
+            e10 += d * d
+            d = yh[b + 2] - o[k]
+            e20 += d * d
+            d = yh[b + 3] - o[k]
+            e30 += d * d
+            k += 1
+        # A non-finite output stays non-finite (module doc of
+        # simulate_into): such a lane is unstable, V = inf.
+        if live0 and not abs(y1_0) < np.inf:
+            live0 = False
+        if live1 and not abs(y1_1) < np.inf:
+            live1 = False
+        if live2 and not abs(y1_2) < np.inf:
+            live2 = False
+        if live3 and not abs(y1_3) < np.inf:
+            live3 = False
+        if k1 > val_start and k1 < n:
+            # Partial V: finite and above the bound means pruned.
+            if live0:
+                p = ((e00 + e01) + (e02 + e03)) / n_val
+                if p < np.inf and p > bound:
+                    v_out[0] = p
+                    pruned[0] = True
+                    live0 = False
+            if live1:
+                p = ((e10 + e11) + (e12 + e13)) / n_val
+                if p < np.inf and p > bound:
+                    v_out[1] = p
+                    pruned[1] = True
+                    live1 = False
+            if live2:
+                p = ((e20 + e21) + (e22 + e23)) / n_val
+                if p < np.inf and p > bound:
+                    v_out[2] = p
+                    pruned[2] = True
+                    live2 = False
+            if live3:
+                p = ((e30 + e31) + (e32 + e33)) / n_val
+                if p < np.inf and p > bound:
+                    v_out[3] = p
+                    pruned[3] = True
+                    live3 = False
+            if not (live0 or live1 or live2 or live3):
+                return k1
+        k0 = k1
+    if live0:
+        v_out[0] = _finite_or_inf(((e00 + e01) + (e02 + e03)) / n_val)
+    if live1:
+        v_out[1] = _finite_or_inf(((e10 + e11) + (e12 + e13)) / n_val)
+    if live2:
+        v_out[2] = _finite_or_inf(((e20 + e21) + (e22 + e23)) / n_val)
+    if live3:
+        v_out[3] = _finite_or_inf(((e30 + e31) + (e32 + e33)) / n_val)
+    return n
+
+
+@njit(cache=True)
+def _finite_or_inf(v):
+    return v if v < np.inf else np.inf
+
+
+@njit(cache=True)
+def _simulate_block(
+    row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
+    val_start, val_stop, prune, v_all, counts,
+):  # fmt: skip
+    """Simulate the stable candidates of one order triple (one candidate block).
+
+    Candidates waiting with ``v_all = NaN`` (stable, see :func:`_fit_unit`)
+    run four at a time, best prediction error first: the first four in full,
+    which makes ``bound``, the best V so far, tight at once; the others
+    stop as soon as their partial V exceeds it (``prune``). ``counts[row]``
+    receives the numbers simulated in full and pruned, and the work done.
+    """
+    na, nb1, nb2 = block_orders[row, 0], block_orders[row, 1], block_orders[row, 2]
+    start, size = block_start[row], block_size[row]
+    nk1_lo, nk2_lo = bounds[3, 0], bounds[4, 0]
+    n_d2 = bounds[4, 1] - bounds[4, 0] + 1 if nb2 > 0 else 1
+    n = o.shape[0]
+    waiting = np.empty(size, dtype=np.int64)
+    keys = np.empty(size)
+    m = 0
+    for c in range(start, start + size):
+        if np.isnan(v_all[c]):
+            waiting[m] = c
+            keys[m] = -score[c]
+            m += 1
+    if m == 0:
+        return
+    order = np.argsort(keys[:m], kind="mergesort")
+    coef = np.zeros((max(na, 2) + 1) * 4)
+    b1 = np.zeros((4, max(nb1, 1)))
+    b2 = np.zeros((4, max(nb2, 1)))
+    nk1 = np.zeros(4, dtype=np.int64)
+    nk2 = np.zeros(4, dtype=np.int64)
+    lanes = np.empty(4, dtype=np.int64)
+    xs = np.empty((4, _CHUNK))
+    yh = np.empty((na + n) * 4)
+    v4 = np.empty(4)
+    pruned = np.empty(4, dtype=np.bool_)
+    bound = np.inf
+    n_full = 0
+    n_pruned = 0
+    samples = 0
+    for first in range(0, m, 4):
+        for lane in range(4):
+            # A short last batch repeats its first candidate in the idle lanes.
+            pick = first + lane if first + lane < m else first
+            c = waiting[order[pick]]
+            lanes[lane] = c
+            within = c - start
+            nk1[lane] = nk1_lo + within // n_d2 if nb1 > 0 else 0
+            nk2[lane] = nk2_lo + within % n_d2 if nb2 > 0 else 0
+            coef[lane] = 1.0
+            for i in range(na):
+                coef[(i + 1) * 4 + lane] = theta_all[c, i]
+            for j in range(nb1):
+                b1[lane, j] = theta_all[c, na + j]
+            for j in range(nb2):
+                b2[lane, j] = theta_all[c, na + nb1 + j]
+        done = simulate_lanes(
+            coef, na, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, o, val_start, val_stop,
+            bound, xs, yh, v4, pruned,
+        )  # fmt: skip
+        used = min(4, m - first)
+        samples += done * used
+        for lane in range(used):
+            v_all[lanes[lane]] = v4[lane]
+            if pruned[lane]:
+                n_pruned += 1
+            else:
+                n_full += 1
+            if prune and v4[lane] < bound:
+                bound = v4[lane]
+    counts[row, 0] = n_full
+    counts[row, 1] = n_pruned
+    counts[row, 2] = samples
+
+
+@njit(cache=True)
+def simulate_blocks(
+    block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
+    val_start, val_stop, prune, v_all, counts,
+):  # fmt: skip
+    """Serial driver of the simulations: :func:`_simulate_block` for every order triple.
+
+    Parameters
+    ----------
+    block_orders : int64 array, shape (n_blocks, 3)
+        ``(na, nb1, nb2)`` of each candidate block.
+    block_start, block_size : int64 arrays, shape (n_blocks,)
+        Where each block starts in the candidate order, and its length.
+    theta_all, score, v_all :
+        As written by :func:`fit_units` with ``simulate`` False; v_all's
+        NaN entries are replaced by V (or a pruned lower bound above the
+        block's best V).
+    prune : bool
+        False: every stable candidate is simulated in full.
+    counts : int64 array, shape (n_blocks, 3)
+        Out per block: candidates simulated in full, candidates pruned, and
+        candidate-samples simulated (lanes times samples).
+    """
+    for row in range(block_start.shape[0]):
+        _simulate_block(
+            row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
+            val_start, val_stop, prune, v_all, counts,
+        )  # fmt: skip
+
+
+@njit(cache=True, parallel=True)
+def simulate_blocks_parallel(
+    block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
+    val_start, val_stop, prune, v_all, counts, n_threads,
+):  # fmt: skip
+    """Parallel driver: thread t takes blocks t, t + n_threads, ...; each block alone
+    decides its pruning, so the result is bit-identical to :func:`simulate_blocks`."""
+    n_blocks = block_start.shape[0]
+    for t in prange(n_threads):
+        for row in range(t, n_blocks, n_threads):
+            _simulate_block(
+                row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
+                pad, o, val_start, val_stop, prune, v_all, counts,
             )  # fmt: skip
 
 
@@ -358,11 +731,11 @@ def max_threads() -> int:
     return numba.config.NUMBA_NUM_THREADS
 
 
-def run_parallel(args, threads: int) -> None:
-    """Run :func:`fit_units_parallel` on ``threads`` numba threads, restoring the pool size after."""
+def run_parallel(kernel, args, threads: int) -> None:
+    """Run a parallel driver on ``threads`` numba threads, restoring the pool size after."""
     previous = numba.get_num_threads()
     numba.set_num_threads(threads)
     try:
-        fit_units_parallel(*args, threads)
+        kernel(*args, threads)
     finally:
         numba.set_num_threads(previous)

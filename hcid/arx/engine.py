@@ -272,9 +272,31 @@ def fit_grid(
     loop computed; VAF comes from :func:`simulate` on them, which runs the
     same kernel, so it matches bit for bit.
 
-    Speed: the simulations dominate; the paper's direct grid (174,447
-    candidates, 2048 samples) takes about 1.3 s on one core
-    (``benchmarks/arx_engine.py``).
+    Speed: the simulations dominate. The stable candidates of each order
+    triple are simulated four at a time (independent recursions side by
+    side), those with the smallest prediction error first; without
+    ``keep_candidates`` a candidate stops once its partial V exceeds the
+    best V of its triple so far, which cannot change the frontier (V only
+    grows). ``benchmarks/arx_engine.py`` times the paper grids against the
+    old one-at-a-time kernel and the reference loop.
+    """
+    fit, _ = _fit_grid(
+        i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_candidates, legacy=False
+    )
+    return fit
+
+
+def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_candidates, legacy):
+    """:func:`fit_grid`, also returning the simulation counts; ``legacy``
+    runs the old kernel (one candidate at a time, no pruning), the twin the
+    tests and the benchmark compare with.
+
+    Returns
+    -------
+    GridFit
+    counts : numpy.ndarray of int64, shape (n_blocks, 3)
+        Per order triple: candidates simulated in full, pruned, and
+        candidate-samples simulated (all zero for ``legacy``).
     """
     if not isinstance(grid, Grid):
         raise IdentificationError(f"grid: must be a hcid.arx.Grid, got {type(grid).__name__}")
@@ -304,15 +326,27 @@ def fit_grid(
     n_cand = int(size.sum())
     v_all = np.empty(n_cand)
     theta_all = np.zeros((n_cand, most))
+    score = np.zeros(n_cand)
+    counts = np.zeros((start.size, 3), dtype=np.int64)
 
-    args = (units, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset, v_all, theta_all)
+    args = (units, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset, v_all, theta_all, score, legacy)
     # errstate: unstable simulations overflow by design; only matters when
     # the kernels run as Python (NUMBA_DISABLE_JIT=1).
     with np.errstate(over="ignore", invalid="ignore"):
         if threads == 1:
             _kernels.fit_units(*args)
         else:
-            _kernels.run_parallel(args, threads)
+            _kernels.run_parallel(_kernels.fit_units_parallel, args, threads)
+        if not legacy:
+            # Stable candidates wait with V = NaN; simulate them per order
+            # triple, pruning unless every V is wanted.
+            orders = np.stack((block_na, block_nb1, block_nb2), axis=1)
+            args = (orders, start, size, bounds, theta_all, score, i1p, i2p, pad, o,
+                    val_start, val_stop, not keep_candidates, v_all, counts)  # fmt: skip
+            if threads == 1:
+                _kernels.simulate_blocks(*args)
+            else:
+                _kernels.run_parallel(_kernels.simulate_blocks_parallel, args, threads)
 
     # Frontier: lexsort is stable, so equal V keep the candidate order, in
     # which nk1 and then nk2 increase inside a block.
@@ -377,7 +411,7 @@ def fit_grid(
         n_candidates=n_cand,
         n_unstable_total=int(np.count_nonzero(unstable)),
         candidates=table,
-    )
+    ), counts
 
 
 def _threads(threads) -> int:
