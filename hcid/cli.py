@@ -40,6 +40,12 @@ MethodOpt = Annotated[
     str, typer.Option("--method", help="A method (direct, indirect), a comma-separated list, or all.")
 ]
 BackendOpt = Annotated[str, typer.Option("--backend", help="loky (local processes) or dask.")]
+TimeoutOpt = Annotated[
+    float,
+    typer.Option(
+        "--worker-timeout", min=1.0, max=86400.0, help="dask: seconds without any worker before giving up."
+    ),
+]
 SchedulerOpt = Annotated[
     str | None,
     typer.Option("--scheduler", help="dask scheduler address tcp://host:port [default: a local cluster]."),
@@ -106,6 +112,7 @@ def identify(
     jobs: JobsOpt = 2,
     backend: BackendOpt = "loky",
     scheduler: SchedulerOpt = None,
+    worker_timeout: TimeoutOpt = 60.0,
     force: ForceOpt = False,
     quiet: QuietOpt = False,
     data: Annotated[
@@ -130,6 +137,7 @@ def identify(
         force=force,
         backend=backend,
         scheduler=scheduler,
+        worker_timeout=worker_timeout,
         show_progress=not quiet,
     )
     _print_identification(result)
@@ -155,13 +163,22 @@ def run_all(
     jobs: JobsOpt = 2,
     backend: BackendOpt = "loky",
     scheduler: SchedulerOpt = None,
+    worker_timeout: TimeoutOpt = 60.0,
     quiet: QuietOpt = False,
 ):
     """Simulate, identify every method and sweep W, skipping what is already done."""
     from hcid.pipeline import run_study
 
     cfg, run_dir = _load(config, run, backend)
-    result = run_study(cfg, run_dir, jobs=jobs, backend=backend, scheduler=scheduler, show_progress=not quiet)
+    result = run_study(
+        cfg,
+        run_dir,
+        jobs=jobs,
+        backend=backend,
+        scheduler=scheduler,
+        worker_timeout=worker_timeout,
+        show_progress=not quiet,
+    )
     _print_identification(result.identification)
     _print_thresholds(result.sweep)
     typer.echo(f"done in {result.seconds:.1f} s; tables in {run_dir}")
@@ -175,6 +192,7 @@ def calibrate_w(
     jobs: JobsOpt = 2,
     backend: BackendOpt = "loky",
     scheduler: SchedulerOpt = None,
+    worker_timeout: TimeoutOpt = 60.0,
     quiet: QuietOpt = False,
 ):
     """Calibrate W on simulations of the config's FB and FF twins: rates, safe interval, recommended W."""
@@ -182,7 +200,13 @@ def calibrate_w(
 
     cfg, run_dir = _load(config, run, backend)
     result = calibrate_study(
-        cfg, run_dir, jobs=jobs, backend=backend, scheduler=scheduler, show_progress=not quiet
+        cfg,
+        run_dir,
+        jobs=jobs,
+        backend=backend,
+        scheduler=scheduler,
+        worker_timeout=worker_timeout,
+        show_progress=not quiet,
     )
     _print_identification(result.study.identification)
     rate = cfg.selection.target_rate

@@ -132,3 +132,53 @@ def true_response(model: HCModel, loop: Loop, w: np.ndarray) -> tuple[np.ndarray
     hft = feedforward_path(model, loop)(s) * np.exp(-s * model.tau_pt)
     he = feedback_path(model, loop)(s) * np.exp(-s * model.tau_pe)
     return np.asarray(hft, dtype=complex), np.asarray(he, dtype=complex)
+
+
+def closed_loop_poles(model: HCModel, loop: Loop, dt: float) -> np.ndarray:
+    """Poles (z) of the discretised feedback loop ``1 + Yc(z) He(z) z^-L = 0`` at step ``dt``.
+
+    The feedforward path is outside the loop, so the loop's stability is the
+    feedback path's with the plant (the same for a model's disturbance-only task).
+
+    Examples
+    --------
+    >>> from hcid.config.types import HCModel, Loop
+    >>> loop = Loop(Kc=2.75, wb=2.0, w_nms=10.1, zeta_nms=0.35, w_n=12.7, zeta_n=0.26, remnant_ratio=0.15)
+    >>> fb = HCModel("FB", 0.0, 0.0, 0.0, 0.75, 0.4, 0.24)
+    >>> bool(np.max(np.abs(closed_loop_poles(fb, loop, 0.01))) < 1)
+    True
+    """
+    b_e, a_e = discretise(feedback_path(model, loop), dt, PATH_METHOD)
+    b_c, a_c = discretise(plant(loop), dt, PATH_METHOD)
+    delay = round(model.tau_pe / dt)
+    den = np.polymul(a_c, a_e)
+    num = np.concatenate([np.zeros(delay), np.polymul(b_c, b_e)])
+    n = max(den.size, num.size)
+    # Coefficients in q = z^-1: char(q) = den(q) + q^L num(q); poles z = 1/q.
+    char = np.zeros(n)
+    char[: den.size] += den
+    char[: num.size] += num
+    q = np.roots(char[::-1])
+    return 1.0 / q[np.abs(q) > 0]
+
+
+def check_closed_loops(models, loop: Loop, dt: float) -> None:
+    """Refuse a model whose closed loop is unstable, naming the model and its largest pole.
+
+    Raises
+    ------
+    ConfigError
+        ``models.<name>: the closed loop with this plant is unstable (pole at z = ..., |z| = ...)``.
+    """
+    from hcid.errors import ConfigError
+
+    for model in models:
+        poles = closed_loop_poles(model, loop, dt)
+        worst = poles[np.argmax(np.abs(poles))] if poles.size else 0.0
+        if poles.size and abs(worst) >= 1.0 - 1e-12:
+            s = np.log(complex(worst)) / dt
+            raise ConfigError(
+                f"models.{model.name}: the closed loop with this plant is unstable (pole at "
+                f"z = {worst.real:.4f}{worst.imag:+.4f}j, |z| = {abs(worst):.4f}; "
+                f"s = {s.real:.3g}{s.imag:+.3g}j rad/s)"
+            )

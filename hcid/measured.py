@@ -27,7 +27,10 @@ from hcid.config import Config, DataConfig
 from hcid.errors import DataError
 from hcid.tables import MEASURED, SIGNALS
 
-__all__ = ["load_data", "records_table"]
+__all__ = ["READERS", "load_data", "records_table"]
+
+#: Largest magnitude a signal may hold: its square must not overflow in the least-squares fits.
+_LARGEST = 1e150
 
 
 def _table_columns(table: pa.Table, path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
@@ -58,17 +61,27 @@ def _read_mat(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
 
     try:
         mat = scipy.io.loadmat(path)
-    except (ValueError, OSError, NotImplementedError) as exc:
-        raise DataError(f"{path}: not a readable MATLAB file ({str(exc).splitlines()[0]})") from exc
+    except (ValueError, OSError, NotImplementedError, TypeError) as exc:
+        raise DataError(f"{path}: not a readable MATLAB file ({str(exc).splitlines()[0][:80]})") from exc
     out = {}
     for name, var in wanted.items():
-        if var in mat:
-            try:
-                value = np.asarray(mat[var], dtype=np.float64)
-            except (TypeError, ValueError) as exc:
-                raise DataError(f"{path}: variable {var!r} is not numeric") from exc
-            # MATLAB stores vectors as 1 x n or n x 1 matrices.
-            out[name] = value.ravel() if value.ndim == 2 and 1 in value.shape else value
+        if var not in mat:
+            continue
+        raw = mat[var]
+        if np.iscomplexobj(raw):
+            raise DataError(f"{path}: variable {var!r} holds complex values; give the real signal")
+        try:
+            value = np.asarray(raw, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise DataError(f"{path}: variable {var!r} is not numeric") from exc
+        # MATLAB stores vectors as 1 x n or n x 1 matrices, and may add singleton dimensions.
+        value = value.reshape([d for d in value.shape if d != 1] or [value.size])
+        if value.ndim > 2:
+            raise DataError(
+                f"{path}: variable {var!r} has shape {mat[var].shape}: more than two non-singleton "
+                "dimensions (use a vector or a samples x runs matrix)"
+            )
+        out[name] = value
     return out
 
 
@@ -150,10 +163,13 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
         where = f"{path}: run {i}"
         for name in (*SIGNALS, "time"):
             if name in run:
-                bad = ~np.isfinite(run[name])
+                bad = ~np.isfinite(run[name]) | (np.abs(run[name]) > _LARGEST)
                 if bad.any():
                     k = int(np.argmax(bad))
-                    raise DataError(f"{where}: {data.columns[name]} holds {run[name][k]} at sample {k}")
+                    raise DataError(
+                        f"{where}: {data.columns[name]} holds {run[name][k]:.6g} at sample {k} "
+                        f"(values must be finite and at most {_LARGEST:g} in magnitude)"
+                    )
         n = run["ft"].size
         if "time" in run:
             steps = np.diff(run["time"])
@@ -165,7 +181,12 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
                 )
             found = 1.0 / steps[0] if steps.size else rate
         else:
-            found = float(np.ravel(run["rate"])[0])
+            rates = np.ravel(run["rate"])
+            if rates.size == 0 or not np.isfinite(rates[0]) or rates[0] <= 0:
+                raise DataError(
+                    f"{where}: the rate {data.columns['rate']!r} is empty or not a positive number"
+                )
+            found = float(rates[0])
         if not np.isclose(found, rate, rtol=1e-6):
             raise DataError(
                 f"{where}: sample rate {found:.6g} Hz, the config's timing.output_rate is "
@@ -173,6 +194,9 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
             )
         if n < need:
             raise DataError(f"{where}: {n} samples, the identification windows need {need}")
+        for name in ("e", "u"):
+            if not np.any(run[name][:need]):
+                raise DataError(f"{where}: {data.columns[name]} is zero over the identification windows")
         records[i] = {"t": np.arange(n) / rate, **{s: run[s] for s in SIGNALS}}
     if not records:
         raise DataError(f"{path}: holds no samples")

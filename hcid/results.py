@@ -41,6 +41,9 @@ __all__ = [
 ]
 
 PARTS = ".parts"
+#: The mark of a run directory: written first, it lists every file hcid wrote there (and only
+#: those are ever deleted by hcid).
+MANIFEST = "hcid-run.json"
 
 
 def _current_umask() -> int:
@@ -63,14 +66,90 @@ def _atomic(path: Path, write) -> None:
         write(tmp)
         os.chmod(tmp, 0o666 & ~_UMASK)
         os.replace(tmp, path)
+    except OSError as exc:  # a full disk, a quota: one line, the previous file intact
+        Path(tmp).unlink(missing_ok=True)
+        raise DataError(f"{path}: cannot write ({exc.strerror or exc}); the previous file is intact") from exc
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
 
 
+def _register(path: Path) -> None:
+    """List ``path`` in its directory's manifest when the directory is a run directory."""
+    manifest = path.parent / MANIFEST
+    if path.name == MANIFEST or not manifest.is_file():
+        return
+    files = owned_files(path.parent)
+    if path.name not in files:
+        _write_manifest(path.parent, [*files, path.name])
+
+
+def _write_manifest(run_dir: Path, files: Sequence[str]) -> None:
+    import json
+
+    text = json.dumps({"hcid": "run directory", "version": 1, "files": sorted(set(files))}, indent=1)
+    _atomic(run_dir / MANIFEST, lambda tmp: Path(tmp).write_text(text + "\n"))
+
+
+def owned_files(run_dir: Path) -> list[str]:
+    """The files hcid wrote in ``run_dir`` (its manifest), or [] if it has none or it is damaged."""
+    import json
+
+    try:
+        data = json.loads((Path(run_dir) / MANIFEST).read_text())
+        files = data["files"]
+        return [f for f in files if isinstance(f, str) and f and "/" not in f and f not in (".", "..")]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+
+
+def claim(run_dir: Path, known: Sequence[str]) -> None:
+    """Make ``run_dir`` an hcid run directory, or check that it is one.
+
+    A new or empty directory gets a manifest; a directory written by an hcid
+    without manifests (every file one of ``known``, with a ``config.yaml``) is
+    adopted; any other non-empty directory is refused.
+
+    Raises
+    ------
+    DataError
+        For a directory hcid does not own.
+    """
+    run_dir = Path(run_dir)
+    if (run_dir / MANIFEST).is_file():
+        return
+    try:
+        entries = sorted(p.name for p in run_dir.iterdir()) if run_dir.is_dir() else []
+    except OSError as exc:
+        raise DataError(f"{run_dir}: cannot read ({exc.strerror or exc})") from exc
+    if entries and not ("config.yaml" in entries and set(entries) <= {*known, PARTS, "report", ".hcid.lock"}):
+        raise DataError(
+            f"{run_dir}: not an hcid run directory (no {MANIFEST}, and it holds other files); "
+            "choose a new or empty --run"
+        )
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise DataError(f"{run_dir}: cannot create ({exc.strerror or exc})") from exc
+    _write_manifest(run_dir, [e for e in entries if e in known])
+
+
+def remove_owned(run_dir: Path, names: Sequence[str] | None = None) -> None:
+    """Delete the files hcid wrote in ``run_dir`` (only those named, if ``names``), and its parts."""
+    owned = owned_files(run_dir)
+    keep = [f for f in owned if names is not None and f not in names]
+    for name in owned:
+        if name not in keep:
+            (Path(run_dir) / name).unlink(missing_ok=True)
+    _write_manifest(Path(run_dir), keep)
+    clear_parts(run_dir)
+
+
 def write_table(table: pa.Table, path: str | Path) -> None:
     """Write a Parquet table atomically (temporary file, then rename)."""
-    _atomic(Path(path), lambda tmp: pq.write_table(table, tmp))
+    path = Path(path)
+    _atomic(path, lambda tmp: pq.write_table(table, tmp))
+    _register(path)
 
 
 def write(schema: Schema, table: pa.Table, run_dir: str | Path) -> Path:
@@ -79,13 +158,31 @@ def write(schema: Schema, table: pa.Table, run_dir: str | Path) -> Path:
     if problem is not None:  # a bug, not a user's mistake: keep the traceback
         raise AssertionError(f"{schema.file}: {problem}")
     path = Path(run_dir) / schema.file
+    if _same_table(path, table):
+        return path  # nothing changed: a complete run needs no write (and may be read-only)
     write_table(table, path)
     return path
 
 
+def _same_table(path: Path, table: pa.Table) -> bool:
+    if not path.is_file():
+        return False
+    try:
+        return pq.read_table(path).equals(table)
+    except (pa.ArrowException, OSError):
+        return False
+
+
 def write_text(text: str, path: str | Path) -> None:
-    """Write a text file atomically."""
-    _atomic(Path(path), lambda tmp: Path(tmp).write_text(text))
+    """Write a text file atomically (nothing is written when the file already holds ``text``)."""
+    path = Path(path)
+    try:
+        if path.is_file() and path.read_text() == text:
+            return
+    except (OSError, UnicodeDecodeError):
+        pass
+    _atomic(path, lambda tmp: Path(tmp).write_text(text))
+    _register(path)
 
 
 def read(
@@ -190,15 +287,68 @@ def records(table: pa.Table, path: str | Path) -> dict[tuple[str, int], dict[str
     return out
 
 
+# --------------------------------------------------------------------------- consistency with the config
+
+
+def check_against_config(table: pa.Table, config, path: str | Path) -> None:
+    """Refuse a table whose keys or values contradict the run's config (a tampered run directory).
+
+    Every model must be one of the config's (or its data name), the seeds of a
+    simulated model the config's seeds, the methods registered ones; a ``v``
+    column must hold positive numbers or inf (unstable), never NaN.
+
+    Raises
+    ------
+    DataError
+        One line naming the file and the first contradiction.
+    """
+    from hcid.methods import METHODS
+
+    names = table.column_names
+    simulated = {m.name for m in config.models}
+    allowed = simulated | ({config.data.name} if config.data is not None else set())
+    if "model" in names:
+        models = set(table.column("model").to_pylist())
+        if not models <= allowed:
+            bad = sorted(models - allowed, key=str)[0]
+            raise DataError(
+                f"{path}: holds model {str(bad)[:40]!r}, which the run's config.yaml does not name "
+                f"({', '.join(sorted(allowed))}); the tables and config.yaml disagree"
+            )
+        if "seed" in names:
+            seeds = set(config.seeds)
+            pairs = set(zip(table.column("model").to_pylist(), table.column("seed").to_pylist(), strict=True))
+            wrong = sorted(p for p in pairs if p[0] in simulated and p[1] not in seeds)
+            if wrong:
+                raise DataError(
+                    f"{path}: holds model {wrong[0][0]}, seed {wrong[0][1]}, not among the run's seeds; "
+                    "the tables and config.yaml disagree"
+                )
+    if "method" in names:
+        unknown = set(table.column("method").to_pylist()) - set(METHODS)
+        if unknown:
+            raise DataError(
+                f"{path}: holds method {str(sorted(unknown, key=str)[0])[:40]!r}, not a registered one"
+            )
+    if "v" in names:
+        v = table.column("v").to_numpy(zero_copy_only=False).astype(np.float64)
+        bad = np.isnan(v) | (v <= 0)
+        if bad.any():
+            raise DataError(
+                f"{path}: column 'v' holds {v[np.argmax(bad)]} (row {int(np.argmax(bad))}); V must be > 0"
+            )
+
+
 # --------------------------------------------------------------------------- identification tables
 
 
-def frontier_part(model: str, seed: int, result, stages) -> dict[str, pa.Table]:
+def frontier_part(model: str, seed: int, result, stages, worker: str = "") -> dict[str, pa.Table]:
     """Tables of one realization and method: its frontier rows, a row per choosing stage, a log row.
 
     ``result`` is a :class:`hcid.methods.MethodResult`, ``stages`` the method's
     choosing stages (:attr:`hcid.methods.Method.choice_stages`). Wall times go to
-    the log only, so the frontier and stage tables are deterministic.
+    the log only, so the frontier and stage tables are deterministic; so does
+    ``worker`` (``host:pid`` of the process that ran the task).
     """
     fit = result.fit.to_arrow().replace_schema_metadata(None)
     fit = fit.rename_columns([tables.FRONTIER_NAMES.get(c, c) for c in fit.column_names])
@@ -227,6 +377,7 @@ def frontier_part(model: str, seed: int, result, stages) -> dict[str, pa.Table]:
             "stage1_unstable": [sum(c.n_unstable for c in result.choices)],
             "seconds_stage1": [sum(c.seconds for c in result.choices)],
             "seconds": [result.seconds],
+            "worker": [worker],
         },
         schema=tables.IDENTIFY_LOG.arrow,
     )
@@ -235,43 +386,60 @@ def frontier_part(model: str, seed: int, result, stages) -> dict[str, pa.Table]:
 
 def write_part(run_dir: Path, model: str, seed: int, method: str, parts: dict[str, pa.Table]) -> None:
     """Store one finished task so an interrupted run can resume from it."""
+    if (Path(run_dir) / PARTS).is_symlink():
+        clear_parts(run_dir)  # parts go into hcid's own folder, never through a link
     folder = Path(run_dir) / PARTS / method
     for kind, table in parts.items():
         write_table(table, folder / f"{model}__{seed}.{kind}.parquet")
 
 
-def read_parts(run_dir: Path, kinds: dict[str, tuple[str, ...]]) -> dict[tuple[str, int, str], dict]:
+def read_parts(run_dir: Path, kinds: dict[str, dict[str, Schema]]) -> dict[tuple[str, int, str], dict]:
     """Finished tasks of an interrupted run, keyed by (model, seed, method).
 
-    ``kinds`` names, per method, the parts a finished task has besides its
-    frontier (its log and its choosing stages); a task with any of them missing
-    or unreadable is left out, to be recomputed.
+    ``kinds`` gives, per method, the schema of each part a finished task has
+    (frontier, log, its choosing stages). A task with a part missing, unreadable,
+    off its schema or naming another realization than its file is left out, to
+    be recomputed.
     """
     found: dict[tuple[str, int, str], dict[str, pa.Table]] = {}
     root = Path(run_dir) / PARTS
-    if not root.is_dir():
+    if not root.is_dir() or root.is_symlink():
         return found
     for path in sorted(root.glob("*/*.frontier.parquet")):
         method = path.parent.name
         if method not in kinds:
             continue
         stem = path.name[: -len(".frontier.parquet")]
-        model, _, seed = stem.rpartition("__")
+        model, _, seed_text = stem.rpartition("__")
+        if not seed_text.isdigit():
+            continue
+        seed = int(seed_text)
         parts = {}
         try:
-            for kind in ("frontier", *kinds[method]):
+            for kind, schema in kinds[method].items():
                 part = path.with_name(f"{stem}.{kind}.parquet")
-                if part.is_file():
-                    parts[kind] = pq.read_table(part)
-        except (pa.ArrowException, OSError):
+                table = pq.read_table(part)
+                if schema.problem(table) is not None or table.num_rows == 0:
+                    break
+                if set(
+                    zip(table.column("model").to_pylist(), table.column("seed").to_pylist(), strict=True)
+                ) != {(model, seed)}:
+                    break
+                parts[kind] = table
+        except (pa.ArrowException, OSError, ValueError):
             continue  # a part cut off mid-write is simply recomputed
-        if all(kind in parts for kind in kinds[method]):
-            found[(model, int(seed), method)] = parts
+        if len(parts) == len(kinds[method]):
+            found[(model, seed, method)] = parts
     return found
 
 
 def clear_parts(run_dir: Path) -> None:
-    shutil.rmtree(Path(run_dir) / PARTS, ignore_errors=True)
+    """Remove the finished-task parts (a link in place of the folder is removed, not followed)."""
+    parts = Path(run_dir) / PARTS
+    if parts.is_symlink() or parts.is_file():
+        parts.unlink()
+    else:
+        shutil.rmtree(parts, ignore_errors=True)
 
 
 def append_run_log(run_dir: Path, stage: str, seconds: float, jobs: int) -> None:

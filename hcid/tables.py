@@ -140,8 +140,9 @@ IDENTIFY_LOG = _schema(
     "identify_log.parquet",
     [("model", _STR), ("seed", _INT), ("method", _STR)]
     + [(c, _INT) for c in ("n_candidates", "n_unstable", "stage1_candidates", "stage1_unstable")]
-    + [("seconds_stage1", _F64), ("seconds", _F64)],
+    + [("seconds_stage1", _F64), ("seconds", _F64), ("worker", _STR)],
     _METHOD_KEY,
+    optional=("worker",),
 )
 SELECTION = _schema(
     "selection.parquet",

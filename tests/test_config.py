@@ -114,3 +114,110 @@ def test_target_shift_must_be_whole_samples(paper_raw):
     data = _mutate(paper_raw, ("identify", "target_shift"), 1.01)
     with pytest.raises(ConfigError, match="identify.target_shift: must be whole samples"):
         parse_config(data, "paper")
+
+
+# --------------------------------------------------------------------------- hostile input (issue 10)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (
+            'a0: &a0 ["lol", "lol", "lol"]\na1: &a1 [*a0, *a0, *a0]\n',
+            "line 2: YAML aliases (*name) are not allowed in a config",
+        ),
+        ("x: " + "[" * 20000 + "]" * 20000 + "\n", "line 1: nested deeper than 40 levels"),
+        ("seeds: [" + "9" * 5000 + "]\n", "not a usable config ('Exceeds the limit (4300 digits)"),
+        ("name: a\nname: b\n", "line 2: duplicate key 'name'"),
+    ],
+)
+def test_hostile_yaml_is_one_line(tmp_path, text, message):
+    path = tmp_path / "c.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert str(info.value).startswith(f"{path}: {message}")
+    assert len(str(info.value)) < 300 and "\n" not in str(info.value)
+
+
+def test_non_utf8_and_oversized_files(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_bytes(b"name: \xff\n")
+    with pytest.raises(ConfigError, match="not UTF-8 text \\(byte 0xff at offset 6\\)"):
+        load_config(path)
+    path.write_text("# " + "x" * (1 << 20))
+    with pytest.raises(ConfigError, match="larger than 1,048,576 bytes"):
+        load_config(path)
+
+
+def test_unstable_closed_loop_is_refused(paper_raw):
+    # Kc = 99 makes the FB loop unstable: |z| of the largest pole of 1 + Yc He z^-24 = 0 is 1.06.
+    data = _mutate(paper_raw, ("loop", "Kc"), 99)
+    with pytest.raises(
+        ConfigError, match=r"models.FB: the closed loop with this plant is unstable \(pole at z = "
+    ):
+        parse_config(data, "paper")
+
+
+def test_stability_check_agrees_with_simulation(paper_config):
+    # The parse-time check against a simulation: at Kc = 8 the largest closed-loop pole has
+    # |z| = 1.0056 and the noise-free loop grows without bound; at Kc = 5 (|z| = 0.9945) it does not.
+    import dataclasses
+
+    import numpy as np
+
+    from hcid.hcmodel import DiscreteLoop, closed_loop_poles
+    from hcid.simulate import simulate_loop
+
+    fb = paper_config.model("FB")
+    for kc, grows in ((5.0, False), (8.0, True)):
+        loop = dataclasses.replace(paper_config.loop, Kc=kc)
+        assert (np.max(np.abs(closed_loop_poles(fb, loop, 0.01))) >= 1) == grows
+        n = 20000
+        fd = np.zeros(n)
+        fd[0] = 1e-3
+        out = simulate_loop(DiscreteLoop.build(fb, loop, 0.01), np.zeros(n), fd, np.zeros(n))
+        late, early = np.max(np.abs(out["e"][-2000:])), np.max(np.abs(out["e"][:2000]))
+        assert (late > 10 * early) == grows
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "message"),
+    [
+        (
+            ("identify", "direct"),
+            None,
+            "identify.direct: must be a mapping (leave the key out for the defaults)",
+        ),
+        (
+            ("identify", "direct", "validation"),
+            [2048, 2048],
+            "identify.direct.validation: must hold at least",
+        ),
+        (("seeds",), list(range(10_001)), "seeds: must hold at most 10,000 seeds"),
+        (("name",), "..", "name: must be 1 to 100 letters"),
+        (("name",), "a\0b", "name: must be 1 to 100 letters"),
+        (("timing", "periods"), 100, "timing: a simulation of"),
+    ],
+)
+def test_values_that_cannot_work_are_refused(paper_raw, path, value, message):
+    data = _mutate(paper_raw, path, value)
+    if path == ("timing", "periods"):
+        data["timing"]["sim_rate"] = 10000.0
+    with pytest.raises(ConfigError) as info:
+        parse_config(data, "paper")
+    assert str(info.value).startswith(message)
+
+
+def test_grid_of_billions_of_candidates_is_refused(paper_raw):
+    grid = {"na": [1, 30], "nb1": [0, 60], "nb2": [0, 60], "nk1": [0, 200], "nk2": [0, 200]}
+    data = _mutate(paper_raw, ("identify", "direct"), {**grid, "estimation": [300, 1088]})
+    with pytest.raises(ConfigError, match="identify.direct: the grid has 4,364,031,630 candidates, at most"):
+        parse_config(data, "paper")
+
+
+def test_error_messages_quote_at_most_80_characters(paper_raw):
+    data = _mutate(paper_raw, ("loop", "Kc"), "x" * 10_000)
+    with pytest.raises(ConfigError) as info:
+        parse_config(data, "paper")
+    assert len(str(info.value)) < 160

@@ -249,3 +249,81 @@ def test_data_at_another_rate_with_matching_config(tmp_path, data_config_path, e
     assert records[1]["u"].size == 4096
     with pytest.raises(DataError, match="sample rate 50 Hz, the config's timing.output_rate is 25 Hz"):
         load_data(path, parse_config(yaml.safe_load(data_config_path.read_text()), "x"))
+
+
+# --------------------------------------------------------------------------- hostile files (issue 10)
+
+
+def _mat_signals(example_table, shape_runs):
+    """The example's first 2048 samples of each signal as a samples x runs (x 1) array."""
+    out = {}
+    for key in ("ft", "fd", "e", "u"):
+        x = example_table.column(COLUMNS[key]).to_numpy()[:2048]
+        out[COLUMNS[key]] = shape_runs(x)
+    return out
+
+
+def test_mat_samples_x_runs_x_1_is_split_into_runs(tmp_path, data_config, example_table):
+    # A 3-D variable of shape (2048, 2, 1) holds two runs, never interleaved sample by sample.
+    path = tmp_path / "d.mat"
+    scipy.io.savemat(
+        path, {**_mat_signals(example_table, lambda x: np.stack([x, 2 * x], 1)[:, :, None]), "rate": 25.0}
+    )
+    records = load_data(path, data_config)
+    assert sorted(records) == [1, 2]
+    np.testing.assert_array_equal(records[2]["u"], 2 * records[1]["u"])
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda x: np.stack([x, x], 1)[:, :, None].repeat(2, 2), "more than two non-singleton dimensions"),
+        (lambda x: x * (1 + 1j), "holds complex values"),
+    ],
+)
+def test_mat_shapes_and_types_refused(tmp_path, data_config, example_table, make, message):
+    path = tmp_path / "d.mat"
+    scipy.io.savemat(path, {**_mat_signals(example_table, make), "rate": 25.0})
+    with pytest.raises(DataError, match=message):
+        load_data(path, data_config)
+
+
+def test_mat_empty_rate_refused(tmp_path, data_config, example_table):
+    path = tmp_path / "d.mat"
+    scipy.io.savemat(path, {**_mat_signals(example_table, lambda x: x), "rate": np.array([])})
+    with pytest.raises(DataError, match="run 1: the rate 'rate' is empty or not a positive number"):
+        load_data(path, data_config)
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda c: c.__setitem__("stick", np.where(np.arange(c["stick"].size) == 7, 1e308, c["stick"])),
+         "run 1: stick holds 1e\\+308 at sample 7 \\(values must be finite and at most 1e\\+150"),
+        (lambda c: c.__setitem__("stick", np.zeros(c["stick"].size)), "run 1: stick is zero over the"),
+    ],
+)  # fmt: skip
+def test_values_that_cannot_be_identified_are_refused(tmp_path, data_config, example_table, edit, message):
+    cols = {c: example_table.column(c).to_numpy() for c in example_table.column_names}
+    edit(cols)
+    path = tmp_path / "d.csv"
+    pacsv.write_csv(pa.table(cols), path)
+    with pytest.raises(DataError, match=message):
+        load_data(path, data_config)
+
+
+def test_only_the_windows_samples_are_identified(data_config, example_table):
+    # Appending 10,000 samples after the windows changes nothing: identification uses the
+    # rows up to the last window sample plus the target shift (SPEC 3: ft_s(k) = ft(k + 25)).
+    from hcid.methods import identify
+
+    # 2048 + 25 samples: the windows' rows and the shift's look-ahead.
+    cols = {
+        k: np.append(example_table.column(COLUMNS[k]).to_numpy()[:2048], [0.1] * 25)
+        for k in COLUMNS
+        if k in ["ft", "fd", "e", "u"]
+    }
+    longer = {k: np.concatenate([v, np.full(10_000, 0.3)]) for k, v in cols.items()}
+    a = identify(cols, data_config.identify, "direct", rate=25.0)
+    b = identify(longer, data_config.identify, "direct", rate=25.0)
+    assert a.fit.to_arrow().equals(b.fit.to_arrow())

@@ -1,6 +1,11 @@
 """The identify / sweep-w pipeline on configs/ci.yaml: determinism, resume, backends, bad data."""
 
+import os
 import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -148,6 +153,71 @@ def test_dask_local_cluster_gives_identical_tables(ci_runs, tmp_path):
     _run(["identify", str(CI_CONFIG), "--run", str(run), "--backend", "dask", "--jobs", "2"])
     for name in ("frontier.parquet", "stage1.parquet"):
         assert (run / name).read_bytes() == (ci_runs[1] / name).read_bytes()
+    # Every task ran on a worker of the cluster, none in this (the client's) process.
+    workers = pq.read_table(run / "identify_log.parquet").column("worker").to_pylist()
+    pids = {int(w.rsplit(":", 1)[1]) for w in workers}
+    assert os.getpid() not in pids and len(pids) >= 1
+
+
+def _dask_worker(address: str) -> subprocess.Popen:
+    dask = Path(sys.executable).parent / "dask"
+    return subprocess.Popen(
+        [str(dask), "worker", address, "--nworkers", "1", "--nthreads", "1", "--no-nanny", "--no-dashboard"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+
+
+def test_dask_all_workers_lost_fails_in_one_line_within_the_timeout(ci_runs, tmp_path):
+    # Two workers without nannies on a loopback scheduler; both are killed (-9) once the
+    # first task is done: hcid must end with one line within --worker-timeout (plus polling).
+    distributed = pytest.importorskip("dask.distributed")
+    run = tmp_path / "lost"
+    run.mkdir()
+    for name in ("simulations.parquet", "config.yaml"):
+        shutil.copy(ci_runs[1] / name, run / name)
+    with distributed.LocalCluster(
+        n_workers=0, processes=True, dashboard_address=None, host="127.0.0.1"
+    ) as cluster:
+        workers = [_dask_worker(cluster.scheduler_address) for _ in range(2)]
+        try:
+            cmd = [str(Path(sys.executable).parent / "hcid"), "identify", str(CI_CONFIG), "--run", str(run),
+                   "--backend", "dask", "--scheduler", cluster.scheduler_address, "--worker-timeout", "8",
+                   "--quiet"]  # fmt: skip
+            proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
+            deadline = time.monotonic() + 240
+            while not list((run / ".parts").glob("*/*.log.parquet")) and time.monotonic() < deadline:
+                time.sleep(0.2)
+            for w in workers:
+                w.kill()
+            killed = time.monotonic()
+            _, err = proc.communicate(timeout=120)
+            elapsed = time.monotonic() - killed
+        finally:
+            for w in workers:
+                w.kill()
+    assert proc.returncode == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hcid: error: dask: no worker for 8 s")
+    assert elapsed < 8 + 30  # the timeout, one poll and shutdown
+
+
+def test_dask_scheduler_without_workers_is_one_line(tmp_path, ci_runs):
+    distributed = pytest.importorskip("dask.distributed")
+    run = tmp_path / "none"
+    run.mkdir()
+    for name in ("simulations.parquet", "config.yaml"):
+        shutil.copy(ci_runs[1] / name, run / name)
+    with distributed.LocalCluster(
+        n_workers=0, processes=True, dashboard_address=None, host="127.0.0.1"
+    ) as cluster:
+        result = runner.invoke(
+            app,
+            ["identify", str(CI_CONFIG), "--run", str(run), "--backend", "dask",
+             "--scheduler", cluster.scheduler_address, "--worker-timeout", "3", "--quiet"],
+        )  # fmt: skip
+    assert result.exit_code == 2
+    assert "no worker joined within 3 s" in result.stderr
 
 
 def _bad_run(tmp_path, ci_runs, damage):
@@ -187,6 +257,11 @@ def test_corrupt_simulations_exit_2(tmp_path, ci_runs, damage, message):
 
 
 def test_sweep_without_frontier_exit_2(tmp_path):
+    result = runner.invoke(app, ["sweep-w", str(CI_CONFIG), "--run", str(tmp_path / "empty")])
+    assert result.exit_code == 2
+    assert "empty: missing; run `hcid run CONFIG` (or simulate / identify) first" in result.stderr
+    assert not (tmp_path / "empty").exists()
+    (tmp_path / "empty").mkdir()
     result = runner.invoke(app, ["sweep-w", str(CI_CONFIG), "--run", str(tmp_path / "empty")])
     assert result.exit_code == 2
     assert "frontier.parquet: missing; run `hcid identify` first" in result.stderr

@@ -66,7 +66,7 @@ def test_interrupted_write_leaves_the_previous_table(tmp_path, monkeypatch):
         raise OSError("disk full")
 
     monkeypatch.setattr(pq, "write_table", broken)
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(DataError, match="cannot write \\(disk full\\); the previous file is intact"):
         results.write_table(pa.table({"x": np.arange(5)}), path)
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.parquet"]  # no temporary file left

@@ -59,10 +59,6 @@ def max_lag(grid: Grid) -> int:
     return grid.max_lag
 
 
-def _delay_count(nb: int, nk: tuple[int, int]) -> int:
-    return nk[1] - nk[0] + 1 if nb > 0 else 1
-
-
 def order_blocks(grid: Grid) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Order triples of ``grid`` and where their candidate blocks start.
 
@@ -95,7 +91,7 @@ def order_blocks(grid: Grid) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
 
 
 def n_candidates(grid: Grid) -> int:
-    """Number of distinct candidates of ``grid``.
+    """Number of distinct candidates of ``grid`` (:attr:`Grid.n_candidates`).
 
     Parameters
     ----------
@@ -107,12 +103,7 @@ def n_candidates(grid: Grid) -> int:
         174,447 for the paper's direct / stage-2 grid and 64,260 for its
         stage-1 grid (SPEC section 3).
     """
-    per_na = sum(
-        _delay_count(nb1, grid.nk1) * _delay_count(nb2, grid.nk2)
-        for nb1 in range(grid.nb1[0], grid.nb1[1] + 1)
-        for nb2 in range(grid.nb2[0], grid.nb2[1] + 1)
-    )
-    return per_na * (grid.na[1] - grid.na[0] + 1)
+    return grid.n_candidates
 
 
 def candidates(grid: Grid) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

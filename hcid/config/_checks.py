@@ -11,9 +11,14 @@ from typing import Any
 
 from hcid.errors import ConfigError
 
+#: Longest quote of a value in an error message (a message stays one readable line).
+QUOTE = 80
+
 
 def fmt(value: Any) -> str:
-    return repr(value) if isinstance(value, str) else str(value)
+    """A value as an error message quotes it: repr for strings, at most :data:`QUOTE` characters."""
+    text = repr(value) if isinstance(value, str) else str(value)
+    return text if len(text) <= QUOTE else text[: QUOTE - 3] + "..."
 
 
 class Section:
@@ -60,7 +65,7 @@ class Section:
         extra = sorted(set(self.data) - self.seen, key=str)
         if extra:
             raise ConfigError(
-                f"{self.key(str(extra[0]))}: unknown key (allowed: {', '.join(sorted(self.seen))})"
+                f"{self.key(str(extra[0])[:QUOTE])}: unknown key (allowed: {', '.join(sorted(self.seen))})"
             )
 
 

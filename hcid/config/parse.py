@@ -11,6 +11,7 @@ the criteria of :mod:`hcid.criteria`.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -34,8 +35,21 @@ from hcid.config.types import (
 )
 from hcid.errors import ConfigError
 
-__all__ = ["load_config", "parse_config"]
+__all__ = ["LIMITS", "load_config", "parse_config"]
 
+#: Bounds on what a config may ask for, each checked at parse time with a one-line error:
+#: the file, its nesting, seeds, candidates per grid and per study, samples per simulation.
+LIMITS = {
+    "file_bytes": 1 << 20,
+    "nesting": 40,
+    "seeds": 10_000,
+    "grid_candidates": 10_000_000,
+    "study_candidates": 2_000_000_000,
+    "simulation_samples": 10_000_000,
+    "name_chars": 100,
+}
+
+_ABSENT = object()  # a key left out (None is a value: refused where a mapping is needed)
 _DATA_COLUMNS = {"ft": "ft", "fd": "fd", "e": "e", "u": "u", "time": "t", "run": "run", "rate": "rate"}
 
 
@@ -43,8 +57,10 @@ _DATA_COLUMNS = {"ft": "ft", "fd": "fd", "e": "e", "u": "u", "time": "t", "run":
 
 
 def _model(name: Any, data: Any) -> HCModel:
-    if not isinstance(name, str) or not name.isidentifier():
-        raise ConfigError(f"models: model names must be identifiers, got {fmt(name)}")
+    if not isinstance(name, str) or not name.isidentifier() or len(name) > 40:
+        raise ConfigError(
+            f"models: model names must be identifiers of at most 40 characters, got {fmt(name)}"
+        )
     s = Section(data, f"models.{name}")
     Kpt = s.number("Kpt", 0.0, 10.0)
     model = HCModel(
@@ -160,6 +176,12 @@ def _timing_section(top: Section) -> Timing:
     for key, secs in (("run_in", timing.run_in), ("window", timing.window)):
         if abs(secs * timing.sim_rate - round(secs * timing.sim_rate)) > 1e-6:
             raise ConfigError(f"timing.{key}: must be whole samples at sim_rate, got {secs:g} s")
+    samples = timing.period_samples * timing.periods
+    if samples > LIMITS["simulation_samples"]:
+        raise ConfigError(
+            f"timing: a simulation of {samples:,} samples (sim_rate x (run_in + window) x periods), "
+            f"at most {LIMITS['simulation_samples']:,} are allowed"
+        )
     if timing.window_samples % timing.decimation:
         raise ConfigError(f"timing.window: must be whole samples at output_rate, got {timing.window:g} s")
     return timing
@@ -185,13 +207,15 @@ def _seeds_section(top: Section) -> tuple[int, ...]:
     if isinstance(value, dict):
         s = Section(value, "seeds")
         first = s.integer("first", 0, 2**31 - 1)
-        count = s.integer("count", 1, 100_000)
+        count = s.integer("count", 1, LIMITS["seeds"])
         s.done()
         return tuple(range(first, first + count))
     if not isinstance(value, list) or not value:
         raise ConfigError(
             f"seeds: must be a non-empty list of integers or {{first, count}}, got {fmt(value)}"
         )
+    if len(value) > LIMITS["seeds"]:
+        raise ConfigError(f"seeds: must hold at most {LIMITS['seeds']:,} seeds, got {len(value):,}")
     seeds = tuple(integer(v, f"seeds[{i}]", 0, 2**31 - 1) for i, v in enumerate(value))
     if len(set(seeds)) != len(seeds):
         raise ConfigError(f"seeds: must not repeat a seed, got {list(seeds)}")
@@ -222,9 +246,11 @@ def _window(section: Section, name: str, n_record: int, auto_first: int) -> Wind
 
 def _stage(data: Any, path: str, defaults: dict, n_record: int) -> StageConfig:
     merged = dict(defaults)
-    if data is not None:
+    if data is not _ABSENT:
         if not isinstance(data, dict):
-            raise ConfigError(f"{path}: must be a mapping, got {fmt(data)}")
+            raise ConfigError(
+                f"{path}: must be a mapping (leave the key out for the defaults), got {fmt(data)}"
+            )
         merged.update(data)
     s = Section(merged, path)
     grid = Grid(
@@ -244,10 +270,15 @@ def _stage(data: Any, path: str, defaults: dict, n_record: int) -> StageConfig:
             f"i.e. first >= {max_lag + 1}, got {[estimation.first, estimation.last]}"
         )
     n_params = grid.na[1] + grid.nb1[1] + grid.nb2[1] + 2
-    if estimation.length < 2 * n_params:
+    for key, window in (("estimation", estimation), ("validation", validation)):
+        if window.length < 2 * n_params:
+            raise ConfigError(
+                f"{path}.{key}: must hold at least {2 * n_params} samples for this grid, got {window.length}"
+            )
+    if grid.n_candidates > LIMITS["grid_candidates"]:
         raise ConfigError(
-            f"{path}.estimation: must hold at least {2 * n_params} samples for this grid, "
-            f"got {estimation.length}"
+            f"{path}: the grid has {grid.n_candidates:,} candidates, at most "
+            f"{LIMITS['grid_candidates']:,} are allowed"
         )
     return StageConfig(grid=grid, estimation=estimation, validation=validation)
 
@@ -281,8 +312,11 @@ def _identify_section(top: Section, timing: Timing) -> IdentifyConfig:
     for name, spec in stage_specs().items():
         defaults = dict(spec.defaults)
         if spec.defaults_from is not None:
-            defaults.update(s.data.get(spec.defaults_from) or {})
-        stages.append((name, _stage(s.get(name, None), f"identify.{name}", defaults, timing.record_samples)))
+            given = s.data.get(spec.defaults_from)
+            defaults.update(given if isinstance(given, dict) else {})
+        stages.append(
+            (name, _stage(s.get(name, _ABSENT), f"identify.{name}", defaults, timing.record_samples))
+        )
     s.done()
     return IdentifyConfig(target_shift=target_shift, stages=tuple(stages))
 
@@ -344,7 +378,7 @@ def _data_section(top: Section, model_names: list[str]) -> DataConfig | None:
         return None
     s = Section(value, "data")
     name = s.get("name", "data")
-    if not isinstance(name, str) or not name.isidentifier() or name in model_names:
+    if not isinstance(name, str) or not name.isidentifier() or len(name) > 40 or name in model_names:
         raise ConfigError(
             f"data.name: must be an identifier other than the model names {model_names}, got {fmt(name)}"
         )
@@ -369,6 +403,101 @@ def _data_section(top: Section, model_names: list[str]) -> DataConfig | None:
 
 # --------------------------------------------------------------------------- entry points
 
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]*")
+
+
+def _study_name(value: Any) -> str:
+    """The study name, also the default run directory ``runs/<name>``: one plain path component."""
+    ok = (
+        isinstance(value, str)
+        and len(value) <= LIMITS["name_chars"]
+        and _NAME.fullmatch(value) is not None
+        and value not in (".", "..")
+    )
+    if not ok:
+        raise ConfigError(
+            f"name: must be 1 to {LIMITS['name_chars']} letters, digits and _ . + - (starting with a "
+            f"letter or digit; it names the run directory), got {fmt(value)}"
+        )
+    return value
+
+
+def _check_study_size(identify: IdentifyConfig, seeds: tuple[int, ...], models: tuple[HCModel, ...]) -> None:
+    per_record = sum(stage.grid.n_candidates for _, stage in identify.stages)
+    total = per_record * len(seeds) * len(models)
+    if total > LIMITS["study_candidates"]:
+        raise ConfigError(
+            f"identify: the study fits {total:,} candidates ({per_record:,} per record x "
+            f"{len(seeds) * len(models):,} records), at most {LIMITS['study_candidates']:,} are allowed"
+        )
+
+
+class _Loader(yaml.SafeLoader):
+    """yaml.SafeLoader without aliases (no expansion bombs), duplicate keys or deep nesting."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._depth = 0
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            mark = self.peek_event().start_mark
+            raise ConfigError(f"line {mark.line + 1}: YAML aliases (*name) are not allowed in a config")
+        self._depth += 1
+        if self._depth > LIMITS["nesting"]:
+            mark = self.peek_event().start_mark
+            raise ConfigError(f"line {mark.line + 1}: nested deeper than {LIMITS['nesting']} levels")
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            if isinstance(key, list | dict):
+                raise ConfigError(f"line {key_node.start_mark.line + 1}: a mapping key must be a plain value")
+            if key in seen:
+                raise ConfigError(f"line {key_node.start_mark.line + 1}: duplicate key {fmt(key)}")
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def read_yaml(path: Path, what: str = "config") -> Any:
+    """Read a YAML file with :class:`_Loader`: at most ``LIMITS['file_bytes']``, UTF-8.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the file and the problem.
+    """
+    try:
+        with open(path, "rb") as f:
+            raw = f.read(LIMITS["file_bytes"] + 1)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read {what} ({exc.strerror or exc})") from exc
+    if len(raw) > LIMITS["file_bytes"]:
+        raise ConfigError(f"{path}: larger than {LIMITS['file_bytes']:,} bytes; not a {what}")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"{path}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start})"
+        ) from exc
+    if "\0" in text:
+        raise ConfigError(f"{path}: holds a NUL character; not a {what}")
+    try:
+        return yaml.load(text, Loader=_Loader)  # noqa: S506 (a SafeLoader subclass)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError(f"{path}: not valid YAML{where}") from exc
+    except (ValueError, RecursionError) as exc:  # e.g. an integer of more than 4300 digits
+        raise ConfigError(f"{path}: not a usable {what} ({fmt(str(exc).splitlines()[0])})") from exc
+
 
 def parse_config(data: Any, name: str) -> Config:
     """Check a parsed YAML document and build the :class:`Config`.
@@ -386,9 +515,7 @@ def parse_config(data: Any, name: str) -> Config:
         On the first unknown key, wrong type or out-of-range value, naming it.
     """
     top = Section(data, "")
-    study_name = top.get("name", name)
-    if not isinstance(study_name, str) or not study_name or "/" in study_name:
-        raise ConfigError(f"name: must be a non-empty string without '/', got {fmt(study_name)}")
+    study_name = _study_name(top.get("name", name))
     models = _models_section(top)
     loop = _loop_section(top)
     disturbance, target = _signals_section(top)
@@ -399,6 +526,12 @@ def parse_config(data: Any, name: str) -> Config:
     selection, selection_raw = _selection_section(top)
     data_cfg = _data_section(top, [m.name for m in models])
     top.done()
+    _check_study_size(identify, seeds, models)
+    # The closed loops' stability needs the discretised paths (hcid.hcmodel): checked
+    # here so that an unstable hypothesis is refused before anything is simulated.
+    from hcid.hcmodel import check_closed_loops
+
+    check_closed_loops(models, loop, timing.sim_dt)
 
     raw = dict(data)
     raw["name"] = study_name
@@ -431,14 +564,4 @@ def load_config(path: str | Path) -> Config:
         If the file is missing, is not YAML, or any key is wrong (naming it).
     """
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read config ({exc.strerror})") from exc
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(f"{path}: not valid YAML{where}") from exc
-    return parse_config(data, path.stem)
+    return parse_config(read_yaml(path), path.stem)

@@ -151,6 +151,22 @@ class Grid:
             object.__setattr__(self, name, checked_grid_range(name, getattr(self, name), lowest))
 
     @property
+    def n_candidates(self) -> int:
+        """Number of distinct candidates: a dropped input (nb = 0) is enumerated once.
+
+        Examples
+        --------
+        >>> Grid(na=(1, 7), nb1=(0, 7), nb2=(0, 7), nk1=(1, 50), nk2=(1, 10)).n_candidates  # SPEC 3
+        174447
+        """
+
+        def delays(nb: tuple[int, int], nk: tuple[int, int]) -> int:
+            used = nb[1] - max(nb[0], 1) + 1 if nb[1] > 0 else 0
+            return max(used, 0) * (nk[1] - nk[0] + 1) + (1 if nb[0] == 0 else 0)
+
+        return (self.na[1] - self.na[0] + 1) * delays(self.nb1, self.nk1) * delays(self.nb2, self.nk2)
+
+    @property
     def max_lag(self) -> int:
         """Largest lag (samples) any candidate uses; an input counts only when its nb_hi > 0.
 

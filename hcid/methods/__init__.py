@@ -84,4 +84,12 @@ def identify(
     threads : int
         Threads of the ARX engine (1 inside a worker process).
     """
-    return get(method).run(record, settings, settings.shift_samples(rate), threads)
+    chosen = get(method)
+    shift = settings.shift_samples(rate)
+    # Only the samples the windows use (and the target shift's look-ahead) are identified:
+    # the simulated outputs before them do not depend on later samples.
+    need = max(
+        max(s.estimation.last, s.validation.last) for s in (settings.stage(x.name) for x in chosen.stages)
+    )
+    keep = {name: np.asarray(x)[: need + shift] for name, x in record.items()}
+    return chosen.run(keep, settings, shift, threads)

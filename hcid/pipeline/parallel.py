@@ -8,6 +8,7 @@ backend.
 from __future__ import annotations
 
 import contextlib
+import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any
 
@@ -33,13 +34,17 @@ def parallel_map(
     show_progress: bool = True,
     backend: str = "loky",
     scheduler: str | None = None,
+    worker_timeout: float = 60.0,
 ) -> Iterable[Any]:
     """Yield ``func(*task)`` for every task, in task order, on ``jobs`` workers.
 
-    A progress bar on stderr counts finished tasks; ``jobs = 1`` runs
-    in-process. ``backend = 'dask'`` sends the tasks to a dask.distributed
+    A progress bar on stderr counts finished tasks; ``jobs = 1`` with loky runs
+    in-process. ``backend = 'dask'`` submits the tasks to a dask.distributed
     scheduler at ``scheduler`` (``tcp://host:port``), or to a local cluster of
-    ``jobs`` single-threaded worker processes when ``scheduler`` is None.
+    ``jobs`` single-threaded worker processes when ``scheduler`` is None; the
+    tasks always run on the cluster's workers, never in this process. A cluster
+    without workers for ``worker_timeout`` seconds (none joined, or all lost)
+    ends the run with one line; finished tasks are kept by the caller.
     """
     from rich.progress import (
         BarColumn,
@@ -53,7 +58,10 @@ def parallel_map(
     if not tasks:
         return
     with contextlib.ExitStack() as stack:
-        stream = _stream(func, tasks, jobs, backend, scheduler, stack)
+        if backend == "dask":
+            stream = _dask_stream(func, tasks, jobs, scheduler, worker_timeout, stack)
+        else:
+            stream = _loky_stream(func, tasks, jobs)
         progress = stack.enter_context(
             Progress(
                 "[progress.description]{task.description}",
@@ -70,34 +78,72 @@ def parallel_map(
             yield result
 
 
-def _stream(func, tasks, jobs, backend, scheduler, stack: contextlib.ExitStack) -> Iterator:
-    from joblib import Parallel, delayed, parallel_config
+def _loky_stream(func, tasks, jobs) -> Iterator:
+    from joblib import Parallel, delayed
 
-    if backend == "loky" and jobs == 1:
+    if jobs == 1:
         return (func(*task) for task in tasks)
-    if backend == "dask":
-        try:
-            from dask.distributed import Client, LocalCluster
-        except ImportError as exc:
-            raise HcidError("--backend dask: needs dask.distributed (pip install 'hcid[dask]')") from exc
-        if scheduler:
-            try:
-                client = stack.enter_context(Client(scheduler, timeout="20s"))
-            except OSError as exc:
-                raise HcidError(f"--scheduler: cannot reach {scheduler} ({exc})") from exc
-        else:
-            cluster = stack.enter_context(
-                LocalCluster(
-                    n_workers=jobs,
-                    threads_per_worker=1,
-                    processes=True,
-                    dashboard_address=None,
-                    host="127.0.0.1",
-                )
-            )
-            client = stack.enter_context(Client(cluster))
-        del client
-        stack.enter_context(parallel_config(backend="dask"))
-    return Parallel(n_jobs=jobs, backend=None if backend == "dask" else backend, return_as="generator")(
+    return Parallel(n_jobs=jobs, backend="loky", return_as="generator")(
         delayed(func)(*task) for task in tasks
     )
+
+
+def _client(scheduler: str | None, jobs: int, timeout: float, stack: contextlib.ExitStack):
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError as exc:
+        raise HcidError("--backend dask: needs dask.distributed (pip install 'hcid[dask]')") from exc
+    if scheduler is None:
+        cluster = stack.enter_context(
+            LocalCluster(
+                n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
+            )
+        )
+        return stack.enter_context(Client(cluster))
+    try:
+        client = stack.enter_context(Client(scheduler, timeout=f"{min(timeout, 20.0):g}s"))
+    except Exception as exc:  # noqa: BLE001 (OSError, ValueError, TypeError, TimeoutError by address)
+        reason = str(exc).splitlines()[0][:80] if str(exc) else type(exc).__name__
+        raise HcidError(f"--scheduler: cannot use {scheduler[:80]!r} ({reason})") from None
+    try:
+        client.wait_for_workers(1, timeout=timeout)
+    except Exception:  # noqa: BLE001 (dask raises TimeoutError of asyncio or builtins)
+        raise HcidError(f"--scheduler {scheduler[:80]}: no worker joined within {timeout:g} s") from None
+    return client
+
+
+def _dask_stream(func, tasks, jobs, scheduler, timeout: float, stack: contextlib.ExitStack) -> Iterator:
+    from dask.distributed import wait
+
+    client = _client(scheduler, jobs, timeout, stack)
+    futures = [client.submit(func, *task, pure=False) for task in tasks]
+    stack.callback(client.cancel, futures)
+    order = {f.key: i for i, f in enumerate(futures)}
+    finished: dict[int, Any] = {}
+    remaining = set(futures)
+    following = 0
+    no_workers_since = None
+    while following < len(futures):
+        if remaining:
+            try:
+                done, _ = wait(list(remaining), timeout=2.0, return_when="FIRST_COMPLETED")
+            except Exception:  # noqa: BLE001 (a timeout of this poll: nothing finished)
+                done = set()
+            for future in done:
+                remaining.discard(future)
+                finished[order[future.key]] = future  # its result (or error) is taken in order
+            if not done:
+                n_workers = len(client.nthreads())  # asks the scheduler now (scheduler_info is cached)
+                now = time.monotonic()
+                if n_workers:
+                    no_workers_since = None
+                elif no_workers_since is None:
+                    no_workers_since = now
+                elif now - no_workers_since > timeout:
+                    raise HcidError(
+                        f"dask: no worker for {timeout:g} s (all lost?); {following} of "
+                        f"{len(futures)} tasks are kept; rerun to resume"
+                    )
+        while following in finished:
+            yield finished.pop(following).result()
+            following += 1

@@ -1,20 +1,157 @@
-"""A run directory belongs to one study: refuse to mix the results of two configs.
+"""Run directories: one study each, one command at a time, and hcid deletes only what it wrote.
 
-Each stage's tables depend on some config sections; a command whose sections
-differ from the run's recorded ``config.yaml`` is refused, naming the first
-differing key, unless ``--force`` redoes that stage (and drops what depended on it).
+- :func:`using` holds a run directory for a command: it refuses paths that are
+  not a plain directory of their own (``/``, the working directory or one of its
+  parents), marks the directory as hcid's with a manifest written first
+  (:func:`hcid.results.claim`), and takes an ``fcntl`` lock that the operating
+  system releases when the process ends, so a ``kill -9`` never leaves a stale
+  lock; a second command on the directory is refused in one line naming the
+  process that holds it.
+- :func:`check_run_dir`: each stage's tables depend on some config sections; a
+  command whose sections differ from the run's recorded ``config.yaml`` is
+  refused, naming the first differing key, unless ``--force`` redoes that stage
+  (and drops, of the files hcid wrote, those that depended on it).
 """
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
+import functools
+import os
+import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from hcid import results, tables
 from hcid.config import Config
-from hcid.errors import DataError
+from hcid.errors import ConfigError, DataError
 
-__all__ = ["IDENTIFICATION_SECTIONS", "SIMULATION_SECTIONS", "check_run_dir", "record_config"]
+__all__ = [
+    "IDENTIFICATION_SECTIONS",
+    "LOCK",
+    "SIMULATION_SECTIONS",
+    "check_run_dir",
+    "holds_run_dir",
+    "known_files",
+    "record_config",
+    "using",
+]
+
+LOCK = ".hcid.lock"
+_HELD: dict[Path, list] = {}  # run directory -> [open lock file, depth] held by this process
+
+
+def known_files() -> list[str]:
+    """Every file name hcid writes in a run directory."""
+    from hcid.methods import METHODS
+
+    schemas = [
+        tables.SIMULATIONS, tables.SIMULATION_SUMMARY, tables.MEASURED, tables.FRONTIER,
+        tables.IDENTIFY_LOG, tables.SELECTION, tables.BREAKPOINTS, tables.thresholds(),
+        tables.CALIBRATION, tables.RUN_LOG,
+    ]  # fmt: skip
+    files = [s.file for s in schemas] + ["config.yaml", results.MANIFEST, LOCK]
+    files += [tables.stage_choice(s.name, s.inputs).file for m in METHODS.values() for s in m.choice_stages]
+    return files
+
+
+def _check_path(run_dir: Path) -> Path:
+    try:
+        resolved = run_dir.resolve()
+        cwd = Path.cwd().resolve()
+    except (OSError, RuntimeError) as exc:
+        raise DataError(f"{run_dir}: not a usable run directory ({exc})") from exc
+    if resolved == resolved.parent or resolved == cwd or resolved in cwd.parents:
+        raise DataError(
+            f"{run_dir}: refusing to use it as a run directory (it is / , the working directory or one "
+            "of its parents); choose a directory of its own, e.g. runs/<name>"
+        )
+    if run_dir.exists() and not run_dir.is_dir():
+        raise DataError(f"{run_dir}: not a directory; choose another --run")
+    return resolved
+
+
+def holds_run_dir(*, create: bool = True):
+    """Decorate ``func(config, run_dir, ...)`` to run while holding ``run_dir`` (:func:`using`)."""
+
+    def decorate(func):
+        @functools.wraps(func)
+        def wrapper(config, run_dir, *args, **kwargs):
+            with using(Path(run_dir), create=create):
+                return func(config, Path(run_dir), *args, **kwargs)
+
+        return wrapper
+
+    return decorate
+
+
+@contextlib.contextmanager
+def using(run_dir: Path, *, create: bool = True) -> Iterator[Path]:
+    """Hold ``run_dir`` for one command: checked, claimed and locked (re-entrant in a process).
+
+    With ``create`` False a missing directory is an error instead of a new run.
+
+    Raises
+    ------
+    DataError
+        If the path is not a directory of its own, hcid does not own it, or
+        another process holds it.
+    """
+    resolved = _check_path(run_dir)
+    if not create and not run_dir.is_dir():
+        raise DataError(f"{run_dir}: missing; run `hcid run CONFIG` (or simulate / identify) first")
+    held = _HELD.get(resolved)
+    created = not run_dir.exists()
+    if held is not None:
+        held[1] += 1
+        try:
+            yield run_dir
+        finally:
+            held[1] -= 1
+        return
+    results.claim(run_dir, known_files())
+    try:
+        handle = open(run_dir / LOCK, "a+")  # noqa: SIM115 (held until the command ends)
+    except OSError as exc:
+        if not os.access(run_dir, os.W_OK):  # read-only: nobody can write it, reading is safe
+            yield run_dir
+            return
+        raise DataError(f"{run_dir}: cannot lock ({exc.strerror or exc})") from exc
+    try:
+        fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.seek(0)
+        holder = handle.read(200).strip() or "another process"
+        handle.close()
+        raise DataError(
+            f"{run_dir}: in use by {holder}; wait for it to finish or choose another --run"
+        ) from None
+    handle.seek(0)
+    handle.truncate()
+    handle.write(f"hcid pid {os.getpid()} ({' '.join(os.path.basename(a) for a in sys.argv[:2])})")
+    handle.flush()
+    _HELD[resolved] = [handle, 1]
+    try:
+        yield run_dir
+    finally:
+        del _HELD[resolved]
+        handle.close()  # releases the lock
+        if created:
+            _remove_if_unused(run_dir)
+
+
+def _remove_if_unused(run_dir: Path) -> None:
+    """A directory this command created and then wrote nothing into (a refusal) is removed."""
+    try:
+        if {p.name for p in run_dir.iterdir()} <= {results.MANIFEST, LOCK}:
+            for name in (results.MANIFEST, LOCK):
+                (run_dir / name).unlink(missing_ok=True)
+            run_dir.rmdir()
+    except OSError:
+        pass
+
 
 #: Config sections each stage's tables depend on.
 SIMULATION_SECTIONS = ("models", "loop", "signals", "timing", "seeds")
@@ -23,12 +160,8 @@ IDENTIFICATION_SECTIONS = (*SIMULATION_SECTIONS, "identify", "data")
 
 def _identification_files() -> list[str]:
     """The tables identification and later stages write (stale when ``identify`` changes)."""
-    from hcid.methods import METHODS
-
-    files = [tables.FRONTIER.file, tables.IDENTIFY_LOG.file, tables.SELECTION.file, tables.BREAKPOINTS.file]
-    files += [tables.thresholds().file, tables.CALIBRATION.file, tables.MEASURED.file]
-    files += [tables.stage_choice(s.name, s.inputs).file for m in METHODS.values() for s in m.choice_stages]
-    return files
+    simulation = {tables.SIMULATIONS.file, tables.SIMULATION_SUMMARY.file, tables.RUN_LOG.file}
+    return [f for f in known_files() if f.endswith(".parquet") and f not in simulation]
 
 
 def _first_difference(a: Any, b: Any, path: str = "") -> str | None:
@@ -57,19 +190,19 @@ def check_run_dir(config: Config, run_dir: Path, stage: str, *, force: bool = Fa
     """
     import yaml
 
+    from hcid.config.parse import read_yaml
+
     if run_dir.exists() and not run_dir.is_dir():
         raise DataError(f"{run_dir}: not a directory; choose another --run")
     path = run_dir / "config.yaml"
     if not path.is_file():
         return
     try:
-        previous = yaml.safe_load(path.read_text())
+        previous = read_yaml(path, "run config")
         if not isinstance(previous, dict):
-            raise TypeError
-    except (yaml.YAMLError, OSError, TypeError) as exc:
-        raise DataError(
-            f"{path}: not a readable config; remove the run directory or use another --run"
-        ) from exc
+            raise ConfigError(f"{path}: not a mapping")
+    except ConfigError as exc:
+        raise DataError(f"{exc}; remove the run directory or use another --run") from exc
     current = yaml.safe_load(config.to_yaml())
     if stage == "simulate":
         sections, stale, redo = SIMULATION_SECTIONS, None, "hcid simulate --force"
@@ -94,10 +227,10 @@ def check_run_dir(config: Config, run_dir: Path, stage: str, *, force: bool = Fa
             f"{run_dir}: made with another config ({key} differs); use `{redo}` to redo it "
             "or --run for another directory"
         )
-    files = run_dir.glob("*.parquet") if stale is None else (run_dir / name for name in stale)
-    for table in files:
-        table.unlink(missing_ok=True)
-    results.clear_parts(run_dir)
+    owned = results.owned_files(run_dir)
+    results.remove_owned(
+        run_dir, [f for f in owned if f.endswith(".parquet") and (stale is None or f in stale)]
+    )
 
 
 def record_config(config: Config, run_dir: Path) -> None:

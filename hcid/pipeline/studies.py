@@ -8,6 +8,8 @@ missing, identify what is not done, sweep W"; the CLI calls one of these.
 
 from __future__ import annotations
 
+import os
+import socket
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -20,7 +22,7 @@ from hcid import criteria, methods, results, selection, tables
 from hcid.config import Config, IdentifyConfig
 from hcid.errors import ConfigError, DataError, IdentificationError
 from hcid.pipeline.parallel import parallel_map
-from hcid.pipeline.rundir import check_run_dir, record_config
+from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
 from hcid.simulate import remnant_gain, simulate_realization
 
 __all__ = [
@@ -58,6 +60,7 @@ class SimulationRun:
     run_dir: Path
 
 
+@holds_run_dir(create=True)
 def simulate_study(
     config: Config, run_dir: Path, *, jobs: int = 2, show_progress: bool = True, force: bool = False
 ) -> SimulationRun:
@@ -90,8 +93,9 @@ def _identify_task(
     settings: IdentifyConfig, rate: float, model: str, seed: int, method: str, record: dict[str, np.ndarray]
 ):
     result = methods.identify(record, settings, method, rate=rate, threads=1)
+    worker = f"{socket.gethostname()}:{os.getpid()}"  # the process that ran it (log only)
     return (model, seed, method), results.frontier_part(
-        model, seed, result, methods.get(method).choice_stages
+        model, seed, result, methods.get(method).choice_stages, worker
     )
 
 
@@ -113,9 +117,16 @@ class IdentifyRun:
     imported: int = 0
 
 
-def _part_kinds() -> dict[str, tuple[str, ...]]:
-    """Per method, the parts a finished task has besides its frontier."""
-    return {name: ("log", *(s.name for s in m.choice_stages)) for name, m in methods.METHODS.items()}
+def _part_kinds() -> dict[str, dict[str, tables.Schema]]:
+    """Per method, the schema of each part a finished task has."""
+    return {
+        name: {
+            "frontier": tables.FRONTIER,
+            "log": tables.IDENTIFY_LOG,
+            **{s.name: tables.stage_choice(s.name, s.inputs) for s in m.choice_stages},
+        }
+        for name, m in methods.METHODS.items()
+    }
 
 
 def _choice_schemas() -> dict[str, tables.Schema]:
@@ -182,6 +193,7 @@ def _import_data(config: Config, run_dir: Path, path: Path) -> dict[int, dict[st
     return records
 
 
+@holds_run_dir(create=True)
 def identify_study(
     config: Config,
     run_dir: Path,
@@ -192,6 +204,7 @@ def identify_study(
     force: bool = False,
     backend: str = "loky",
     scheduler: str | None = None,
+    worker_timeout: float = 60.0,
     show_progress: bool = True,
 ) -> IdentifyRun:
     """Identify every model x seed x method of ``config``, simulating first if the run has no simulations.
@@ -250,13 +263,14 @@ def identify_study(
         show_progress=show_progress,
         backend=backend,
         scheduler=scheduler,
+        worker_timeout=worker_timeout,
     ):
         results.write_part(run_dir, *key, parts)
     done.update(results.read_parts(run_dir, _part_kinds()))
 
     order = _canonical_order(config, done)
     frontier = tables.concat([done[k]["frontier"] for k in order])
-    log = tables.concat([done[k]["log"] for k in order])
+    log = tables.concat([_with_worker(done[k]["log"]) for k in order])
     results.write(tables.FRONTIER, frontier, run_dir)
     results.write(tables.IDENTIFY_LOG, log, run_dir)
     choices = {}
@@ -278,6 +292,13 @@ def identify_study(
         simulation=simulation,
         imported=len(keys) if data_path is not None else 0,
     )
+
+
+def _with_worker(log: pa.Table) -> pa.Table:
+    """A log row of an hcid that did not record the worker gets an empty one."""
+    if "worker" in log.column_names:
+        return log
+    return log.append_column("worker", pa.array([""] * log.num_rows, pa.string()))
 
 
 def _canonical_order(config: Config, done: dict) -> list[tuple[str, int, str]]:
@@ -305,6 +326,7 @@ class SweepRun:
     run_dir: Path
 
 
+@holds_run_dir(create=False)
 def sweep_study(config: Config, run_dir: Path) -> SweepRun:
     """Select by ``MSC = log V + W d`` for every realization, method and W of the grid.
 
@@ -320,6 +342,7 @@ def sweep_study(config: Config, run_dir: Path) -> SweepRun:
         (*tables.FRONTIER.key, *tables.SELECTED_COLUMNS),
         hint="run `hcid identify` first",
     )
+    results.check_against_config(frontier, config, run_dir / tables.FRONTIER.file)
     w = np.asarray(config.selection.w_grid)
     sel_parts, bp_parts = [], []
     segments: dict[tuple[str, str], list] = {}
@@ -404,6 +427,7 @@ class StudyRun:
     seconds: float
 
 
+@holds_run_dir(create=True)
 def run_study(
     config: Config,
     run_dir: Path,
@@ -411,12 +435,19 @@ def run_study(
     jobs: int = 2,
     backend: str = "loky",
     scheduler: str | None = None,
+    worker_timeout: float = 60.0,
     show_progress: bool = True,
 ) -> StudyRun:
     """Simulate (if missing), identify every method (what is not done yet), then sweep W."""
     start = time.perf_counter()
     identification = identify_study(
-        config, run_dir, jobs=jobs, backend=backend, scheduler=scheduler, show_progress=show_progress
+        config,
+        run_dir,
+        jobs=jobs,
+        backend=backend,
+        scheduler=scheduler,
+        worker_timeout=worker_timeout,
+        show_progress=show_progress,
     )
     sweep = sweep_study(config, run_dir)
     return StudyRun(identification, sweep, time.perf_counter() - start)
@@ -434,6 +465,7 @@ class CalibrationRun:
     run_dir: Path
 
 
+@holds_run_dir(create=True)
 def calibrate_study(
     config: Config,
     run_dir: Path,
@@ -441,6 +473,7 @@ def calibrate_study(
     jobs: int = 2,
     backend: str = "loky",
     scheduler: str | None = None,
+    worker_timeout: float = 60.0,
     show_progress: bool = True,
 ) -> CalibrationRun:
     """Run the study of the config's HC hypothesis (what is not done yet), then compute
@@ -459,7 +492,13 @@ def calibrate_study(
             f"model (Kpt > 0), got {[m.name for m in config.models]}"
         )
     study = run_study(
-        config, run_dir, jobs=jobs, backend=backend, scheduler=scheduler, show_progress=show_progress
+        config,
+        run_dir,
+        jobs=jobs,
+        backend=backend,
+        scheduler=scheduler,
+        worker_timeout=worker_timeout,
+        show_progress=show_progress,
     )
     chosen = _selections(results.read(tables.FRONTIER, run_dir), run_dir)
     out = []

@@ -103,6 +103,9 @@ def write_report(data: ReportData, out_dir: Path) -> Report:
 
 def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Report:
     """Write the report of ``run_dir`` into ``out_dir`` (default: ``run_dir/report``)."""
+    from hcid.pipeline.rundir import using
+
     run_dir = Path(run_dir)
     out = Path(out_dir) if out_dir is not None else run_dir / "report"
-    return write_report(compute_report(run_dir), out)
+    with using(run_dir, create=False):
+        return write_report(compute_report(run_dir), out)

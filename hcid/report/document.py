@@ -34,18 +34,31 @@ class Doc:
         self.drawings[name] = draw
 
 
+def _escape_md(text: str) -> str:
+    """Markdown text with HTML escaped (``<``, ``>``, ``&``), as the HTML report escapes it: a config
+    name or run path never becomes markup in a Markdown viewer."""
+    return html.escape(text, quote=False)
+
+
 def to_markdown(doc: Doc) -> str:
     parts = []
     for kind, block in doc.blocks:
         if kind == "md":
-            parts.append(block["text"])
+            parts.append(_escape_md(block["text"]))
         elif kind == "figure":
             f = block
-            parts.append(f"![{f['caption']}]({f['name']})\n\n_{f['caption']}_")
+            caption = _escape_md(f["caption"])
+            parts.append(f"![{caption}]({f['name']})\n\n_{caption}_")
         else:
             t = block
-            lines = ["| " + " | ".join(t["header"]) + " |", "|" + "---|" * len(t["header"])]
-            lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in t["rows"]]
+            lines = [
+                "| " + " | ".join(_escape_md(h) for h in t["header"]) + " |",
+                "|" + "---|" * len(t["header"]),
+            ]
+            lines += [
+                "| " + " | ".join(_escape_md(str(c)).replace("|", "\\|") for c in row) + " |"
+                for row in t["rows"]
+            ]
             parts.append("\n".join(lines))
     return "\n\n".join(parts) + "\n"
 

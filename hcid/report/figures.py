@@ -169,7 +169,7 @@ def plot_bode(
         ax_ph.set_xlabel("frequency (rad/s)")
         if ax_mag.get_legend_handles_labels()[0]:
             ax_mag.legend(fontsize=8, loc="best")
-    fig.suptitle(title)
+    fig.suptitle(title, parse_math=False)  # user strings are not mathtext
     fig.tight_layout()
     return fig
 
@@ -208,7 +208,7 @@ def plot_errors(
             ax.grid(True, which="both", alpha=0.3)
         if axes[0, col].get_legend_handles_labels()[0]:
             axes[0, col].legend(fontsize=8)
-    fig.suptitle(title)
+    fig.suptitle(title, parse_math=False)  # user strings are not mathtext
     fig.tight_layout()
     return fig
 
@@ -232,7 +232,7 @@ def plot_signals(t: np.ndarray, channels: dict[str, np.ndarray], title: str, axe
     axes[1].legend(fontsize=8, loc="upper right")
     for ax in axes:
         ax.grid(True, alpha=0.3)
-    fig.suptitle(title)
+    fig.suptitle(title, parse_math=False)  # user strings are not mathtext
     fig.tight_layout()
     return fig
 
@@ -251,7 +251,7 @@ def plot_data_structure(data, marks: dict[str, float], name: str, axes=None):
             axes[0, col].step(v["w"], v["nb_ft"], where="post", **style)
             axes[1, col].step(v["w"], v["d"], where="post", **style)
             axes[2, col].plot(v["w"], v["vaf_estimation"], **style)
-        axes[0, col].set_title(f"{name}: {method} method")
+        axes[0, col].set_title(f"{name}: {method} method", parse_math=False)
         axes[0, col].set_ylabel("selected nb_ft (-)")
         axes[1, col].set_ylabel("selected d (-)")
         axes[2, col].set_ylabel("VAF (%)")
@@ -298,7 +298,9 @@ def plot_calibration(table, name: str, axes=None):
         ax.set_ylim(-0.02, 1.02)
         ax.set_xlabel("W (penalty per parameter, -)")
         ax.set_ylabel("rate over realizations (-)")
-        ax.set_title(f"{name}: {method} method ({r[0]['n_fb']} + {r[0]['n_ff']} realizations)")
+        ax.set_title(
+            f"{name}: {method} method ({r[0]['n_fb']} + {r[0]['n_ff']} realizations)", parse_math=False
+        )
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8, loc="center left")
     fig.tight_layout()

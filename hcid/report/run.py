@@ -6,11 +6,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pyarrow as pa
-import yaml
 
 from hcid import criteria, methods, results, tables
 from hcid.config import Config, parse_config
-from hcid.errors import DataError
+from hcid.config.parse import read_yaml
+from hcid.errors import ConfigError, DataError
 
 __all__ = ["RunTables", "marks_for_plot", "read_run"]
 
@@ -84,10 +84,9 @@ def _load_config(run_dir: Path) -> Config:
     if not path.is_file():
         raise DataError(f"{path}: missing; is {run_dir} a run directory (made by `hcid simulate`)?")
     try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise DataError(f"{path}: not valid YAML") from exc
-    return parse_config(data, run_dir.name)
+        return parse_config(read_yaml(path, "run config"), run_dir.name)
+    except ConfigError as exc:
+        raise DataError(f"{path}: {exc}" if not str(exc).startswith(str(path)) else str(exc)) from exc
 
 
 def read_run(run_dir: Path) -> RunTables:
@@ -99,4 +98,8 @@ def read_run(run_dir: Path) -> RunTables:
             table = results.read_optional(tables.stage_choice(stage.name, stage.inputs), run_dir)
             if table is not None:
                 choices[stage.name] = table
-    return RunTables(run_dir=run_dir, config=_load_config(run_dir), choices=choices, **loaded)
+    config = _load_config(run_dir)
+    for name, table in loaded.items():
+        if table is not None:
+            results.check_against_config(table, config, run_dir / _READS[name][0].file)
+    return RunTables(run_dir=run_dir, config=config, choices=choices, **loaded)

@@ -1,0 +1,200 @@
+"""Run directories (issue 10): the lock, the manifest-guarded delete, unsafe paths, tampered tables."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from hcid import results
+from hcid.cli import app
+from hcid.errors import DataError
+from hcid.pipeline import rundir
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory):
+    """configs/ci.yaml with seed 1, run end to end once (copied by the tests that change it)."""
+    from .conftest import CI_CONFIG
+
+    base = tmp_path_factory.mktemp("rundir")
+    raw = yaml.safe_load(CI_CONFIG.read_text())
+    raw["seeds"] = [1]
+    config = base / "small.yaml"
+    config.write_text(yaml.safe_dump(raw))
+    run = base / "run"
+    result = runner.invoke(app, ["run", str(config), "--run", str(run), "--jobs", "1", "--quiet"])
+    assert result.exit_code == 0, result.output
+    return config, run
+
+
+def _copy(small_run, tmp_path):
+    config, run = small_run
+    shutil.copytree(run, tmp_path / "run")
+    return config, tmp_path / "run"
+
+
+def test_manifest_lists_what_hcid_wrote(small_run):
+    _, run = small_run
+    owned = set(results.owned_files(run))
+    assert {"config.yaml", "simulations.parquet", "frontier.parquet", "thresholds.parquet"} <= owned
+    assert ".hcid.lock" not in owned and results.MANIFEST not in owned
+
+
+def test_second_command_on_a_held_directory_is_refused(small_run, tmp_path):
+    # A process holding the lock (released by the OS when it ends, even by kill -9): the
+    # command is refused in one line naming it, and the tables are unchanged.
+    config, run = _copy(small_run, tmp_path)
+    script = (
+        "import sys, time\nfrom pathlib import Path\nfrom hcid.pipeline.rundir import using\n"
+        "with using(Path(sys.argv[1])):\n    print('held', flush=True)\n    time.sleep(60)\n"
+    )
+    holder = subprocess.Popen([sys.executable, "-c", script, str(run)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        before = (run / "frontier.parquet").read_bytes()
+        result = runner.invoke(app, ["identify", str(config), "--run", str(run), "--force", "--quiet"])
+        assert result.exit_code == 2
+        assert f"in use by hcid pid {holder.pid}" in result.stderr
+        assert len(result.stderr.strip().splitlines()) == 1
+        assert (run / "frontier.parquet").read_bytes() == before
+    finally:
+        holder.kill()  # kill -9 semantics: the OS drops the lock
+        holder.wait()
+    result = runner.invoke(app, ["sweep-w", str(config), "--run", str(run)])
+    assert result.exit_code == 0, result.output
+
+
+def test_lock_is_reentrant_in_one_process(tmp_path):
+    with rundir.using(tmp_path / "r"), rundir.using(tmp_path / "r"):
+        assert (tmp_path / "r" / results.MANIFEST).is_file()
+
+
+def test_force_deletes_only_files_hcid_wrote(small_run, tmp_path):
+    config, run = _copy(small_run, tmp_path)
+    (run / "my_notes.parquet").write_bytes(b"mine")
+    other = yaml.safe_load(config.read_text())
+    other["seeds"] = [2]
+    config2 = tmp_path / "other.yaml"
+    config2.write_text(yaml.safe_dump(other))
+    result = runner.invoke(
+        app, ["simulate", str(config2), "--run", str(run), "--force", "--quiet", "--jobs", "1"]
+    )
+    assert result.exit_code == 0, result.output
+    assert (run / "my_notes.parquet").read_bytes() == b"mine"
+    assert not (run / "frontier.parquet").exists()  # hcid's, made from the old simulation
+
+
+@pytest.mark.parametrize("where", ["/", ".", ".."])
+def test_unsafe_run_paths_are_refused(small_run, where):
+    config, _ = small_run
+    result = runner.invoke(app, ["simulate", str(config), "--run", where, "--quiet"])
+    assert result.exit_code == 2
+    assert "refusing to use it as a run directory" in result.stderr
+
+
+def test_foreign_directory_is_refused_and_untouched(small_run, tmp_path):
+    config, _ = small_run
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "thesis.parquet").write_bytes(b"x")
+    result = runner.invoke(
+        app, ["simulate", str(config), "--run", str(tmp_path / "data"), "--force", "--quiet"]
+    )
+    assert result.exit_code == 2
+    assert "not an hcid run directory" in result.stderr
+    assert sorted(p.name for p in (tmp_path / "data").iterdir()) == ["thesis.parquet"]
+
+
+@pytest.mark.parametrize(
+    ("column", "values", "message"),
+    [
+        ("v", lambda n: [float("nan")] * n, "column 'v' holds nan"),
+        ("v", lambda n: ["1"] * n, "column 'v' is string, expected double"),
+        ("model", lambda n: ["ZZ"] * n, "holds model 'ZZ', which the run's config.yaml does not name"),
+        ("seed", lambda n: [99] * n, "seed 99, not among the run's seeds"),
+    ],
+)
+def test_tampered_frontier_is_refused(small_run, tmp_path, column, values, message):
+    config, run = _copy(small_run, tmp_path)
+    table = pq.read_table(run / "frontier.parquet")
+    i = table.column_names.index(column)
+    pq.write_table(table.set_column(i, column, pa.array(values(table.num_rows))), run / "frontier.parquet")
+    for args in (["sweep-w", str(config), "--run", str(run)], ["report", str(run)]):
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2, args
+        assert message in result.stderr
+
+
+def test_report_md_escapes_user_strings(small_run, tmp_path):
+    _, run = small_run
+    target = tmp_path / "<b>run</b>"
+    shutil.copytree(run, target)
+    result = runner.invoke(app, ["report", str(target)])
+    assert result.exit_code == 0, result.output
+    text = (target / "report" / "report.md").read_text()
+    assert "&lt;b&gt;run&lt;/b&gt;" in text and "<b>run</b>" not in text
+
+
+def test_dollar_in_the_study_name_is_not_mathtext(small_run, tmp_path):
+    config, run = _copy(small_run, tmp_path)
+    path = run / "config.yaml"
+    raw = yaml.safe_load(path.read_text())
+    raw["name"] = "a$b$c"
+    path.write_text(yaml.safe_dump(raw))
+    result = runner.invoke(app, ["report", str(run)])
+    assert result.exit_code == 0, result.output
+
+
+def test_symlinked_parts_are_never_written_through(small_run, tmp_path):
+    config, run = _copy(small_run, tmp_path)
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (run / ".parts").symlink_to(outside)
+    result = runner.invoke(
+        app, ["identify", str(config), "--run", str(run), "--force", "--quiet", "--jobs", "1"]
+    )
+    assert result.exit_code == 0, result.output
+    assert list(outside.iterdir()) == []
+    assert not (run / ".parts").exists()
+
+
+def test_full_disk_is_one_line_and_keeps_the_table(tmp_path, monkeypatch):
+    import errno
+
+    table = pa.table({"x": [1]})
+    results.write_table(table, tmp_path / "t.parquet")
+
+    def enospc(table, where):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(pq, "write_table", enospc)
+    with pytest.raises(
+        DataError, match="cannot write \\(No space left on device\\); the previous file is intact"
+    ):
+        results.write_table(pa.table({"x": [2]}), tmp_path / "t.parquet")
+    monkeypatch.undo()
+    assert pq.read_table(tmp_path / "t.parquet").equals(table)
+
+
+def test_complete_run_writes_nothing(small_run, tmp_path):
+    config, run = _copy(small_run, tmp_path)
+    stamps = {p.name: p.stat().st_mtime_ns for p in run.iterdir() if p.suffix in (".parquet", ".yaml")}
+    time.sleep(0.01)
+    result = runner.invoke(app, ["run", str(config), "--run", str(run), "--quiet", "--jobs", "1"])
+    assert result.exit_code == 0, result.output
+    assert {p: (run / p).stat().st_mtime_ns for p in stamps} == stamps
+
+
+def test_lock_file_holds_the_pid(tmp_path):
+    with rundir.using(tmp_path / "r"):
+        assert f"pid {os.getpid()}" in (tmp_path / "r" / rundir.LOCK).read_text()
