@@ -3,7 +3,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test test-all lint bench clean
+.PHONY: run test test-all lint bench robustness clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -30,6 +30,10 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/arx_engine.py
+
+robustness: $(STAMP)
+	$(BIN)/python tests/robustness/battery.py
+	$(BIN)/python tests/robustness/concurrency.py
 
 clean:
 	rm -rf $(VENV) runs/*/ .pytest_cache build *.egg-info

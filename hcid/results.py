@@ -165,11 +165,14 @@ def write(schema: Schema, table: pa.Table, run_dir: str | Path) -> Path:
 
 
 def _same_table(path: Path, table: pa.Table) -> bool:
+    """Whether ``path`` holds exactly the bytes ``table`` would be written as (NaN-safe)."""
     if not path.is_file():
         return False
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink)
     try:
-        return pq.read_table(path).equals(table)
-    except (pa.ArrowException, OSError):
+        return path.read_bytes() == sink.getvalue().to_pybytes()
+    except OSError:
         return False
 
 

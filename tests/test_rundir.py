@@ -145,14 +145,23 @@ def test_report_md_escapes_user_strings(small_run, tmp_path):
     assert "&lt;b&gt;run&lt;/b&gt;" in text and "<b>run</b>" not in text
 
 
-def test_dollar_in_the_study_name_is_not_mathtext(small_run, tmp_path):
-    config, run = _copy(small_run, tmp_path)
-    path = run / "config.yaml"
-    raw = yaml.safe_load(path.read_text())
+def test_dollar_in_a_name_is_refused_and_titles_are_not_mathtext(small_run, tmp_path):
+    # A name is one plain path component (no '$'); figure titles never parse mathtext anyway.
+    import numpy as np
+
+    from hcid.report import figures
+
+    config, _ = small_run
+    raw = yaml.safe_load(config.read_text())
     raw["name"] = "a$b$c"
-    path.write_text(yaml.safe_dump(raw))
-    result = runner.invoke(app, ["report", str(run)])
-    assert result.exit_code == 0, result.output
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(raw))
+    result = runner.invoke(app, ["simulate", str(bad), "--run", str(tmp_path / "r"), "--quiet"])
+    assert result.exit_code == 2 and "name: must be 1 to 100 letters" in result.stderr
+    t = np.arange(10.0)
+    fig = figures.plot_signals(t, {"ft": t, "u": t}, "a$b$c ^_{x}")
+    figures.save(fig, tmp_path / "f.png")  # mathtext would fail on the unbalanced '$'
+    assert (tmp_path / "f.png").stat().st_size > 0
 
 
 def test_symlinked_parts_are_never_written_through(small_run, tmp_path):

@@ -89,10 +89,16 @@ def _loky_stream(func, tasks, jobs) -> Iterator:
 
 
 def _client(scheduler: str | None, jobs: int, timeout: float, stack: contextlib.ExitStack):
+    import logging
+
+    # A lost worker makes distributed log tracebacks of its own; hcid reports the loss in one line.
     try:
         from dask.distributed import Client, LocalCluster
     except ImportError as exc:
         raise HcidError("--backend dask: needs dask.distributed (pip install 'hcid[dask]')") from exc
+    for name in [*logging.root.manager.loggerDict, "asyncio"]:
+        if name.split(".")[0] in ("asyncio", "distributed", "tornado"):
+            logging.getLogger(name).setLevel(logging.CRITICAL)
     if scheduler is None:
         cluster = stack.enter_context(
             LocalCluster(
@@ -130,8 +136,13 @@ def _dask_stream(func, tasks, jobs, scheduler, timeout: float, stack: contextlib
             except Exception:  # noqa: BLE001 (a timeout of this poll: nothing finished)
                 done = set()
             for future in done:
-                remaining.discard(future)
-                finished[order[future.key]] = future  # its result (or error) is taken in order
+                # Fetch now: a result left on a worker is lost with it. A task's own error is
+                # raised; a result whose worker died meanwhile is waited for again.
+                try:
+                    finished[order[future.key]] = future.result(timeout=timeout)
+                    remaining.discard(future)
+                except TimeoutError:
+                    done = set()
             if not done:
                 n_workers = len(client.nthreads())  # asks the scheduler now (scheduler_info is cached)
                 now = time.monotonic()
@@ -145,5 +156,5 @@ def _dask_stream(func, tasks, jobs, scheduler, timeout: float, stack: contextlib
                         f"{len(futures)} tasks are kept; rerun to resume"
                     )
         while following in finished:
-            yield finished.pop(following).result()
+            yield finished.pop(following)
             following += 1
