@@ -97,7 +97,7 @@ def main():
 
     print("2. paper record FF, seed 1, with remnant; direct method at W_BIC")
     data = paper_record("FF", 1)
-    fd_free = simulate_realization(config, model, seed=1, kn=0.0)  # for the unshifted ft
+    clean = simulate_realization(config, model, seed=1, kn=0.0)  # ft unshifted (remnant-free)
     grid = fit_grid(data["ft_s"], data["e"], data["u"], DIRECT_GRID, ESTIMATION, VALIDATION)
     orders = np.column_stack([grid.na, grid.nb1, grid.nb2, grid.nk1, grid.nk2])
     row = int(select_at(grid.d, grid.v, orders, np.array([w_bic(960)]))[0])
@@ -106,7 +106,7 @@ def main():
     dt = 1 / 25.0
     h_ft = arx_response(a, b1, int(grid.nk1[row]), omega, dt, advance=1.0) if b1.size else None
     h_e = arx_response(a, b2, int(grid.nk2[row]), omega, dt)
-    record = hcfit.TrackingRecord(fd_free.ft, data["e"], data["u"], 25.0, ESTIMATION, VALIDATION)
+    record = hcfit.TrackingRecord(clean.ft, data["e"], data["u"], 25.0, ESTIMATION, VALIDATION)
     seconds, fit = _timed(lambda: hcfit.fit_frequency(omega, h_e, h_ft, yc, record=record))
     print(f"  frequency fit: median {seconds:.3f} s, VAF_val {fit.vaf_validation:.2f}%: {_estimates(fit)}")
     seconds, fit = _timed(lambda: hcfit.fit_time(record, yc, h_ft is not None))
@@ -116,7 +116,7 @@ def main():
     for label, u_hat in (("ARX", u_arx), ("time fit", hcfit.simulate_hc(fit.values, yc, record))):
         start = time.perf_counter()
         res = analyse_residuals(
-            data["u"] - u_hat, {"ft": fd_free.ft, "e": data["e"]}, VALIDATION, 25, rate=25.0
+            data["u"] - u_hat, {"ft": clean.ft, "e": data["e"]}, VALIDATION, 25, rate=25.0
         )
         took = time.perf_counter() - start
         shares = ", ".join(f"{s['signal']} {100 * s['share_outside']:.0f}%" for s in res.summary_rows())
