@@ -18,7 +18,7 @@ def paper_record(model: str = "FF", seed: int = 1) -> dict[str, np.ndarray]:
     ``ft_s(k) = ft(k + 25)``, zeros after the record (SPEC section 3).
     """
     from hcid.config import load_config
-    from hcid.identify import shift_forward
+    from hcid.methods import shift_forward
     from hcid.simulate import remnant_gain, simulate_realization
 
     config = load_config(PAPER_CONFIG)

@@ -19,6 +19,7 @@ import numpy as np
 import pyarrow as pa
 from scipy import stats
 
+from hcid import tables
 from hcid.selection import Segments
 
 __all__ = ["Calibration", "calibrate", "clopper_pearson"]
@@ -66,9 +67,9 @@ class Calibration:
 
     def to_arrow(self) -> pa.Table:
         n = self.w.size
-        return pa.table(
+        return pa.Table.from_pydict(
             {
-                "method": pa.array([self.method] * n, pa.string()),
+                "method": [self.method] * n,
                 "w": self.w,
                 "fp_rate": self.fp_rate,
                 "fp_low": self.fp_low,
@@ -76,13 +77,14 @@ class Calibration:
                 "fn_rate": self.fn_rate,
                 "fn_low": self.fn_low,
                 "fn_high": self.fn_high,
-                "n_fb": pa.array([self.n_fb] * n, pa.int64()),
-                "n_ff": pa.array([self.n_ff] * n, pa.int64()),
+                "n_fb": [self.n_fb] * n,
+                "n_ff": [self.n_ff] * n,
                 "target_rate": np.full(n, self.target_rate),
                 "safe_low": np.full(n, self.safe_low),
                 "safe_high": np.full(n, self.safe_high),
                 "recommended": np.full(n, self.recommended),
-            }
+            },
+            schema=tables.CALIBRATION.arrow,
         )
 
 

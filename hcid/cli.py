@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import functools
 import os
-import sys
 from pathlib import Path
 from typing import Annotated
 
@@ -37,7 +36,9 @@ RunOpt = Annotated[Path | None, typer.Option("--run", help="Run directory [defau
 JobsOpt = Annotated[int, typer.Option("--jobs", min=1, max=256, help="Worker processes.")]
 QuietOpt = Annotated[bool, typer.Option("--quiet", help="No progress bar.")]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Recompute what is already done.")]
-MethodOpt = Annotated[str, typer.Option("--method", help="direct, indirect or both.")]
+MethodOpt = Annotated[
+    str, typer.Option("--method", help="A method (direct, indirect), a comma-separated list, or all.")
+]
 BackendOpt = Annotated[str, typer.Option("--backend", help="loky (local processes) or dask.")]
 SchedulerOpt = Annotated[
     str | None,
@@ -61,16 +62,27 @@ def _user_errors(func):
     return wrapper
 
 
-def _check_backend(backend: str) -> None:
+def _load(config: Path, run: Path | None, backend: str = "loky"):
+    """The parsed config and its run directory; a bad --backend is refused before any work."""
+    from hcid.config import load_config
+    from hcid.pipeline import check_backend
+
+    check_backend(backend)
+    cfg = load_config(config)
+    return cfg, (run if run is not None else Path("runs") / cfg.name)
+
+
+def _methods(method: str) -> tuple[str, ...]:
     from hcid.errors import HcidError
-    from hcid.pipeline import BACKENDS
+    from hcid.methods import METHODS
 
-    if backend not in BACKENDS:
-        raise HcidError(f"--backend: must be one of {', '.join(BACKENDS)}, got {backend!r}")
-
-
-def _run_dir(run: Path | None, config) -> Path:
-    return run if run is not None else Path("runs") / config.name
+    if method == "all":
+        return tuple(METHODS)
+    names = tuple(m.strip() for m in method.split(","))
+    unknown = [m for m in names if m not in METHODS]
+    if unknown or not names:
+        raise HcidError(f"--method: must be all or among {', '.join(METHODS)}; got {method!r}")
+    return names
 
 
 @app.command()
@@ -79,29 +91,17 @@ def simulate(
     config: ConfigArg, run: RunOpt = None, jobs: JobsOpt = 2, quiet: QuietOpt = False, force: ForceOpt = False
 ):
     """Simulate every model x seed of CONFIG and write RUN/simulations.parquet."""
-    from hcid.config import load_config
     from hcid.pipeline import simulate_study
 
-    cfg = load_config(config)
-    result = simulate_study(cfg, _run_dir(run, cfg), jobs=jobs, show_progress=not quiet, force=force)
-    _print_simulation_summary(result)
-
-
-def _methods(method: str) -> tuple[str, ...]:
-    from hcid.errors import HcidError
-
-    choices = {"direct": ("direct",), "indirect": ("indirect",), "both": ("direct", "indirect")}
-    try:
-        return choices[method]
-    except KeyError:
-        raise HcidError(f"--method: must be one of direct, indirect, both; got {method!r}") from None
+    cfg, run_dir = _load(config, run)
+    _print_simulation(simulate_study(cfg, run_dir, jobs=jobs, show_progress=not quiet, force=force))
 
 
 @app.command()
 @_user_errors
 def identify(
     config: ConfigArg,
-    method: MethodOpt = "both",
+    method: MethodOpt = "all",
     run: RunOpt = None,
     jobs: JobsOpt = 2,
     backend: BackendOpt = "loky",
@@ -118,72 +118,33 @@ def identify(
     ] = None,
 ):
     """Identify every model x seed of CONFIG (or every run of --data); writes RUN/frontier.parquet."""
-    from hcid.config import load_config
-    from hcid.pipeline import identify_study, import_data, simulate_study
+    from hcid.pipeline import identify_study
 
-    cfg = load_config(config)
-    methods = _methods(method)
-    _check_backend(backend)
-    run_dir = _run_dir(run, cfg)
-    records = None
-    if data is not None:
-        records = import_data(cfg, run_dir, data)
-        typer.echo(f"read {len(records)} run(s) of {cfg.data.name} from {data}")
-    elif not (run_dir / "simulations.parquet").exists():
-        _print_simulation_summary(simulate_study(cfg, run_dir, jobs=jobs, show_progress=not quiet))
+    cfg, run_dir = _load(config, run, backend)
     result = identify_study(
         cfg,
         run_dir,
-        methods,
-        data=records,
+        _methods(method),
+        data_path=data,
         jobs=jobs,
         force=force,
         backend=backend,
         scheduler=scheduler,
         show_progress=not quiet,
     )
-    _print_identify_summary(result)
-
-
-def _print_identify_summary(result) -> None:
-    log = result.log.to_pydict()
-    typer.echo(
-        f"identified {result.computed} realization-methods, reused {result.reused}; "
-        f"{sum(log['n_candidates']) + sum(log['stage1_candidates']):,} candidates in the tables, "
-        f"{sum(log['n_unstable']) + sum(log['stage1_unstable']):,} unstable"
-    )
-    typer.echo(f"wrote {result.run_dir / 'frontier.parquet'}")
+    _print_identification(result)
 
 
 @app.command("sweep-w")
 @_user_errors
 def sweep_w(config: ConfigArg, run: RunOpt = None):
     """Select models over the W grid; writes selection, breakpoints and thresholds tables."""
-    from hcid.config import load_config
     from hcid.pipeline import sweep_study
 
-    cfg = load_config(config)
-    result = sweep_study(cfg, _run_dir(run, cfg))
-    _print_thresholds(result.thresholds)
-    typer.echo(f"wrote {result.run_dir / 'thresholds.parquet'}")
-
-
-def _print_thresholds(thresholds) -> None:
-    from hcid import paper as PAPER
-
-    typer.echo(f"{'method':<10}{'model':<8}{'threshold':<11}{'this run':>12}{'paper':>10}")
-    for row in thresholds.to_pylist():
-        for name in ("w_fp", "w_fn"):
-            if row[name] is None:
-                continue
-            paper = PAPER.W_FP.get(row["method"]) if name == "w_fp" else PAPER.W_FN
-            paper_text = f"{paper:.2g}" if paper is not None else "-"
-            typer.echo(
-                f"{row['method']:<10}{row['model']:<8}{name.upper():<11}{row[name]:>12.4g}{paper_text:>10}"
-            )
-    first = thresholds.to_pylist()[0] if thresholds.num_rows else None
-    if first:
-        typer.echo(f"W_AIC = {first['w_aic']:.4g}, W_BIC = {first['w_bic']:.4g} (Nf = {first['nf']})")
+    cfg, run_dir = _load(config, run)
+    result = sweep_study(cfg, run_dir)
+    _print_thresholds(result)
+    typer.echo(f"wrote {run_dir / 'thresholds.parquet'}")
 
 
 @app.command("run")
@@ -196,47 +157,14 @@ def run_all(
     scheduler: SchedulerOpt = None,
     quiet: QuietOpt = False,
 ):
-    """Simulate, identify both methods and sweep W, skipping what is already done."""
-    import time
+    """Simulate, identify every method and sweep W, skipping what is already done."""
+    from hcid.pipeline import run_study
 
-    from hcid.config import load_config
-    from hcid.pipeline import identify_study, simulate_study, sweep_study
-
-    cfg = load_config(config)
-    _check_backend(backend)
-    run_dir = _run_dir(run, cfg)
-    start = time.perf_counter()
-    if not (run_dir / "simulations.parquet").exists():
-        _print_simulation_summary(simulate_study(cfg, run_dir, jobs=jobs, show_progress=not quiet))
-    _print_identify_summary(
-        identify_study(cfg, run_dir, jobs=jobs, backend=backend, scheduler=scheduler, show_progress=not quiet)
-    )
-    _print_thresholds(sweep_study(cfg, run_dir).thresholds)
-    typer.echo(f"done in {time.perf_counter() - start:.1f} s; tables in {run_dir}")
-
-
-def _print_simulation_summary(result) -> None:
-    import numpy as np
-
-    from hcid import paper as PAPER
-
-    summary = result.summary.to_pydict()
-    models = list(dict.fromkeys(summary["model"]))
-    typer.echo(f"Kn = {result.kn:.6g} (remnant gain, from var(n)/var(u) in the disturbance-only task)")
-    typer.echo(
-        f"{'model':<8}{'seeds':>6}{'RMS(e) deg mean +- sd':>24}{'paper':>8}{'var(n)/var(u) dist-only':>26}"
-    )
-    for m in models:
-        rows = [i for i, name in enumerate(summary["model"]) if name == m]
-        rms = np.array([summary["rms_e_deg"][i] for i in rows])
-        ratio = np.array([summary["noise_ratio_disturbance_only"][i] for i in rows])
-        paper = PAPER.RMS_E_DEG.get(m)
-        paper_text = f"{paper:.2f}" if paper is not None else "-"
-        typer.echo(
-            f"{m:<8}{len(rows):>6}{rms.mean():>15.3f} +- {rms.std(ddof=1) if len(rows) > 1 else 0.0:.3f}"
-            f"{paper_text:>8}{ratio.mean():>26.4f}"
-        )
-    typer.echo(f"wrote {result.run_dir / 'simulations.parquet'}")
+    cfg, run_dir = _load(config, run, backend)
+    result = run_study(cfg, run_dir, jobs=jobs, backend=backend, scheduler=scheduler, show_progress=not quiet)
+    _print_identification(result.identification)
+    _print_thresholds(result.sweep)
+    typer.echo(f"done in {result.seconds:.1f} s; tables in {run_dir}")
 
 
 @app.command("calibrate-w")
@@ -250,17 +178,15 @@ def calibrate_w(
     quiet: QuietOpt = False,
 ):
     """Calibrate W on simulations of the config's FB and FF twins: rates, safe interval, recommended W."""
-    from hcid.config import load_config
-    from hcid.pipeline import calibrate_study, sweep_study
+    from hcid.pipeline import calibrate_study
 
-    cfg = load_config(config)
-    _check_backend(backend)
-    run_dir = _run_dir(run, cfg)
+    cfg, run_dir = _load(config, run, backend)
     result = calibrate_study(
         cfg, run_dir, jobs=jobs, backend=backend, scheduler=scheduler, show_progress=not quiet
     )
-    sweep_study(cfg, run_dir)
-    typer.echo(f"target rate {cfg.target_rate:g} for false positives (FB twin) and false negatives (FF twin)")
+    _print_identification(result.study.identification)
+    rate = cfg.selection.target_rate
+    typer.echo(f"target rate {rate:g} for false positives (FB twin) and false negatives (FF twin)")
     for cal in result.calibrations:
         if cal.has_safe_interval:
             typer.echo(
@@ -296,9 +222,66 @@ def report(
     typer.echo(f"report: {result.html}")
 
 
-def main() -> None:
-    app()
+# --------------------------------------------------------------------------- summaries
 
 
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+def _print_simulation(result) -> None:
+    import numpy as np
+
+    from hcid import paper
+
+    summary = result.summary.to_pydict()
+    models = list(dict.fromkeys(summary["model"]))
+    typer.echo(f"Kn = {result.kn:.6g} (remnant gain, from var(n)/var(u) in the disturbance-only task)")
+    typer.echo(
+        f"{'model':<8}{'seeds':>6}{'RMS(e) deg mean +- sd':>24}{'paper':>8}{'var(n)/var(u) dist-only':>26}"
+    )
+    for m in models:
+        rows = [i for i, name in enumerate(summary["model"]) if name == m]
+        rms = np.array([summary["rms_e_deg"][i] for i in rows])
+        ratio = np.array([summary["noise_ratio_disturbance_only"][i] for i in rows])
+        ref = paper.RMS_E_DEG.get(m)
+        ref_text = f"{ref:.2f}" if ref is not None else "-"
+        typer.echo(
+            f"{m:<8}{len(rows):>6}{rms.mean():>15.3f} +- {rms.std(ddof=1) if len(rows) > 1 else 0.0:.3f}"
+            f"{ref_text:>8}{ratio.mean():>26.4f}"
+        )
+    typer.echo(f"wrote {result.run_dir / 'simulations.parquet'}")
+
+
+def _print_identification(result) -> None:
+    if result.simulation is not None:
+        _print_simulation(result.simulation)
+    if result.imported:
+        typer.echo(f"read {result.imported} measured run(s)")
+    log = result.log.to_pydict()
+    typer.echo(
+        f"identified {result.computed} realization-methods, reused {result.reused}; "
+        f"{sum(log['n_candidates']) + sum(log['stage1_candidates']):,} candidates in the tables, "
+        f"{sum(log['n_unstable']) + sum(log['stage1_unstable']):,} unstable"
+    )
+    typer.echo(f"wrote {result.run_dir / 'frontier.parquet'}")
+
+
+def _print_thresholds(sweep) -> None:
+    from hcid import paper
+
+    rows = sweep.thresholds.to_pylist()
+    typer.echo(f"{'method':<10}{'model':<8}{'threshold':<11}{'this run':>12}{'paper':>10}")
+    for row in rows:
+        for name in ("w_fp", "w_fn"):
+            if row[name] is None:
+                continue
+            ref = paper.W_FP.get(row["method"]) if name == "w_fp" else paper.W_FN
+            ref_text = f"{ref:.2g}" if ref is not None else "-"
+            typer.echo(
+                f"{row['method']:<10}{row['model']:<8}{name.upper():<11}{row[name]:>12.4g}{ref_text:>10}"
+            )
+    by_nf: dict[int, list[str]] = {}
+    for row in rows:
+        by_nf.setdefault(row["nf"], [])
+        if row["method"] not in by_nf[row["nf"]]:
+            by_nf[row["nf"]].append(row["method"])
+    for nf, names in by_nf.items():
+        marks = ", ".join(f"{c.label} = {c.w(nf):.4g}" for c in sweep.criteria)
+        typer.echo(f"{marks} (Nf = {nf}: {', '.join(names)})")

@@ -25,32 +25,12 @@ import pyarrow as pa
 
 from hcid.config import Config, DataConfig
 from hcid.errors import DataError
+from hcid.tables import MEASURED, SIGNALS
 
-__all__ = ["SIGNALS", "load_data", "records_table"]
-
-SIGNALS = ("ft", "fd", "e", "u")
+__all__ = ["load_data", "records_table"]
 
 
-def _read_columns(path: Path, data: DataConfig) -> dict[str, np.ndarray]:
-    suffix = path.suffix.lower()
-    wanted = {name: data.columns[name] for name in (*SIGNALS, "time", "run", "rate") if name in data.columns}
-    try:
-        if suffix == ".csv":
-            import pyarrow.csv as pacsv
-
-            table = pacsv.read_csv(path)
-        elif suffix in (".parquet", ".pq"):
-            import pyarrow.parquet as pq
-
-            table = pq.read_table(path)
-        elif suffix == ".mat":
-            return _read_mat(path, wanted)
-        else:
-            raise DataError(f"{path}: unknown data format {suffix!r} (use .csv, .parquet or .mat)")
-    except (pa.ArrowException, OSError, ValueError) as exc:
-        if isinstance(exc, DataError):
-            raise
-        raise DataError(f"{path}: cannot read ({str(exc).splitlines()[0]})") from exc
+def _table_columns(table: pa.Table, path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
     out = {}
     for name, column in wanted.items():
         if column in table.column_names:
@@ -59,6 +39,18 @@ def _read_columns(path: Path, data: DataConfig) -> dict[str, np.ndarray]:
             except (pa.ArrowException, ValueError) as exc:
                 raise DataError(f"{path}: column {column!r} is not numeric") from exc
     return out
+
+
+def _read_csv(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
+    import pyarrow.csv as pacsv
+
+    return _table_columns(pacsv.read_csv(path), path, wanted)
+
+
+def _read_parquet(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
+    import pyarrow.parquet as pq
+
+    return _table_columns(pq.read_table(path), path, wanted)
 
 
 def _read_mat(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
@@ -78,6 +70,25 @@ def _read_mat(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
             # MATLAB stores vectors as 1 x n or n x 1 matrices.
             out[name] = value.ravel() if value.ndim == 2 and 1 in value.shape else value
     return out
+
+
+#: Data formats by file suffix: ``reader(path, wanted) -> {signal: array}``, where ``wanted``
+#: maps ft, fd, e, u, time, run and rate to the file's names. Add a format here.
+READERS = {".csv": _read_csv, ".parquet": _read_parquet, ".pq": _read_parquet, ".mat": _read_mat}
+
+
+def _read_columns(path: Path, data: DataConfig) -> dict[str, np.ndarray]:
+    suffix = path.suffix.lower()
+    wanted = {name: data.columns[name] for name in (*SIGNALS, "time", "run", "rate") if name in data.columns}
+    reader = READERS.get(suffix)
+    if reader is None:
+        raise DataError(f"{path}: unknown data format {suffix!r} (use {', '.join(READERS)})")
+    try:
+        return reader(path, wanted)
+    except DataError:
+        raise
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise DataError(f"{path}: cannot read ({str(exc).splitlines()[0]})") from exc
 
 
 def _split_runs(path: Path, cols: dict[str, np.ndarray], data: DataConfig) -> list[dict[str, np.ndarray]]:
@@ -133,16 +144,7 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
             f"{path}: needs a time column '{data.columns['time']}' or a rate '{data.columns['rate']}'"
         )
     rate = config.timing.output_rate
-    need = max(
-        s.validation.last for s in (config.identify.direct, config.identify.stage1, config.identify.stage2)
-    )
-    need = max(
-        need,
-        *(
-            s.estimation.last
-            for s in (config.identify.direct, config.identify.stage1, config.identify.stage2)
-        ),
-    )
+    need = max(max(s.validation.last, s.estimation.last) for _, s in config.identify.stages)
     records = {}
     for i, run in enumerate(_split_runs(path, cols, data), start=1):
         where = f"{path}: run {i}"
@@ -187,9 +189,4 @@ def records_table(name: str, records: dict[int, dict[str, np.ndarray]]) -> pa.Ta
         parts["k"].append(np.arange(n, dtype=np.int64))
         for c in ("t", *SIGNALS):
             parts[c].append(rec[c])
-    return pa.table(
-        {
-            c: np.concatenate(v) if c != "model" else pa.array(np.concatenate(v), pa.string())
-            for c, v in parts.items()
-        }
-    )
+    return pa.Table.from_pydict({c: np.concatenate(v) for c, v in parts.items()}, schema=MEASURED.arrow)

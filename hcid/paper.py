@@ -1,4 +1,8 @@
-"""Figures the paper reports (SPEC section 6), to print beside this tool's: never to tune to."""
+"""The paper's figures and fixed numbers (SPEC sections 5 and 6), in one place.
+
+The figures are printed beside this tool's, never tuned to. The fixed numbers
+are those of the paper's own analysis that are not properties of a config.
+"""
 
 #: Table 2: RMS(e) in deg per model.
 RMS_E_DEG = {"FB": 2.43, "FF": 1.22}
@@ -6,3 +10,13 @@ RMS_E_DEG = {"FB": 2.43, "FF": 1.22}
 W_FP = {"direct": 1.2e-2, "indirect": 3.7e-2}
 #: Section 5.2: FF mean nb_ft >= 2 up to this W, both methods.
 W_FN = 0.26
+#: Fig. 9: the W at which FF models lose their feedforward.
+W_NO_FEEDFORWARD = 0.47
+#: Fig. 7a: the feedforward gain the FB false positives resemble.
+KPT_FALSE_POSITIVE = 0.2
+#: Section 5 (SPEC 5): frequencies (rad/s) at which identified paths are compared with the true ones.
+FREQUENCY_RANGE = (0.1, 30.0)
+#: Section 5.3: the feedforward is accurate below this frequency (rad/s) at W_BIC.
+FEEDFORWARD_ACCURATE_BELOW = 3.0
+#: Fig. 10: direct's errors below indirect's under these frequencies (rad/s), per path.
+DIRECT_BETTER_BELOW = {"hft": 8.0, "he": 7.0}

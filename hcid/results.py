@@ -1,19 +1,17 @@
-"""Result tables on disk: Parquet in a run directory, written atomically.
+"""Result tables on disk: Parquet in a run directory, written atomically, read against their schemas.
 
-Layout of a run directory (default ``runs/<config name>``):
-
-- ``config.yaml``: the resolved config of the run.
-- ``simulations.parquet``: one row per model, seed and sample.
-- ``simulation_summary.parquet``: one row per model and seed.
-
-Every write goes to a temporary file beside the target and is renamed over it,
-so a reader never sees a half-written table and an interrupted write leaves the
-previous table intact.
+The schemas and the run directory's layout are in :mod:`hcid.tables`. Every
+write goes to a temporary file beside the target and is renamed over it, so a
+reader never sees a half-written table and an interrupted write leaves the
+previous table intact. Finished identification tasks are kept in
+``RUN/.parts/<method>/`` until the tables are assembled, so an interrupted run
+resumes where it stopped.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -22,27 +20,27 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from hcid import tables
 from hcid.errors import DataError
-from hcid.simulate import CHANNELS, Realization
+from hcid.simulate import Realization
+from hcid.tables import CHANNELS, Schema
 
 __all__ = [
-    "SIMULATIONS",
-    "SIMULATION_SUMMARY",
-    "read_table",
+    "append_run_log",
+    "clear_parts",
+    "frontier_part",
+    "read",
+    "read_optional",
+    "read_parts",
     "realizations_table",
     "records",
     "summary_table",
-    "write_table",
+    "write",
+    "write_part",
     "write_text",
 ]
 
-SIMULATIONS = "simulations.parquet"
-SIMULATION_SUMMARY = "simulation_summary.parquet"
-
-_SIMULATION_SCHEMA = pa.schema(
-    [("model", pa.string()), ("seed", pa.int64()), ("k", pa.int64()), ("t", pa.float64())]
-    + [(name, pa.float64()) for name in CHANNELS]
-)
+PARTS = ".parts"
 
 
 def _current_umask() -> int:
@@ -75,35 +73,60 @@ def write_table(table: pa.Table, path: str | Path) -> None:
     _atomic(Path(path), lambda tmp: pq.write_table(table, tmp))
 
 
+def write(schema: Schema, table: pa.Table, run_dir: str | Path) -> Path:
+    """Check ``table`` against ``schema`` and write it atomically as ``run_dir/schema.file``."""
+    problem = schema.problem(table)
+    if problem is not None:  # a bug, not a user's mistake: keep the traceback
+        raise AssertionError(f"{schema.file}: {problem}")
+    path = Path(run_dir) / schema.file
+    write_table(table, path)
+    return path
+
+
 def write_text(text: str, path: str | Path) -> None:
     """Write a text file atomically."""
     _atomic(Path(path), lambda tmp: Path(tmp).write_text(text))
 
 
-def read_table(path: str | Path, required: Sequence[str] = (), *, hint: str = "") -> pa.Table:
-    """Read a Parquet table, checking that it exists, parses and has the columns.
+def read(
+    schema: Schema, run_dir: str | Path, columns: Sequence[str] | None = None, *, hint: str = ""
+) -> pa.Table:
+    """Read ``run_dir/schema.file``, checking it exists, parses and has the columns with their types.
+
+    ``columns`` limits the check to the columns the caller reads (default: all).
 
     Raises
     ------
     DataError
         One line naming the file and what is wrong.
     """
-    path = Path(path)
+    path = Path(run_dir) / schema.file
     if not path.is_file():
         raise DataError(f"{path}: missing{'; ' + hint if hint else ''}")
     try:
         table = pq.read_table(path)
     except (pa.ArrowException, OSError) as exc:
         raise DataError(f"{path}: not a readable Parquet table ({str(exc).splitlines()[0]})") from exc
-    missing = [c for c in required if c not in table.column_names]
-    if missing:
-        raise DataError(f"{path}: missing columns {missing}")
+    problem = schema.problem(table, columns)
+    if problem is not None:
+        raise DataError(f"{path}: {problem}{'; ' + hint if hint else ''}")
     return table
+
+
+def read_optional(
+    schema: Schema, run_dir: str | Path, columns: Sequence[str] | None = None
+) -> pa.Table | None:
+    """:func:`read`, or None when the table has not been written."""
+    return read(schema, run_dir, columns) if (Path(run_dir) / schema.file).is_file() else None
+
+
+# --------------------------------------------------------------------------- simulation tables
 
 
 def realizations_table(realizations: Sequence[Realization]) -> pa.Table:
     """Stack realizations into the ``simulations.parquet`` table (given order)."""
-    columns: dict[str, list] = {name: [] for name in _SIMULATION_SCHEMA.names}
+    schema = tables.SIMULATIONS.arrow
+    columns: dict[str, list] = {name: [] for name in schema.names}
     for r in realizations:
         n = r.t.size
         columns["model"].append(np.full(n, r.model, dtype=object))
@@ -112,40 +135,38 @@ def realizations_table(realizations: Sequence[Realization]) -> pa.Table:
         columns["t"].append(r.t)
         for name in CHANNELS:
             columns[name].append(getattr(r, name))
-    arrays = [pa.array(np.concatenate(columns[f.name]), type=f.type) for f in _SIMULATION_SCHEMA]
-    return pa.Table.from_arrays(arrays, schema=_SIMULATION_SCHEMA)
+    arrays = [pa.array(np.concatenate(columns[f.name]), type=f.type) for f in schema]
+    return pa.Table.from_arrays(arrays, schema=schema)
 
 
 def summary_table(realizations: Sequence[Realization], disturbance_only: Sequence[Realization]) -> pa.Table:
     """Per model and seed: RMS(e) in deg, var(n)/var(u), the same ratio in the
     disturbance-only task, and Kn."""
-    return pa.table(
+    return pa.Table.from_pydict(
         {
-            "model": pa.array([r.model for r in realizations], pa.string()),
-            "seed": pa.array([r.seed for r in realizations], pa.int64()),
-            "rms_e_deg": pa.array([r.rms_e_deg for r in realizations], pa.float64()),
-            "noise_ratio": pa.array([r.noise_ratio for r in realizations], pa.float64()),
-            "noise_ratio_disturbance_only": pa.array([r.noise_ratio for r in disturbance_only], pa.float64()),
-            "kn": pa.array([r.kn for r in realizations], pa.float64()),
-        }
+            "model": [r.model for r in realizations],
+            "seed": [r.seed for r in realizations],
+            "rms_e_deg": [r.rms_e_deg for r in realizations],
+            "noise_ratio": [r.noise_ratio for r in realizations],
+            "noise_ratio_disturbance_only": [r.noise_ratio for r in disturbance_only],
+            "kn": [r.kn for r in realizations],
+        },
+        schema=tables.SIMULATION_SUMMARY.arrow,
     )
 
 
-def records(table: pa.Table, path: str | Path = SIMULATIONS) -> dict[tuple[str, int], dict[str, np.ndarray]]:
+def records(table: pa.Table, path: str | Path) -> dict[tuple[str, int], dict[str, np.ndarray]]:
     """Split a simulations table into one dict of float64 arrays per (model, seed).
 
     Raises
     ------
     DataError
-        If a channel holds NaN or inf, or a record's samples are not 0..N-1.
+        If a column is missing or mistyped, a channel holds NaN or inf, or a
+        record's samples are not 0..N-1.
     """
-    missing = [c for c in _SIMULATION_SCHEMA.names if c not in table.column_names]
-    if missing:
-        raise DataError(f"{path}: missing columns {missing}")
-    for field_ in _SIMULATION_SCHEMA:
-        found = table.schema.field(field_.name).type
-        if found != field_.type:
-            raise DataError(f"{path}: column {field_.name!r} is {found}, expected {field_.type}")
+    problem = tables.SIMULATIONS.problem(table)
+    if problem is not None:
+        raise DataError(f"{path}: {problem}")
     model = table.column("model").to_numpy(zero_copy_only=False).astype(str)
     seed = table.column("seed").to_numpy()
     k = table.column("k").to_numpy()
@@ -171,82 +192,60 @@ def records(table: pa.Table, path: str | Path = SIMULATIONS) -> dict[tuple[str, 
 
 # --------------------------------------------------------------------------- identification tables
 
-FRONTIER = "frontier.parquet"
-STAGE1 = "stage1.parquet"
-IDENTIFY_LOG = "identify_log.parquet"
-SELECTION = "selection.parquet"
-BREAKPOINTS = "breakpoints.parquet"
-THRESHOLDS = "thresholds.parquet"
-PARTS = ".parts"
-MEASURED = "measured.parquet"
-CALIBRATION = "calibration.parquet"
 
-#: Engine column names -> table column names (input 1 is ft, input 2 is e).
-FRONTIER_NAMES = {"nb1": "nb_ft", "nb2": "nb_e", "nk1": "nk_ft", "nk2": "nk_e", "b1": "b_ft", "b2": "b_e"}
-KEY_COLUMNS = ("model", "seed", "method")
+def frontier_part(model: str, seed: int, result, stages) -> dict[str, pa.Table]:
+    """Tables of one realization and method: its frontier rows, a row per choosing stage, a log row.
 
-
-def frontier_part(model: str, seed: int, result) -> dict[str, pa.Table]:
-    """Tables of one realization and method: frontier rows, stage-1 row, log row.
-
-    ``result`` is a :class:`hcid.identify.MethodResult`. Wall times go to the log
-    only, so the frontier and stage-1 tables are deterministic.
+    ``result`` is a :class:`hcid.methods.MethodResult`, ``stages`` the method's
+    choosing stages (:attr:`hcid.methods.Method.choice_stages`). Wall times go to
+    the log only, so the frontier and stage tables are deterministic.
     """
     fit = result.fit.to_arrow().replace_schema_metadata(None)
-    fit = fit.rename_columns([FRONTIER_NAMES.get(c, c) for c in fit.column_names])
+    fit = fit.rename_columns([tables.FRONTIER_NAMES.get(c, c) for c in fit.column_names])
     n = fit.num_rows
     keys = [
         pa.array([model] * n, pa.string()),
         pa.array([seed] * n, pa.int64()),
         pa.array([result.method] * n, pa.string()),
     ]
-    frontier = pa.Table.from_arrays(keys + fit.columns, names=[*KEY_COLUMNS, *fit.column_names])
-    log = {
-        "model": [model],
-        "seed": [seed],
-        "method": [result.method],
-        "n_candidates": [result.fit.n_candidates],
-        "n_unstable": [result.fit.n_unstable_total],
-        "stage1_candidates": [0],
-        "stage1_unstable": [0],
-        "seconds_stage1": [0.0],
-        "seconds": [result.seconds],
-    }
-    tables = {"frontier": frontier}
-    s1 = result.stage1
-    if s1 is not None:
-        tables["stage1"] = pa.table(
-            {
-                "model": [model],
-                "seed": [seed],
-                "na": [s1.na],
-                "nb_ft": [s1.nb1],
-                "nb_fd": [s1.nb2],
-                "nk_ft": [s1.nk1],
-                "nk_fd": [s1.nk2],
-                "v": [s1.v],
-                "n_candidates": [s1.n_candidates],
-                "n_unstable": [s1.n_unstable],
-            }
+    frontier = pa.Table.from_arrays(keys + fit.columns, names=[*tables.FRONTIER.key, *fit.column_names])
+    out = {"frontier": frontier}
+    for spec, c in zip(stages, result.choices, strict=True):
+        schema = tables.stage_choice(spec.name, spec.inputs)
+        values = [model, seed, c.na, c.nb1, c.nb2, c.nk1, c.nk2, c.v, c.n_candidates, c.n_unstable]
+        out[spec.name] = pa.Table.from_pydict(
+            {name: [v] for name, v in zip(schema.names, values, strict=True)}, schema=schema.arrow
         )
-        log.update(
-            stage1_candidates=[s1.n_candidates], stage1_unstable=[s1.n_unstable], seconds_stage1=[s1.seconds]
-        )
-    tables["log"] = pa.table(log)
-    return tables
+    out["log"] = pa.Table.from_pydict(
+        {
+            "model": [model],
+            "seed": [seed],
+            "method": [result.method],
+            "n_candidates": [result.fit.n_candidates],
+            "n_unstable": [result.fit.n_unstable_total],
+            "stage1_candidates": [sum(c.n_candidates for c in result.choices)],
+            "stage1_unstable": [sum(c.n_unstable for c in result.choices)],
+            "seconds_stage1": [sum(c.seconds for c in result.choices)],
+            "seconds": [result.seconds],
+        },
+        schema=tables.IDENTIFY_LOG.arrow,
+    )
+    return out
 
 
-def write_part(run_dir: Path, model: str, seed: int, method: str, tables: dict[str, pa.Table]) -> None:
+def write_part(run_dir: Path, model: str, seed: int, method: str, parts: dict[str, pa.Table]) -> None:
     """Store one finished task so an interrupted run can resume from it."""
     folder = Path(run_dir) / PARTS / method
-    for kind, table in tables.items():
+    for kind, table in parts.items():
         write_table(table, folder / f"{model}__{seed}.{kind}.parquet")
 
 
-def read_parts(run_dir: Path) -> dict[tuple[str, int, str], dict[str, pa.Table]]:
+def read_parts(run_dir: Path, kinds: dict[str, tuple[str, ...]]) -> dict[tuple[str, int, str], dict]:
     """Finished tasks of an interrupted run, keyed by (model, seed, method).
 
-    A task counts only when its frontier and log parts are both readable.
+    ``kinds`` names, per method, the parts a finished task has besides its
+    frontier (its log and its choosing stages); a task with any of them missing
+    or unreadable is left out, to be recomputed.
     """
     found: dict[tuple[str, int, str], dict[str, pa.Table]] = {}
     root = Path(run_dir) / PARTS
@@ -254,44 +253,25 @@ def read_parts(run_dir: Path) -> dict[tuple[str, int, str], dict[str, pa.Table]]
         return found
     for path in sorted(root.glob("*/*.frontier.parquet")):
         method = path.parent.name
+        if method not in kinds:
+            continue
         stem = path.name[: -len(".frontier.parquet")]
         model, _, seed = stem.rpartition("__")
-        tables = {}
+        parts = {}
         try:
-            for kind in ("frontier", "log", "stage1"):
+            for kind in ("frontier", *kinds[method]):
                 part = path.with_name(f"{stem}.{kind}.parquet")
                 if part.is_file():
-                    tables[kind] = pq.read_table(part)
+                    parts[kind] = pq.read_table(part)
         except (pa.ArrowException, OSError):
             continue  # a part cut off mid-write is simply recomputed
-        if "log" in tables and (method == "direct" or "stage1" in tables):
-            found[(model, int(seed), method)] = tables
+        if all(kind in parts for kind in kinds[method]):
+            found[(model, int(seed), method)] = parts
     return found
 
 
 def clear_parts(run_dir: Path) -> None:
-    import shutil
-
     shutil.rmtree(Path(run_dir) / PARTS, ignore_errors=True)
-
-
-def split_by_key(table: pa.Table, keys: Sequence[str]) -> dict[tuple, pa.Table]:
-    """Rows of ``table`` grouped by the values of ``keys``, in first-seen order."""
-    if table.num_rows == 0:
-        return {}
-    cols = [table.column(k).to_pylist() for k in keys]
-    groups: dict[tuple, list[int]] = {}
-    for i, key in enumerate(zip(*cols, strict=True)):
-        groups.setdefault(key, []).append(i)
-    return {key: table.take(pa.array(rows, pa.int64())) for key, rows in groups.items()}
-
-
-def concat(tables: Sequence[pa.Table]) -> pa.Table:
-    """Concatenate tables of one schema into a single-chunk table."""
-    return pa.concat_tables(tables).combine_chunks()
-
-
-RUN_LOG = "run_log.parquet"
 
 
 def append_run_log(run_dir: Path, stage: str, seconds: float, jobs: int) -> None:
@@ -302,14 +282,15 @@ def append_run_log(run_dir: Path, stage: str, seconds: float, jobs: int) -> None
     """
     import datetime
 
-    path = Path(run_dir) / RUN_LOG
-    row = pa.table(
+    path = Path(run_dir) / tables.RUN_LOG.file
+    row = pa.Table.from_pydict(
         {
             "stage": [stage],
             "seconds": [float(seconds)],
             "jobs": [int(jobs)],
             "finished": [datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")],
-        }
+        },
+        schema=tables.RUN_LOG.arrow,
     )
     try:
         previous = pq.read_table(path) if path.is_file() else None

@@ -26,19 +26,7 @@ __all__ = [
     "select_brute_force",
     "false_negative_threshold",
     "false_positive_threshold",
-    "w_aic",
-    "w_bic",
 ]
-
-
-def w_aic(n_estimation: int) -> float:
-    """AIC penalty ``2 / Nf`` (SPEC 4)."""
-    return 2.0 / n_estimation
-
-
-def w_bic(n_estimation: int) -> float:
-    """BIC penalty ``ln(Nf) / Nf`` (SPEC 4)."""
-    return float(np.log(n_estimation) / n_estimation)
 
 
 def _order_key(orders: np.ndarray) -> np.ndarray:

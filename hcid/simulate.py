@@ -21,6 +21,7 @@ from scipy import signal as sps
 from hcid import signals
 from hcid.config import Config, HCModel
 from hcid.hcmodel import DiscreteLoop
+from hcid.tables import CHANNELS
 
 __all__ = [
     "Realization",
@@ -30,9 +31,6 @@ __all__ = [
     "simulate_realization",
     "white_noise",
 ]
-
-#: Channels of a realization, in table order.
-CHANNELS = ("ft", "fd", "e", "u", "theta", "n")
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ def ci_config():
 
 
 def _record(config, model_name: str, seed: int) -> dict[str, np.ndarray]:
-    from hcid.identify import shift_forward
+    from hcid.methods import shift_forward
     from hcid.simulate import remnant_gain, simulate_realization
 
     r = simulate_realization(config, config.model(model_name), seed, remnant_gain(config))
@@ -44,3 +44,13 @@ def paper_record(paper_config):
 def paper_record_fb(paper_config):
     """FB model, seed 1, of configs/paper.yaml."""
     return _record(paper_config, "FB", 1)
+
+
+@pytest.fixture()
+def ci_raw():
+    """configs/ci.yaml as a YAML document, reduced to seed 1 (a fresh copy per test)."""
+    import yaml
+
+    raw = yaml.safe_load(CI_CONFIG.read_text())
+    raw["seeds"] = [1]
+    return raw

@@ -23,10 +23,10 @@ def test_paper_config_values(paper_config):
     assert (ff.Kpt, ff.TI, ff.tau_pt, ff.Kpe, ff.TL, ff.tau_pe) == (0.8, 0.25, 0.35, 0.75, 0.4, 0.24)
     assert paper_config.timing.record_samples == 2048
     assert paper_config.seeds == tuple(range(1, 51))
-    assert paper_config.identify.direct.estimation.rows() == slice(128, 1088)
-    assert paper_config.identify.stage1.estimation.rows() == slice(29, 2048)  # SPEC 3
-    assert paper_config.w_grid[0] == pytest.approx(1e-4)
-    assert paper_config.w_grid[-1] == pytest.approx(2.0)
+    assert paper_config.identify.stage("direct").estimation.rows() == slice(128, 1088)
+    assert paper_config.identify.stage("stage1").estimation.rows() == slice(29, 2048)  # SPEC 3
+    assert paper_config.selection.w_grid[0] == pytest.approx(1e-4)
+    assert paper_config.selection.w_grid[-1] == pytest.approx(2.0)
 
 
 def _mutate(raw, path, value):
@@ -98,8 +98,8 @@ def test_stage2_defaults_to_direct_grid(paper_raw):
     data = copy.deepcopy(paper_raw)
     data["identify"] = {"direct": {"na": [1, 3]}}
     config = parse_config(data, "x")
-    assert config.identify.stage2.grid.na == (1, 3)
-    assert config.identify.stage2.grid.nk1 == (1, 50)
+    assert config.identify.stage("stage2").grid.na == (1, 3)
+    assert config.identify.stage("stage2").grid.nk1 == (1, 50)
 
 
 def test_non_finite_target_step_refused(paper_raw):

@@ -7,8 +7,9 @@ import pyarrow.parquet as pq
 import pytest
 from typer.testing import CliRunner
 
-from hcid import pipeline, results, selection
+from hcid import pipeline, selection, tables
 from hcid.cli import app
+from hcid.pipeline import studies
 
 from .conftest import CI_CONFIG
 
@@ -43,12 +44,12 @@ def ci_runs(tmp_path_factory):
 def test_tables_written(ci_runs, ci_config):
     run = ci_runs[1]
     frontier = pq.read_table(run / "frontier.parquet")
-    g = ci_config.identify.direct.grid
+    g = ci_config.identify.stage("direct").grid
     triples = (g.na[1] - g.na[0] + 1) * (g.nb1[1] - g.nb1[0] + 1) * (g.nb2[1] - g.nb2[0] + 1)
     # one row per model, seed, method and (na, nb_ft, nb_e)
     assert frontier.num_rows == 2 * 3 * 2 * triples
     assert pq.read_table(run / "stage1.parquet").num_rows == 2 * 3
-    assert pq.read_table(run / "selection.parquet").num_rows == 2 * 3 * 2 * len(ci_config.w_grid)
+    assert pq.read_table(run / "selection.parquet").num_rows == 2 * 3 * 2 * len(ci_config.selection.w_grid)
     thresholds = pq.read_table(run / "thresholds.parquet").to_pylist()
     assert {(r["method"], r["model"]) for r in thresholds} == {
         (m, mo) for m in ("direct", "indirect") for mo in ("FB", "FF")
@@ -63,7 +64,7 @@ def test_identical_across_jobs(ci_runs, name):
 def test_selection_table_is_brute_force_argmin(ci_runs, ci_config):
     # Every stored selection equals the row-by-row argmin of log V + W d over the frontier.
     run = ci_runs[1]
-    frontier = results.split_by_key(pq.read_table(run / "frontier.parquet"), results.KEY_COLUMNS)
+    frontier = tables.split_by_key(pq.read_table(run / "frontier.parquet"), tables.FRONTIER.key)
     chosen = pq.read_table(run / "selection.parquet").to_pylist()
     cols = ("na", "nb_ft", "nb_e", "nk_ft", "nk_e")
     for row in chosen[::7]:
@@ -78,7 +79,7 @@ def test_selection_table_is_brute_force_argmin(ci_runs, ci_config):
 def test_thresholds_match_fine_grid(ci_runs):
     # W_FP / W_FN from exact breakpoints bracket the values seen on a fine W grid.
     run = ci_runs[1]
-    frontier = results.split_by_key(pq.read_table(run / "frontier.parquet"), results.KEY_COLUMNS)
+    frontier = tables.split_by_key(pq.read_table(run / "frontier.parquet"), tables.FRONTIER.key)
     w = np.geomspace(1e-5, 20, 3000)
     thresholds = {(r["method"], r["model"]): r for r in pq.read_table(run / "thresholds.parquet").to_pylist()}
     cols = ("na", "nb_ft", "nb_e", "nk_ft", "nk_e")
@@ -107,7 +108,7 @@ def test_resume_after_interruption_gives_identical_tables(ci_runs, tmp_path, mon
     run.mkdir()
     for name in ("simulations.parquet", "config.yaml"):
         shutil.copy(ci_runs[1] / name, run / name)
-    real = pipeline._identify_task
+    real = studies._identify_task
     calls = {"n": 0}
 
     def interrupted(*args):
@@ -116,12 +117,12 @@ def test_resume_after_interruption_gives_identical_tables(ci_runs, tmp_path, mon
             raise KeyboardInterrupt
         return real(*args)
 
-    monkeypatch.setattr(pipeline, "_identify_task", interrupted)
+    monkeypatch.setattr(studies, "_identify_task", interrupted)
     with pytest.raises(KeyboardInterrupt):
         pipeline.identify_study(ci_config, run, jobs=1, show_progress=False)
     assert not (run / "frontier.parquet").exists()
     assert len(list((run / ".parts").glob("*/*.frontier.parquet"))) == 5
-    monkeypatch.setattr(pipeline, "_identify_task", real)
+    monkeypatch.setattr(studies, "_identify_task", real)
     resumed = pipeline.identify_study(ci_config, run, jobs=1, show_progress=False)
     assert (resumed.computed, resumed.reused) == (7, 5)
     for name in ("frontier.parquet", "stage1.parquet"):
@@ -133,7 +134,7 @@ def test_done_realizations_are_not_recomputed(ci_runs, ci_config, monkeypatch):
     def fail(*args):
         raise AssertionError("recomputed a finished realization")
 
-    monkeypatch.setattr(pipeline, "_identify_task", fail)
+    monkeypatch.setattr(studies, "_identify_task", fail)
     again = pipeline.identify_study(ci_config, ci_runs[2], jobs=1, show_progress=False)
     assert again.computed == 0
 

@@ -177,6 +177,6 @@ def test_plots_draw_on_given_axes_and_colour_marks_by_method(ci_run):
     out = figures.plot_nb_ft(curves, {"W_FP direct": 0.01, "W_FP indirect": 0.02}, ax=ax)
     assert out is fig
     colours = {line.get_label(): line.get_color() for line in ax.get_lines()}
-    assert colours["W_FP direct"] == figures.COLORS["direct"]
-    assert colours["W_FP indirect"] == figures.COLORS["indirect"]
+    assert colours["W_FP direct"] == figures.method_color("direct") == "C0"
+    assert colours["W_FP indirect"] == figures.method_color("indirect") == "C1"
     plt.close(fig)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hcid import selection
+from hcid import criteria, selection
 
 
 def _random_frontier(rng, n=60):
@@ -54,8 +54,8 @@ def test_ties_go_to_smaller_d_then_orders():
 
 def test_aic_bic_penalties():
     # SPEC 4: Nf = 960 gives W_AIC = 2.08e-3 and W_BIC = 7.15e-3.
-    assert selection.w_aic(960) == pytest.approx(2.083e-3, rel=1e-3)
-    assert selection.w_bic(960) == pytest.approx(7.153e-3, rel=1e-3)
+    assert criteria.w_aic(960) == pytest.approx(2.083e-3, rel=1e-3)
+    assert criteria.w_bic(960) == pytest.approx(7.153e-3, rel=1e-3)
 
 
 def test_false_positive_threshold_is_last_positive_interval_end():

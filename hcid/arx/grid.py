@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hcid.config import Grid
+from hcid.config.types import Grid
 
 __all__ = [
     "Grid",

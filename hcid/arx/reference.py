@@ -11,7 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import pyarrow as pa
 from scipy.signal import lfilter
 
 __all__ = ["ReferenceFit", "fit_reference", "regression_matrix"]
@@ -51,16 +50,6 @@ class ReferenceFit:
     a: tuple[np.ndarray, ...]
     b1: tuple[np.ndarray, ...]
     b2: tuple[np.ndarray, ...]
-
-    def to_arrow(self) -> pa.Table:
-        """Scalar per-candidate columns as an Arrow table (coefficients left out).
-
-        Returns
-        -------
-        pyarrow.Table
-        """
-        names = ("na", "nb1", "nb2", "nk1", "nk2", "v", "unstable", "max_root", "condition")
-        return pa.table({name: getattr(self, name) for name in names})
 
 
 def regression_matrix(i1, i2, o, na: int, nb1: int, nb2: int, nk1: int, nk2: int, rows: slice):

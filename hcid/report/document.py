@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import html
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -13,9 +14,14 @@ __all__ = ["Doc", "to_html", "to_markdown"]
 
 @dataclass
 class Doc:
-    """Report being written: blocks of Markdown text, tables and figures, in order."""
+    """Report being written: blocks of Markdown text, tables and figures, in order.
+
+    A figure block names a PNG; ``drawings[name]`` draws it (a matplotlib
+    Figure) when the report is written, from data computed beforehand.
+    """
 
     blocks: list[tuple[str, dict]] = field(default_factory=list)
+    drawings: dict[str, Callable[[], object]] = field(default_factory=dict)
 
     def text(self, md: str) -> None:
         self.blocks.append(("md", {"text": md}))
@@ -23,8 +29,9 @@ class Doc:
     def table(self, header: list[str], rows: list[list[str]]) -> None:
         self.blocks.append(("table", {"header": header, "rows": rows}))
 
-    def figure(self, name: str, caption: str) -> None:
+    def figure(self, name: str, caption: str, draw: Callable[[], object]) -> None:
         self.blocks.append(("figure", {"name": name, "caption": caption}))
+        self.drawings[name] = draw
 
 
 def to_markdown(doc: Doc) -> str:

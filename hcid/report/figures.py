@@ -1,18 +1,18 @@
 """Figures of the report, drawn with matplotlib from :mod:`hcid.report.compute` data.
 
 Each ``plot_*`` takes computed data and draws it; nothing here computes results.
+Figures are :class:`matplotlib.figure.Figure` objects made without pyplot, so
+no global backend or figure registry is touched.
 """
 
 from __future__ import annotations
 
-import matplotlib
+import numpy as np
+from matplotlib import colormaps
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from hcid.report.compute import DISTURBANCE_BAND, Curves, Responses  # noqa: E402
+from hcid.methods import METHODS
+from hcid.report.compute import Curves, Responses
 
 __all__ = [
     "plot_bode",
@@ -25,20 +25,32 @@ __all__ = [
     "save",
 ]
 
-COLORS = {"direct": "tab:blue", "indirect": "tab:orange"}
 STYLES = {0: "-", 1: "--"}
 DPI = 110
 
 
+def method_color(method: str) -> str:
+    """A method's colour in every figure: tab10 in registry order (direct blue, indirect orange)."""
+    names = list(METHODS)
+    index = names.index(method) if method in names else len(names) + sum(map(ord, method)) % 5
+    return f"C{index % 10}"
+
+
+def methods_in(keys) -> list[str]:
+    """The methods among ``(model, method)`` keys, registered ones first in registry order."""
+    found = {k[1] for k in keys}
+    return [m for m in METHODS if m in found] + sorted(found - set(METHODS))
+
+
 def save(fig, path) -> None:
     fig.savefig(path, dpi=DPI, bbox_inches="tight")
-    plt.close(fig)
 
 
-def _figure(axes, rows: int, cols: int, **kwargs):
+def _figure(axes, rows: int, cols: int, *, figsize, sharex: bool = False):
     """``(figure, 2-D array of axes)``: new ones, or the caller's ``axes`` (rows x cols)."""
     if axes is None:
-        return plt.subplots(rows, cols, squeeze=False, **kwargs)
+        fig = Figure(figsize=figsize)
+        return fig, fig.subplots(rows, cols, squeeze=False, sharex=sharex)
     axes = np.asarray(axes, dtype=object).reshape(rows, cols)
     return axes.flat[0].figure, axes
 
@@ -52,7 +64,7 @@ def _w_lines(ax, marks: dict[str, float]) -> None:
     for i, (label, w) in enumerate(marks.items()):
         if w is not None and np.isfinite(w) and w > 0:
             words = label.split()
-            color = next((c for m, c in COLORS.items() if m in words), "0.3")
+            color = next((method_color(m) for m in METHODS if m in words), "0.3")
             ax.axvline(w, color=color, ls=[":", "--", "-.", (0, (3, 1, 1, 1))][i % 4], lw=1.2, label=label)
 
 
@@ -70,9 +82,9 @@ def plot_vaf(curves: Curves, marks: dict[str, float], axes=None):
         for (model, method), mean in sorted(curves.vaf_mean.items()):
             sd = curves.vaf_sd[(model, method)]
             ls = STYLES[models.index(model) % 2]
-            ax.plot(curves.w[sel], mean[sel], ls, color=COLORS.get(method), label=_key_label(model, method))
+            ax.plot(curves.w[sel], mean[sel], ls, color=method_color(method), label=_key_label(model, method))
             ax.fill_between(
-                curves.w[sel], (mean - sd)[sel], (mean + sd)[sel], color=COLORS.get(method), alpha=0.15
+                curves.w[sel], (mean - sd)[sel], (mean + sd)[sel], color=method_color(method), alpha=0.15
             )
         _w_lines(ax, marks)
         ax.set_xscale("log")
@@ -94,7 +106,7 @@ def plot_nb_ft(curves: Curves, marks: dict[str, float], ax=None):
     models = sorted({k[0] for k in curves.nb_ft_mean})
     for (model, method), mean in sorted(curves.nb_ft_mean.items()):
         ls = STYLES[models.index(model) % 2]
-        ax.plot(curves.w, mean, ls, color=COLORS.get(method), label=_key_label(model, method))
+        ax.plot(curves.w, mean, ls, color=method_color(method), label=_key_label(model, method))
     _w_lines(ax, marks)
     ax.axhline(2.0, color="0.6", lw=0.8)
     ax.set_xscale("log")
@@ -131,14 +143,14 @@ def plot_bode(
     omega = responses.omega
     for col, path in enumerate(paths):
         ax_mag, ax_ph = axes[0, col], axes[1, col]
-        for method in ("direct", "indirect"):
+        for method in methods_in(getattr(responses, path)):
             h = getattr(responses, path).get((model, method))
             if h is None:
                 continue
             keep = np.any(np.abs(h) > 0, axis=1)
             if keep.any():
                 _bode_axes(
-                    ax_mag, ax_ph, omega, h[keep], COLORS[method], f"{method} ({int(keep.sum())})", 0.5
+                    ax_mag, ax_ph, omega, h[keep], method_color(method), f"{method} ({int(keep.sum())})", 0.5
                 )
         true = truths.get(path)
         if true is not None and np.any(np.abs(true) > 0):
@@ -148,7 +160,7 @@ def plot_bode(
             ax_mag.loglog(omega, np.abs(ref), "k--", lw=1.5, label=label)
             ax_ph.semilogx(omega, np.degrees(np.unwrap(np.angle(ref))), "k--", lw=1.5)
         for ax in (ax_mag, ax_ph):
-            for w in DISTURBANCE_BAND:
+            for w in responses.band:
                 ax.axvline(w, color="0.5", ls="--", lw=0.8)
             ax.grid(True, which="both", alpha=0.3)
         ax_mag.set_title(names[path])
@@ -163,20 +175,24 @@ def plot_bode(
 
 
 def plot_errors(
-    omega: np.ndarray, errors: dict[tuple[str, str], dict[str, np.ndarray]], title: str, axes=None
+    omega: np.ndarray,
+    errors: dict[tuple[str, str], dict[str, np.ndarray]],
+    band: tuple[float, float],
+    title: str,
+    axes=None,
 ):
-    """Paper Fig. 10: mean and max magnitude and phase errors, direct vs indirect.
+    """Paper Fig. 10: mean and max magnitude and phase errors per method; dashed: the disturbance band.
 
     ``errors[(path, method)]`` comes from :func:`hcid.report.compute.compute_errors`.
     """
     fig, axes = _figure(axes, 2, 2, figsize=(11, 6.5), sharex=True)
     names = {"hft": "feedforward", "he": "feedback"}
     for col, path in enumerate(("hft", "he")):
-        for method in ("direct", "indirect"):
+        for method in methods_in(errors):
             err = errors.get((path, method))
             if err is None:
                 continue
-            c = COLORS[method]
+            c = method_color(method)
             axes[0, col].loglog(omega, err["mag_mean"], color=c, label=f"{method} mean")
             axes[0, col].loglog(omega, err["mag_max"], color=c, ls="--", label=f"{method} max")
             axes[1, col].semilogx(omega, err["phase_mean"], color=c)
@@ -187,7 +203,7 @@ def plot_errors(
         axes[1, col].set_xlabel("frequency (rad/s)")
         axes[1, col].set_ylim(0, 180)
         for ax in axes[:, col]:
-            for w in DISTURBANCE_BAND:
+            for w in band:
                 ax.axvline(w, color="0.5", ls="--", lw=0.8)
             ax.grid(True, which="both", alpha=0.3)
         if axes[0, col].get_legend_handles_labels()[0]:
@@ -223,14 +239,15 @@ def plot_signals(t: np.ndarray, channels: dict[str, np.ndarray], title: str, axe
 
 def plot_data_structure(data, marks: dict[str, float], name: str, axes=None):
     """Measured runs: selected nb_ft, d and VAF vs W, per method (lines per run)."""
-    fig, axes = _figure(axes, 3, 2, figsize=(11, 8), sharex=True)
+    methods = methods_in(data.values)
+    fig, axes = _figure(axes, 3, len(methods), figsize=(5.5 * len(methods), 8), sharex=True)
     runs = sorted({k[0] for k in data.values})
-    for col, method in enumerate(("direct", "indirect")):
+    for col, method in enumerate(methods):
         for i, run in enumerate(runs):
             v = data.values.get((run, method))
             if v is None:
                 continue
-            style = dict(lw=1.2, color=plt.cm.viridis(i / max(len(runs) - 1, 1)), label=f"run {run}")
+            style = dict(lw=1.2, color=colormaps["viridis"](i / max(len(runs) - 1, 1)), label=f"run {run}")
             axes[0, col].step(v["w"], v["nb_ft"], where="post", **style)
             axes[1, col].step(v["w"], v["d"], where="post", **style)
             axes[2, col].plot(v["w"], v["vaf_estimation"], **style)
@@ -251,7 +268,7 @@ def plot_data_structure(data, marks: dict[str, float], name: str, axes=None):
 def plot_calibration(table, name: str, axes=None):
     """False-positive (FB twin) and false-negative (FF twin) rates vs W with 95% bands,
     the safe interval shaded and the recommended W marked, one panel per method."""
-    methods = [m for m in ("direct", "indirect") if m in set(table.column("method").to_pylist())]
+    methods = methods_in((None, m) for m in table.column("method").to_pylist())
     fig, axes = _figure(axes, 1, len(methods), figsize=(5.8 * len(methods), 4.3))
     rows = table.to_pylist()
     for ax, method in zip(axes[0], methods, strict=True):

@@ -1,15 +1,16 @@
-"""Direct and indirect identification on a noise-free known ARX system."""
+"""The methods: direct and indirect identification on a noise-free known ARX system, and the registry."""
 
 import copy
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 import yaml
 from scipy import signal as sps
 
-from hcid import selection
+from hcid import methods, selection
 from hcid.config import parse_config
-from hcid.identify import identify, shift_forward
+from hcid.methods import Method, StageSpec, identify, registered, shift_forward
 
 from .conftest import CI_CONFIG
 
@@ -62,7 +63,7 @@ def test_noise_free_system_is_selected_exactly(record, settings, method, w):
     assert fit.vaf_validation[row] == pytest.approx(100.0, abs=1e-9)
     if method == "indirect":
         # Stage 1 reproduces e exactly, so its V is at rounding level.
-        assert result.stage1.v < 1e-20
+        assert result.choices[0].v < 1e-20
 
 
 def test_target_shift_is_one_second(settings):
@@ -82,8 +83,8 @@ def test_unknown_method_is_an_error(record, settings):
 def test_stage1_window_is_auto(settings):
     # SPEC 3: stage 1 estimates and validates from the grid's largest lag on. ci.yaml's
     # stage-1 grid: max(na 4, nk_ft 3 + nb_ft 8 - 1, nk_fd 3 + nb_fd 4 - 1) = 10.
-    assert settings.stage1.estimation.rows() == slice(10, 2048)
-    assert settings.stage1.validation.rows() == slice(10, 2048)
+    assert settings.stage("stage1").estimation.rows() == slice(10, 2048)
+    assert settings.stage("stage1").validation.rows() == slice(10, 2048)
 
 
 def test_dropped_input_does_not_count_in_max_lag():
@@ -91,7 +92,7 @@ def test_dropped_input_does_not_count_in_max_lag():
     raw = yaml.safe_load(CI_CONFIG.read_text())
     raw["identify"]["stage1"].update(nb2=[0, 0], nk2=[1, 150])
     cfg = parse_config(copy.deepcopy(raw), "ci")
-    assert cfg.identify.stage1.estimation.rows() == slice(10, 2048)
+    assert cfg.identify.stage("stage1").estimation.rows() == slice(10, 2048)
 
 
 @pytest.mark.parametrize("method", ["direct", "indirect"])
@@ -109,3 +110,80 @@ def test_nearly_noise_free_system_is_selected_at_small_w(record, settings, metho
     assert tuple(orders[row]) == (2, 2, 3, NK21, NK22)
     np.testing.assert_allclose(fit.a[row], A2, atol=1e-5)
     np.testing.assert_allclose(fit.b2[row], B22, atol=1e-5)
+
+
+# --------------------------------------------------------------------------- the registry seam
+
+
+def _toy_run(record, settings, shift, threads):
+    import time
+
+    from hcid.methods.base import MethodResult, fit_stage
+
+    start = time.perf_counter()
+    fit = fit_stage(
+        settings.stage("toy"), shift_forward(record["ft"], shift), record["e"], record["u"], threads
+    )
+    return MethodResult("toy", fit, (), time.perf_counter() - start)
+
+
+TOY = Method(
+    name="toy",
+    stages=(
+        StageSpec(
+            "toy",
+            ("ft", "e", "u"),
+            {
+                "na": [1, 2],
+                "nb1": [0, 2],
+                "nb2": [0, 2],
+                "nk1": [24, 26],
+                "nk2": [5, 6],
+                "estimation": [201, 1088],
+                "validation": [1089, 2048],
+            },
+        ),
+    ),
+    run=_toy_run,
+)
+
+
+def test_a_registered_method_flows_through_to_the_selection_tables(ci_raw, tmp_path):
+    # The seam of issue 9: one Method object, registered, is parsed, identified, swept and
+    # tabulated with nothing else changed. Its Nf is its own stage's estimation rows: 888.
+    from hcid.pipeline import identify_study, sweep_study
+
+    with registered(TOY):
+        cfg = parse_config(ci_raw, "toy")
+        assert cfg.identify.stage("toy").estimation.length == 888
+        run = tmp_path / "toy"
+        identify_study(cfg, run, ("toy",), jobs=1, show_progress=False)
+        sweep = sweep_study(cfg, run)
+    selection = pq.read_table(run / "selection.parquet")
+    assert set(selection.column("method").to_pylist()) == {"toy"}
+    assert selection.num_rows == 2 * len(cfg.selection.w_grid)  # FB and FF, seed 1
+    th = {(r["method"], r["model"]): r for r in sweep.thresholds.to_pylist()}
+    assert th[("toy", "FB")]["nf"] == 888
+    assert th[("toy", "FB")]["w_bic"] == pytest.approx(np.log(888) / 888, rel=1e-12)
+    assert "toy" not in methods.METHODS  # unregistered on leaving the block
+
+
+def test_nf_follows_each_methods_own_final_stage(ci_raw, tmp_path):
+    # The latent bug of issue 9: with stage 2's estimation rows differing from direct's, the
+    # indirect method's W_AIC/W_BIC follow stage 2's Nf (SPEC 7), in the table and the report.
+    from hcid.pipeline import run_study
+    from hcid.report.build import compute_report
+
+    ci_raw["identify"]["stage2"]["estimation"] = [201, 1088]
+    cfg = parse_config(ci_raw, "nf")
+    run = tmp_path / "nf"
+    result = run_study(cfg, run, jobs=1, show_progress=False)
+    th = {(r["method"], r["model"]): r for r in result.sweep.thresholds.to_pylist()}
+    assert th[("direct", "FB")]["nf"] == 960 and th[("indirect", "FB")]["nf"] == 888
+    assert th[("indirect", "FF")]["w_bic"] == pytest.approx(np.log(888) / 888, rel=1e-12)
+    assert th[("direct", "FF")]["w_bic"] == pytest.approx(np.log(960) / 960, rel=1e-12)
+    data = compute_report(run)
+    assert data.run.w_bic() == pytest.approx({"direct": np.log(960) / 960, "indirect": np.log(888) / 888})
+    marks = data.sections["curves"].criterion_marks
+    assert marks["W_BIC direct"] == pytest.approx(np.log(960) / 960)
+    assert marks["W_BIC indirect"] == pytest.approx(np.log(888) / 888)

@@ -1,0 +1,145 @@
+"""What an identification method is: its stages, and what running it on one record returns.
+
+A method is a :class:`Method`: a name, the stages it runs (each a
+:class:`StageSpec`: the config section under ``identify``, the signals it maps,
+the SPEC defaults of its grid and windows), which stage's estimation rows define
+``Nf`` for the selection criteria, and a ``run`` function from a record to a
+:class:`MethodResult`. The last stage's frontier is what model selection works
+on; earlier stages each hand on one chosen model (:class:`StageChoice`, stored
+in the table named after the stage).
+
+Pure functions over arrays; no I/O.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hcid.arx.engine import GridFit, best, fit_grid
+from hcid.config.types import IdentifyConfig, StageConfig
+
+__all__ = ["Method", "MethodResult", "StageChoice", "StageSpec", "choose", "fit_stage", "shift_forward"]
+
+
+@dataclass(frozen=True)
+class StageSpec:
+    """One stage of a method, as the config and the tables see it.
+
+    Attributes
+    ----------
+    name : str
+        Its config section, ``identify.<name>``, and the name of its table when
+        it is not the final stage (``<name>.parquet``).
+    inputs : tuple of str
+        Names of ARX inputs 1 and 2 and of the output, e.g. ``("ft", "e", "u")``;
+        they name the columns ``nb_<input>`` and ``nk_<input>`` of its tables.
+    defaults : mapping
+        Grid ranges and windows used for keys the config leaves out (SPEC 3).
+    defaults_from : str or None
+        A stage whose keys, as given in the config, override ``defaults``
+        (stage 2 of the indirect method takes the direct method's grid).
+    """
+
+    name: str
+    inputs: tuple[str, str, str]
+    defaults: Mapping[str, Any]
+    defaults_from: str | None = None
+
+
+@dataclass(frozen=True)
+class StageChoice:
+    """The model a non-final stage hands on: its structure, V and candidate counts."""
+
+    stage: str
+    na: int
+    nb1: int
+    nb2: int
+    nk1: int
+    nk2: int
+    v: float
+    n_candidates: int
+    n_unstable: int
+    seconds: float
+
+
+@dataclass(frozen=True)
+class MethodResult:
+    """Frontier of a method's final stage on one record, with the earlier stages' choices."""
+
+    method: str
+    fit: GridFit
+    choices: tuple[StageChoice, ...]
+    seconds: float
+
+
+#: ``run(record, settings, shift, threads)``: ``record`` holds ft, fd, e, u (rad) at the
+#: analysis rate, ``shift`` is the target shift in samples.
+RunFunction = Callable[[Mapping[str, np.ndarray], IdentifyConfig, int, int], MethodResult]
+
+
+@dataclass(frozen=True)
+class Method:
+    """An identification method: its stages in order and how to run it.
+
+    ``nf_stage`` names the stage whose estimation rows give ``Nf``, the number
+    the criteria's penalties W(Nf) depend on (the final stage when None).
+    """
+
+    name: str
+    stages: tuple[StageSpec, ...]
+    run: RunFunction
+    nf_stage: str | None = None
+
+    @property
+    def final_stage(self) -> StageSpec:
+        return self.stages[-1]
+
+    @property
+    def choice_stages(self) -> tuple[StageSpec, ...]:
+        """The stages before the final one: each hands on one model, kept in its own table."""
+        return self.stages[:-1]
+
+    def nf(self, settings: IdentifyConfig) -> int:
+        """Nf: the estimation rows of the stage that defines it (SPEC 4 and 7)."""
+        return settings.stage(self.nf_stage or self.final_stage.name).estimation.length
+
+
+def shift_forward(x: np.ndarray, n: int) -> np.ndarray:
+    """``x(k + n)`` with zeros after the record (SPEC 3: ``ft_s(k) = ft(k + 25)``).
+
+    Examples
+    --------
+    >>> shift_forward(np.array([1.0, 2.0, 3.0, 4.0]), 1)
+    array([2., 3., 4., 0.])
+    """
+    if n == 0:
+        return x.copy()
+    return np.concatenate([x[n:], np.zeros(n)])
+
+
+def fit_stage(stage: StageConfig, i1: np.ndarray, i2: np.ndarray, o: np.ndarray, threads: int) -> GridFit:
+    """Fit every candidate of a stage's grid on its windows (:func:`hcid.arx.fit_grid`)."""
+    return fit_grid(i1, i2, o, stage.grid, stage.estimation.rows(), stage.validation.rows(), threads=threads)
+
+
+def choose(name: str, fit: GridFit, start: float) -> tuple[int, StageChoice]:
+    """The smallest-V row of a stage's frontier and its :class:`StageChoice`."""
+    row = best(fit)
+    choice = StageChoice(
+        stage=name,
+        na=int(fit.na[row]),
+        nb1=int(fit.nb1[row]),
+        nb2=int(fit.nb2[row]),
+        nk1=int(fit.nk1[row]),
+        nk2=int(fit.nk2[row]),
+        v=float(fit.v[row]),
+        n_candidates=fit.n_candidates,
+        n_unstable=fit.n_unstable_total,
+        seconds=time.perf_counter() - start,
+    )
+    return row, choice

@@ -1,0 +1,39 @@
+"""Batch runs of a study on a joblib pool or a dask cluster, resumable, writing the run's tables.
+
+- :mod:`hcid.pipeline.studies`: the stages (simulate, identify, sweep W,
+  calibrate W) and :func:`run_study`, which chains them.
+- :mod:`hcid.pipeline.parallel`: the worker pool and progress bar.
+- :mod:`hcid.pipeline.rundir`: which config a run directory belongs to.
+"""
+
+from hcid.pipeline.parallel import BACKENDS, check_backend, parallel_map
+from hcid.pipeline.rundir import check_run_dir
+from hcid.pipeline.studies import (
+    CalibrationRun,
+    IdentifyRun,
+    SimulationRun,
+    StudyRun,
+    SweepRun,
+    calibrate_study,
+    identify_study,
+    run_study,
+    simulate_study,
+    sweep_study,
+)
+
+__all__ = [
+    "BACKENDS",
+    "CalibrationRun",
+    "IdentifyRun",
+    "SimulationRun",
+    "StudyRun",
+    "SweepRun",
+    "calibrate_study",
+    "check_backend",
+    "check_run_dir",
+    "identify_study",
+    "parallel_map",
+    "run_study",
+    "simulate_study",
+    "sweep_study",
+]

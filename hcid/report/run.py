@@ -1,0 +1,102 @@
+"""What a report is built from: the run's config and tables, read once and checked against their schemas."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import pyarrow as pa
+import yaml
+
+from hcid import criteria, methods, results, tables
+from hcid.config import Config, parse_config
+from hcid.errors import DataError
+
+__all__ = ["RunTables", "marks_for_plot", "read_run"]
+
+#: The columns each table must hold for the report (checked with their types on reading).
+_READS = {
+    "summary": (tables.SIMULATION_SUMMARY, None),
+    "frontier": (tables.FRONTIER, None),
+    "log": (tables.IDENTIFY_LOG, None),
+    "selection": (tables.SELECTION, None),
+    "thresholds": (tables.thresholds(), None),
+    "runlog": (tables.RUN_LOG, None),
+    "calibration": (tables.CALIBRATION, None),
+}
+
+
+@dataclass(frozen=True)
+class RunTables:
+    """A run directory's config and tables (None where a stage has not run).
+
+    ``choices`` holds the table of each choosing stage of the registered
+    methods that is present (``stage1``).
+    """
+
+    run_dir: Path
+    config: Config
+    summary: pa.Table | None
+    frontier: pa.Table | None
+    log: pa.Table | None
+    selection: pa.Table | None
+    thresholds: pa.Table | None
+    runlog: pa.Table | None
+    calibration: pa.Table | None
+    choices: dict[str, pa.Table]
+
+    def simulations(self) -> dict | None:
+        """The simulated records by (model, seed), or None without simulations."""
+        table = results.read_optional(tables.SIMULATIONS, self.run_dir)
+        return None if table is None else results.records(table, self.run_dir / tables.SIMULATIONS.file)
+
+    def nf(self) -> dict[str, int]:
+        """Nf of every registered method: the estimation rows of the stage that defines it."""
+        return {name: m.nf(self.config.identify) for name, m in methods.METHODS.items()}
+
+    def criterion_marks(self) -> dict[str, dict[str, float]]:
+        """Per configured criterion label, its W per method (each method's own Nf)."""
+        nf = self.nf()
+        return {
+            c.label: {m: c.w(n) for m, n in nf.items()}
+            for c in criteria.configured(self.config.selection.criteria)
+        }
+
+    def w_bic(self) -> dict[str, float]:
+        """W_BIC per method (the paper's figures are drawn at W_BIC)."""
+        return {m: criteria.w_bic(n) for m, n in self.nf().items()}
+
+
+def marks_for_plot(marks: dict[str, dict[str, float]]) -> dict[str, float]:
+    """Flatten criterion marks to plot labels: one line per criterion, or one per method if they differ."""
+    out = {}
+    for label, per_method in marks.items():
+        values = set(per_method.values())
+        if len(values) == 1:
+            out[label] = values.pop()
+        else:
+            out.update({f"{label} {m}": w for m, w in per_method.items()})
+    return out
+
+
+def _load_config(run_dir: Path) -> Config:
+    path = run_dir / "config.yaml"
+    if not path.is_file():
+        raise DataError(f"{path}: missing; is {run_dir} a run directory (made by `hcid simulate`)?")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise DataError(f"{path}: not valid YAML") from exc
+    return parse_config(data, run_dir.name)
+
+
+def read_run(run_dir: Path) -> RunTables:
+    """Read a run directory for its report; one-line DataError for a damaged table or config."""
+    loaded = {name: results.read_optional(schema, run_dir, cols) for name, (schema, cols) in _READS.items()}
+    choices = {}
+    for method in methods.METHODS.values():
+        for stage in method.choice_stages:
+            table = results.read_optional(tables.stage_choice(stage.name, stage.inputs), run_dir)
+            if table is not None:
+                choices[stage.name] = table
+    return RunTables(run_dir=run_dir, config=_load_config(run_dir), choices=choices, **loaded)

@@ -1,0 +1,15 @@
+"""The report's sections, in order: each computes its data from the run, then renders it.
+
+A section is a module with ``TITLE``, ``compute(run, done) -> data`` (pure:
+reads the :class:`~hcid.report.run.RunTables` and the data of earlier sections
+in ``done``, draws nothing) and ``render(data, doc)`` (adds text, tables and
+figure drawings to the :class:`~hcid.report.document.Doc`). To add a section or
+a figure, write or extend one module here and list it in :data:`SECTIONS`.
+"""
+
+from hcid.report.sections import calibration, curves, data, facts, responses, simulation, verdicts
+
+#: The sections in report order.
+SECTIONS = (facts, simulation, curves, responses, verdicts, calibration, data)
+
+__all__ = ["SECTIONS"]

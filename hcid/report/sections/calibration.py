@@ -1,0 +1,59 @@
+"""9. W calibration on the HC hypothesis (paper section 6, first recommendation)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pyarrow as pa
+
+from hcid import methods
+from hcid.report import figures
+from hcid.report.document import Doc
+
+TITLE = "9. W calibration on the HC hypothesis"
+
+
+@dataclass(frozen=True)
+class CalibrationData:
+    table: pa.Table
+    name: str
+    rows: list[list[str]]
+    recommended: dict[str, float]
+
+
+def compute(run, done) -> CalibrationData | None:
+    if run.calibration is None:
+        return None
+    rows, recommended = [], {}
+    present = run.calibration.to_pylist()
+    for method in [*methods.METHODS, *sorted({r["method"] for r in present} - set(methods.METHODS))]:
+        r = next((x for x in present if x["method"] == method), None)
+        if r is None:
+            continue
+        recommended[method] = r["recommended"]
+        rows.append(
+            [
+                method,
+                f"{r['target_rate']:g}",
+                f"{r['safe_low']:.4g}",
+                f"{r['safe_high']:.4g}",
+                f"{r['recommended']:.4g}" if np.isfinite(r["recommended"]) else "no safe W",
+            ]
+        )
+    return CalibrationData(run.calibration, run.config.name, rows, recommended)
+
+
+def render(data: CalibrationData | None, doc: Doc) -> None:
+    if data is None:
+        return
+    doc.text(f"## {TITLE}")
+    doc.figure(
+        "calibration.png",
+        "False-positive rate of the FB twin and false-negative rate of the FF "
+        "twin over W, with exact 95% (Clopper-Pearson) bands over realizations; green: the safe "
+        "interval where both rates are at most the target rate, and the recommended W, its "
+        "geometric midpoint.",
+        lambda: figures.plot_calibration(data.table, data.name),
+    )
+    doc.table(["method", "target rate", "safe from W", "safe below W", "recommended W"], data.rows)

@@ -1,0 +1,222 @@
+"""Every table hcid writes: its file name, columns with their Arrow types, and its key.
+
+The one home of each table's schema. Writers build their tables against these
+schemas, :func:`hcid.results.read` checks what it reads against them, and the
+report reads the columns named here. A leaf module: it imports only pyarrow, so
+any layer may refer to a schema.
+
+Run directory layout (default ``runs/<config name>``):
+
+==============================  =============================================  ==========================
+file                            one row per                                    written by
+==============================  =============================================  ==========================
+``config.yaml``                 (the resolved config of the run)               every stage
+``simulations.parquet``         model, seed and sample                         ``hcid simulate``
+``simulation_summary.parquet``  model and seed                                 ``hcid simulate``
+``measured.parquet``            run and sample of imported data                ``hcid identify --data``
+``frontier.parquet``            model, seed, method and order triple           ``hcid identify``
+``<stage>.parquet``             model and seed: the model a non-final stage    ``hcid identify``
+                                hands on (``stage1.parquet``)
+``identify_log.parquet``        model, seed and method (candidates, seconds)   ``hcid identify``
+``selection.parquet``           model, seed, method and W of the grid          ``hcid sweep-w``
+``breakpoints.parquet``         model, seed, method and interval of W          ``hcid sweep-w``
+``thresholds.parquet``          method and model                               ``hcid sweep-w``
+``calibration.parquet``         method and W of the grid                       ``hcid calibrate-w``
+``run_log.parquet``             stage run (wall seconds)                       every computing stage
+==============================  =============================================  ==========================
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import pyarrow as pa
+
+__all__ = [
+    "BREAKPOINTS",
+    "CALIBRATION",
+    "FRONTIER",
+    "IDENTIFY_LOG",
+    "MEASURED",
+    "ORDER_COLUMNS",
+    "RUN_LOG",
+    "SELECTED_COLUMNS",
+    "SELECTION",
+    "SIMULATIONS",
+    "SIMULATION_SUMMARY",
+    "Schema",
+    "concat",
+    "split_by_key",
+    "stage_choice",
+    "thresholds",
+]
+
+_STR, _INT, _F64, _BOOL = pa.string(), pa.int64(), pa.float64(), pa.bool_()
+_LIST = pa.list_(pa.float64())
+
+
+@dataclass(frozen=True)
+class Schema:
+    """A table: file name in the run directory, typed columns in order, key columns.
+
+    ``optional`` columns may be absent from a table written by an older hcid
+    (a criterion added later); every other column must be there with its type.
+    """
+
+    file: str
+    fields: tuple[tuple[str, pa.DataType], ...]
+    key: tuple[str, ...]
+    optional: tuple[str, ...] = ()
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(name for name, _ in self.fields)
+
+    @property
+    def arrow(self) -> pa.Schema:
+        return pa.schema(list(self.fields))
+
+    def problem(self, table: pa.Table, columns: Sequence[str] | None = None) -> str | None:
+        """What is wrong with ``table`` against this schema (only ``columns`` if given), or None."""
+        wanted = dict(self.fields)
+        names = self.names if columns is None else tuple(columns)
+        missing = [c for c in names if c not in table.column_names and c not in self.optional]
+        if missing:
+            return f"missing columns {missing}"
+        for name in names:
+            if name in table.column_names and name in wanted:
+                found = table.schema.field(name).type
+                if found != wanted[name]:
+                    return f"column {name!r} is {found}, expected {wanted[name]}"
+        return None
+
+
+def _schema(file: str, fields: Iterable[tuple[str, pa.DataType]], key: tuple[str, ...], **kw) -> Schema:
+    return Schema(file=file, fields=tuple(fields), key=key, **kw)
+
+
+#: Channels of a simulated record, in table order (rad).
+CHANNELS = ("ft", "fd", "e", "u", "theta", "n")
+#: Signals of a measured record (rad).
+SIGNALS = ("ft", "fd", "e", "u")
+#: The structure integers of a selected model, in the order of the last tie rule (SPEC 4).
+ORDER_COLUMNS = ("na", "nb_ft", "nb_e", "nk_ft", "nk_e")
+#: What selection keeps of a frontier row.
+SELECTED_COLUMNS = (*ORDER_COLUMNS, "d", "v", "vaf_estimation", "vaf_validation")
+#: Engine column names (:meth:`hcid.arx.GridFit.to_arrow`) -> table names: input 1 is ft, input 2 e.
+FRONTIER_NAMES = {"nb1": "nb_ft", "nb2": "nb_e", "nk1": "nk_ft", "nk2": "nk_e", "b1": "b_ft", "b2": "b_e"}
+
+_REALIZATION_KEY = ("model", "seed")
+_METHOD_KEY = ("model", "seed", "method")
+_SELECTED_FIELDS = [(c, _INT) for c in (*ORDER_COLUMNS, "d")] + [
+    (c, _F64) for c in ("v", "vaf_estimation", "vaf_validation")
+]
+
+SIMULATIONS = _schema(
+    "simulations.parquet",
+    [("model", _STR), ("seed", _INT), ("k", _INT), ("t", _F64)] + [(c, _F64) for c in CHANNELS],
+    _REALIZATION_KEY,
+)
+SIMULATION_SUMMARY = _schema(
+    "simulation_summary.parquet",
+    [("model", _STR), ("seed", _INT)]
+    + [(c, _F64) for c in ("rms_e_deg", "noise_ratio", "noise_ratio_disturbance_only", "kn")],
+    _REALIZATION_KEY,
+)
+MEASURED = _schema(
+    "measured.parquet",
+    [("model", _STR), ("seed", _INT), ("k", _INT), ("t", _F64)] + [(c, _F64) for c in SIGNALS],
+    _REALIZATION_KEY,
+)
+FRONTIER = _schema(
+    "frontier.parquet",
+    [("model", _STR), ("seed", _INT), ("method", _STR)]
+    + _SELECTED_FIELDS
+    + [("n_unstable", _INT), ("a", _LIST), ("b_ft", _LIST), ("b_e", _LIST)],
+    _METHOD_KEY,
+)
+IDENTIFY_LOG = _schema(
+    "identify_log.parquet",
+    [("model", _STR), ("seed", _INT), ("method", _STR)]
+    + [(c, _INT) for c in ("n_candidates", "n_unstable", "stage1_candidates", "stage1_unstable")]
+    + [("seconds_stage1", _F64), ("seconds", _F64)],
+    _METHOD_KEY,
+)
+SELECTION = _schema(
+    "selection.parquet",
+    [("model", _STR), ("seed", _INT), ("method", _STR), ("w", _F64)] + _SELECTED_FIELDS,
+    (*_METHOD_KEY, "w"),
+)
+BREAKPOINTS = _schema(
+    "breakpoints.parquet",
+    [("model", _STR), ("seed", _INT), ("method", _STR), ("w_from", _F64), ("w_to", _F64)] + _SELECTED_FIELDS,
+    (*_METHOD_KEY, "w_from"),
+)
+CALIBRATION = _schema(
+    "calibration.parquet",
+    [("method", _STR), ("w", _F64)]
+    + [(c, _F64) for c in ("fp_rate", "fp_low", "fp_high", "fn_rate", "fn_low", "fn_high")]
+    + [("n_fb", _INT), ("n_ff", _INT)]
+    + [(c, _F64) for c in ("target_rate", "safe_low", "safe_high", "recommended")],
+    ("method", "w"),
+)
+RUN_LOG = _schema(
+    "run_log.parquet",
+    [("stage", _STR), ("seconds", _F64), ("jobs", _INT), ("finished", _STR)],
+    ("stage", "finished"),
+)
+
+
+def stage_choice(stage: str, inputs: Sequence[str]) -> Schema:
+    """``<stage>.parquet``: the model a non-final stage hands on, per model and seed.
+
+    Its inputs name the order columns (``nb_ft``, ``nb_fd`` for stage 1, whose inputs are ft and fd).
+    """
+    i1, i2 = inputs[0], inputs[1]
+    return _schema(
+        f"{stage}.parquet",
+        [("model", _STR), ("seed", _INT)]
+        + [(c, _INT) for c in ("na", f"nb_{i1}", f"nb_{i2}", f"nk_{i1}", f"nk_{i2}")]
+        + [("v", _F64), ("n_candidates", _INT), ("n_unstable", _INT)],
+        _REALIZATION_KEY,
+    )
+
+
+def thresholds(criterion_columns: Sequence[str] = ()) -> Schema:
+    """``thresholds.parquet``: per method and model, Nf, each criterion's W, W_FP (FB) and W_FN (FF).
+
+    ``criterion_columns`` are the ``w_<name>`` columns of the configured criteria
+    (:attr:`hcid.criteria.Criterion.column`); a reader passes none and finds them
+    by name.
+    """
+    return _schema(
+        "thresholds.parquet",
+        [
+            ("method", _STR),
+            ("model", _STR),
+            ("has_feedforward", _BOOL),
+            ("n_realizations", _INT),
+            ("nf", _INT),
+        ]
+        + [(c, _F64) for c in criterion_columns]
+        + [("w_fp", _F64), ("w_fn", _F64)],
+        ("method", "model"),
+        optional=tuple(criterion_columns),
+    )
+
+
+def split_by_key(table: pa.Table, keys: Sequence[str]) -> dict[tuple, pa.Table]:
+    """Rows of ``table`` grouped by the values of ``keys``, in first-seen order."""
+    if table.num_rows == 0:
+        return {}
+    cols = [table.column(k).to_pylist() for k in keys]
+    groups: dict[tuple, list[int]] = {}
+    for i, key in enumerate(zip(*cols, strict=True)):
+        groups.setdefault(key, []).append(i)
+    return {key: table.take(pa.array(rows, pa.int64())) for key, rows in groups.items()}
+
+
+def concat(tables: Sequence[pa.Table]) -> pa.Table:
+    """Concatenate tables of one schema into a single-chunk table."""
+    return pa.concat_tables(tables).combine_chunks()

@@ -1,0 +1,87 @@
+"""Tables on disk: writes checked against the schemas, reads that refuse in one line, atomic writes."""
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from hcid import results, tables
+from hcid.errors import DataError
+
+
+def _log_row(**overrides):
+    row = {"stage": ["simulate"], "seconds": [1.5], "jobs": [2], "finished": ["now"]}
+    row.update(overrides)
+    return pa.table(row)
+
+
+def test_write_then_read_round_trip(tmp_path):
+    table = pa.Table.from_pydict(
+        {"stage": ["simulate"], "seconds": [1.5], "jobs": [2], "finished": ["now"]},
+        schema=tables.RUN_LOG.arrow,
+    )
+    path = results.write(tables.RUN_LOG, table, tmp_path)
+    assert path == tmp_path / "run_log.parquet"
+    assert results.read(tables.RUN_LOG, tmp_path).equals(table)
+
+
+def test_write_refuses_a_table_off_its_schema(tmp_path):
+    with pytest.raises(AssertionError, match="run_log.parquet: missing columns \\['finished'\\]"):
+        results.write(tables.RUN_LOG, _log_row().drop(["finished"]), tmp_path)
+    assert not (tmp_path / "run_log.parquet").exists()
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        (_log_row().drop(["jobs"]), "missing columns ['jobs']"),
+        (_log_row(seconds=["1.5"]), "column 'seconds' is string, expected double"),
+    ],
+)
+def test_read_names_the_file_and_the_problem(tmp_path, table, message):
+    pq.write_table(table, tmp_path / "run_log.parquet")
+    with pytest.raises(DataError) as info:
+        results.read(tables.RUN_LOG, tmp_path)
+    assert str(info.value) == f"{tmp_path / 'run_log.parquet'}: {message}"
+
+
+def test_read_missing_and_corrupt(tmp_path):
+    with pytest.raises(DataError, match="frontier.parquet: missing; run it"):
+        results.read(tables.FRONTIER, tmp_path, hint="run it")
+    (tmp_path / "frontier.parquet").write_bytes(b"not parquet")
+    with pytest.raises(DataError, match="frontier.parquet: not a readable Parquet table"):
+        results.read(tables.FRONTIER, tmp_path)
+    assert results.read_optional(tables.SELECTION, tmp_path) is None
+
+
+def test_interrupted_write_leaves_the_previous_table(tmp_path, monkeypatch):
+    table = pa.table({"x": np.arange(3)})
+    path = tmp_path / "t.parquet"
+    results.write_table(table, path)
+    before = path.read_bytes()
+
+    def broken(table, where):
+        with open(where, "wb") as f:
+            f.write(b"half")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(pq, "write_table", broken)
+    with pytest.raises(OSError, match="disk full"):
+        results.write_table(pa.table({"x": np.arange(5)}), path)
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.parquet"]  # no temporary file left
+
+
+def test_stage_choice_schema_names_its_inputs():
+    schema = tables.stage_choice("stage1", ("ft", "fd", "e"))
+    assert schema.file == "stage1.parquet"
+    assert schema.names[:7] == ("model", "seed", "na", "nb_ft", "nb_fd", "nk_ft", "nk_fd")
+
+
+def test_thresholds_schema_takes_the_criteria_columns():
+    schema = tables.thresholds(["w_aic", "w_mbic"])
+    assert "w_mbic" in schema.names and schema.optional == ("w_aic", "w_mbic")
+    row = {"method": "direct", "model": "FB", "has_feedforward": False, "n_realizations": 1}
+    row.update(nf=960, w_fp=0.1, w_fn=None)
+    old = pa.Table.from_pylist([row], schema=tables.thresholds().arrow)  # no criterion column
+    assert tables.thresholds(["w_mbic"]).problem(old) is None  # a table of an older run reads
