@@ -25,6 +25,9 @@ TRUE_FF = {
 }
 TRUE_FB = {name: TRUE_FF[name] for name in hcfit.FEEDBACK_PARAMETERS}
 DELAYS = ("tau_pe", "tau_pt")
+# SPEC 5: the disturbance band of the paper's 20 sines, 0.23..17.33 rad/s (k = 3 and 226
+# times 2 pi / 81.92 s), what configs/paper.yaml's Disturbance.band gives.
+BAND = (3 * 2 * np.pi / 81.92, 226 * 2 * np.pi / 81.92)
 # SPEC 3: direct-method windows 129..1088 and 1089..2048.
 ESTIMATION, VALIDATION = slice(128, 1088), slice(1088, 2048)
 
@@ -66,7 +69,7 @@ def test_frequency_fit_recovers_the_true_paths(paper_config, loop_plant, model_n
     # an independent evaluation) stand in for the ARX response on the band grid;
     # noise-free, so the brief's 1% / 5 ms must hold (measured: ~1e-15).
     model = paper_config.model(model_name)
-    omega = hcfit.band_grid()
+    omega = hcfit.band_grid(BAND)
     hft, he = true_response(model, paper_config.loop, omega)
     fit = hcfit.fit_frequency(omega, he, hft if model.has_feedforward else None, loop_plant)
     assert_recovered(fit, TRUE_FF if model.has_feedforward else TRUE_FB)
@@ -80,7 +83,7 @@ def test_frequency_fit_validation_vaf_with_a_record(paper_config, loop_plant, no
     # Source: SPEC 4's VAF over the validation rows; the noise-free closed loop's u
     # is the true model's output, so the fitted model explains it to within the
     # 100 Hz-vs-25 Hz discretisation difference (measured 99.99999%).
-    omega = hcfit.band_grid()
+    omega = hcfit.band_grid(BAND)
     hft, he = true_response(paper_config.model("FF"), paper_config.loop, omega)
     fit = hcfit.fit_frequency(omega, he, hft, loop_plant, record=_record(noise_free["FF"]))
     assert fit.vaf_validation == pytest.approx(100.0, abs=1e-3)
@@ -102,7 +105,7 @@ def test_fit_with_another_plant_uses_its_frequency_response():
     # SPEC 7: any proper plant, e.g. a double integrator K/s^2. Paths built here
     # from the formulas of SPEC 7 with that plant, fit with the same plant.
     yc = control.tf([3.0], [1.0, 0.0, 0.0])
-    omega = hcfit.band_grid()
+    omega = hcfit.band_grid(BAND)
     s = 1j * omega
     nms = 10.1**2 / (s**2 + 2 * 0.35 * 10.1 * s + 10.1**2)
     he = nms * 0.75 * (0.4 * s + 1) * np.exp(-s * 0.24)
@@ -132,7 +135,7 @@ def test_anticipation_is_recovered_by_both_targets(paper_config, loop_plant, noi
     # (frequency target, evaluated by hc_response) and u simulated from them
     # (time target, simulate_hc reads ft 0.3 s ahead; past the record ft is 0).
     true = dict(TRUE_FF, tau_pt=-0.3)
-    omega = hcfit.band_grid()
+    omega = hcfit.band_grid(BAND)
     hft, he = hcfit.hc_response(true, loop_plant, omega)
     assert_recovered(hcfit.fit_frequency(omega, he, hft, loop_plant), true)
     r = noise_free["FF"]
@@ -196,7 +199,7 @@ def _narrowed(name, lower, upper):
 def test_a_fit_on_a_bound_is_flagged(paper_config, loop_plant):
     # True Kpe 0.75 lies above the narrowed bounds [0.2, 0.5]: the estimate sits on
     # the upper bound and is flagged; the cost is no longer ~0.
-    omega = hcfit.band_grid()
+    omega = hcfit.band_grid(BAND)
     hft, he = true_response(paper_config.model("FF"), paper_config.loop, omega)
     fit = hcfit.fit_frequency(omega, he, hft, loop_plant, _narrowed("Kpe", 0.2, 0.5))
     at_bound = dict(zip(fit.names, fit.at_bound, strict=True))
@@ -210,7 +213,7 @@ def test_a_fit_on_a_bound_is_flagged(paper_config, loop_plant):
 
 
 def test_same_inputs_and_seed_give_identical_results(paper_config, loop_plant, noise_free):
-    omega = hcfit.band_grid()
+    omega = hcfit.band_grid(BAND)
     hft, he = true_response(paper_config.model("FF"), paper_config.loop, omega)
     # Noise on the response makes the optimum non-trivial (cost > 0) and multi-start.
     rng = np.random.default_rng(7)
@@ -224,7 +227,7 @@ def test_same_inputs_and_seed_give_identical_results(paper_config, loop_plant, n
 
 
 def test_fit_hc_dispatches_on_the_target(paper_config, loop_plant, noise_free):
-    omega = hcfit.band_grid()
+    omega = hcfit.band_grid(BAND)
     _, he = true_response(paper_config.model("FB"), paper_config.loop, omega)
     settings = hcfit.FitSettings()
     assert hcfit.fit_hc(settings, loop_plant, False, omega=omega, he=he) == hcfit.fit_frequency(
@@ -237,7 +240,7 @@ def test_fit_hc_dispatches_on_the_target(paper_config, loop_plant, noise_free):
 
 
 def test_bad_inputs_are_refused(loop_plant):
-    omega = hcfit.band_grid()
+    omega = hcfit.band_grid(BAND)
     he = np.ones(omega.size, dtype=complex)
     with pytest.raises(DataError, match="he: must be finite and nonzero"):
         hcfit.fit_frequency(omega, np.zeros(omega.size), None, loop_plant)
@@ -254,8 +257,17 @@ def test_bad_inputs_are_refused(loop_plant):
 # --------------------------------------------------------------------------- settings
 
 
+def test_paper_config_resolves_the_band_from_its_disturbance(paper_config):
+    # SPEC 5: 0.23..17.33 rad/s; the config's fit_hc section is absent, so the band is the
+    # disturbance band and every other setting the default.
+    assert paper_config.fit_hc.band == pytest.approx((0.2301, 17.334), abs=1e-3)
+    assert paper_config.fit_hc.band == BAND
+    assert dataclasses.replace(paper_config.fit_hc, band=None) == hcfit.FitSettings()
+
+
 def test_parse_defaults_and_values():
     assert hcfit.parse_fit_settings(None, "fit_hc") == hcfit.FitSettings()
+    assert hcfit.parse_fit_settings(None, "fit_hc", default_band=(1.0, 2.0)).band == (1.0, 2.0)
     s = hcfit.parse_fit_settings(
         {
             "target": "time",

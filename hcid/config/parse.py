@@ -367,6 +367,13 @@ def _data_section(top: Section, model_names: list[str]) -> DataConfig | None:
     return DataConfig(name=name, columns=columns, w_report=tuple(float(w) for w in w_raw))
 
 
+def _fit_hc_section(top: Section, disturbance: Disturbance):
+    # The settings live with the fit (hcid.hcfit.settings), parsed here once like every section.
+    from hcid.hcfit.settings import parse_fit_settings
+
+    return parse_fit_settings(top.get("fit_hc", None), "fit_hc", default_band=disturbance.band)
+
+
 # --------------------------------------------------------------------------- entry points
 
 
@@ -398,6 +405,7 @@ def parse_config(data: Any, name: str) -> Config:
     identify = _identify_section(top, timing)
     selection, selection_raw = _selection_section(top)
     data_cfg = _data_section(top, [m.name for m in models])
+    fit_hc = _fit_hc_section(top, disturbance)
     top.done()
 
     raw = dict(data)
@@ -418,6 +426,7 @@ def parse_config(data: Any, name: str) -> Config:
         identify=identify,
         selection=selection,
         data=data_cfg,
+        fit_hc=fit_hc,
         raw=raw,
     )
 

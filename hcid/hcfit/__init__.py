@@ -16,7 +16,8 @@ Two targets (:data:`TARGETS`):
 
 - ``frequency`` (the authors' approach, the default): minimise
   ``sum_w |H_arx - H_par|^2 / |H_arx|^2`` over both paths on a log grid of the
-  disturbance band (:func:`band_grid`), the relative complex error.
+  disturbance band (:func:`band_grid`; the config's
+  :attr:`hcid.config.Disturbance.band`), the relative complex error.
 - ``time``: minimise ``sum (u - u_par)^2`` over the estimation rows, where
   ``u_par = Hft_par ft + He_par e`` is simulated from the measured, unshifted ft
   and e (:func:`simulate_hc`).
@@ -31,7 +32,6 @@ result wins. Equal inputs and settings give identical results.
 from hcid.hcfit.fit import BOUND_TOLERANCE, HCFit, fit_frequency, fit_hc, fit_time
 from hcid.hcfit.model import TrackingRecord, hc_response, simulate_hc
 from hcid.hcfit.settings import (
-    DEFAULT_BAND,
     DEFAULT_BOUNDS,
     FEEDBACK_PARAMETERS,
     FEEDFORWARD_PARAMETERS,
@@ -46,7 +46,6 @@ from hcid.hcfit.settings import (
 
 __all__ = [
     "BOUND_TOLERANCE",
-    "DEFAULT_BAND",
     "DEFAULT_BOUNDS",
     "FEEDBACK_PARAMETERS",
     "FEEDFORWARD_PARAMETERS",

@@ -21,8 +21,8 @@ import control
 import numpy as np
 from scipy import signal as sps
 
-from hcid._checks import integer
 from hcid.arx.engine import _rows
+from hcid.config._checks import integer
 from hcid.errors import ConfigError, DataError
 from hcid.hcfit.settings import FEEDBACK_PARAMETERS, PARAMETERS
 

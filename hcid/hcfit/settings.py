@@ -11,11 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hcid._checks import Section, fmt, integer
+from hcid.config._checks import Section, fmt, integer
 from hcid.errors import ConfigError
 
 __all__ = [
-    "DEFAULT_BAND",
     "DEFAULT_BOUNDS",
     "FEEDBACK_PARAMETERS",
     "FEEDFORWARD_PARAMETERS",
@@ -42,11 +41,6 @@ UNITS = {
     "tau_pt": "s",
 }
 TARGETS = ("frequency", "time")
-
-#: SPEC 5: the disturbance band of the paper (rad/s). Same numbers as
-#: ``hcid.report.compute.DISTURBANCE_BAND``; analyses may not import the report.
-DEFAULT_BAND = (0.23, 17.33)
-
 
 # Physical limits that no bound may cross: a negative feedback delay is not
 # causal, and w_nms, zeta_nms and TI must be positive for the paths to be
@@ -138,8 +132,11 @@ class FitSettings:
         Random local starts besides the global-stage result (>= 0).
     seed : int
         Seed of the global stage and of the random starts.
-    band : tuple of float
-        ``(lo, hi)`` of the frequency target's log grid (rad/s).
+    band : tuple of float, or None
+        ``(lo, hi)`` of the frequency target's log grid (rad/s). None until
+        resolved: :func:`parse_fit_settings` fills in the config's disturbance
+        band (:attr:`hcid.config.Disturbance.band`, SPEC 5) when the config
+        gives none.
     points : int
         Points of that grid.
     oversample : int
@@ -155,7 +152,7 @@ class FitSettings:
     target: str = "frequency"
     starts: int = 4
     seed: int = 0
-    band: tuple[float, float] = DEFAULT_BAND
+    band: tuple[float, float] | None = None
     points: int = 50
     oversample: int = 4
     popsize: int = 8
@@ -171,9 +168,10 @@ class FitSettings:
         integer(self.oversample, "oversample", 1, 64)
         integer(self.popsize, "popsize", 2, 200)
         integer(self.maxiter, "maxiter", 1, 10_000)
-        lo, hi = self.band
-        if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi):
-            raise ConfigError(f"band: must be [lo, hi] rad/s with 0 < lo < hi, got {list(self.band)}")
+        if self.band is not None:
+            lo, hi = self.band
+            if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi):
+                raise ConfigError(f"band: must be [lo, hi] rad/s with 0 < lo < hi, got {list(self.band)}")
         names = tuple(b.name for b in self.bounds)
         if names != PARAMETERS:
             raise ConfigError(f"bounds: must be one per parameter in the order {PARAMETERS}, got {names}")
@@ -197,7 +195,9 @@ def _pair(section: Section, name: str, default: tuple[float, float] | None) -> t
     return float(value[0]), float(value[1])
 
 
-def parse_fit_settings(data: dict | None, path: str = "fit_hc") -> FitSettings:
+def parse_fit_settings(
+    data: dict | None, path: str = "fit_hc", *, default_band: tuple[float, float] | None = None
+) -> FitSettings:
     """Build :class:`FitSettings` from a parsed YAML mapping.
 
     Parameters
@@ -211,6 +211,9 @@ def parse_fit_settings(data: dict | None, path: str = "fit_hc") -> FitSettings:
         bounds (the whole bounds if the two do not overlap).
     path : str
         Dotted key of the mapping, prefixed to error messages.
+    default_band : tuple of float, optional
+        The band (rad/s) when ``data`` gives none: the config's disturbance
+        band (:attr:`hcid.config.Disturbance.band`).
 
     Raises
     ------
@@ -230,8 +233,8 @@ def parse_fit_settings(data: dict | None, path: str = "fit_hc") -> FitSettings:
     oversample = s.integer("oversample", 1, 64, defaults.oversample)
     popsize = s.integer("popsize", 2, 200, defaults.popsize)
     maxiter = s.integer("maxiter", 1, 10_000, defaults.maxiter)
-    band = _pair(s, "band", defaults.band)
-    if not 0 < band[0] < band[1]:
+    band = _pair(s, "band", default_band)
+    if band is not None and not 0 < band[0] < band[1]:
         raise ConfigError(f"{s.key('band')}: must be [lo, hi] rad/s with 0 < lo < hi, got {list(band)}")
     given_bounds = s.section("bounds", {})
     given_starts = s.section("start_ranges", {})
@@ -262,6 +265,14 @@ def parse_fit_settings(data: dict | None, path: str = "fit_hc") -> FitSettings:
     )
 
 
-def band_grid(band: tuple[float, float] = DEFAULT_BAND, points: int = 50) -> np.ndarray:
-    """Log grid of ``points`` frequencies (rad/s) from ``band[0]`` to ``band[1]``, ends included."""
+def band_grid(band: tuple[float, float], points: int = 50) -> np.ndarray:
+    """Log grid of ``points`` frequencies (rad/s) from ``band[0]`` to ``band[1]``, ends included.
+
+    Examples
+    --------
+    >>> band_grid((0.1, 10.0), 3)
+    array([ 0.1,  1. , 10. ])
+    """
+    if band is None:
+        raise ConfigError("band: not resolved; give fit_hc.band or parse the settings with the config")
     return np.geomspace(band[0], band[1], points)
