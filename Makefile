@@ -30,6 +30,7 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/arx_engine.py
+	$(BIN)/python benchmarks/fit_hc.py
 
 clean:
 	rm -rf $(VENV) runs/*/ .pytest_cache build *.egg-info

@@ -27,11 +27,12 @@ from _paper_record import PAPER_CONFIG, paper_record  # noqa: E402
 from hcid import hcfit  # noqa: E402
 from hcid.arx import Grid, fit_grid  # noqa: E402
 from hcid.arx.engine import simulate  # noqa: E402
+from hcid.arx.response import path_response  # noqa: E402
 from hcid.config import load_config  # noqa: E402
+from hcid.criteria import w_bic  # noqa: E402
 from hcid.hcmodel import plant, true_response  # noqa: E402
-from hcid.report.compute import arx_response  # noqa: E402
 from hcid.residuals import analyse_residuals  # noqa: E402
-from hcid.selection import select_at, w_bic  # noqa: E402
+from hcid.selection import select_at  # noqa: E402
 from hcid.simulate import simulate_realization  # noqa: E402
 
 REPEATS = 5
@@ -79,7 +80,7 @@ def main():
     config = load_config(PAPER_CONFIG)
     yc = plant(config.loop)
     model = config.model("FF")
-    omega = hcfit.band_grid()
+    omega = hcfit.band_grid(config.disturbance.band)
 
     print("1. noise-free FF, default settings")
     hft, he = true_response(model, config.loop, omega)
@@ -104,8 +105,8 @@ def main():
     a, b1, b2 = grid.a[row], grid.b1[row], grid.b2[row]
     print(f"  selected (na, nb_ft, nb_e, nk_ft, nk_e) = {tuple(int(x) for x in orders[row])}")
     dt = 1 / 25.0
-    h_ft = arx_response(a, b1, int(grid.nk1[row]), omega, dt, advance=1.0) if b1.size else None
-    h_e = arx_response(a, b2, int(grid.nk2[row]), omega, dt)
+    h_ft = path_response(a, b1, int(grid.nk1[row]), omega, dt, advance=1.0) if b1.size else None
+    h_e = path_response(a, b2, int(grid.nk2[row]), omega, dt)
     record = hcfit.TrackingRecord(clean.ft, data["e"], data["u"], 25.0, ESTIMATION, VALIDATION)
     seconds, fit = _timed(lambda: hcfit.fit_frequency(omega, h_e, h_ft, yc, record=record))
     print(f"  frequency fit: median {seconds:.3f} s, VAF_val {fit.vaf_validation:.2f}%: {_estimates(fit)}")
