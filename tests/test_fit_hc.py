@@ -51,7 +51,7 @@ def test_tables_hold_one_row_per_record_method_w_and_parameter(fitted):
     # 2 models x 2 seeds x 2 methods at one W each (no calibration: W_BIC, Nf = 960).
     fits = {(r["model"], r["seed"], r["method"], r["w"]) for r in rows}
     assert len(fits) == 8
-    assert {r["w"] for r in rows} == {pytest.approx(w_bic(960))}
+    assert sorted({r["w"] for r in rows}) == [pytest.approx(w_bic(960), rel=1e-12)]
     assert {r["w_source"] for r in rows} == {"W_BIC"}
     for key in fits:
         group = [r for r in rows if (r["model"], r["seed"], r["method"], r["w"]) == key]
@@ -78,24 +78,25 @@ def test_tables_hold_one_row_per_record_method_w_and_parameter(fitted):
     assert res.num_rows == 8 * (25 + 2 * 51)
     assert set(res.column("signal").to_pylist()) == {"eps", "ft_s", "e"}
     # The 99% band of a white residual over the 960 validation rows: 2.5758 / sqrt(960).
-    assert set(res.column("bound").to_pylist()) == {pytest.approx(2.5758293035489 / 960**0.5)}
+    assert sorted(set(res.column("bound").to_pylist())) == [pytest.approx(2.5758293035489 / 960**0.5)]
     assert "fitted 8 record-methods, reused 0" in output
 
 
 @pytest.mark.parametrize("name", [tables.HC_PARAMETERS.file, tables.RESIDUALS.file])
 def test_tables_identical_for_jobs_1_and_2(fitted, name):
     _, out = fitted
-    assert pq.read_table(out[1][0] / name).equals(pq.read_table(out[2][0] / name))
+    # Byte for byte (Table.equals would call NaN unequal: a FB fit has no true TI).
+    assert (out[1][0] / name).read_bytes() == (out[2][0] / name).read_bytes()
 
 
 def test_second_call_reuses_everything_and_another_w_adds_rows(fitted, tmp_path):
     config, out = fitted
     run = out[1][0]
-    before = pq.read_table(run / tables.HC_PARAMETERS.file)
+    before = (run / tables.HC_PARAMETERS.file).read_bytes()
     result = runner.invoke(app, ["fit-hc", str(config), "--run", str(run), "--quiet"])
     assert result.exit_code == 0, result.output
     assert "fitted 0 record-methods, reused 8" in result.output
-    assert pq.read_table(run / tables.HC_PARAMETERS.file).equals(before)
+    assert (run / tables.HC_PARAMETERS.file).read_bytes() == before
     # A new W is fitted for the direct method only; the W_BIC rows stay.
     result = runner.invoke(
         app, ["fit-hc", str(config), "--run", str(run), "--w", "0.47", "--method", "direct", "--quiet"]

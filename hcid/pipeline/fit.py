@@ -345,11 +345,10 @@ def fit_hc_study(
     tasks, kept, reused = [], {}, 0
     for key, t in by_key.items():
         model, seed, method_name = key
-        if method_name not in names:
-            continue
-        pairs = w_of[method_name]
+        # Methods not asked for keep their valid rows (below) and get no new ones.
+        pairs = w_of.get(method_name, [])
         todo = []
-        for sel, (_, source) in zip(_selected(t, [w for w, _ in pairs]), pairs, strict=True):
+        for sel, (_, source) in zip(_selected(t, [w for w, _ in pairs]) if pairs else [], pairs, strict=True):
             group = existing.get((*key, sel.w))
             if group is not None and _valid(group, sel, source):
                 kept[(*key, sel.w)] = group
@@ -362,7 +361,7 @@ def fit_hc_study(
             if _valid(existing[(*key, sel.w)], sel, None):
                 kept[(*key, sel.w)] = existing[(*key, sel.w)]
         if not todo:
-            reused += 1
+            reused += method_name in names
             continue
         record = records.get((model, seed))
         if record is None:
