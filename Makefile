@@ -30,6 +30,7 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/arx_engine.py
+	$(BIN)/python benchmarks/fit_hc.py
 
 robustness: $(STAMP)
 	$(BIN)/python tests/robustness/battery.py

@@ -22,6 +22,8 @@ file                            one row per                                    w
 ``breakpoints.parquet``         model, seed, method and interval of W          ``hcid sweep-w``
 ``thresholds.parquet``          method and model                               ``hcid sweep-w``
 ``calibration.parquet``         method and W of the grid                       ``hcid calibrate-w``
+``hc_parameters.parquet``       record, method, W and HC parameter             ``hcid fit-hc``
+``residuals.parquet``           record, method, W, residual series and lag     ``hcid fit-hc``
 ``run_log.parquet``             stage run (wall seconds)                       every computing stage
 ==============================  =============================================  ==========================
 """
@@ -37,9 +39,11 @@ __all__ = [
     "BREAKPOINTS",
     "CALIBRATION",
     "FRONTIER",
+    "HC_PARAMETERS",
     "IDENTIFY_LOG",
     "MEASURED",
     "ORDER_COLUMNS",
+    "RESIDUALS",
     "RUN_LOG",
     "SELECTED_COLUMNS",
     "SELECTION",
@@ -221,3 +225,39 @@ def split_by_key(table: pa.Table, keys: Sequence[str]) -> dict[tuple, pa.Table]:
 def concat(tables: Sequence[pa.Table]) -> pa.Table:
     """Concatenate tables of one schema into a single-chunk table."""
     return pa.concat_tables(tables).combine_chunks()
+
+
+# --------------------------------------------------------------------------- analyses of selected models
+
+#: The selected model's columns in the analysis tables (orders, delays, V, the ARX model's VAF).
+_SELECTED_MODEL_FIELDS = [(c, _INT) for c in ORDER_COLUMNS] + [("v", _F64), ("vaf_arx_validation", _F64)]
+_ANALYSIS_KEY = ("model", "seed", "method", "w")
+
+#: ``hc_parameters.parquet`` (``hcid fit-hc``): one row per record (model and seed, or
+#: measured run), method, W and parameter of the parametric HC fit (SPEC 8).
+#: ``w_source`` says where W came from (W_BIC, calibrated, --w); ``settings`` is a
+#: digest of the fit settings the row was made with; ``status`` is ``fitted`` or why
+#: not; ``true_value`` is the simulated model's (NaN for measured data or an
+#: undefined parameter); ``at_bound`` flags an estimate on its bound; ``cost`` and
+#: ``vaf_validation`` (%, the parametric model on the validation rows) repeat per row.
+HC_PARAMETERS = _schema(
+    "hc_parameters.parquet",
+    [("model", _STR), ("seed", _INT), ("method", _STR), ("w", _F64), ("w_source", _STR)]
+    + _SELECTED_MODEL_FIELDS
+    + [("target", _STR), ("settings", _STR), ("status", _STR), ("parameter", _STR), ("unit", _STR)]
+    + [("estimate", _F64), ("true_value", _F64), ("lower", _F64), ("upper", _F64), ("at_bound", _BOOL)]
+    + [("cost", _F64), ("vaf_validation", _F64), ("starts", _INT)],
+    (*_ANALYSIS_KEY, "parameter"),
+)
+#: ``residuals.parquet`` (``hcid fit-hc``): one row per record, method, W, series and lag:
+#: the selected model's simulation-residual autocorrelation (``signal`` eps) and its
+#: cross-correlation with each input (ft_s, e), the white-residual band (``bound``),
+#: whether the lag is outside it, and the share of that series' lags outside.
+RESIDUALS = _schema(
+    "residuals.parquet",
+    [("model", _STR), ("seed", _INT), ("method", _STR), ("w", _F64), ("w_source", _STR)]
+    + _SELECTED_MODEL_FIELDS
+    + [("signal", _STR), ("kind", _STR), ("lag", _INT), ("lag_s", _F64), ("correlation", _F64)]
+    + [("bound", _F64), ("outside", _BOOL), ("share_outside", _F64), ("n", _INT), ("confidence", _F64)],
+    (*_ANALYSIS_KEY, "signal", "lag"),
+)

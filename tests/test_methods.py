@@ -1,6 +1,7 @@
 """The methods: direct and indirect identification on a noise-free known ARX system, and the registry."""
 
 import copy
+import dataclasses
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -10,6 +11,7 @@ from scipy import signal as sps
 
 from hcid import methods, selection
 from hcid.config import parse_config
+from hcid.errors import IdentificationError
 from hcid.methods import Method, StageSpec, identify, registered, shift_forward
 
 from .conftest import CI_CONFIG
@@ -187,3 +189,26 @@ def test_nf_follows_each_methods_own_final_stage(ci_raw, tmp_path):
     marks = data.sections["curves"].criterion_marks
     assert marks["W_BIC direct"] == pytest.approx(np.log(960) / 960)
     assert marks["W_BIC indirect"] == pytest.approx(np.log(888) / 888)
+
+
+def test_final_signals_rebuild_what_the_final_stage_was_fitted_to(ci_config, paper_record):
+    # Source: the identification itself. Refitting the final stage's grid on the rebuilt
+    # (i1, i2, o) gives the frontier that identify returned: for the indirect method, e_r
+    # comes from stage 1's stored choice refitted alone (its V checked against the stored
+    # one), so V agrees to the engine's rounding (fit_grid Notes: ~1e-9 relative).
+    from hcid.methods.base import fit_stage
+
+    settings = ci_config.identify
+    shift = settings.shift_samples(ci_config.timing.output_rate)
+    for name in ("direct", "indirect"):
+        method = methods.get(name)
+        result = identify(paper_record, settings, name, rate=25.0)
+        i1, i2, o = method.final_signals(paper_record, settings, shift, result.choices)
+        np.testing.assert_array_equal(i1, paper_record["ft_s"])
+        np.testing.assert_array_equal(o, paper_record["u"])
+        again = fit_stage(settings.stage(method.final_stage.name), i1, i2, o, 1)
+        np.testing.assert_allclose(again.v, result.fit.v, rtol=1e-6)
+    # A choice made on another record is refused instead of giving a wrong e_r.
+    wrong = dataclasses.replace(result.choices[0], v=result.choices[0].v * 1.01)
+    with pytest.raises(IdentificationError, match="stage1: refitting the chosen candidate"):
+        methods.get("indirect").final_signals(paper_record, settings, shift, (wrong,))

@@ -401,6 +401,13 @@ def _data_section(top: Section, model_names: list[str]) -> DataConfig | None:
     return DataConfig(name=name, columns=columns, w_report=tuple(float(w) for w in w_raw))
 
 
+def _fit_hc_section(top: Section, disturbance: Disturbance):
+    # The settings live with the fit (hcid.hcfit.settings), parsed here once like every section.
+    from hcid.hcfit.settings import parse_fit_settings
+
+    return parse_fit_settings(top.get("fit_hc", None), "fit_hc", default_band=disturbance.band)
+
+
 # --------------------------------------------------------------------------- entry points
 
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]*")
@@ -525,6 +532,7 @@ def parse_config(data: Any, name: str) -> Config:
     identify = _identify_section(top, timing)
     selection, selection_raw = _selection_section(top)
     data_cfg = _data_section(top, [m.name for m in models])
+    fit_hc = _fit_hc_section(top, disturbance)
     top.done()
     _check_study_size(identify, seeds, models)
     # The closed loops' stability needs the discretised paths (hcid.hcmodel): checked
@@ -551,6 +559,7 @@ def parse_config(data: Any, name: str) -> Config:
         identify=identify,
         selection=selection,
         data=data_cfg,
+        fit_hc=fit_hc,
         raw=raw,
     )
 

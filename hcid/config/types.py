@@ -7,6 +7,7 @@ output rate (``[129, 1088]``); :meth:`Window.rows` gives the Python slice
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -74,6 +75,19 @@ class Disturbance:
     k: tuple[int, ...]
     amplitude: tuple[float, ...]
     phase: tuple[float, ...]
+
+    @property
+    def band(self) -> tuple[float, float]:
+        """Lowest and highest disturbance frequency (rad/s): where identified models are
+        expected to be accurate (SPEC 5: 0.23..17.33 rad/s for the paper's 20 sines).
+
+        Examples
+        --------
+        >>> Disturbance(81.92, 8.09, (3, 226), (1.0, 1.0), (0.0, 0.0)).band
+        (0.23009711818284617, 17.333982903107746)
+        """
+        base = 2.0 * math.pi / self.base_period
+        return float(min(self.k) * base), float(max(self.k) * base)
 
 
 @dataclass(frozen=True)
@@ -279,6 +293,9 @@ class Config:
     identify: IdentifyConfig
     selection: SelectionConfig
     data: DataConfig | None = None
+    #: The parametric HC fit's settings (:class:`hcid.hcfit.FitSettings`, config
+    #: section ``fit_hc``; typed loosely because the analyses sit above the config).
+    fit_hc: Any = None
     raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False, hash=False)
 
     def model(self, name: str) -> HCModel:

@@ -21,9 +21,19 @@ from typing import Any
 import numpy as np
 
 from hcid.arx.engine import GridFit, best, fit_grid
-from hcid.config.types import IdentifyConfig, StageConfig
+from hcid.config.types import Grid, IdentifyConfig, StageConfig
+from hcid.errors import IdentificationError
 
-__all__ = ["Method", "MethodResult", "StageChoice", "StageSpec", "choose", "fit_stage", "shift_forward"]
+__all__ = [
+    "Method",
+    "MethodResult",
+    "StageChoice",
+    "StageSpec",
+    "choose",
+    "fit_stage",
+    "refit",
+    "shift_forward",
+]
 
 
 @dataclass(frozen=True)
@@ -80,6 +90,12 @@ class MethodResult:
 #: ``run(record, settings, shift, threads)``: ``record`` holds ft, fd, e, u (rad) at the
 #: analysis rate, ``shift`` is the target shift in samples.
 RunFunction = Callable[[Mapping[str, np.ndarray], IdentifyConfig, int, int], MethodResult]
+#: ``signals(record, settings, shift, choices)``: the final stage's ``(i1, i2, o)`` on a
+#: record, given the earlier stages' choices (in the order of ``choice_stages``).
+SignalsFunction = Callable[
+    [Mapping[str, np.ndarray], IdentifyConfig, int, tuple[StageChoice, ...]],
+    tuple[np.ndarray, np.ndarray, np.ndarray],
+]
 
 
 @dataclass(frozen=True)
@@ -88,12 +104,16 @@ class Method:
 
     ``nf_stage`` names the stage whose estimation rows give ``Nf``, the number
     the criteria's penalties W(Nf) depend on (the final stage when None).
+    ``signals`` rebuilds the final stage's inputs and output from a record and
+    the earlier stages' stored choices (for residuals of a selected model); a
+    one-stage method may leave it None (:meth:`final_signals`).
     """
 
     name: str
     stages: tuple[StageSpec, ...]
     run: RunFunction
     nf_stage: str | None = None
+    signals: SignalsFunction | None = None
 
     @property
     def final_stage(self) -> StageSpec:
@@ -103,6 +123,28 @@ class Method:
     def choice_stages(self) -> tuple[StageSpec, ...]:
         """The stages before the final one: each hands on one model, kept in its own table."""
         return self.stages[:-1]
+
+    def final_signals(
+        self,
+        record: Mapping[str, np.ndarray],
+        settings: IdentifyConfig,
+        shift: int,
+        choices: tuple[StageChoice, ...] = (),
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The final stage's ``(i1, i2, o)`` on ``record``: what its frontier was fitted to.
+
+        Without a ``signals`` function (a one-stage method), i1 is ft shifted
+        forward by ``shift`` samples (SPEC 3) and i2, o are the record's signals
+        named by the final stage's inputs.
+        """
+        if self.signals is not None:
+            return self.signals(record, settings, shift, tuple(choices))
+        if self.choice_stages:
+            raise IdentificationError(
+                f"method {self.name}: has earlier stages, so it must give a signals function"
+            )
+        i1, i2, o = self.final_stage.inputs
+        return shift_forward(record[i1], shift), record[i2], record[o]
 
     def nf(self, settings: IdentifyConfig) -> int:
         """Nf: the estimation rows of the stage that defines it (SPEC 4 and 7)."""
@@ -125,6 +167,38 @@ def shift_forward(x: np.ndarray, n: int) -> np.ndarray:
 def fit_stage(stage: StageConfig, i1: np.ndarray, i2: np.ndarray, o: np.ndarray, threads: int) -> GridFit:
     """Fit every candidate of a stage's grid on its windows (:func:`hcid.arx.fit_grid`)."""
     return fit_grid(i1, i2, o, stage.grid, stage.estimation.rows(), stage.validation.rows(), threads=threads)
+
+
+def refit(
+    stage: StageConfig, choice: StageChoice, i1: np.ndarray, i2: np.ndarray, o: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(a, b1, b2)`` of a stage's chosen candidate, fitted again on the stage's windows.
+
+    The one candidate of ``choice`` is estimated alone (a one-point grid), which
+    gives the grid fit's coefficients up to rounding (:func:`hcid.arx.fit_grid`,
+    Notes); its V is checked against the stored ``choice.v``.
+
+    Raises
+    ------
+    hcid.errors.IdentificationError
+        If the refit's V differs from ``choice.v`` by more than 1e-6 relative
+        (the record is not the one the choice was made on).
+    """
+    grid = Grid(
+        na=(choice.na, choice.na),
+        nb1=(choice.nb1, choice.nb1),
+        nb2=(choice.nb2, choice.nb2),
+        nk1=(choice.nk1, choice.nk1),
+        nk2=(choice.nk2, choice.nk2),
+    )
+    fit = fit_grid(i1, i2, o, grid, stage.estimation.rows(), stage.validation.rows())
+    v = float(fit.v[0])
+    if not (np.isfinite(v) and abs(v - choice.v) <= 1e-6 * abs(choice.v)):
+        raise IdentificationError(
+            f"{choice.stage}: refitting the chosen candidate gives V = {v:.6g}, stored {choice.v:.6g}; "
+            "the record is not the one it was chosen on"
+        )
+    return fit.a[0], fit.b1[0], fit.b2[0]
 
 
 def choose(name: str, fit: GridFit, start: float) -> tuple[int, StageChoice]:

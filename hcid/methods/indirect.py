@@ -12,7 +12,7 @@ from __future__ import annotations
 import time
 
 from hcid.arx.engine import simulate
-from hcid.methods.base import Method, MethodResult, StageSpec, choose, fit_stage, shift_forward
+from hcid.methods.base import Method, MethodResult, StageSpec, choose, fit_stage, refit, shift_forward
 from hcid.methods.direct import DIRECT_DEFAULTS
 
 #: SPEC 3: the stage-1 grid (64,260 candidates); its windows run from the grid's largest lag on.
@@ -37,6 +37,16 @@ def _run(record, settings, shift, threads) -> MethodResult:
     return MethodResult("indirect", fit, (choice,), time.perf_counter() - start)
 
 
+def _signals(record, settings, shift, choices):
+    # e_r again from stage 1's stored choice (stage1.parquet holds its orders, not its
+    # coefficients): the one candidate is refitted, its V checked against the stored one.
+    (choice,) = choices
+    ft_s = shift_forward(record["ft"], shift)
+    a, b1, b2 = refit(settings.stage("stage1"), choice, ft_s, record["fd"], record["e"])
+    e_r = simulate(a, b1, b2, choice.nk1, choice.nk2, ft_s, record["fd"])
+    return ft_s, e_r, record["u"]
+
+
 METHOD = Method(
     name="indirect",
     stages=(
@@ -44,4 +54,5 @@ METHOD = Method(
         StageSpec("stage2", ("ft", "e", "u"), DIRECT_DEFAULTS, defaults_from="direct"),
     ),
     run=_run,
+    signals=_signals,
 )

@@ -2,10 +2,13 @@
 
 - :mod:`hcid.pipeline.studies`: the stages (simulate, identify, sweep W,
   calibrate W) and :func:`run_study`, which chains them.
+- :mod:`hcid.pipeline.fit`: ``fit-hc``, the parametric HC fit and residual
+  analysis of every selected model.
 - :mod:`hcid.pipeline.parallel`: the worker pool and progress bar.
 - :mod:`hcid.pipeline.rundir`: which config a run directory belongs to.
 """
 
+from hcid.pipeline.fit import HCFitRun, fit_hc_study
 from hcid.pipeline.parallel import BACKENDS, check_backend, parallel_map
 from hcid.pipeline.rundir import check_run_dir
 from hcid.pipeline.studies import (
@@ -24,6 +27,7 @@ from hcid.pipeline.studies import (
 __all__ = [
     "BACKENDS",
     "CalibrationRun",
+    "HCFitRun",
     "IdentifyRun",
     "SimulationRun",
     "StudyRun",
@@ -31,6 +35,7 @@ __all__ = [
     "calibrate_study",
     "check_backend",
     "check_run_dir",
+    "fit_hc_study",
     "identify_study",
     "parallel_map",
     "run_study",

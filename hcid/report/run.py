@@ -23,6 +23,8 @@ _READS = {
     "thresholds": (tables.thresholds(), None),
     "runlog": (tables.RUN_LOG, None),
     "calibration": (tables.CALIBRATION, None),
+    "hc_parameters": (tables.HC_PARAMETERS, None),
+    "residuals": (tables.RESIDUALS, None),
 }
 
 
@@ -44,6 +46,8 @@ class RunTables:
     runlog: pa.Table | None
     calibration: pa.Table | None
     choices: dict[str, pa.Table]
+    hc_parameters: pa.Table | None = None
+    residuals: pa.Table | None = None
 
     def simulations(self) -> dict | None:
         """The simulated records by (model, seed), or None without simulations."""

@@ -1,0 +1,66 @@
+"""Parametric fit of the HC model to a selected ARX model (SPEC section 8).
+
+The parametric paths are those of SPEC sections 1 and 7 with continuous delays:
+
+    He_par  = Ynms * Kpe (TL s + 1) exp(-s tau_pe)                 u per e
+    Hft_par = Ynms * Kpt / Yc / (TI s + 1)^2 exp(-s tau_pt)        u per ft
+    Ynms    = w_nms^2 / (s^2 + 2 zeta_nms w_nms s + w_nms^2)
+
+with the plant ``Yc`` any proper continuous python-control transfer function
+(:func:`hcid.hcmodel.plant`); it is only evaluated through its frequency
+response and its numerator and denominator polynomials. The feedforward
+parameters are fitted only when the selected model has a feedforward path
+(``nb_ft > 0``).
+
+Two targets (:data:`TARGETS`):
+
+- ``frequency`` (the authors' approach, the default): minimise
+  ``sum_w |H_arx - H_par|^2 / |H_arx|^2`` over both paths on a log grid of the
+  disturbance band (:func:`band_grid`; the config's
+  :attr:`hcid.config.Disturbance.band`), the relative complex error.
+- ``time``: minimise ``sum (u - u_par)^2`` over the estimation rows, where
+  ``u_par = Hft_par ft + He_par e`` is simulated from the measured, unshifted ft
+  and e (:func:`simulate_hc`).
+
+Both run a seeded global stage (``scipy.optimize.differential_evolution`` over
+the starting ranges) and then a bounded local stage
+(``scipy.optimize.least_squares``) from the global result and from
+``starts`` points drawn from the starting ranges with the seed; the best local
+result wins. Equal inputs and settings give identical results.
+"""
+
+from hcid.hcfit.fit import BOUND_TOLERANCE, HCFit, fit_frequency, fit_hc, fit_time
+from hcid.hcfit.model import TrackingRecord, hc_response, simulate_hc
+from hcid.hcfit.settings import (
+    DEFAULT_BOUNDS,
+    FEEDBACK_PARAMETERS,
+    FEEDFORWARD_PARAMETERS,
+    PARAMETERS,
+    TARGETS,
+    UNITS,
+    FitSettings,
+    ParameterBounds,
+    band_grid,
+    parse_fit_settings,
+)
+
+__all__ = [
+    "BOUND_TOLERANCE",
+    "DEFAULT_BOUNDS",
+    "FEEDBACK_PARAMETERS",
+    "FEEDFORWARD_PARAMETERS",
+    "PARAMETERS",
+    "TARGETS",
+    "UNITS",
+    "FitSettings",
+    "HCFit",
+    "ParameterBounds",
+    "TrackingRecord",
+    "band_grid",
+    "fit_frequency",
+    "fit_hc",
+    "fit_time",
+    "hc_response",
+    "parse_fit_settings",
+    "simulate_hc",
+]

@@ -1,0 +1,329 @@
+"""Fitting the parametric HC model: the frequency and time targets and the optimiser."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import control
+import numpy as np
+from scipy import optimize
+
+from hcid.errors import DataError, IdentificationError
+from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials, _responses, _Simulator, simulate_hc
+from hcid.hcfit.settings import UNITS, FitSettings
+
+__all__ = ["BOUND_TOLERANCE", "HCFit", "fit_frequency", "fit_hc", "fit_time"]
+
+#: A parameter is flagged ``at_bound`` when it lies within this share of its
+#: bound width of a bound (the local stage lands within ~1e-9 of an active one).
+BOUND_TOLERANCE = 1e-4
+
+
+@dataclass(frozen=True)
+class HCFit:
+    """The fitted parametric HC model.
+
+    Attributes
+    ----------
+    target : str
+        ``frequency`` or ``time``.
+    names : tuple of str
+        Fitted parameters: :data:`FEEDBACK_PARAMETERS`, then
+        :data:`FEEDFORWARD_PARAMETERS` if the model has a feedforward path.
+    estimates : tuple of float
+        Estimates in the units of :data:`UNITS`.
+    at_bound : tuple of bool
+        Whether each estimate lies on a bound (within :data:`BOUND_TOLERANCE`
+        of the bound width): the optimum may lie outside the bounds.
+    cost : float
+        Frequency target: ``sum |H_arx - H_par|^2 / |H_arx|^2`` over the grid
+        and both paths (-); time target: ``sum (u - u_par)^2`` over the
+        estimation rows (rad^2).
+    starts : int
+        Local fits run (the global-stage result plus the random starts).
+    start_costs : tuple of float
+        Cost reached from each start, the global-stage start first.
+    vaf_validation : float
+        ``(1 - sum (u - u_par)^2 / sum u^2) * 100`` (%) over the validation
+        rows; NaN when no record was given to a frequency fit.
+    """
+
+    target: str
+    names: tuple[str, ...]
+    estimates: tuple[float, ...]
+    at_bound: tuple[bool, ...]
+    cost: float
+    starts: int
+    start_costs: tuple[float, ...]
+    vaf_validation: float
+
+    @property
+    def values(self) -> dict[str, float]:
+        """``{parameter: estimate}``, for :func:`hc_response` and :func:`simulate_hc`."""
+        return dict(zip(self.names, self.estimates, strict=True))
+
+    @property
+    def has_feedforward(self) -> bool:
+        return "Kpt" in self.names
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One dict per parameter: parameter, estimate, unit, at_bound, cost, vaf_validation,
+        target, starts."""
+        return [
+            {
+                "parameter": name,
+                "estimate": value,
+                "unit": UNITS[name],
+                "at_bound": hit,
+                "cost": self.cost,
+                "vaf_validation": self.vaf_validation,
+                "target": self.target,
+                "starts": self.starts,
+            }
+            for name, value, hit in zip(self.names, self.estimates, self.at_bound, strict=True)
+        ]
+
+
+# --------------------------------------------------------------------------- problems
+
+
+class _FrequencyProblem:
+    def __init__(self, omega, he, hft, plant):
+        _plant_polynomials(plant)
+        self.plant = plant
+        self.s = (1j * omega)[:, None]
+        self.yc = np.asarray(plant(1j * omega), dtype=complex)[:, None]
+        self.names = _names(hft is not None)
+        self.he = he[:, None]
+        self.hft = None if hft is None else hft[:, None]
+
+    def _relative_errors(self, theta: np.ndarray) -> np.ndarray:
+        hft, he = _responses(theta, self.names, self.s, self.yc)
+        errors = [(he - self.he) / np.abs(self.he)]
+        if hft is not None:
+            errors.append((hft - self.hft) / np.abs(self.hft))
+        return np.concatenate(errors)  # (n_paths * n_w, n_sets)
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        r = self._relative_errors(x[:, None])[:, 0]
+        return np.concatenate([r.real, r.imag])
+
+    def costs(self, thetas: np.ndarray) -> np.ndarray:
+        with np.errstate(over="ignore", invalid="ignore"):
+            c = np.sum(np.abs(self._relative_errors(thetas)) ** 2, axis=0)
+        return np.where(np.isfinite(c), c, np.inf)
+
+
+class _TimeProblem:
+    def __init__(self, record: TrackingRecord, plant, settings: FitSettings, feedforward: bool):
+        self.plant = plant
+        self.names = _names(feedforward)
+        delay_bounds = [settings.bound(name) for name in ("tau_pe", "tau_pt") if name in self.names]
+        delays = (min(b.lower for b in delay_bounds), max(b.upper for b in delay_bounds))
+        stop = record.estimation.stop  # the cost needs u_par up to the estimation rows' end only
+        self.simulate = _Simulator(record, plant, settings.oversample, feedforward, delays, stop)
+        self.u = record.u[record.estimation]
+        self.rows = record.estimation
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        with np.errstate(over="ignore", invalid="ignore"):
+            r = self.simulate(dict(zip(self.names, x, strict=True)))[self.rows] - self.u
+        # An unstable trial (never at the bounds' interior optimum) gets a large finite cost.
+        return np.where(np.isfinite(r), r, 1e6)
+
+    def costs(self, thetas: np.ndarray) -> np.ndarray:
+        return np.array([np.sum(self.residuals(thetas[:, i]) ** 2) for i in range(thetas.shape[1])])
+
+
+def _solve(problem, settings: FitSettings, target: str, record: TrackingRecord | None) -> HCFit:
+    bounds = [settings.bound(n) for n in problem.names]
+    lower = np.array([b.lower for b in bounds])
+    upper = np.array([b.upper for b in bounds])
+    start_box = [(b.start_lower, b.start_upper) for b in bounds]
+    # A zero-width starting range is a fixed start: widen it by a hair for DE.
+    start_box = [(lo, hi if hi > lo else lo + 1e-12 * max(1.0, abs(lo))) for lo, hi in start_box]
+    glob = optimize.differential_evolution(
+        # Clipped, so a widened zero-width start never leaves the bounds.
+        lambda thetas: problem.costs(np.clip(thetas, lower[:, None], upper[:, None])),
+        start_box,
+        popsize=settings.popsize,
+        maxiter=settings.maxiter,
+        tol=1e-8,
+        seed=np.random.default_rng(settings.seed),
+        polish=False,
+        updating="deferred",
+        vectorized=True,
+    )
+    rng = np.random.default_rng([settings.seed, 1])
+    randoms = rng.uniform(
+        [lo for lo, _ in start_box], [hi for _, hi in start_box], (settings.starts, len(bounds))
+    )
+    best = None
+    costs = []
+    for x0 in [glob.x, *randoms]:
+        x0 = np.clip(x0, lower, upper)
+        fit = optimize.least_squares(
+            problem.residuals,
+            x0,
+            bounds=(lower, upper),
+            method="trf",
+            x_scale="jac",
+            xtol=1e-12,
+            ftol=1e-12,
+            gtol=1e-12,
+            max_nfev=400,
+        )
+        cost = float(np.sum(fit.fun**2))
+        costs.append(cost)
+        if best is None or cost < best[0]:
+            best = (cost, fit.x)
+    cost, x = best
+    width = upper - lower
+    at_bound = tuple(
+        bool(v - lo <= BOUND_TOLERANCE * w or hi - v <= BOUND_TOLERANCE * w)
+        for v, lo, hi, w in zip(x, lower, upper, width, strict=True)
+    )
+    values = dict(zip(problem.names, (float(v) for v in x), strict=True))
+    vaf = math.nan
+    if record is not None:
+        u_par = simulate_hc(values, problem.plant, record, settings.oversample)
+        u = record.u[record.validation]
+        vaf = float((1.0 - np.sum((u - u_par[record.validation]) ** 2) / np.sum(u**2)) * 100.0)
+    return HCFit(
+        target=target,
+        names=problem.names,
+        estimates=tuple(values.values()),
+        at_bound=at_bound,
+        cost=cost,
+        starts=len(costs),
+        start_costs=tuple(costs),
+        vaf_validation=vaf,
+    )
+
+
+# --------------------------------------------------------------------------- public fits
+
+
+def _response(name: str, value: Any, n: int | None) -> np.ndarray:
+    h = np.asarray(value, dtype=complex)
+    if h.ndim != 1 or (n is not None and h.size != n):
+        raise DataError(
+            f"{name}: must be a 1-D array of complex responses, one per omega, got shape {h.shape}"
+        )
+    if not np.all(np.isfinite(h)) or np.any(h == 0):
+        raise DataError(f"{name}: must be finite and nonzero at every frequency (the cost divides by |H|)")
+    return h
+
+
+def fit_frequency(
+    omega: np.ndarray,
+    he: np.ndarray,
+    hft: np.ndarray | None,
+    plant: control.TransferFunction,
+    settings: FitSettings = FitSettings(),  # noqa: B008 (frozen)
+    record: TrackingRecord | None = None,
+) -> HCFit:
+    """Fit the parametric paths to the ARX paths' frequency responses.
+
+    Minimises ``sum_w |H_arx - H_par|^2 / |H_arx|^2`` over ``omega`` and both
+    paths (real and imaginary parts as the least-squares residuals).
+
+    Parameters
+    ----------
+    omega : ndarray, shape (n,)
+        Frequencies (rad/s), normally ``band_grid(settings.band, settings.points)``.
+    he : ndarray of complex, shape (n,)
+        ARX feedback path, u per e (SPEC 5).
+    hft : ndarray of complex, shape (n,), or None
+        ARX feedforward path with the target shift undone (SPEC 5); None when
+        the selected model has no feedforward (``nb_ft = 0``): the
+        feedforward parameters are then not fitted.
+    plant : control.TransferFunction
+        ``Yc`` (:func:`hcid.hcmodel.plant`).
+    settings : FitSettings
+        Bounds, starts, seed and global-stage size (``target`` is not read).
+    record : TrackingRecord, optional
+        Measured ft, e, u for the validation VAF; without it the VAF is NaN.
+
+    Returns
+    -------
+    HCFit
+
+    Raises
+    ------
+    hcid.errors.DataError
+        If omega is not positive and finite or a response is not finite and nonzero.
+    hcid.errors.ConfigError
+        If the plant is not a proper SISO continuous transfer function.
+    """
+    omega = np.asarray(omega, dtype=np.float64)
+    if omega.ndim != 1 or omega.size < 2 or not np.all(np.isfinite(omega)) or np.any(omega <= 0):
+        raise DataError(
+            f"omega: must be a 1-D array of positive frequencies (rad/s), got shape {omega.shape}"
+        )
+    he = _response("he", he, omega.size)
+    hft = None if hft is None else _response("hft", hft, omega.size)
+    problem = _FrequencyProblem(omega, he, hft, plant)
+    return _solve(problem, settings, "frequency", record)
+
+
+def fit_time(
+    record: TrackingRecord,
+    plant: control.TransferFunction,
+    feedforward: bool,
+    settings: FitSettings = FitSettings(),  # noqa: B008 (frozen)
+) -> HCFit:
+    """Fit the parametric model to the measured u over the estimation rows.
+
+    Minimises ``sum (u - u_par)^2`` over ``record.estimation``, with u_par from
+    :func:`simulate_hc` at ``settings.oversample``.
+
+    Parameters
+    ----------
+    record : TrackingRecord
+        Measured ft (unshifted), e, u (rad) at ``record.rate`` (Hz), with the
+        estimation and validation rows.
+    plant : control.TransferFunction
+        ``Yc``.
+    feedforward : bool
+        Whether the selected model has a feedforward path (``nb_ft > 0``).
+    settings : FitSettings
+        ``target`` is not read.
+
+    Returns
+    -------
+    HCFit
+    """
+    if not isinstance(record, TrackingRecord):
+        raise IdentificationError(f"record: must be a TrackingRecord, got {type(record).__name__}")
+    problem = _TimeProblem(record, plant, settings, bool(feedforward))
+    return _solve(problem, settings, "time", record)
+
+
+def fit_hc(
+    settings: FitSettings,
+    plant: control.TransferFunction,
+    feedforward: bool,
+    *,
+    record: TrackingRecord | None = None,
+    omega: np.ndarray | None = None,
+    he: np.ndarray | None = None,
+    hft: np.ndarray | None = None,
+) -> HCFit:
+    """Fit by ``settings.target``: :func:`fit_frequency` or :func:`fit_time`.
+
+    The frequency target needs ``omega`` and ``he`` (and ``hft`` exactly when
+    ``feedforward``); the time target needs ``record``, which the frequency
+    target uses for its validation VAF when given.
+    """
+    if settings.target == "time":
+        if record is None:
+            raise IdentificationError("record: the time target needs the measured ft, e and u")
+        return fit_time(record, plant, feedforward, settings)
+    if omega is None or he is None or (hft is None) == bool(feedforward):
+        raise IdentificationError(
+            "omega, he, hft: the frequency target needs omega and he, and hft exactly when feedforward"
+        )
+    return fit_frequency(omega, he, hft, plant, settings, record)

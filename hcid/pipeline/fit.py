@@ -1,0 +1,419 @@
+"""The ``fit-hc`` stage: parametric HC fit and residual analysis of every selected model.
+
+For every record (simulated realization or measured run) and method in
+``frontier.parquet``, the model selected at each requested W is analysed by
+:func:`hcid.selected.analyse_selected` on the worker pool
+(:func:`~hcid.pipeline.parallel.parallel_map`), one task per record and method.
+Writes ``hc_parameters.parquet`` and ``residuals.parquet``
+(:data:`hcid.tables.HC_PARAMETERS`, :data:`hcid.tables.RESIDUALS`).
+
+Resumable: each finished task is kept in ``RUN/.parts/fit_hc/<settings>/``
+until the tables are written; rows already in the tables (or parts) are reused
+when they were made with the same fit settings (the ``settings`` digest) and
+the same selected model (orders and V equal to the current frontier's
+selection at their W). Rows at other W values that are still valid are kept.
+Wall times go to ``run_log.parquet`` only, so the tables are identical for any
+``jobs``, backend or interruption.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import math
+import shutil
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute  # noqa: F401  (pa.compute)
+import pyarrow.parquet as pq
+
+from hcid import criteria, methods, results, selection, tables
+from hcid.config import Config
+from hcid.errors import DataError, HcidError
+from hcid.hcfit import FEEDBACK_PARAMETERS, UNITS, parse_fit_settings
+from hcid.pipeline.parallel import parallel_map
+from hcid.pipeline.rundir import check_run_dir, record_config
+from hcid.selected import (
+    RESIDUAL_CONFIDENCE,
+    RESIDUAL_MAX_LAG,
+    SelectedModel,
+    analyse_selected,
+    true_parameters,
+)
+
+__all__ = ["HCFitRun", "fit_hc_study", "requested_w"]
+
+PARTS = Path(".parts") / "fit_hc"
+_KEY = ("model", "seed", "method", "w")
+
+
+@dataclass(frozen=True)
+class HCFitRun:
+    """The tables of ``hcid fit-hc`` and what was done.
+
+    ``w_of[method]`` lists the ``(W, source)`` pairs fitted; ``computed`` and
+    ``reused`` count (record, method) tasks.
+    """
+
+    parameters: pa.Table
+    residuals: pa.Table
+    w_of: dict[str, list[tuple[float, str]]]
+    computed: int
+    reused: int
+    seconds: float
+    run_dir: Path
+
+
+def requested_w(
+    config: Config, run_dir: Path, method_names: Sequence[str], w_values: Sequence[float] | None
+) -> dict[str, list[tuple[float, str]]]:
+    """Per method, the W values to analyse and where each came from.
+
+    ``w_values`` if given (source ``--w``); otherwise the method's calibrated W
+    from ``calibration.parquet`` when it has one (``calibrated``), else
+    ``W_BIC = ln(Nf)/Nf`` with the method's Nf (``W_BIC``).
+    """
+    if w_values:
+        bad = [w for w in w_values if not (math.isfinite(w) and w > 0)]
+        if bad:
+            raise HcidError(f"--w: must be positive numbers, got {bad}")
+        return {m: [(float(w), "--w") for w in sorted(set(w_values))] for m in method_names}
+    calibration = results.read_optional(tables.CALIBRATION, run_dir, ("method", "recommended"))
+    recommended = {}
+    if calibration is not None:
+        for method, w in zip(
+            calibration.column("method").to_pylist(),
+            calibration.column("recommended").to_pylist(),
+            strict=True,
+        ):
+            if w is not None and math.isfinite(w) and w > 0:
+                recommended[method] = float(w)
+    out = {}
+    for m in method_names:
+        if m in recommended:
+            out[m] = [(recommended[m], "calibrated")]
+        else:
+            out[m] = [(criteria.w_bic(methods.get(m).nf(config.identify)), "W_BIC")]
+    return out
+
+
+def _settings_digest(config: Config) -> str:
+    text = repr((config.fit_hc, RESIDUAL_MAX_LAG, RESIDUAL_CONFIDENCE))
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+# --------------------------------------------------------------------------- inputs
+
+
+def _records(run_dir: Path) -> dict[tuple[str, int], dict[str, np.ndarray]]:
+    out = {}
+    sims = results.read_optional(tables.SIMULATIONS, run_dir)
+    if sims is not None:
+        out.update(results.records(sims, run_dir / tables.SIMULATIONS.file))
+    measured = results.read_optional(tables.MEASURED, run_dir)
+    if measured is not None:
+        for key, t in tables.split_by_key(measured, tables.MEASURED.key).items():
+            out[key] = {c: t.column(c).to_numpy().astype(np.float64) for c in tables.SIGNALS}
+    return out
+
+
+def _choices(run_dir: Path) -> dict[str, dict[tuple[str, int], methods.StageChoice]]:
+    """Per choosing stage, its stored choice per (model, seed)."""
+    out: dict[str, dict] = {}
+    for method in methods.METHODS.values():
+        for stage in method.choice_stages:
+            schema = tables.stage_choice(stage.name, stage.inputs)
+            table = results.read_optional(schema, run_dir)
+            if table is None:
+                continue
+            i1, i2 = stage.inputs[0], stage.inputs[1]
+            found = {}
+            for row in table.to_pylist():
+                found[(row["model"], row["seed"])] = methods.StageChoice(
+                    stage=stage.name,
+                    na=row["na"],
+                    nb1=row[f"nb_{i1}"],
+                    nb2=row[f"nb_{i2}"],
+                    nk1=row[f"nk_{i1}"],
+                    nk2=row[f"nk_{i2}"],
+                    v=row["v"],
+                    n_candidates=row["n_candidates"],
+                    n_unstable=row["n_unstable"],
+                    seconds=0.0,
+                )
+            out[stage.name] = found
+    return out
+
+
+def _selected(t: pa.Table, ws: list[float]) -> list[SelectedModel]:
+    d = t.column("d").to_numpy()
+    v = t.column("v").to_numpy()
+    orders = np.column_stack([t.column(c).to_numpy() for c in tables.ORDER_COLUMNS])
+    rows = selection.select_at(d, v, orders, np.asarray(ws))
+    out = []
+    for w, row in zip(ws, rows, strict=True):
+        row = int(row)
+        na, nb_ft, nb_e, nk_ft, nk_e = (int(x) for x in orders[row])
+        out.append(
+            SelectedModel(
+                w=float(w),
+                na=na,
+                nb_ft=nb_ft,
+                nb_e=nb_e,
+                nk_ft=nk_ft,
+                nk_e=nk_e,
+                v=float(v[row]),
+                vaf_validation=float(t.column("vaf_validation")[row].as_py()),
+                a=np.asarray(t.column("a")[row].as_py(), dtype=np.float64),
+                b_ft=np.asarray(t.column("b_ft")[row].as_py(), dtype=np.float64),
+                b_e=np.asarray(t.column("b_e")[row].as_py(), dtype=np.float64),
+            )
+        )
+    return out
+
+
+# --------------------------------------------------------------------------- one task
+
+
+def _base(key, w_source: str, sel: SelectedModel) -> dict:
+    model, seed, method = key
+    return {
+        "model": model,
+        "seed": seed,
+        "method": method,
+        "w": sel.w,
+        "w_source": w_source,
+        "na": sel.na,
+        "nb_ft": sel.nb_ft,
+        "nb_e": sel.nb_e,
+        "nk_ft": sel.nk_ft,
+        "nk_e": sel.nk_e,
+        "v": sel.v,
+        "vaf_arx_validation": sel.vaf_validation,
+    }
+
+
+def _fit_task(config, key, record, selected, sources, choices, truths, digest):
+    method = methods.get(key[2])
+    settings = config.fit_hc
+    parameter_rows, residual_rows = [], []
+    for sel, source in zip(selected, sources, strict=True):
+        analysis = analyse_selected(sel, record, config, method, choices)
+        base = {**_base(key, source, sel), "target": settings.target, "settings": digest}
+        if analysis.fit is None:
+            fitted = [(n, math.nan, False) for n in FEEDBACK_PARAMETERS]
+            cost = vaf = math.nan
+            starts, status = 0, "no feedback path (nb_e = 0)"
+        else:
+            fit = analysis.fit
+            fitted = list(zip(fit.names, fit.estimates, fit.at_bound, strict=True))
+            cost, vaf, starts, status = fit.cost, fit.vaf_validation, fit.starts, "fitted"
+        for name, estimate, hit in fitted:
+            bound = settings.bound(name)
+            parameter_rows.append(
+                {
+                    **base,
+                    "status": status,
+                    "parameter": name,
+                    "unit": UNITS[name],
+                    "estimate": estimate,
+                    "true_value": truths.get(name, math.nan),
+                    "lower": bound.lower,
+                    "upper": bound.upper,
+                    "at_bound": hit,
+                    "cost": cost,
+                    "vaf_validation": vaf,
+                    "starts": starts,
+                }
+            )
+        res = analysis.residuals
+        shares = {c.signal: c.share_outside for c in res.correlations}
+        base = _base(key, source, sel)
+        for row in res.rows():
+            residual_rows.append(
+                {
+                    **base,
+                    **row,
+                    "share_outside": shares[row["signal"]],
+                    "n": res.n,
+                    "confidence": res.confidence,
+                }
+            )
+    return (
+        key,
+        pa.Table.from_pylist(parameter_rows, schema=tables.HC_PARAMETERS.arrow),
+        pa.Table.from_pylist(residual_rows, schema=tables.RESIDUALS.arrow),
+    )
+
+
+# --------------------------------------------------------------------------- reuse
+
+
+def _groups(parameters: pa.Table | None, residuals: pa.Table | None, digest: str) -> dict:
+    """Rows made with these settings, by (model, seed, method, w): (parameters, residuals)."""
+    if parameters is None or residuals is None:
+        return {}
+    mask = pa.compute.equal(parameters.column("settings"), digest)
+    params = tables.split_by_key(parameters.filter(mask), _KEY)
+    res = tables.split_by_key(residuals, _KEY)
+    return {k: (p, res[k]) for k, p in params.items() if k in res}
+
+
+def _read_parts(run_dir: Path, digest: str) -> dict:
+    folder = run_dir / PARTS / digest
+    found = {}
+    if not folder.is_dir():
+        return found
+    for path in sorted(folder.glob("*.parameters.parquet")):
+        other = path.with_name(path.name.replace(".parameters.", ".residuals."))
+        try:
+            found.update(_groups(pq.read_table(path), pq.read_table(other), digest))
+        except (pa.ArrowException, OSError):
+            continue  # cut off mid-write: recomputed
+    return found
+
+
+def _valid(group: tuple[pa.Table, pa.Table], sel: SelectedModel, source: str | None) -> bool:
+    """Whether stored rows were made from this selected model (and, if given, W source)."""
+    first = group[0].slice(0, 1).to_pylist()[0]
+    same = tuple(first[c] for c in tables.ORDER_COLUMNS) == sel.orders and first["v"] == sel.v
+    return same and (source is None or first["w_source"] == source)
+
+
+# --------------------------------------------------------------------------- the stage
+
+
+def fit_hc_study(
+    config: Config,
+    run_dir: Path,
+    method_names: Sequence[str] | None = None,
+    w_values: Sequence[float] | None = None,
+    *,
+    jobs: int = 2,
+    force: bool = False,
+    backend: str = "loky",
+    scheduler: str | None = None,
+    show_progress: bool = True,
+) -> HCFitRun:
+    """Fit the parametric HC model to, and analyse the residuals of, every selected model.
+
+    For every record and method of ``frontier.parquet`` (``method_names``
+    default: every registered method present), the models selected at
+    :func:`requested_w` are analysed by :func:`hcid.selected.analyse_selected`.
+    Writes ``hc_parameters.parquet`` and ``residuals.parquet`` atomically;
+    reuses valid rows unless ``force``.
+
+    Raises
+    ------
+    DataError
+        If the run has no frontier, or a record or stage choice the frontier
+        needs is missing.
+    """
+    check_run_dir(config, run_dir, "select")
+    start = time.perf_counter()
+    settings = config.fit_hc if config.fit_hc is not None else parse_fit_settings(None)
+    if settings.band is None:  # settings built in code: the config's disturbance band (SPEC 5)
+        settings = dataclasses.replace(settings, band=config.disturbance.band)
+    config = dataclasses.replace(config, fit_hc=settings)
+    frontier = results.read(tables.FRONTIER, run_dir, hint="run `hcid identify` first")
+    by_key = tables.split_by_key(frontier, tables.FRONTIER.key)
+    present = list(dict.fromkeys(k[2] for k in by_key))
+    names = [m for m in (method_names or methods.METHODS) if m in present]
+    for m in names:
+        methods.get(m)
+    w_of = requested_w(config, run_dir, names, w_values)
+    records = _records(run_dir)
+    choices = _choices(run_dir)
+    digest = _settings_digest(config)
+
+    existing = {}
+    if not force:
+        existing = _groups(
+            results.read_optional(tables.HC_PARAMETERS, run_dir),
+            results.read_optional(tables.RESIDUALS, run_dir),
+            digest,
+        )
+        existing.update(_read_parts(run_dir, digest))
+    else:
+        shutil.rmtree(run_dir / PARTS, ignore_errors=True)
+
+    tasks, kept, reused = [], {}, 0
+    for key, t in by_key.items():
+        model, seed, method_name = key
+        # Methods not asked for keep their valid rows (below) and get no new ones.
+        pairs = w_of.get(method_name, [])
+        todo = []
+        for sel, (_, source) in zip(_selected(t, [w for w, _ in pairs]) if pairs else [], pairs, strict=True):
+            group = existing.get((*key, sel.w))
+            if group is not None and _valid(group, sel, source):
+                kept[(*key, sel.w)] = group
+            else:
+                todo.append((sel, source))
+        # Rows at other W of this record and method stay while their selection still holds.
+        requested = {w for w, _ in pairs}
+        others = sorted(k[3] for k in existing if k[:3] == key and k[3] not in requested)
+        for sel in _selected(t, others) if others else []:
+            if _valid(existing[(*key, sel.w)], sel, None):
+                kept[(*key, sel.w)] = existing[(*key, sel.w)]
+        if not todo:
+            reused += method_name in names
+            continue
+        record = records.get((model, seed))
+        if record is None:
+            raise DataError(f"{run_dir}: no record of {model}, seed {seed} (simulations or measured data)")
+        stage_choices = []
+        for stage in methods.get(method_name).choice_stages:
+            found = choices.get(stage.name, {}).get((model, seed))
+            if found is None:
+                raise DataError(
+                    f"{run_dir / (stage.name + '.parquet')}: no {stage.name} choice of {model}, seed {seed}; "
+                    "rerun `hcid identify`"
+                )
+            stage_choices.append(found)
+        truths = true_parameters(config, model) if model in {m.name for m in config.models} else {}
+        tasks.append(
+            (
+                config,
+                key,
+                record,
+                [s for s, _ in todo],
+                [src for _, src in todo],
+                tuple(stage_choices),
+                truths,
+                digest,
+            )
+        )
+
+    parts_dir = run_dir / PARTS / digest
+    for key, params, res in parallel_map(
+        _fit_task,
+        tasks,
+        jobs=jobs,
+        label="fit-hc",
+        show_progress=show_progress,
+        backend=backend,
+        scheduler=scheduler,
+    ):
+        stem = "__".join(str(k) for k in key)
+        results.write_table(params, parts_dir / f"{stem}.parameters.parquet")
+        results.write_table(res, parts_dir / f"{stem}.residuals.parquet")
+        kept.update(_groups(params, res, digest))
+
+    order = {k: i for i, k in enumerate(by_key)}
+    keys = sorted(kept, key=lambda k: (order.get(k[:3], len(order)), k[3]))
+    empty = (tables.HC_PARAMETERS.arrow.empty_table(), tables.RESIDUALS.arrow.empty_table())
+    parameters = tables.concat([empty[0]] + [kept[k][0] for k in keys])
+    residuals = tables.concat([empty[1]] + [kept[k][1] for k in keys])
+    record_config(config, run_dir)
+    results.write(tables.HC_PARAMETERS, parameters, run_dir)
+    results.write(tables.RESIDUALS, residuals, run_dir)
+    shutil.rmtree(run_dir / PARTS, ignore_errors=True)
+    seconds = time.perf_counter() - start
+    if tasks:
+        results.append_run_log(run_dir, f"fit-hc ({len(tasks)} tasks)", seconds, jobs)
+    return HCFitRun(parameters, residuals, w_of, len(tasks), reused, seconds, run_dir)

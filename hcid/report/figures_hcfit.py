@@ -1,0 +1,114 @@
+"""Figures of the parametric HC fit and the residual analysis (report section 11).
+
+Each ``plot_*`` draws data computed by :mod:`hcid.report.sections.hcfit`;
+nothing here computes results. No pyplot (see :mod:`hcid.report.figures`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hcid.hcfit import PARAMETERS, UNITS
+from hcid.report.figures import _figure, method_color
+
+__all__ = ["plot_parameter_strips", "plot_parametric_bode", "plot_residual_correlations"]
+
+
+def plot_parameter_strips(
+    groups: list[tuple[str, str]],
+    estimates: dict[tuple[str, str, str], np.ndarray],
+    at_bound: dict[tuple[str, str, str], np.ndarray],
+    truths: dict[tuple[str, str], float],
+    title: str = "",
+    axes=None,
+):
+    """One panel per parameter: every realization's estimate (dots; crosses at a bound) per
+    (model, method) group, the group's true value as a black bar.
+
+    ``estimates[(model, method, parameter)]`` are the estimates across realizations,
+    ``truths[(model, parameter)]`` the true values (NaN: none).
+    """
+    fig, axes = _figure(axes, 2, 4, figsize=(15.0, 7.0))
+    x = np.arange(len(groups))
+    for ax, name in zip(axes.flat, PARAMETERS, strict=True):
+        for i, (model, method) in enumerate(groups):
+            values = estimates.get((model, method, name))
+            if values is not None and values.size:
+                # Deterministic spread across the strip (no random jitter).
+                offsets = np.linspace(-0.25, 0.25, values.size) if values.size > 1 else np.zeros(1)
+                hit = at_bound.get((model, method, name), np.zeros(values.size, bool))
+                color = method_color(method)
+                ax.scatter(x[i] + offsets[~hit], values[~hit], s=9, color=color, alpha=0.7)
+                if hit.any():
+                    ax.scatter(x[i] + offsets[hit], values[hit], s=25, color=color, marker="x")
+            true = truths.get((model, name), np.nan)
+            if np.isfinite(true):
+                ax.hlines(true, x[i] - 0.35, x[i] + 0.35, color="k", lw=2)
+        ax.set_title(f"{name} ({UNITS[name]})")
+        ax.set_xticks(x, [f"{m}\n{me}" for m, me in groups], fontsize=8)
+        ax.grid(True, axis="y", alpha=0.3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def plot_parametric_bode(omega, band, curves: list[tuple[str, str, dict, dict]], title: str = "", axes=None):
+    """ARX paths (thin, the method's colour) and the parametric model's (dashed black) per run.
+
+    ``curves`` holds ``(run label, method, arx, par)`` with ``arx`` and ``par``
+    mapping 'hft'/'he' to complex responses on ``omega`` (None: no path).
+    """
+    names = {"hft": "feedforward Hft (u per ft)", "he": "feedback He (u per e)"}
+    fig, axes = _figure(axes, 2, 2, figsize=(11.0, 6.5), sharex=True)
+    for col, path in enumerate(("hft", "he")):
+        ax_mag, ax_ph = axes[0, col], axes[1, col]
+        labelled = set()
+        for _run, method, arx, par in curves:
+            for kind, h in (("ARX", arx.get(path)), ("parametric", par.get(path))):
+                if h is None or not np.any(np.abs(h) > 0):
+                    continue
+                style = (
+                    {"color": method_color(method), "lw": 0.8}
+                    if kind == "ARX"
+                    else {"color": "k", "ls": "--", "lw": 0.8}
+                )
+                label = f"{kind} {method}" if kind == "ARX" else kind
+                ax_mag.loglog(omega, np.abs(h), label=None if label in labelled else label, **style)
+                ax_ph.semilogx(omega, np.degrees(np.unwrap(np.angle(h))), **style)
+                labelled.add(label)
+        for ax in (ax_mag, ax_ph):
+            for w in band:
+                ax.axvline(w, color="0.5", ls="--", lw=0.8)
+            ax.grid(True, which="both", alpha=0.3)
+        ax_mag.set_title(names[path])
+        ax_mag.set_ylabel("magnitude (-)")
+        ax_ph.set_ylabel("phase (deg)")
+        ax_ph.set_xlabel("frequency (rad/s)")
+        if ax_mag.get_legend_handles_labels()[0]:
+            ax_mag.legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def plot_residual_correlations(
+    series: list[tuple[str, np.ndarray, np.ndarray, float]], title: str = "", axes=None
+):
+    """One panel per series: correlation against lag (s), the white-residual band shaded.
+
+    ``series`` holds ``(signal, lag_s, correlation, bound)``.
+    """
+    fig, axes = _figure(axes, 1, max(1, len(series)), figsize=(4.5 * max(1, len(series)), 3.5))
+    for ax, (signal, lag_s, values, bound) in zip(axes.flat, series, strict=False):
+        outside = np.abs(values) > bound
+        ax.axhspan(-bound, bound, color="0.85")
+        ax.vlines(lag_s, 0, values, color="C0", lw=1)
+        ax.plot(lag_s[outside], values[outside], "o", color="C3", ms=3)
+        ax.axhline(0, color="k", lw=0.5)
+        kind = "autocorrelation of eps" if signal == "eps" else f"eps vs {signal}"
+        ax.set_title(f"{kind} ({outside.mean() * 100:.0f}% outside)")
+        ax.set_xlabel("lag (s)")
+        ax.grid(True, alpha=0.3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,187 @@
+"""`hcid fit-hc` (issue 12): tables, determinism across --jobs, resuming, W choice, config errors."""
+
+import shutil
+
+import pyarrow.parquet as pq
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from hcid import hcfit, tables
+from hcid.cli import app
+from hcid.criteria import w_bic
+
+runner = CliRunner()
+
+# Small optimiser sizes keep the test fast; the settings' effect on results is the core's tests' matter.
+FAST = {"starts": 1, "popsize": 4, "maxiter": 8}
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    """configs/ci.yaml, seeds 1-2, run and fitted with --jobs 1 and with --jobs 2."""
+    from .conftest import CI_CONFIG
+
+    base = tmp_path_factory.mktemp("fit")
+    raw = yaml.safe_load(CI_CONFIG.read_text())
+    raw["seeds"] = [1, 2]
+    raw["fit_hc"] = FAST
+    config = base / "ci.yaml"
+    config.write_text(yaml.safe_dump(raw))
+    identified = base / "identified"
+    result = runner.invoke(app, ["run", str(config), "--run", str(identified), "--quiet"])
+    assert result.exit_code == 0, result.output
+    out = {}
+    for jobs in (1, 2):
+        run = base / f"jobs{jobs}"
+        shutil.copytree(identified, run)
+        args = ["fit-hc", str(config), "--run", str(run), "--jobs", str(jobs), "--quiet"]
+        result = runner.invoke(app, args)
+        assert result.exit_code == 0, result.output
+        out[jobs] = (run, result.output)
+    return config, out
+
+
+def test_tables_hold_one_row_per_record_method_w_and_parameter(fitted):
+    _, out = fitted
+    run, output = out[1]
+    params = pq.read_table(run / tables.HC_PARAMETERS.file)
+    assert tables.HC_PARAMETERS.problem(params) is None
+    rows = params.to_pylist()
+    # 2 models x 2 seeds x 2 methods at one W each (no calibration: W_BIC, Nf = 960).
+    fits = {(r["model"], r["seed"], r["method"], r["w"]) for r in rows}
+    assert len(fits) == 8
+    assert sorted({r["w"] for r in rows}) == [pytest.approx(w_bic(960), rel=1e-12)]
+    assert {r["w_source"] for r in rows} == {"W_BIC"}
+    for key in fits:
+        group = [r for r in rows if (r["model"], r["seed"], r["method"], r["w"]) == key]
+        names = tuple(r["parameter"] for r in group)
+        # Feedforward parameters exactly when the selected model has a feedforward path.
+        expected = hcfit.PARAMETERS if group[0]["nb_ft"] > 0 else hcfit.FEEDBACK_PARAMETERS
+        assert names == expected
+        assert all(r["status"] == "fitted" for r in group)
+    # True values: configs/ci.yaml's models (SPEC 1) and the loop's NMS.
+    ff = {r["parameter"]: r["true_value"] for r in rows if r["model"] == "FF"}
+    assert ff == {
+        "Kpe": 0.75,
+        "TL": 0.4,
+        "tau_pe": 0.24,
+        "w_nms": 10.1,
+        "zeta_nms": 0.35,
+        "Kpt": 0.8,
+        "TI": 0.25,
+        "tau_pt": 0.35,
+    }
+    res = pq.read_table(run / tables.RESIDUALS.file)
+    assert tables.RESIDUALS.problem(res) is None
+    # 1 s of lags at 25 Hz: 25 autocorrelation lags and 51 per input (ft_s, e), per fit.
+    assert res.num_rows == 8 * (25 + 2 * 51)
+    assert set(res.column("signal").to_pylist()) == {"eps", "ft_s", "e"}
+    # The 99% band of a white residual over the 960 validation rows: 2.5758 / sqrt(960).
+    assert sorted(set(res.column("bound").to_pylist())) == [pytest.approx(2.5758293035489 / 960**0.5)]
+    assert "fitted 8 record-methods, reused 0" in output
+
+
+@pytest.mark.parametrize("name", [tables.HC_PARAMETERS.file, tables.RESIDUALS.file])
+def test_tables_identical_for_jobs_1_and_2(fitted, name):
+    _, out = fitted
+    # Byte for byte (Table.equals would call NaN unequal: a FB fit has no true TI).
+    assert (out[1][0] / name).read_bytes() == (out[2][0] / name).read_bytes()
+
+
+def test_second_call_reuses_everything_and_another_w_adds_rows(fitted, tmp_path):
+    config, out = fitted
+    run = out[1][0]
+    before = (run / tables.HC_PARAMETERS.file).read_bytes()
+    result = runner.invoke(app, ["fit-hc", str(config), "--run", str(run), "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert "fitted 0 record-methods, reused 8" in result.output
+    assert (run / tables.HC_PARAMETERS.file).read_bytes() == before
+    # A new W is fitted for the direct method only; the W_BIC rows stay.
+    result = runner.invoke(
+        app, ["fit-hc", str(config), "--run", str(run), "--w", "0.47", "--method", "direct", "--quiet"]
+    )
+    assert result.exit_code == 0, result.output
+    assert "fitted 4 record-methods" in result.output
+    after = pq.read_table(run / tables.HC_PARAMETERS.file).to_pylist()
+    assert {(r["method"], r["w_source"]) for r in after} == {
+        ("direct", "W_BIC"),
+        ("indirect", "W_BIC"),
+        ("direct", "--w"),
+    }
+
+
+def test_changed_settings_refit_instead_of_reusing(fitted, tmp_path):
+    config, out = fitted
+    run = tmp_path / "copy"
+    shutil.copytree(out[2][0], run)
+    raw = yaml.safe_load(config.read_text())
+    raw["fit_hc"] = {**FAST, "seed": 1}
+    changed = tmp_path / "ci.yaml"
+    changed.write_text(yaml.safe_dump(raw))
+    result = runner.invoke(app, ["fit-hc", str(changed), "--run", str(run), "--method", "direct", "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert "fitted 4 record-methods, reused 0" in result.output
+
+
+def test_a_fit_on_a_bound_is_flagged_in_the_table(fitted, tmp_path):
+    # Kpe bounds [0.2, 0.5] exclude the true 0.75 (configs/ci.yaml): every estimate lies on
+    # the upper bound, and the table says so.
+    config, out = fitted
+    run = tmp_path / "copy"
+    shutil.copytree(out[1][0], run)
+    raw = yaml.safe_load(config.read_text())
+    raw["fit_hc"] = {**FAST, "bounds": {"Kpe": [0.2, 0.5]}}
+    narrowed = tmp_path / "ci.yaml"
+    narrowed.write_text(yaml.safe_dump(raw))
+    result = runner.invoke(app, ["fit-hc", str(narrowed), "--run", str(run), "--method", "direct", "--quiet"])
+    assert result.exit_code == 0, result.output
+    rows = [
+        r
+        for r in pq.read_table(run / tables.HC_PARAMETERS.file).to_pylist()
+        if r["parameter"] == "Kpe" and r["method"] == "direct"
+    ]
+    assert len(rows) == 4
+    assert all(r["at_bound"] and r["estimate"] == pytest.approx(0.5, abs=1e-4) for r in rows)
+
+
+@pytest.mark.parametrize(
+    ("fit_hc", "message"),
+    [
+        ({"bounds": {"TL": [2, 1]}}, "fit_hc.bounds.TL: lower 2 above upper 1"),
+        ({"bounds": {"w_nms": [0, 10]}}, "fit_hc.bounds.w_nms: lower must be > 0 rad/s, got 0"),
+        ({"start_ranges": {"Kpe": [0.001, 1]}}, "fit_hc.start_ranges.Kpe: [0.001, 1] outside the bounds"),
+        ({"target": "both"}, "fit_hc.target: must be one of frequency, time"),
+    ],
+)
+def test_bad_bounds_give_one_line_and_exit_2(ci_raw, tmp_path, fit_hc, message):
+    ci_raw["fit_hc"] = fit_hc
+    config = tmp_path / "bad.yaml"
+    config.write_text(yaml.safe_dump(ci_raw))
+    run = tmp_path / "run"
+    result = runner.invoke(app, ["fit-hc", str(config), "--run", str(run), "--quiet"])
+    assert result.exit_code == 2
+    assert message in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not run.exists()
+
+
+def test_without_identification_one_line_and_exit_2(ci_raw, tmp_path):
+    config = tmp_path / "ci.yaml"
+    config.write_text(yaml.safe_dump(ci_raw))
+    result = runner.invoke(app, ["fit-hc", str(config), "--run", str(tmp_path / "run"), "--quiet"])
+    assert result.exit_code == 2
+    assert "frontier.parquet: missing; run `hcid identify` first" in result.stderr
+    result = runner.invoke(app, ["fit-hc", str(config), "--run", str(tmp_path / "run"), "--w", "-1"])
+    assert result.exit_code == 2
+
+
+def test_report_shows_the_section(fitted, tmp_path):
+    _, out = fitted
+    result = runner.invoke(app, ["report", str(out[1][0]), "--out", str(tmp_path / "report")])
+    assert result.exit_code == 0, result.output
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "## 11. Parametric HC model" in text
+    assert "| FF | direct | 0.007153 | Kpt | - | 2 | 0.8 |" in text
+    assert (tmp_path / "report" / "hc_parameters_W_BIC.png").is_file()
+    assert (tmp_path / "report" / "hc_residuals.png").is_file()
