@@ -37,7 +37,7 @@ from hcid.config import Config
 from hcid.errors import DataError, HcidError
 from hcid.hcfit import FEEDBACK_PARAMETERS, UNITS, parse_fit_settings
 from hcid.pipeline.parallel import parallel_map
-from hcid.pipeline.rundir import check_run_dir, record_config
+from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
 from hcid.selected import (
     RESIDUAL_CONFIDENCE,
     RESIDUAL_MAX_LAG,
@@ -288,6 +288,7 @@ def _valid(group: tuple[pa.Table, pa.Table], sel: SelectedModel, source: str | N
 # --------------------------------------------------------------------------- the stage
 
 
+@holds_run_dir(create=False)
 def fit_hc_study(
     config: Config,
     run_dir: Path,
@@ -321,6 +322,7 @@ def fit_hc_study(
         settings = dataclasses.replace(settings, band=config.disturbance.band)
     config = dataclasses.replace(config, fit_hc=settings)
     frontier = results.read(tables.FRONTIER, run_dir, hint="run `hcid identify` first")
+    results.check_against_config(frontier, config, run_dir / tables.FRONTIER.file)
     by_key = tables.split_by_key(frontier, tables.FRONTIER.key)
     present = list(dict.fromkeys(k[2] for k in by_key))
     names = [m for m in (method_names or methods.METHODS) if m in present]
