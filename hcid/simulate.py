@@ -109,12 +109,16 @@ def simulate_loop(
     e = np.zeros(m + block)  # e[block + k] is e(k); the first `block` entries are the rest state
     u = np.empty(m)
     theta = np.empty(m)
+    at_input = dloop.disturbance_at == "input"
     for k0 in range(0, m, block):
         k1 = min(k0 + block, m)
         u_fb, z_fb = sps.lfilter(b_fb, a_fb, e[k0:k1], zi=z_fb)
         u[k0:k1] = u_fb + u_open[k0:k1]
-        y, z_c = sps.lfilter(b_c, a_c, u[k0:k1], zi=z_c)
-        theta[k0:k1] = y + fd[k0:k1]
+        if at_input:  # theta = Yc (u + fd)
+            theta[k0:k1], z_c = sps.lfilter(b_c, a_c, u[k0:k1] + fd[k0:k1], zi=z_c)
+        else:  # theta = Yc u + fd (the paper)
+            y, z_c = sps.lfilter(b_c, a_c, u[k0:k1], zi=z_c)
+            theta[k0:k1] = y + fd[k0:k1]
         e[block + k0 : block + k1] = ft[k0:k1] - theta[k0:k1]
     return {"ft": ft, "fd": fd, "e": e[block:], "u": u, "theta": theta, "n": n}
 
@@ -140,9 +144,10 @@ def remnant_gain(config: Config) -> float:
 
     Computed once, analytically, from the discrete loop's frequency responses
     (ft = 0, feedback path of the first model; SPEC: all models share one Kn):
-    ``u = (n - He fd) / (1 + Yc He)``, so with ``n = Kn n1``
+    ``u = (n - He D fd) / (1 + Yc He)`` with ``D = 1`` for a disturbance at the plant's
+    output and ``D = Yc`` at its input, so with ``n = Kn n1``
 
-    - ``var(u_fd) = sum_i A_i^2 / 2 |He / (1 + Yc He)|^2`` at the disturbance frequencies,
+    - ``var(u_fd) = sum_i A_i^2 / 2 |He D / (1 + Yc He)|^2`` at the disturbance frequencies,
     - ``var(n1)`` and ``var(n1 / (1 + Yc He))`` are integrals of ``|.|^2`` over
       ``[0, pi]`` of the unit-white-noise-driven discrete filters,
 
@@ -157,7 +162,10 @@ def remnant_gain(config: Config) -> float:
     w_dist = 2 * np.pi / dist.base_period * np.asarray(dist.k, dtype=np.float64)
     he = dloop.response("feedback", w_dist)
     yc = dloop.response("plant", w_dist)
-    var_u_fd = float(np.sum(np.asarray(dist.amplitude) ** 2 / 2 * np.abs(he / (1 + yc * he)) ** 2))
+    to_u = he / (1 + yc * he)
+    if dloop.disturbance_at == "input":
+        to_u = to_u * yc
+    var_u_fd = float(np.sum(np.asarray(dist.amplitude) ** 2 / 2 * np.abs(to_u) ** 2))
 
     # Variance of a unit-white-noise-driven discrete filter: (1/pi) int_0^pi |H|^2 dW.
     # The midpoint rule is spectrally accurate for these smooth periodic integrands

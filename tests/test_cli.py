@@ -12,6 +12,9 @@ from .conftest import CI_CONFIG
 
 runner = CliRunner()
 
+#: The plant lines of configs/ci.yaml, replaced by a loop.plant in the bad-input cases.
+_PAPER_PLANT = "  Kc: 2.75                    # plant Yc = Kc*wb / (s (s + wb))\n  wb: 2.0"
+
 
 @pytest.fixture(scope="module")
 def simulated(tmp_path_factory):
@@ -56,6 +59,19 @@ def test_simulate_identical_across_jobs(simulated, name):
             "identify.direct.validation",
         ),
         (("Kc: 2.75", "Kc: [2.75]"), "loop.Kc: must be a number"),
+        # SPEC 7: plants and hypotheses that cannot be simulated.
+        (
+            (_PAPER_PLANT, "  plant: {kind: triple_integrator, K: 1}"),
+            "loop.plant.kind: unknown plant shorthand",
+        ),
+        (
+            (_PAPER_PLANT, "  plant: {kind: tf, num: [1], den: [1, 0, 0, 0, 0, 0]}"),
+            "models.FF: the feedforward path Ynms Kpt / Yc / (TI s + 1)^2 is improper",
+        ),
+        (
+            (_PAPER_PLANT, "  plant: {kind: integrator, K: 3}\n  disturbance_at: input"),
+            "models.FB: the closed loop with this plant is unstable (pole at z = 1.0047-0.0788j",
+        ),
     ],
 )
 def test_bad_config_exit_2_one_line_nothing_written(tmp_path, edit, message):

@@ -221,3 +221,64 @@ def test_error_messages_quote_at_most_80_characters(paper_raw):
     with pytest.raises(ConfigError) as info:
         parse_config(data, "paper")
     assert len(str(info.value)) < 160
+
+
+# --------------------------------------------------------------------------- plants (SPEC 7)
+
+
+def _with_plant(raw, plant, **loop_keys):
+    data = copy.deepcopy(raw)
+    del data["loop"]["Kc"], data["loop"]["wb"]
+    data["loop"]["plant"] = plant
+    data["loop"].update(loop_keys)
+    return data
+
+
+@pytest.mark.parametrize(
+    ("plant", "num", "den"),
+    [
+        ({"kind": "integrator", "K": 1.5}, (1.5,), (1.0, 0.0)),
+        ({"kind": "double_integrator", "K": 0.5}, (0.5,), (1.0, 0.0, 0.0)),
+        ({"kind": "second_order", "K": 2.75, "wb": 2.0}, (5.5,), (1.0, 2.0, 0.0)),
+        ({"kind": "tf", "num": [0, 0, 5.5], "den": [1, 2, 0]}, (5.5,), (1.0, 2.0, 0.0)),
+    ],
+)
+def test_plant_shorthands(paper_raw, plant, num, den):
+    # K/s, K/s^2, K wb/(s (s + wb)) and a tf with leading zeros stripped.
+    config = parse_config(_with_plant(paper_raw, plant), "x")
+    assert (config.loop.plant.num, config.loop.plant.den) == (num, den)
+    assert config.loop.disturbance_at == "output"
+
+
+def test_paper_plant_is_the_default(paper_config):
+    # No loop.plant: the paper's Kc wb / (s (s + wb)) with Kc = 2.75, wb = 2, bit for bit.
+    assert paper_config.loop.plant_spec is None
+    assert (paper_config.loop.plant.num, paper_config.loop.plant.den) == ((2.75 * 2.0,), (1.0, 2.0, 0.0))
+
+
+@pytest.mark.parametrize(
+    ("plant", "extra", "message"),
+    [
+        ({"kind": "cubic"}, {}, "loop.plant.kind: unknown plant shorthand 'cubic' (allowed: second_order, "),
+        ({"kind": "tf", "num": [1, 0, 0], "den": [1, 1]}, {}, "loop.plant: must be proper"),
+        ({"kind": "integrator", "K": 1}, {"disturbance_at": "middle"}, "loop.disturbance_at: must be one of"),
+        # Yc = (1 - s) / (s (s + 1)): its zero at s = 1 is a pole of the Inverse Feedforward Model.
+        (
+            {"kind": "tf", "num": [-1, 1], "den": [1, 1, 0]},
+            {},
+            "models.FF: the feedforward path Ynms Kpt / Yc / (TI s + 1)^2 is unstable",
+        ),
+    ],
+)
+def test_bad_plants(paper_raw, plant, extra, message):
+    with pytest.raises(ConfigError) as info:
+        parse_config(_with_plant(paper_raw, plant, **extra), "x")
+    assert message in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_plant_given_twice_is_refused(paper_raw):
+    data = copy.deepcopy(paper_raw)
+    data["loop"]["plant"] = {"kind": "integrator", "K": 1}
+    with pytest.raises(ConfigError, match="loop.Kc: give the plant either as loop.Kc and loop.wb"):
+        parse_config(data, "x")

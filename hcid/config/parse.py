@@ -26,6 +26,7 @@ from hcid.config.types import (
     HCModel,
     IdentifyConfig,
     Loop,
+    Plant,
     Segment,
     SelectionConfig,
     StageConfig,
@@ -35,7 +36,7 @@ from hcid.config.types import (
 )
 from hcid.errors import ConfigError
 
-__all__ = ["LIMITS", "load_config", "parse_config"]
+__all__ = ["DISTURBANCE_POINTS", "LIMITS", "PLANTS", "load_config", "parse_config"]
 
 #: Bounds on what a config may ask for, each checked at parse time with a one-line error:
 #: the file, its nesting, seeds, candidates per grid and per study, samples per simulation.
@@ -85,16 +86,107 @@ def _models_section(top: Section) -> tuple[HCModel, ...]:
     return tuple(_model(k, v) for k, v in raw.items())
 
 
+def _integrator(s: Section) -> Plant:
+    K = s.number("K", 0.0, 1e4, open_lo=True)
+    return Plant("integrator", (K,), (1.0, 0.0), f"{K:g}/s")
+
+
+def _double_integrator(s: Section) -> Plant:
+    K = s.number("K", 0.0, 1e4, open_lo=True)
+    return Plant("double_integrator", (K,), (1.0, 0.0, 0.0), f"{K:g}/s^2")
+
+
+def _second_order(s: Section) -> Plant:
+    return Plant.second_order(s.number("K", 0.0, 1e4, open_lo=True), s.number("wb", 0.0, 1e4, open_lo=True))
+
+
+def _poly_text(coefs: tuple[float, ...]) -> str:
+    n = len(coefs) - 1
+    terms = [
+        f"{c:g}" + ("" if i == n else " s" if i == n - 1 else f" s^{n - i}")
+        for i, c in enumerate(coefs)
+        if c != 0
+    ]
+    return " + ".join(terms).replace("+ -", "- ")
+
+
+def _transfer_function(s: Section) -> Plant:
+    num, den = number_list(s, "num"), number_list(s, "den")
+    for key, coefs in (("num", num), ("den", den)):
+        if len(coefs) > 11:
+            raise ConfigError(
+                f"loop.plant.{key}: must hold at most 11 coefficients (degree 10), got {len(coefs)}"
+            )
+    num = tuple(num[next((i for i, c in enumerate(num) if c != 0), len(num)) :])
+    if not num:
+        raise ConfigError("loop.plant.num: must not be all zero")
+    if den[0] == 0:
+        raise ConfigError(f"loop.plant.den: the leading coefficient must not be 0, got {list(den)}")
+    if len(num) > len(den):
+        raise ConfigError(
+            f"loop.plant: must be proper (degree of num <= degree of den), got degrees "
+            f"{len(num) - 1} and {len(den) - 1}"
+        )
+    return Plant("tf", num, den, f"({_poly_text(num)}) / ({_poly_text(den)})")
+
+
+#: Plant shorthands of ``loop.plant.kind``, each a builder from its section (SPEC 7);
+#: ``tf`` takes any proper transfer function in s. Add a shorthand here.
+PLANTS = {
+    "second_order": _second_order,
+    "integrator": _integrator,
+    "double_integrator": _double_integrator,
+    "tf": _transfer_function,
+}
+
+#: Where the disturbance enters: at the plant's output (the paper) or its input.
+DISTURBANCE_POINTS = ("output", "input")
+
+
+def _plant(loop: Section) -> Plant:
+    s = loop.section("plant")
+    kind = s.get("kind")
+    try:
+        builder = PLANTS[kind]
+    except (KeyError, TypeError):
+        raise ConfigError(
+            f"loop.plant.kind: unknown plant shorthand {fmt(kind)} (allowed: {', '.join(PLANTS)})"
+        ) from None
+    plant = builder(s)
+    s.done()
+    return plant
+
+
 def _loop_section(top: Section) -> Loop:
     s = top.section("loop")
+    if "plant" in s.data:
+        both = [k for k in ("Kc", "wb") if k in s.data]
+        if both:
+            raise ConfigError(
+                f"loop.{both[0]}: give the plant either as loop.Kc and loop.wb (the paper's "
+                "Kc wb / (s (s + wb))) or as loop.plant, not both"
+            )
+        plant = _plant(s)
+        Kc, wb = (plant.num[0] / plant.den[1], plant.den[1]) if plant.kind == "second_order" else (0.0, 0.0)
+    else:
+        plant = None
+        Kc = s.number("Kc", 0.0, 1e3, open_lo=True)
+        wb = s.number("wb", 0.0, 1e3, open_lo=True)
+    point = s.get("disturbance_at", "output")
+    if point not in DISTURBANCE_POINTS:
+        raise ConfigError(
+            f"loop.disturbance_at: must be one of {', '.join(DISTURBANCE_POINTS)}, got {fmt(point)}"
+        )
     loop = Loop(
-        Kc=s.number("Kc", 0.0, 1e3, open_lo=True),
-        wb=s.number("wb", 0.0, 1e3, open_lo=True),
+        Kc=Kc,
+        wb=wb,
         w_nms=s.number("w_nms", 0.0, 1e3, open_lo=True),
         zeta_nms=s.number("zeta_nms", 0.0, 10.0, open_lo=True),
         w_n=s.number("w_n", 0.0, 1e3, open_lo=True),
         zeta_n=s.number("zeta_n", 0.0, 10.0, open_lo=True),
         remnant_ratio=s.number("remnant_ratio", 0.0, 0.9),
+        plant_spec=plant,
+        disturbance_at=point,
     )
     s.done()
     return loop

@@ -23,6 +23,7 @@ __all__ = [
     "HCModel",
     "IdentifyConfig",
     "Loop",
+    "Plant",
     "Segment",
     "SelectionConfig",
     "StageConfig",
@@ -53,8 +54,39 @@ class HCModel:
 
 
 @dataclass(frozen=True)
+class Plant:
+    """The controlled element ``Yc(s) = num(s) / den(s)``, theta per u.
+
+    ``num`` and ``den`` are polynomial coefficients in s, highest power first;
+    ``kind`` is the shorthand it was written as (``second_order``, ``integrator``,
+    ``double_integrator``) or ``tf``; ``text`` is how the report prints it.
+
+    Examples
+    --------
+    >>> Plant.second_order(2.75, 2.0).den
+    (1.0, 2.0, 0.0)
+    """
+
+    kind: str
+    num: tuple[float, ...]
+    den: tuple[float, ...]
+    text: str
+
+    @classmethod
+    def second_order(cls, K: float, wb: float) -> Plant:
+        """The paper's plant ``K wb / (s (s + wb))``."""
+        return cls("second_order", (K * wb,), (1.0, wb, 0.0), f"{K:g}*{wb:g}/(s (s + {wb:g}))")
+
+
+@dataclass(frozen=True)
 class Loop:
-    """Plant, neuromuscular and remnant-filter parameters (rad/s, unitless)."""
+    """Plant, neuromuscular and remnant-filter parameters (rad/s, unitless).
+
+    ``Kc`` and ``wb`` are the paper's plant ``Kc wb / (s (s + wb))``, used when
+    ``plant_spec`` is None (the default); a config's ``loop.plant`` sets
+    ``plant_spec`` instead. ``disturbance_at`` is ``output`` (the paper:
+    ``theta = Yc u + fd``) or ``input`` (``theta = Yc (u + fd)``).
+    """
 
     Kc: float
     wb: float
@@ -63,6 +95,13 @@ class Loop:
     w_n: float
     zeta_n: float
     remnant_ratio: float
+    plant_spec: Plant | None = None
+    disturbance_at: str = "output"
+
+    @property
+    def plant(self) -> Plant:
+        """The configured plant, or the paper's from ``Kc`` and ``wb``."""
+        return self.plant_spec if self.plant_spec is not None else Plant.second_order(self.Kc, self.wb)
 
 
 @dataclass(frozen=True)
