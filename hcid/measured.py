@@ -27,7 +27,7 @@ from hcid.config import Config, DataConfig
 from hcid.errors import DataError
 from hcid.tables import MEASURED, SIGNALS
 
-__all__ = ["READERS", "load_data", "records_table"]
+__all__ = ["READERS", "load_data", "read_signal", "records_table"]
 
 #: Largest magnitude a signal may hold: its square must not overflow in the least-squares fits.
 _LARGEST = 1e150
@@ -45,9 +45,14 @@ def _table_columns(table: pa.Table, path: Path, wanted: dict[str, str]) -> dict[
 
 
 def _read_csv(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
+    import io
+
     import pyarrow.csv as pacsv
 
-    return _table_columns(pacsv.read_csv(path), path, wanted)
+    # Loggers write a header of '#' comment lines: skipped, as are comment lines further down.
+    with open(path, "rb") as f:
+        lines = [line for line in f if not line.lstrip().startswith(b"#")]
+    return _table_columns(pacsv.read_csv(io.BytesIO(b"".join(lines))), path, wanted)
 
 
 def _read_parquet(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
@@ -102,6 +107,49 @@ def _read_columns(path: Path, data: DataConfig) -> dict[str, np.ndarray]:
         raise
     except (pa.ArrowException, OSError, ValueError) as exc:
         raise DataError(f"{path}: cannot read ({str(exc).splitlines()[0]})") from exc
+
+
+def read_signal(path: str | Path, column: str, run: int | None = None) -> np.ndarray:
+    """One column (or .mat variable) of a data file as a float64 vector, e.g. a recorded forcing function.
+
+    With ``run``, only the rows whose ``run`` column equals it (CSV, Parquet) or that
+    column of a samples x runs matrix (.mat, counted from 1).
+
+    Raises
+    ------
+    DataError
+        If the file is missing or unreadable, lacks the column, or the values are not finite.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: missing")
+    reader = READERS.get(path.suffix.lower())
+    if reader is None:
+        raise DataError(f"{path}: unknown data format {path.suffix.lower()!r} (use {', '.join(READERS)})")
+    wanted = {"x": column} if run is None else {"x": column, "run": "run"}
+    try:
+        cols = reader(path, wanted)
+    except DataError:
+        raise
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise DataError(f"{path}: cannot read ({str(exc).splitlines()[0]})") from exc
+    if "x" not in cols:
+        raise DataError(f"{path}: has no column {column!r}")
+    x = cols["x"]
+    if run is not None:
+        if x.ndim == 2:
+            if not 1 <= run <= x.shape[1]:
+                raise DataError(f"{path}: {column!r} has {x.shape[1]} runs, no run {run}")
+            x = x[:, run - 1]
+        elif "run" in cols:
+            rows = cols["run"].ravel() == run
+            if not rows.any():
+                raise DataError(f"{path}: no rows with run = {run}")
+            x = x.ravel()[rows]
+    x = np.ascontiguousarray(x.ravel() if x.ndim == 1 or min(x.shape) == 1 else x[:, 0], dtype=np.float64)
+    if x.size == 0 or not np.all(np.isfinite(x)):
+        raise DataError(f"{path}: column {column!r} is empty or holds NaN or inf")
+    return x
 
 
 def _split_runs(path: Path, cols: dict[str, np.ndarray], data: DataConfig) -> list[dict[str, np.ndarray]]:

@@ -19,7 +19,7 @@ import numpy as np
 from scipy import signal as sps
 
 from hcid import signals
-from hcid.config import Config, HCModel
+from hcid.config import Config, HCModel, Multisine
 from hcid.hcmodel import DiscreteLoop
 from hcid.tables import CHANNELS
 
@@ -139,6 +139,18 @@ def _feedback_only(model: HCModel) -> HCModel:
     return dataclasses.replace(model, Kpt=0.0, TI=0.0, tau_pt=0.0)
 
 
+def _disturbance_lines(config: Config) -> tuple[np.ndarray, np.ndarray]:
+    """Frequencies (rad/s) and amplitudes (rad) of the disturbance's sines."""
+    dist = config.disturbance
+    if isinstance(dist, Multisine):
+        return signals.forcing_frequencies(dist), np.asarray(dist.amplitude)
+    timing = config.timing
+    fd = signals.forcing(timing, dist)[-timing.window_samples :]
+    lines = np.fft.rfft(fd)[1 : (fd.size + 1) // 2] * 2 / fd.size  # DC and Nyquist left out
+    w = 2 * np.pi / timing.window * np.arange(1, lines.size + 1)
+    return w, np.abs(lines)
+
+
 def remnant_gain(config: Config) -> float:
     """Kn that gives ``var(n)/var(u) = remnant_ratio`` in the disturbance-only task.
 
@@ -147,7 +159,9 @@ def remnant_gain(config: Config) -> float:
     ``u = (n - He D fd) / (1 + Yc He)`` with ``D = 1`` for a disturbance at the plant's
     output and ``D = Yc`` at its input, so with ``n = Kn n1``
 
-    - ``var(u_fd) = sum_i A_i^2 / 2 |He D / (1 + Yc He)|^2`` at the disturbance frequencies,
+    - ``var(u_fd) = sum_i A_i^2 / 2 |He D / (1 + Yc He)|^2`` at the disturbance frequencies
+      (a multisine's own lines; for another kind of disturbance, the DFT lines of one
+      window of it at the simulation rate, the window taken as its period),
     - ``var(n1)`` and ``var(n1 / (1 + Yc He))`` are integrals of ``|.|^2`` over
       ``[0, pi]`` of the unit-white-noise-driven discrete filters,
 
@@ -158,14 +172,13 @@ def remnant_gain(config: Config) -> float:
     if ratio == 0.0:
         return 0.0
 
-    dist = config.disturbance
-    w_dist = 2 * np.pi / dist.base_period * np.asarray(dist.k, dtype=np.float64)
+    w_dist, amplitude = _disturbance_lines(config)
     he = dloop.response("feedback", w_dist)
     yc = dloop.response("plant", w_dist)
     to_u = he / (1 + yc * he)
     if dloop.disturbance_at == "input":
         to_u = to_u * yc
-    var_u_fd = float(np.sum(np.asarray(dist.amplitude) ** 2 / 2 * np.abs(to_u) ** 2))
+    var_u_fd = float(np.sum(amplitude**2 / 2 * np.abs(to_u) ** 2))
 
     # Variance of a unit-white-noise-driven discrete filter: (1/pi) int_0^pi |H|^2 dW.
     # The midpoint rule is spectrally accurate for these smooth periodic integrands
@@ -203,12 +216,12 @@ def simulate_realization(
     """
     timing = config.timing
     t = signals.simulation_time(timing)
-    fd = signals.disturbance(t, config.disturbance)
+    fd = signals.forcing(timing, config.disturbance)
     if disturbance_only:
         model = _feedback_only(model)
         ft = np.zeros_like(t)
     else:
-        ft = signals.target(timing, config.target)
+        ft = signals.forcing(timing, config.target)
     dloop = DiscreteLoop.build(model, config.loop, timing.sim_dt)
     b_n, a_n = dloop.remnant
     n = kn * sps.lfilter(b_n, a_n, white_noise(seed, t.size))

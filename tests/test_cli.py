@@ -96,3 +96,19 @@ def test_bad_config_keeps_earlier_results(simulated, tmp_path):
     assert result.exit_code == 2
     assert "seeds[1]: must be an integer in [0, 2147483647], got -2" in result.stderr
     assert (run / "simulations.parquet").read_bytes() == before
+
+
+def test_forcing_file_missing_its_column_exit_2_nothing_written(tmp_path):
+    (tmp_path / "sig.csv").write_text("t,fd\n" + "".join(f"{i / 25},0.01\n" for i in range(2048)))
+    text = CI_CONFIG.read_text()
+    start, end = text.index("  disturbance:"), text.index("  target:")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(
+        text[:start] + "  disturbance: {kind: file, path: sig.csv, column: fdx, rate: 25}\n" + text[end:]
+    )
+    run = tmp_path / "run"
+    result = runner.invoke(app, ["simulate", str(bad), "--run", str(run), "--quiet"])
+    assert result.exit_code == 2
+    assert "signals.disturbance: " in result.stderr and "has no column 'fdx'" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not run.exists()

@@ -105,7 +105,7 @@ def test_stage2_defaults_to_direct_grid(paper_raw):
 def test_non_finite_target_step_refused(paper_raw):
     data = _mutate(paper_raw, ("signals", "target", "segments"), [["c", 3, 0], ["p", 3.74, float("inf")]])
     with pytest.raises(
-        ConfigError, match=r"signals.target.segments\[1\]: must be \[c\|p, seconds > 0, step\]"
+        ConfigError, match=r"signals.target.segments\[1\]: must be \[c\|p\|r, seconds > 0, step\]"
     ):
         parse_config(data, "paper")
 
@@ -282,3 +282,60 @@ def test_plant_given_twice_is_refused(paper_raw):
     data["loop"]["plant"] = {"kind": "integrator", "K": 1}
     with pytest.raises(ConfigError, match="loop.Kc: give the plant either as loop.Kc and loop.wb"):
         parse_config(data, "x")
+
+
+# --------------------------------------------------------------------------- forcing functions (SPEC 7)
+
+
+def test_forcing_function_kinds(paper_raw, tmp_path):
+    # A multisine target, a segments disturbance (with a ramp) and a file column, each parsed
+    # into its own type; a file path is read relative to the config's folder.
+    from hcid.config import FileSignal, Multisine, Segments
+
+    data = copy.deepcopy(paper_raw)
+    data["signals"]["target"] = {
+        "kind": "multisine",
+        "base_period": 81.92,
+        "k": [2, 5],
+        "amplitude": [0.1, 0.2],
+        "phase": [0, 1],
+    }
+    data["signals"]["disturbance"] = {
+        "kind": "segments",
+        "gain_deg": 1.0,
+        "segments": [["c", 2, 0], ["r", 3, 1]],
+    }
+    config = parse_config(data, "x")
+    assert isinstance(config.target, Multisine) and config.target.time_offset == 0.0
+    assert isinstance(config.disturbance, Segments) and config.disturbance.segments[1].kind == "r"
+    (tmp_path / "sig.csv").write_text("t,fd\n" + "".join(f"{i / 25},{0.01 * (i % 7)}\n" for i in range(2048)))
+    data["signals"]["disturbance"] = {"kind": "file", "path": "sig.csv", "column": "fd", "rate": 25.0}
+    config = parse_config(data, "x", tmp_path)
+    assert isinstance(config.disturbance, FileSignal) and config.disturbance.values.size == 2048
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        (
+            {"kind": "chirp"},
+            "signals.disturbance.kind: unknown forcing function 'chirp' (allowed: multisine, ",
+        ),
+        ({"kind": "file", "path": "sig.csv", "column": "nope", "rate": 25.0}, "signals.disturbance: "),
+        ({"kind": "file", "path": "absent.csv", "column": "fd", "rate": 25.0}, "absent.csv: missing"),
+        ({"kind": "file", "path": "sig.csv", "column": "fd", "rate": 25.0, "start": 10.0}, "needs 2298"),
+        (
+            {"kind": "file", "path": "sig.csv", "column": "fd", "rate": 25.0, "start": 0.01},
+            "must be whole samples",
+        ),
+    ],
+)
+def test_bad_forcing_functions(paper_raw, tmp_path, spec, message):
+    (tmp_path / "sig.csv").write_text("t,fd\n" + "".join(f"{i / 25},0.01\n" for i in range(2048)))
+    data = copy.deepcopy(paper_raw)
+    data["signals"]["disturbance"] = spec
+    with pytest.raises(ConfigError) as info:
+        parse_config(data, "x", tmp_path)
+    assert message in str(info.value) and "\n" not in str(info.value)
+    if spec.get("column") == "nope":
+        assert str(info.value).endswith("has no column 'nope'")

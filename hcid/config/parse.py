@@ -21,16 +21,18 @@ from hcid.config._checks import Section, fmt, int_range, integer, number_list
 from hcid.config.types import (
     Config,
     DataConfig,
-    Disturbance,
+    FileSignal,
+    Forcing,
     Grid,
     HCModel,
     IdentifyConfig,
     Loop,
+    Multisine,
     Plant,
     Segment,
+    Segments,
     SelectionConfig,
     StageConfig,
-    Target,
     Timing,
     Window,
 )
@@ -195,56 +197,96 @@ def _loop_section(top: Section) -> Loop:
 # --------------------------------------------------------------------------- signals and timing
 
 
-def _disturbance(sig: Section) -> Disturbance:
-    s = sig.section("disturbance")
+def _multisine(s: Section) -> Multisine:
     k = s.get("k")
     if not isinstance(k, list) or not k:
-        raise ConfigError(f"signals.disturbance.k: must be a non-empty list of integers, got {fmt(k)}")
-    k_int = tuple(integer(v, f"signals.disturbance.k[{i}]", 1, 100_000) for i, v in enumerate(k))
-    disturbance = Disturbance(
+        raise ConfigError(f"{s.key('k')}: must be a non-empty list of integers, got {fmt(k)}")
+    k_int = tuple(integer(v, f"{s.key('k')}[{i}]", 1, 100_000) for i, v in enumerate(k))
+    return Multisine(
         base_period=s.number("base_period", 0.0, 1e5, open_lo=True),
-        time_offset=s.number("time_offset", -1e5, 1e5),
+        time_offset=s.number("time_offset", -1e5, 1e5, 0.0),
         k=k_int,
         amplitude=number_list(s, "amplitude", len(k_int)),
         phase=number_list(s, "phase", len(k_int)),
     )
-    s.done()
-    return disturbance
 
 
-def _segment(i: int, seg: Any) -> Segment:
-    key = f"signals.target.segments[{i}]"
+def _segment(path: str, i: int, seg: Any) -> Segment:
+    key = f"{path}.segments[{i}]"
     ok = (
         isinstance(seg, list)
         and len(seg) == 3
-        and seg[0] in ("c", "p")
+        and seg[0] in ("c", "p", "r")
         and all(isinstance(v, int | float) and not isinstance(v, bool) for v in seg[1:])
         and all(math.isfinite(v) for v in seg[1:])
         and seg[1] > 0
     )
     if not ok:
-        raise ConfigError(f"{key}: must be [c|p, seconds > 0, step], got {fmt(seg)}")
+        raise ConfigError(f"{key}: must be [c|p|r, seconds > 0, step], got {fmt(seg)}")
     if seg[0] == "c" and seg[2] != 0:
         raise ConfigError(f"{key}: a hold segment 'c' must have step 0, got {seg[2]}")
     return Segment(seg[0], float(seg[1]), float(seg[2]))
 
 
-def _target(sig: Section) -> Target:
-    s = sig.section("target")
+def _segments(s: Section) -> Segments:
     gain_deg = s.number("gain_deg", 0.0, 180.0)
     raw = s.get("segments")
     if not isinstance(raw, list) or not raw:
         raise ConfigError(
-            f"signals.target.segments: must be a non-empty list of [kind, seconds, step], got {fmt(raw)}"
+            f"{s.key('segments')}: must be a non-empty list of [kind, seconds, step], got {fmt(raw)}"
         )
-    target = Target(gain=math.radians(gain_deg), segments=tuple(_segment(i, x) for i, x in enumerate(raw)))
+    return Segments(
+        gain=math.radians(gain_deg), segments=tuple(_segment(s.path, i, x) for i, x in enumerate(raw))
+    )
+
+
+def _file_signal(s: Section, base: Path | None) -> FileSignal:
+    # A forcing function recorded in a data file: read here, at the entry point, with the
+    # data readers (hcid.measured.READERS), so that the numerical core never opens a file.
+    from hcid.errors import DataError
+    from hcid.measured import read_signal
+
+    raw_path = s.get("path")
+    column = s.get("column")
+    for key, value in (("path", raw_path), ("column", column)):
+        if not isinstance(value, str) or not value:
+            raise ConfigError(f"{s.key(key)}: must be a non-empty string, got {fmt(value)}")
+    rate = s.number("rate", 0.1, 1e5)
+    start = s.number("start", 0.0, 1e5, 0.0)
+    run = s.get("run", None)
+    if run is not None:
+        run = integer(run, s.key("run"), 0, 2**31 - 1)
+    path = Path(raw_path)
+    if not path.is_absolute() and base is not None:
+        path = base / path
+    try:
+        values = read_signal(path, column, run)
+    except DataError as exc:
+        raise ConfigError(f"{s.path}: {exc}") from None
+    return FileSignal(path=str(raw_path), column=column, rate=rate, start=start, values=values)
+
+
+#: Kinds of forcing function (``signals.<target|disturbance>.kind``), each a parser of its
+#: section. The target defaults to ``segments``, the disturbance to ``multisine``.
+FORCING_KINDS = {"multisine": _multisine, "segments": _segments, "file": _file_signal}
+
+
+def _forcing(sig: Section, name: str, default_kind: str, base: Path | None) -> Forcing:
+    s = sig.section(name)
+    kind = s.get("kind", default_kind)
+    if kind not in FORCING_KINDS:
+        raise ConfigError(
+            f"{s.key('kind')}: unknown forcing function {fmt(kind)} (allowed: {', '.join(FORCING_KINDS)})"
+        )
+    spec = _file_signal(s, base) if kind == "file" else FORCING_KINDS[kind](s)
     s.done()
-    return target
+    return spec
 
 
-def _signals_section(top: Section) -> tuple[Disturbance, Target]:
+def _signals_section(top: Section, base: Path | None) -> tuple[Forcing, Forcing]:
     sig = top.section("signals")
-    disturbance, target = _disturbance(sig), _target(sig)
+    disturbance = _forcing(sig, "disturbance", "multisine", base)
+    target = _forcing(sig, "target", "segments", base)
     sig.done()
     return disturbance, target
 
@@ -279,12 +321,34 @@ def _timing_section(top: Section) -> Timing:
     return timing
 
 
-def _check_against_timing(timing: Timing, target: Target, models: tuple[HCModel, ...]) -> None:
-    total = sum(s.duration for s in target.segments)
-    if total > timing.window + 1e-9:
-        raise ConfigError(
-            f"signals.target.segments: must last at most timing.window ({timing.window:g} s), got {total:g} s"
-        )
+def _check_forcing(name: str, spec: Forcing, timing: Timing) -> None:
+    key = f"signals.{name}"
+    if isinstance(spec, Segments):
+        total = sum(s.duration for s in spec.segments)
+        if total > timing.window + 1e-9:
+            raise ConfigError(
+                f"{key}.segments: must last at most timing.window ({timing.window:g} s), got {total:g} s"
+            )
+    elif isinstance(spec, FileSignal):
+        for what, secs in (("start", spec.start), ("timing.window", timing.window)):
+            if abs(secs * spec.rate - round(secs * spec.rate)) > 1e-6:
+                raise ConfigError(
+                    f"{key}.{what if what == 'start' else 'rate'}: {what} ({secs:g} s) must be whole "
+                    f"samples at the file's rate {spec.rate:g} Hz"
+                )
+        need = round((spec.start + timing.window) * spec.rate)
+        if spec.values.size < need:
+            raise ConfigError(
+                f"{key}: column {spec.column!r} of {spec.path} holds {spec.values.size} samples, the window "
+                f"from {spec.start:g} s to {spec.start + timing.window:g} s needs {need}"
+            )
+
+
+def _check_against_timing(
+    timing: Timing, signals: tuple[Forcing, Forcing], models: tuple[HCModel, ...]
+) -> None:
+    for name, spec in zip(("disturbance", "target"), signals, strict=True):
+        _check_forcing(name, spec, timing)
     for m in models:
         for key, tau in (("tau_pe", m.tau_pe), ("tau_pt", m.tau_pt)):
             if abs(tau * timing.sim_rate - round(tau * timing.sim_rate)) > 1e-6:
@@ -591,7 +655,7 @@ def read_yaml(path: Path, what: str = "config") -> Any:
         raise ConfigError(f"{path}: not a usable {what} ({fmt(str(exc).splitlines()[0])})") from exc
 
 
-def parse_config(data: Any, name: str) -> Config:
+def parse_config(data: Any, name: str, base: Path | None = None) -> Config:
     """Check a parsed YAML document and build the :class:`Config`.
 
     Parameters
@@ -600,6 +664,8 @@ def parse_config(data: Any, name: str) -> Config:
         The result of ``yaml.safe_load``.
     name : str
         Study name used when the document has no ``name`` key (the file stem).
+    base : Path, optional
+        Folder that relative file paths in the config are read from (the config's own).
 
     Raises
     ------
@@ -610,9 +676,9 @@ def parse_config(data: Any, name: str) -> Config:
     study_name = _study_name(top.get("name", name))
     models = _models_section(top)
     loop = _loop_section(top)
-    disturbance, target = _signals_section(top)
+    disturbance, target = _signals_section(top, base)
     timing = _timing_section(top)
-    _check_against_timing(timing, target, models)
+    _check_against_timing(timing, (disturbance, target), models)
     seeds = _seeds_section(top)
     identify = _identify_section(top, timing)
     selection, selection_raw = _selection_section(top)
@@ -656,4 +722,4 @@ def load_config(path: str | Path) -> Config:
         If the file is missing, is not YAML, or any key is wrong (naming it).
     """
     path = Path(path)
-    return parse_config(read_yaml(path), path.stem)
+    return parse_config(read_yaml(path), path.stem, path.parent)

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 import yaml
 
 from hcid.config._checks import GRID_LOWEST, checked_grid_range
@@ -18,16 +19,18 @@ from hcid.errors import ConfigError
 __all__ = [
     "Config",
     "DataConfig",
-    "Disturbance",
+    "FileSignal",
+    "Forcing",
     "Grid",
     "HCModel",
     "IdentifyConfig",
     "Loop",
+    "Multisine",
     "Plant",
     "Segment",
+    "Segments",
     "SelectionConfig",
     "StageConfig",
-    "Target",
     "Timing",
     "Window",
 ]
@@ -105,8 +108,11 @@ class Loop:
 
 
 @dataclass(frozen=True)
-class Disturbance:
-    """Multisine disturbance ``fd(t) = sum A_i sin(k_i wm (t + t0) + phi_i)`` (rad)."""
+class Multisine:
+    """Sum of sines ``f(t) = sum A_i sin(k_i wm (t + t0) + phi_i)`` (rad), ``wm = 2 pi / base_period``.
+
+    The paper's disturbance (SPEC 2); periodic in ``base_period``.
+    """
 
     base_period: float
     time_offset: float
@@ -117,7 +123,7 @@ class Disturbance:
 
 @dataclass(frozen=True)
 class Segment:
-    """One target segment: ``kind`` 'c' (hold) or 'p' (parabola), seconds, step in Kt."""
+    """One segment: ``kind`` 'c' (hold), 'p' (parabola) or 'r' (ramp), seconds, step in units of the gain."""
 
     kind: str
     duration: float
@@ -125,11 +131,30 @@ class Segment:
 
 
 @dataclass(frozen=True)
-class Target:
-    """Parabola target: segments after the run-in, gain Kt in rad."""
+class Segments:
+    """Segments after each period's run-in (the paper's target, SPEC 2), gain in rad."""
 
     gain: float
     segments: tuple[Segment, ...]
+
+
+@dataclass(frozen=True)
+class FileSignal:
+    """A forcing function read from a column of a data file (CSV, Parquet or .mat).
+
+    ``values`` (rad) are the column's samples at ``rate`` Hz; the measurement
+    window starts ``start`` s into them and is taken as one period of the signal.
+    """
+
+    path: str
+    column: str
+    rate: float
+    start: float
+    values: np.ndarray = field(repr=False, compare=False, hash=False)
+
+
+#: A forcing function (target or disturbance): one of the kinds of ``signals.<name>.kind``.
+Forcing = Multisine | Segments | FileSignal
 
 
 @dataclass(frozen=True)
@@ -311,8 +336,8 @@ class Config:
     name: str
     models: tuple[HCModel, ...]
     loop: Loop
-    disturbance: Disturbance
-    target: Target
+    disturbance: Forcing
+    target: Forcing
     timing: Timing
     seeds: tuple[int, ...]
     identify: IdentifyConfig

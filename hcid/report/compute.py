@@ -44,9 +44,16 @@ def frequency_grid(n: int = 200) -> np.ndarray:
 
 def disturbance_band(config: Config) -> tuple[float, float]:
     """Lowest and highest disturbance frequency (rad/s), where estimates are expected to be
-    accurate (SPEC 5: 0.23..17.33 rad/s for the paper's 20 sines)."""
-    base = 2 * np.pi / config.disturbance.base_period
-    return float(min(config.disturbance.k) * base), float(max(config.disturbance.k) * base)
+    accurate (SPEC 5: 0.23..17.33 rad/s for the paper's 20 sines).
+
+    A disturbance that is not a multisine (or a config without one) gives the band
+    from the window's fundamental to the analysis Nyquist frequency."""
+    from hcid.signals import forcing_frequencies
+
+    w = forcing_frequencies(config.disturbance) if config.disturbance is not None else None
+    if w is not None:
+        return float(np.min(w)), float(np.max(w))
+    return 2 * np.pi / config.timing.window, np.pi * config.timing.output_rate
 
 
 # --------------------------------------------------------------------------- curves over W
