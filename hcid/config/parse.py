@@ -53,7 +53,19 @@ LIMITS = {
 }
 
 _ABSENT = object()  # a key left out (None is a value: refused where a mapping is needed)
-_DATA_COLUMNS = {"ft": "ft", "fd": "fd", "e": "e", "u": "u", "time": "t", "run": "run", "rate": "rate"}
+_DATA_COLUMNS = {
+    "ft": "ft",
+    "fd": "fd",
+    "e": "e",
+    "u": "u",
+    "theta": "theta",
+    "time": "t",
+    "run": "run",
+    "rate": "rate",
+}
+#: The sections only a config that simulates holds; a config without them (and with a
+#: ``data`` section) describes measured data only.
+SIMULATION_SECTIONS = ("models", "loop", "signals", "seeds")
 
 
 # --------------------------------------------------------------------------- models and loop
@@ -528,11 +540,29 @@ def _selection_section(top: Section) -> tuple[SelectionConfig, dict]:
     return SelectionConfig(w_grid=w_grid, target_rate=target_rate, criteria=chosen), resolved
 
 
-def _data_section(top: Section, model_names: list[str]) -> DataConfig | None:
-    value = top.get("data", None)
-    if value is None:
-        return None
+def _data_timing(top: Section) -> Timing:
+    """The analysis timing of a data-only config without a timing section: data.analysis_rate, data.window."""
+    s = top.section("data")
+    rate = s.number("analysis_rate", 0.1, 10_000.0)
+    window = s.number("window", 0.0, 1e4, open_lo=True)
+    if abs(window * rate - round(window * rate)) > 1e-6:
+        raise ConfigError(
+            f"data.window: must be whole samples at data.analysis_rate ({rate:g} Hz), got {window:g} s"
+        )
+    return Timing(sim_rate=rate, output_rate=rate, run_in=0.0, window=window, periods=1)
+
+
+def default_data() -> DataConfig:
+    """The data section of a config that has none: the default column names."""
+    return DataConfig(name="data", columns=dict(_DATA_COLUMNS), w_report=(0.00715, 0.47), time_default=True)
+
+
+def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataConfig:
+    value = top.get("data", {})
     s = Section(value, "data")
+    if "timing" not in top.data:  # a data-only config: its analysis timing, read by _data_timing
+        s.get("analysis_rate")
+        s.get("window")
     name = s.get("name", "data")
     if not isinstance(name, str) or not name.isidentifier() or len(name) > 40 or name in model_names:
         raise ConfigError(
@@ -545,6 +575,7 @@ def _data_section(top: Section, model_names: list[str]) -> DataConfig | None:
         if not isinstance(col, str) or not col:
             raise ConfigError(f"data.columns.{key}: must be a column or variable name, got {fmt(col)}")
         columns[key] = col
+    time_default = "time" not in cs.data
     cs.done()
     w_raw = s.get("w_report", [0.00715, 0.47])
     if (
@@ -553,8 +584,20 @@ def _data_section(top: Section, model_names: list[str]) -> DataConfig | None:
         or not all(isinstance(w, int | float) and not isinstance(w, bool) and w > 0 for w in w_raw)
     ):
         raise ConfigError(f"data.w_report: must be a non-empty list of W > 0, got {fmt(w_raw)}")
+    lead_in = s.number("lead_in", 0.0, 1e4, 0.0)
+    rate = timing.output_rate
+    if abs(lead_in * rate - round(lead_in * rate)) > 1e-6:
+        raise ConfigError(
+            f"data.lead_in: must be whole samples at the analysis rate ({rate:g} Hz), got {lead_in:g} s"
+        )
     s.done()
-    return DataConfig(name=name, columns=columns, w_report=tuple(float(w) for w in w_raw))
+    return DataConfig(
+        name=name,
+        columns=columns,
+        w_report=tuple(float(w) for w in w_raw),
+        lead_in=lead_in,
+        time_default=time_default,
+    )
 
 
 # --------------------------------------------------------------------------- entry points
@@ -674,22 +717,28 @@ def parse_config(data: Any, name: str, base: Path | None = None) -> Config:
     """
     top = Section(data, "")
     study_name = _study_name(top.get("name", name))
-    models = _models_section(top)
-    loop = _loop_section(top)
-    disturbance, target = _signals_section(top, base)
-    timing = _timing_section(top)
-    _check_against_timing(timing, (disturbance, target), models)
-    seeds = _seeds_section(top)
+    simulates = "data" not in top.data or any(k in top.data for k in SIMULATION_SECTIONS)
+    if simulates:
+        models = _models_section(top)
+        loop = _loop_section(top)
+        disturbance, target = _signals_section(top, base)
+        timing = _timing_section(top)
+        _check_against_timing(timing, (disturbance, target), models)
+        seeds = _seeds_section(top)
+    else:
+        models, loop, disturbance, target, seeds = (), None, None, None, ()
+        timing = _timing_section(top) if "timing" in top.data else _data_timing(top)
     identify = _identify_section(top, timing)
     selection, selection_raw = _selection_section(top)
-    data_cfg = _data_section(top, [m.name for m in models])
+    data_cfg = _data_section(top, [m.name for m in models], timing)
     top.done()
     _check_study_size(identify, seeds, models)
-    # The closed loops' stability needs the discretised paths (hcid.hcmodel): checked
-    # here so that an unstable hypothesis is refused before anything is simulated.
-    from hcid.hcmodel import check_closed_loops
+    if simulates:
+        # The closed loops' stability needs the discretised paths (hcid.hcmodel): checked
+        # here so that an unstable hypothesis is refused before anything is simulated.
+        from hcid.hcmodel import check_closed_loops
 
-    check_closed_loops(models, loop, timing.sim_dt)
+        check_closed_loops(models, loop, timing.sim_dt)
 
     raw = dict(data)
     raw["name"] = study_name

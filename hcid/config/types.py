@@ -320,30 +320,59 @@ class SelectionConfig:
 class DataConfig:
     """How to read measured data: a label and the names of the columns (or .mat variables).
 
-    ``columns`` maps ft, fd, e, u, time, run and rate to names in the file;
-    ``w_report`` are the W values at which the report shows the data's models.
+    ``columns`` maps ft, fd, e, u, theta, time, run and rate to names in the file
+    (defaults: the same names, time ``t``; ``e`` may be missing when ``theta``, the
+    system output, is there: then ``e = ft - theta``); ``time_default`` says the
+    time column was not named, so ``time`` is accepted too. ``w_report`` are the W
+    values at which the report shows the data's models; ``lead_in`` (s, whole
+    samples at the analysis rate) is skipped at the start of every run, after the
+    data are resampled to the analysis rate.
     """
 
     name: str
     columns: dict[str, str]
     w_report: tuple[float, ...]
+    lead_in: float = 0.0
+    time_default: bool = False
 
 
 @dataclass(frozen=True)
 class Config:
-    """A whole study."""
+    """A whole study, or a data-only config (no models, loop, signals or seeds: ``simulates`` is False).
+
+    ``data`` is always set after parsing (the default column names when the config has
+    no ``data`` section)."""
 
     name: str
     models: tuple[HCModel, ...]
-    loop: Loop
-    disturbance: Forcing
-    target: Forcing
+    loop: Loop | None
+    disturbance: Forcing | None
+    target: Forcing | None
     timing: Timing
     seeds: tuple[int, ...]
     identify: IdentifyConfig
     selection: SelectionConfig
     data: DataConfig | None = None
     raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False, hash=False)
+
+    @property
+    def simulates(self) -> bool:
+        """Whether the config holds the simulation sections (models, loop, signals, seeds)."""
+        return self.loop is not None
+
+    def require_simulation(self, command: str) -> None:
+        """Refuse a command that simulates on a data-only config.
+
+        Raises
+        ------
+        ConfigError
+            Naming the missing sections and the command.
+        """
+        if not self.simulates:
+            raise ConfigError(
+                f"models, loop, signals, timing, seeds: missing; `hcid {command}` simulates and needs "
+                "them (this config describes measured data only)"
+            )
 
     def model(self, name: str) -> HCModel:
         for m in self.models:
