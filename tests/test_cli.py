@@ -112,3 +112,21 @@ def test_forcing_file_missing_its_column_exit_2_nothing_written(tmp_path):
     assert "signals.disturbance: " in result.stderr and "has no column 'fdx'" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
     assert not run.exists()
+
+
+def test_window_not_whole_samples_exit_2_nothing_written(tmp_path):
+    text = CI_CONFIG.read_text()
+    text = text.replace("  target_shift: 1.0\n", "  target_shift: 1.0\n  windows_in: seconds\n", 1)
+    text = text.replace(
+        "estimation: [129, 1088], validation: [1089, 2048]",
+        "estimation: [5.13, 43.52], validation: [43.52, 81.92]",
+        1,
+    )
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(text)
+    run = tmp_path / "run"
+    result = runner.invoke(app, ["simulate", str(bad), "--run", str(run), "--quiet"])
+    assert result.exit_code == 2
+    assert "identify.direct.estimation: 5.13 s is not a whole number of samples" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not run.exists()

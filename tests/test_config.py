@@ -339,3 +339,46 @@ def test_bad_forcing_functions(paper_raw, tmp_path, spec, message):
     assert message in str(info.value) and "\n" not in str(info.value)
     if spec.get("column") == "nope":
         assert str(info.value).endswith("has no column 'nope'")
+
+
+# --------------------------------------------------------------------------- windows in seconds (issue 11)
+
+
+def test_windows_in_seconds_equal_the_paper_samples(paper_raw, paper_config):
+    # SPEC 3 at 25 Hz: samples 129..1088 are [5.12 s, 43.52 s), 1089..2048 are [43.52 s, 81.92 s).
+    data = copy.deepcopy(paper_raw)
+    data["identify"]["windows_in"] = "seconds"
+    for stage in ("direct", "stage2"):
+        data["identify"][stage].update(estimation=[5.12, 43.52], validation=[43.52, 81.92])
+    config = parse_config(data, "paper")
+    assert config.identify == paper_config.identify
+    assert config.to_yaml() == paper_config.to_yaml()  # the resolved config holds samples
+
+
+def test_stage2_inherits_seconds_from_direct(paper_raw, paper_config):
+    data = copy.deepcopy(paper_raw)
+    data["identify"]["windows_in"] = "seconds"
+    data["identify"]["direct"].update(estimation=[5.12, 43.52], validation=[43.52, 81.92])
+    del data["identify"]["stage2"]
+    assert parse_config(data, "paper").identify == paper_config.identify
+
+
+@pytest.mark.parametrize(
+    ("window", "message"),
+    [
+        (
+            [5.13, 43.52],
+            "identify.direct.estimation: 5.13 s is not a whole number of samples at the analysis rate 25 Hz",
+        ),
+        ([5.12, 90.0], "identify.direct.estimation: must end within the record (81.92 s, 2048 samples)"),
+        ([43.52, 5.12], "identify.direct.estimation: must be 'auto' or [start, end] in s"),
+    ],
+)
+def test_bad_windows_in_seconds(paper_raw, window, message):
+    data = copy.deepcopy(paper_raw)
+    data["identify"]["windows_in"] = "seconds"
+    data["identify"]["direct"]["estimation"] = window
+    data["identify"]["direct"]["validation"] = [43.52, 81.92]
+    with pytest.raises(ConfigError) as info:
+        parse_config(data, "paper")
+    assert message in str(info.value) and "\n" not in str(info.value)

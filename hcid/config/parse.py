@@ -393,11 +393,43 @@ def _seeds_section(top: Section) -> tuple[int, ...]:
 # --------------------------------------------------------------------------- identification
 
 
-def _window(section: Section, name: str, n_record: int, auto_first: int) -> Window:
+def _seconds_window(key: str, value: Any, rate: float, n_record: int) -> list[int]:
+    """``[start, end]`` in s (end exclusive: the window holds ``(end - start) rate`` samples) as samples."""
+    ok = (
+        isinstance(value, list)
+        and len(value) == 2
+        and all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+        and 0 <= value[0] < value[1]
+    )
+    if not ok:
+        raise ConfigError(
+            f"{key}: must be 'auto' or [start, end] in s with 0 <= start < end "
+            f"(identify.windows_in is seconds), got {fmt(value)}"
+        )
+    samples = []
+    for v in value:
+        k = v * rate
+        if abs(k - round(k)) > 1e-6:
+            raise ConfigError(
+                f"{key}: {v:g} s is not a whole number of samples at the analysis rate {rate:g} Hz "
+                f"(1 sample = {1 / rate:g} s), got {fmt(value)}"
+            )
+        samples.append(round(k))
+    first, last = samples[0] + 1, samples[1]
+    if last > n_record:
+        raise ConfigError(
+            f"{key}: must end within the record ({n_record / rate:g} s, {n_record} samples), got {fmt(value)}"
+        )
+    return [first, last]
+
+
+def _window(section: Section, name: str, n_record: int, auto_first: int, rate: float, unit: str) -> Window:
     value = section.get(name)
     key = section.key(name)
     if value == "auto":
         return Window(auto_first + 1, n_record)
+    if unit == "seconds":
+        value = _seconds_window(key, value, rate, n_record)
     ok = (
         isinstance(value, list)
         and len(value) == 2
@@ -412,7 +444,8 @@ def _window(section: Section, name: str, n_record: int, auto_first: int) -> Wind
     return Window(int(value[0]), int(value[1]))
 
 
-def _stage(data: Any, path: str, defaults: dict, n_record: int) -> StageConfig:
+def _stage(data: Any, path: str, defaults: dict, timing: Timing, unit: str, given: set) -> StageConfig:
+    n_record, rate = timing.record_samples, timing.output_rate
     merged = dict(defaults)
     if data is not _ABSENT:
         if not isinstance(data, dict):
@@ -429,8 +462,11 @@ def _stage(data: Any, path: str, defaults: dict, n_record: int) -> StageConfig:
         nk2=int_range(s, "nk2", 0, 200),
     )
     max_lag = grid.max_lag
-    estimation = _window(s, "estimation", n_record, max_lag)
-    validation = _window(s, "validation", n_record, max_lag)
+    # A method's default window (its StageSpec) is in samples; one the config gives is in `unit`.
+    est_unit = unit if "estimation" in given else "samples"
+    val_unit = unit if "validation" in given else "samples"
+    estimation = _window(s, "estimation", n_record, max_lag, rate, est_unit)
+    validation = _window(s, "validation", n_record, max_lag, rate, val_unit)
     s.done()
     if estimation.first - 1 < max_lag:
         raise ConfigError(
@@ -476,15 +512,22 @@ def _identify_section(top: Section, timing: Timing) -> IdentifyConfig:
             f"identify.target_shift: must be whole samples at timing.output_rate "
             f"({timing.output_rate:g} Hz), got {target_shift:g} s"
         )
+    unit = s.get("windows_in", "samples")
+    if unit not in ("samples", "seconds"):
+        raise ConfigError(f"identify.windows_in: must be 'samples' or 'seconds', got {fmt(unit)}")
     stages = []
     for name, spec in stage_specs().items():
         defaults = dict(spec.defaults)
+        given = set()
         if spec.defaults_from is not None:
-            given = s.data.get(spec.defaults_from)
-            defaults.update(given if isinstance(given, dict) else {})
-        stages.append(
-            (name, _stage(s.get(name, _ABSENT), f"identify.{name}", defaults, timing.record_samples))
-        )
+            inherited = s.data.get(spec.defaults_from)
+            if isinstance(inherited, dict):
+                defaults.update(inherited)
+                given |= set(inherited)
+        data = s.get(name, _ABSENT)
+        if isinstance(data, dict):
+            given |= set(data)
+        stages.append((name, _stage(data, f"identify.{name}", defaults, timing, unit, given)))
     s.done()
     return IdentifyConfig(target_shift=target_shift, stages=tuple(stages))
 
