@@ -190,7 +190,8 @@ MAX_RESAMPLING_FACTOR = 100
 
 
 def resampling_factors(rate_in: float, rate_out: float) -> tuple[int, int]:
-    """``(up, down)`` with ``rate_out = rate_in * up / down`` exactly (to 1e-9), both at most 100.
+    """``(up, down)`` with ``rate_out = rate_in * up / down`` (to 1e-6, as a time column's
+    uniformity is checked), both at most 100.
 
     Raises
     ------
@@ -206,7 +207,7 @@ def resampling_factors(rate_in: float, rate_out: float) -> tuple[int, int]:
 
     ratio = Fraction(rate_out / rate_in).limit_denominator(MAX_RESAMPLING_FACTOR)
     up, down = ratio.numerator, ratio.denominator
-    if up > MAX_RESAMPLING_FACTOR or abs(rate_in * up / down - rate_out) > 1e-9 * rate_out:
+    if up > MAX_RESAMPLING_FACTOR or abs(rate_in * up / down - rate_out) > 1e-6 * rate_out:
         raise DataError(
             f"cannot resample {rate_in:.10g} Hz to {rate_out:g} Hz exactly: the ratio is not "
             f"p/q with p, q <= {MAX_RESAMPLING_FACTOR}"
@@ -299,7 +300,7 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
                 )
             if steps.size and steps[0] <= 0:
                 raise DataError(f"{where}: time does not increase (step {steps[0]:.6g} s)")
-            found = 1.0 / steps[0] if steps.size else rate
+            found = steps.size / (run["time"][-1] - run["time"][0]) if steps.size else rate
         else:
             rates = np.ravel(run["rate"])
             if rates.size == 0 or not np.isfinite(rates[0]) or rates[0] <= 0:

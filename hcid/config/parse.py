@@ -270,7 +270,10 @@ def _file_signal(s: Section, base: Path | None) -> FileSignal:
         run = integer(run, s.key("run"), 0, 2**31 - 1)
     path = Path(raw_path)
     if not path.is_absolute() and base is not None:
-        path = base / path
+        path = (base / path).resolve()
+        # The resolved config (a run's config.yaml, read back by `hcid report` from the run
+        # directory) names the file by its absolute path.
+        s.data["path"] = str(path)
     try:
         values = read_signal(path, column, run)
     except DataError as exc:

@@ -7,9 +7,18 @@ figure drawings to the :class:`~hcid.report.document.Doc`). To add a section or
 a figure, write or extend one module here and list it in :data:`SECTIONS`.
 """
 
-from hcid.report.sections import calibration, curves, data, facts, responses, simulation, verdicts
+from hcid.report.sections import (
+    calibration,
+    curves,
+    data,
+    experiment,
+    facts,
+    responses,
+    simulation,
+    verdicts,
+)
 
-#: The sections in report order.
-SECTIONS = (facts, simulation, curves, responses, verdicts, calibration, data)
+#: The sections in report order; the verdicts appear only for the paper's experiment.
+SECTIONS = (facts, experiment, simulation, curves, responses, verdicts, calibration, data)
 
 __all__ = ["SECTIONS"]
