@@ -221,6 +221,7 @@ def test_report_of_another_experiment(tmp_path):
     assert "at the plant input: theta = Yc (u + fd)" in text
     assert "segments: 2 hold, 2 ramp" in text
     assert "Verdicts" not in text and report.verdicts == []
+    assert "W_FP 0.012" not in text and "W_FN 0.26" not in text  # the paper's thresholds
     assert (run / "report" / "forcing_spectra.png").stat().st_size > 0
 
 
