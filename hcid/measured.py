@@ -115,10 +115,10 @@ def _read_columns(path: Path, data: DataConfig) -> dict[str, np.ndarray]:
         raise DataError(f"{path}: cannot read ({str(exc).splitlines()[0]})") from exc
 
 
-def read_signal(path: str | Path, column: str, run: int | None = None) -> np.ndarray:
+def read_signal(path: str | Path, column: str, run: int | None = None, run_column: str = "run") -> np.ndarray:
     """One column (or .mat variable) of a data file as a float64 vector, e.g. a recorded forcing function.
 
-    With ``run``, only the rows whose ``run`` column equals it (CSV, Parquet) or that
+    With ``run``, only the rows whose ``run_column`` equals it (CSV, Parquet) or that
     column of a samples x runs matrix (.mat, counted from 1).
 
     Raises
@@ -132,7 +132,7 @@ def read_signal(path: str | Path, column: str, run: int | None = None) -> np.nda
     reader = READERS.get(path.suffix.lower())
     if reader is None:
         raise DataError(f"{path}: unknown data format {path.suffix.lower()!r} (use {', '.join(READERS)})")
-    wanted = {"x": column} if run is None else {"x": column, "run": "run"}
+    wanted = {"x": column} if run is None else {"x": column, "run": run_column}
     try:
         cols = reader(path, wanted)
     except DataError:
@@ -150,7 +150,7 @@ def read_signal(path: str | Path, column: str, run: int | None = None) -> np.nda
         elif "run" in cols:
             rows = cols["run"].ravel() == run
             if not rows.any():
-                raise DataError(f"{path}: no rows with run = {run}")
+                raise DataError(f"{path}: no rows with {run_column} = {run}")
             x = x.ravel()[rows]
     x = np.ascontiguousarray(x.ravel() if x.ndim == 1 or min(x.shape) == 1 else x[:, 0], dtype=np.float64)
     if x.size == 0 or not np.all(np.isfinite(x)):

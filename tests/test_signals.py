@@ -124,3 +124,36 @@ def test_file_signal_repeats_its_window_at_the_simulation_rate(tmp_path):
     timing = Timing(sim_rate=100.0, output_rate=25.0, run_in=3.0, window=20.0, periods=2)
     got = signals.forcing(timing, spec)
     np.testing.assert_allclose(got, signals.multisine(signals.simulation_time(timing), ms), atol=1e-12)
+
+
+def test_forcing_functions_from_the_example_data_file():
+    # configs/integrator_example: the target and disturbance read back from the synthetic data
+    # file (trial 1, the 40 s after the 5 s lead-in, 60 Hz) are the config's multisines, which
+    # made them (written with 9 significant digits; FFT resampling 60 -> 100 Hz is exact for
+    # them): calibrate-w can simulate with the measured file's own forcing functions.
+    import dataclasses
+
+    from hcid.config import load_config, parse_config
+    from hcid.config.parse import read_yaml
+
+    from .conftest import ROOT
+
+    path = ROOT / "configs" / "integrator_example.yaml"
+    config = load_config(path)
+    raw = read_yaml(path)
+    for name, column in (("target", "target"), ("disturbance", "disturbance")):
+        raw["signals"][name] = {
+            "kind": "file",
+            "path": "integrator_example/trials_synthetic.csv",
+            "column": column,
+            "rate": 60.0,
+            "start": 5.0,
+            "run": 1,
+            "run_column": "trial",
+        }
+    from_file = parse_config(raw, "x", path.parent)
+    timing = dataclasses.replace(config.timing, periods=1)
+    for name in ("target", "disturbance"):
+        want = signals.forcing(timing, getattr(config, name))
+        got = signals.forcing(timing, getattr(from_file, name))
+        np.testing.assert_allclose(got, want, atol=1e-8 * np.max(np.abs(want)) + 1e-9)

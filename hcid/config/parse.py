@@ -268,6 +268,9 @@ def _file_signal(s: Section, base: Path | None) -> FileSignal:
     run = s.get("run", None)
     if run is not None:
         run = integer(run, s.key("run"), 0, 2**31 - 1)
+    run_column = s.get("run_column", "run")
+    if not isinstance(run_column, str) or not run_column:
+        raise ConfigError(f"{s.key('run_column')}: must be a non-empty string, got {fmt(run_column)}")
     path = Path(raw_path)
     if not path.is_absolute() and base is not None:
         path = (base / path).resolve()
@@ -275,7 +278,7 @@ def _file_signal(s: Section, base: Path | None) -> FileSignal:
         # directory) names the file by its absolute path.
         s.data["path"] = str(path)
     try:
-        values = read_signal(path, column, run)
+        values = read_signal(path, column, run, run_column)
     except DataError as exc:
         raise ConfigError(f"{s.path}: {exc}") from None
     return FileSignal(path=str(raw_path), column=column, rate=rate, start=start, values=values)
