@@ -106,7 +106,9 @@ def simulate(
     from hcid.pipeline import simulate_study
 
     cfg, run_dir = _load(config, run)
-    _print_simulation(simulate_study(cfg, run_dir, jobs=jobs, show_progress=not quiet, force=force))
+    _print_simulation(
+        simulate_study(cfg, run_dir, jobs=jobs, show_progress=not quiet, force=force), _is_paper(cfg)
+    )
 
 
 @app.command()
@@ -146,7 +148,7 @@ def identify(
         worker_timeout=worker_timeout,
         show_progress=not quiet,
     )
-    _print_identification(result)
+    _print_identification(result, _is_paper(cfg))
 
 
 @app.command("sweep-w")
@@ -157,7 +159,7 @@ def sweep_w(config: ConfigArg, run: RunOpt = None):
 
     cfg, run_dir = _load(config, run)
     result = sweep_study(cfg, run_dir)
-    _print_thresholds(result)
+    _print_thresholds(result, _is_paper(cfg))
     typer.echo(f"wrote {run_dir / 'thresholds.parquet'}")
 
 
@@ -185,8 +187,8 @@ def run_all(
         worker_timeout=worker_timeout,
         show_progress=not quiet,
     )
-    _print_identification(result.identification)
-    _print_thresholds(result.sweep)
+    _print_identification(result.identification, _is_paper(cfg))
+    _print_thresholds(result.sweep, _is_paper(cfg))
     typer.echo(f"done in {result.seconds:.1f} s; tables in {run_dir}")
 
 
@@ -214,7 +216,7 @@ def calibrate_w(
         worker_timeout=worker_timeout,
         show_progress=not quiet,
     )
-    _print_identification(result.study.identification)
+    _print_identification(result.study.identification, _is_paper(cfg))
     rate = cfg.selection.target_rate
     typer.echo(f"target rate {rate:g} for false positives (FB twin) and false negatives (FF twin)")
     for cal in result.calibrations:
@@ -292,7 +294,14 @@ def report(
 # --------------------------------------------------------------------------- summaries
 
 
-def _print_simulation(result) -> None:
+def _is_paper(cfg) -> bool:
+    """Whether the paper's figures are printed beside this run's (its experiment only)."""
+    from hcid import paper
+
+    return paper.is_paper_experiment(cfg)
+
+
+def _print_simulation(result, is_paper: bool) -> None:
     import numpy as np
 
     from hcid import paper
@@ -307,7 +316,7 @@ def _print_simulation(result) -> None:
         rows = [i for i, name in enumerate(summary["model"]) if name == m]
         rms = np.array([summary["rms_e_deg"][i] for i in rows])
         ratio = np.array([summary["noise_ratio_disturbance_only"][i] for i in rows])
-        ref = paper.RMS_E_DEG.get(m)
+        ref = paper.RMS_E_DEG.get(m) if is_paper else None
         ref_text = f"{ref:.2f}" if ref is not None else "-"
         typer.echo(
             f"{m:<8}{len(rows):>6}{rms.mean():>15.3f} +- {rms.std(ddof=1) if len(rows) > 1 else 0.0:.3f}"
@@ -316,9 +325,9 @@ def _print_simulation(result) -> None:
     typer.echo(f"wrote {result.run_dir / 'simulations.parquet'}")
 
 
-def _print_identification(result) -> None:
+def _print_identification(result, is_paper: bool) -> None:
     if result.simulation is not None:
-        _print_simulation(result.simulation)
+        _print_simulation(result.simulation, is_paper)
     if result.imported:
         typer.echo(f"read {result.imported} measured run(s)")
     log = result.log.to_pydict()
@@ -330,7 +339,7 @@ def _print_identification(result) -> None:
     typer.echo(f"wrote {result.run_dir / 'frontier.parquet'}")
 
 
-def _print_thresholds(sweep) -> None:
+def _print_thresholds(sweep, is_paper: bool) -> None:
     from hcid import paper
 
     rows = sweep.thresholds.to_pylist()
@@ -340,6 +349,7 @@ def _print_thresholds(sweep) -> None:
             if row[name] is None:
                 continue
             ref = paper.W_FP.get(row["method"]) if name == "w_fp" else paper.W_FN
+            ref = ref if is_paper else None
             ref_text = f"{ref:.2g}" if ref is not None else "-"
             typer.echo(
                 f"{row['method']:<10}{row['model']:<8}{name.upper():<11}{row[name]:>12.4g}{ref_text:>10}"

@@ -31,8 +31,8 @@ __all__ = [
 
 
 def plant(loop: Loop) -> control.TransferFunction:
-    """``Yc = Kc wb / (s (s + wb))``, theta per u."""
-    return control.tf([loop.Kc * loop.wb], [1.0, loop.wb, 0.0])
+    """The configured plant ``Yc`` (the paper's ``Kc wb / (s (s + wb))`` by default), theta per u."""
+    return control.tf(list(loop.plant.num), list(loop.plant.den))
 
 
 def _nms(loop: Loop) -> control.TransferFunction:
@@ -41,12 +41,33 @@ def _nms(loop: Loop) -> control.TransferFunction:
 
 
 def feedforward_path(model: HCModel, loop: Loop) -> control.TransferFunction:
-    """``Ynms * Kpt / Yc / (TI s + 1)^2`` without its delay: u per ft (0 for Kpt = 0)."""
+    """``Ynms * Kpt / Yc / (TI s + 1)^2`` without its delay: u per ft (0 for Kpt = 0).
+
+    The Inverse Feedforward Model (SPEC 7) for the configured plant, formed as one
+    transfer function (common factors cancelled).
+
+    Raises
+    ------
+    ConfigError
+        If the product is improper for this plant (its relative degree exceeds 4).
+    """
     if not model.has_feedforward:
         return control.tf([0.0], [1.0])
-    inverse_plant = control.tf([1.0, loop.wb, 0.0], [loop.Kc * loop.wb])
+    yc = loop.plant
+    inverse_plant = control.tf(list(yc.den), list(yc.num))
     lag = control.tf([1.0], [model.TI**2, 2 * model.TI, 1.0])
-    return control.minreal(model.Kpt * _nms(loop) * inverse_plant * lag, verbose=False)
+    path = control.minreal(model.Kpt * _nms(loop) * inverse_plant * lag, verbose=False)
+    num = np.trim_zeros(np.atleast_1d(np.asarray(path.num[0][0], dtype=np.float64)), "f")
+    den = np.atleast_1d(np.asarray(path.den[0][0], dtype=np.float64))
+    if num.size > den.size:
+        from hcid.errors import ConfigError
+
+        raise ConfigError(
+            f"models.{model.name}: the feedforward path Ynms Kpt / Yc / (TI s + 1)^2 is improper "
+            f"for the plant {yc.text} (numerator degree {num.size - 1} > denominator degree "
+            f"{den.size - 1}); no proper Inverse Feedforward Model exists for it"
+        )
+    return path
 
 
 def feedback_path(model: HCModel, loop: Loop) -> control.TransferFunction:
@@ -86,6 +107,9 @@ class DiscreteLoop:
         ``(b, a)`` of Hft, He, Yc and Yn (Kn = 1).
     delay_ft, delay_e : int
         Feedforward and feedback delays in samples.
+    has_feedforward : bool
+    disturbance_at : str
+        ``output`` (``theta = Yc u + fd``) or ``input`` (``theta = Yc (u + fd)``).
     """
 
     dt: float
@@ -96,6 +120,7 @@ class DiscreteLoop:
     delay_ft: int
     delay_e: int
     has_feedforward: bool
+    disturbance_at: str = "output"
 
     @classmethod
     def build(cls, model: HCModel, loop: Loop, dt: float) -> DiscreteLoop:
@@ -110,6 +135,7 @@ class DiscreteLoop:
             delay_ft=round(model.tau_pt / dt) if model.has_feedforward else 0,
             delay_e=round(model.tau_pe / dt),
             has_feedforward=model.has_feedforward,
+            disturbance_at=loop.disturbance_at,
         )
 
     def response(self, which: str, w: np.ndarray) -> np.ndarray:
@@ -163,7 +189,11 @@ def closed_loop_poles(model: HCModel, loop: Loop, dt: float) -> np.ndarray:
 
 
 def check_closed_loops(models, loop: Loop, dt: float) -> None:
-    """Refuse a model whose closed loop is unstable, naming the model and its largest pole.
+    """Refuse a model whose closed loop or feedforward path is unstable or improper.
+
+    The closed loop is named with its largest pole; the feedforward path
+    (``Ynms Kpt / Yc / (TI s + 1)^2``, the plant's zeros become its poles) with
+    its right-half-plane pole; an improper path is refused by :func:`feedforward_path`.
 
     Raises
     ------
@@ -172,6 +202,17 @@ def check_closed_loops(models, loop: Loop, dt: float) -> None:
     """
     from hcid.errors import ConfigError
 
+    for model in models:
+        ff = feedforward_path(model, loop)
+        if model.has_feedforward:
+            ff_poles = np.atleast_1d(ff.poles())
+            if ff_poles.size and np.max(ff_poles.real) >= 0:
+                p = ff_poles[np.argmax(ff_poles.real)]
+                raise ConfigError(
+                    f"models.{model.name}: the feedforward path Ynms Kpt / Yc / (TI s + 1)^2 is unstable "
+                    f"for the plant {loop.plant.text} (pole at s = {p.real:.3g}{p.imag:+.3g}j rad/s: "
+                    "a zero of the plant in the right half-plane or at 0)"
+                )
     for model in models:
         poles = closed_loop_poles(model, loop, dt)
         worst = poles[np.argmax(np.abs(poles))] if poles.size else 0.0

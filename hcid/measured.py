@@ -27,7 +27,7 @@ from hcid.config import Config, DataConfig
 from hcid.errors import DataError
 from hcid.tables import MEASURED, SIGNALS
 
-__all__ = ["READERS", "load_data", "records_table"]
+__all__ = ["READERS", "load_data", "read_signal", "records_table"]
 
 #: Largest magnitude a signal may hold: its square must not overflow in the least-squares fits.
 _LARGEST = 1e150
@@ -45,9 +45,14 @@ def _table_columns(table: pa.Table, path: Path, wanted: dict[str, str]) -> dict[
 
 
 def _read_csv(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
+    import io
+
     import pyarrow.csv as pacsv
 
-    return _table_columns(pacsv.read_csv(path), path, wanted)
+    # Loggers write a header of '#' comment lines: skipped, as are comment lines further down.
+    with open(path, "rb") as f:
+        lines = [line for line in f if not line.lstrip().startswith(b"#")]
+    return _table_columns(pacsv.read_csv(io.BytesIO(b"".join(lines))), path, wanted)
 
 
 def _read_parquet(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
@@ -92,7 +97,13 @@ READERS = {".csv": _read_csv, ".parquet": _read_parquet, ".pq": _read_parquet, "
 
 def _read_columns(path: Path, data: DataConfig) -> dict[str, np.ndarray]:
     suffix = path.suffix.lower()
-    wanted = {name: data.columns[name] for name in (*SIGNALS, "time", "run", "rate") if name in data.columns}
+    wanted = {
+        name: data.columns[name]
+        for name in (*SIGNALS, "theta", "time", "run", "rate")
+        if name in data.columns
+    }
+    if data.time_default:
+        wanted["time_alt"] = "time"  # default names: 't' or 'time'
     reader = READERS.get(suffix)
     if reader is None:
         raise DataError(f"{path}: unknown data format {suffix!r} (use {', '.join(READERS)})")
@@ -102,6 +113,49 @@ def _read_columns(path: Path, data: DataConfig) -> dict[str, np.ndarray]:
         raise
     except (pa.ArrowException, OSError, ValueError) as exc:
         raise DataError(f"{path}: cannot read ({str(exc).splitlines()[0]})") from exc
+
+
+def read_signal(path: str | Path, column: str, run: int | None = None, run_column: str = "run") -> np.ndarray:
+    """One column (or .mat variable) of a data file as a float64 vector, e.g. a recorded forcing function.
+
+    With ``run``, only the rows whose ``run_column`` equals it (CSV, Parquet) or that
+    column of a samples x runs matrix (.mat, counted from 1).
+
+    Raises
+    ------
+    DataError
+        If the file is missing or unreadable, lacks the column, or the values are not finite.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: missing")
+    reader = READERS.get(path.suffix.lower())
+    if reader is None:
+        raise DataError(f"{path}: unknown data format {path.suffix.lower()!r} (use {', '.join(READERS)})")
+    wanted = {"x": column} if run is None else {"x": column, "run": run_column}
+    try:
+        cols = reader(path, wanted)
+    except DataError:
+        raise
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise DataError(f"{path}: cannot read ({str(exc).splitlines()[0]})") from exc
+    if "x" not in cols:
+        raise DataError(f"{path}: has no column {column!r}")
+    x = cols["x"]
+    if run is not None:
+        if x.ndim == 2:
+            if not 1 <= run <= x.shape[1]:
+                raise DataError(f"{path}: {column!r} has {x.shape[1]} runs, no run {run}")
+            x = x[:, run - 1]
+        elif "run" in cols:
+            rows = cols["run"].ravel() == run
+            if not rows.any():
+                raise DataError(f"{path}: no rows with {run_column} = {run}")
+            x = x.ravel()[rows]
+    x = np.ascontiguousarray(x.ravel() if x.ndim == 1 or min(x.shape) == 1 else x[:, 0], dtype=np.float64)
+    if x.size == 0 or not np.all(np.isfinite(x)):
+        raise DataError(f"{path}: column {column!r} is empty or holds NaN or inf")
+    return x
 
 
 def _split_runs(path: Path, cols: dict[str, np.ndarray], data: DataConfig) -> list[dict[str, np.ndarray]]:
@@ -131,33 +185,98 @@ def _split_runs(path: Path, cols: dict[str, np.ndarray], data: DataConfig) -> li
     return out
 
 
+#: Largest up or down factor of a resampling: ratios of rates beyond it are refused.
+MAX_RESAMPLING_FACTOR = 100
+
+
+def resampling_factors(rate_in: float, rate_out: float) -> tuple[int, int]:
+    """``(up, down)`` with ``rate_out = rate_in * up / down`` (to 1e-6, as a time column's
+    uniformity is checked), both at most 100.
+
+    Raises
+    ------
+    DataError
+        If no such small integers exist (the ratio cannot be done exactly).
+
+    Examples
+    --------
+    >>> resampling_factors(60.0, 20.0), resampling_factors(100.0, 25.0), resampling_factors(60.0, 25.0)
+    ((1, 3), (1, 4), (5, 12))
+    """
+    from fractions import Fraction
+
+    ratio = Fraction(rate_out / rate_in).limit_denominator(MAX_RESAMPLING_FACTOR)
+    up, down = ratio.numerator, ratio.denominator
+    if up > MAX_RESAMPLING_FACTOR or abs(rate_in * up / down - rate_out) > 1e-6 * rate_out:
+        raise DataError(
+            f"cannot resample {rate_in:.10g} Hz to {rate_out:g} Hz exactly: the ratio is not "
+            f"p/q with p, q <= {MAX_RESAMPLING_FACTOR}"
+        )
+    return up, down
+
+
+def resample(x: np.ndarray, up: int, down: int) -> np.ndarray:
+    """Resample by ``up/down`` with ``scipy.signal.resample_poly``: zero phase, anti-aliased.
+
+    The polyphase FIR is a Kaiser-windowed sinc (beta 5, cut-off at the lower of the two
+    Nyquist frequencies), linear phase with its delay removed; the signal is taken
+    as 0 outside the record, so the first and last ``10 max(up, down)`` input samples
+    are affected by the record's ends.
+    """
+    from scipy import signal as sps
+
+    if up == down:
+        return x
+    return sps.resample_poly(x, up, down)
+
+
 def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarray]]:
     """Read and check a measured-data file; one record per run, keyed by run number (1, 2, ...).
 
-    Each record holds ``t`` (s, from 0), ``ft``, ``fd``, ``e``, ``u`` (rad) at
-    ``config.timing.output_rate``.
+    Each record holds ``t`` (s, from 0 after the lead-in), ``ft``, ``fd``, ``e``, ``u``
+    (rad) at the analysis rate ``config.timing.output_rate``. Column names are the
+    config's ``data.columns`` (by default ``t`` or ``time``, ``ft``, ``fd``, ``e``,
+    ``u``, ``run``); without an ``e`` column, ``e = ft - theta`` from the system
+    output. A run at another rate is resampled once to the analysis rate
+    (:func:`resample`, zero phase); then ``data.lead_in`` s are skipped.
 
     Raises
     ------
     DataError
         One line naming the file and the problem.
     """
+    from hcid.config.parse import default_data
+
     path = Path(path)
-    data = config.data
-    if data is None:
-        raise DataError(f"{path}: the config has no 'data' section to map its columns")
+    data = config.data if config.data is not None else default_data()
     if not path.is_file():
         raise DataError(f"{path}: missing")
     cols = _read_columns(path, data)
+    if "time" not in cols and "time_alt" in cols:
+        cols["time"] = cols.pop("time_alt")
+    cols.pop("time_alt", None)
+    if "e" not in cols and "theta" in cols and "ft" in cols:
+        if cols["theta"].shape != cols["ft"].shape:
+            raise DataError(
+                f"{path}: signals of unequal length ({data.columns['theta']}, {data.columns['ft']})"
+            )
+        cols["e"] = cols["ft"] - cols["theta"]  # e = ft - theta
+    cols.pop("theta", None)
     missing = [data.columns[n] for n in SIGNALS if n not in cols]
     if missing:
-        raise DataError(f"{path}: missing columns {missing} (mapped in the config's data.columns)")
+        hint = (
+            f" (or a system output '{data.columns['theta']}' for e = ft - theta)"
+            if "e" in missing[-1:]
+            else ""
+        )
+        raise DataError(f"{path}: missing columns {missing}{hint} (mapped in the config's data.columns)")
     if "time" not in cols and "rate" not in cols:
         raise DataError(
             f"{path}: needs a time column '{data.columns['time']}' or a rate '{data.columns['rate']}'"
         )
     rate = config.timing.output_rate
     need = max(max(s.validation.last, s.estimation.last) for _, s in config.identify.stages)
+    skip = round(data.lead_in * rate)
     records = {}
     for i, run in enumerate(_split_runs(path, cols, data), start=1):
         where = f"{path}: run {i}"
@@ -166,11 +285,11 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
                 bad = ~np.isfinite(run[name]) | (np.abs(run[name]) > _LARGEST)
                 if bad.any():
                     k = int(np.argmax(bad))
+                    label = data.columns[name] if name != "e" or "e" in data.columns else "e"
                     raise DataError(
-                        f"{where}: {data.columns[name]} holds {run[name][k]:.6g} at sample {k} "
+                        f"{where}: {label} holds {run[name][k]:.6g} at sample {k} "
                         f"(values must be finite and at most {_LARGEST:g} in magnitude)"
                     )
-        n = run["ft"].size
         if "time" in run:
             steps = np.diff(run["time"])
             if steps.size and not np.allclose(steps, steps[0], rtol=1e-6, atol=1e-9):
@@ -179,7 +298,9 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
                     f"{where}: time is not uniformly sampled (step {steps[k]:.6g} s at sample "
                     f"{k + 1}, first step {steps[0]:.6g} s)"
                 )
-            found = 1.0 / steps[0] if steps.size else rate
+            if steps.size and steps[0] <= 0:
+                raise DataError(f"{where}: time does not increase (step {steps[0]:.6g} s)")
+            found = steps.size / (run["time"][-1] - run["time"][0]) if steps.size else rate
         else:
             rates = np.ravel(run["rate"])
             if rates.size == 0 or not np.isfinite(rates[0]) or rates[0] <= 0:
@@ -187,17 +308,30 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
                     f"{where}: the rate {data.columns['rate']!r} is empty or not a positive number"
                 )
             found = float(rates[0])
+        signals_ = {name: run[name] for name in SIGNALS}
         if not np.isclose(found, rate, rtol=1e-6):
-            raise DataError(
-                f"{where}: sample rate {found:.6g} Hz, the config's timing.output_rate is "
-                f"{rate:g} Hz (set it, and the windows in samples, to the data's rate)"
-            )
+            if found < rate:
+                raise DataError(
+                    f"{where}: sample rate {found:.6g} Hz, below the config's analysis rate "
+                    f"(timing.output_rate) {rate:g} Hz; set that to the data's rate or lower"
+                )
+            try:
+                up, down = resampling_factors(found, rate)
+            except DataError as exc:
+                raise DataError(f"{where}: {exc}") from None
+            signals_ = {name: resample(x, up, down) for name, x in signals_.items()}
+        n = signals_["ft"].size - skip
         if n < need:
-            raise DataError(f"{where}: {n} samples, the identification windows need {need}")
+            raise DataError(
+                f"{where}: {n} samples at {rate:g} Hz"
+                + (f" after the {data.lead_in:g} s lead-in" if skip else "")
+                + f", the identification windows need {need}"
+            )
+        signals_ = {name: np.ascontiguousarray(x[skip:]) for name, x in signals_.items()}
         for name in ("e", "u"):
-            if not np.any(run[name][:need]):
+            if not np.any(signals_[name][:need]):
                 raise DataError(f"{where}: {data.columns[name]} is zero over the identification windows")
-        records[i] = {"t": np.arange(n) / rate, **{s: run[s] for s in SIGNALS}}
+        records[i] = {"t": np.arange(n) / rate, **signals_}
     if not records:
         raise DataError(f"{path}: holds no samples")
     return records

@@ -20,3 +20,21 @@ FREQUENCY_RANGE = (0.1, 30.0)
 FEEDFORWARD_ACCURATE_BELOW = 3.0
 #: Fig. 10: direct's errors below indirect's under these frequencies (rad/s), per path.
 DIRECT_BETTER_BELOW = {"hft": 8.0, "he": 7.0}
+
+#: The paper's plant Yc = Kc wb / (s (s + wb)), Kc = 2.75, wb = 2: (numerator, denominator) in s.
+PLANT = ((5.5,), (1.0, 2.0, 0.0))
+
+
+def is_paper_experiment(config) -> bool:
+    """Whether a config simulates the paper's experiment: its plant, the disturbance at the
+    plant output, a multisine disturbance and a segments target (the claims of SPEC 6 and
+    Table 2's RMS(e) are compared only then)."""
+    from hcid.config import Multisine, Segments
+
+    return (
+        config.simulates
+        and (config.loop.plant.num, config.loop.plant.den) == PLANT
+        and config.loop.disturbance_at == "output"
+        and isinstance(config.disturbance, Multisine)
+        and isinstance(config.target, Segments)
+    )

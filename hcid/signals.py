@@ -1,33 +1,45 @@
-"""Forcing functions of the tracking task (SPEC section 2): target and disturbance.
+"""Forcing functions of the tracking task (SPEC sections 2 and 7): target and disturbance.
 
 Pure functions of time. Time ``t`` is in s with ``t = 0`` at the start of the
-measurement window that is kept; values are in rad.
+measurement window that is kept; values are in rad. Each kind of forcing
+function (:data:`FORCING`: multisine, segments, a file's column) gives its
+values at every simulation sample with :func:`forcing`.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy import signal as sps
 
-from hcid.config import Disturbance, Target, Timing
+from hcid.config import FileSignal, Forcing, Multisine, Segments, Timing
 
-__all__ = ["disturbance", "target", "target_in_period", "simulation_time"]
+__all__ = [
+    "FORCING",
+    "file_signal",
+    "forcing",
+    "forcing_frequencies",
+    "multisine",
+    "segments",
+    "segments_in_period",
+    "simulation_time",
+]
 
 
-def disturbance(t: np.ndarray, spec: Disturbance) -> np.ndarray:
-    """Multisine disturbance ``fd(t) = sum_i A_i sin(k_i wm (t + t0) + phi_i)``.
+def multisine(t: np.ndarray, spec: Multisine) -> np.ndarray:
+    """Sum of sines ``f(t) = sum_i A_i sin(k_i wm (t + t0) + phi_i)``.
 
     Parameters
     ----------
     t : ndarray, shape (n,)
-        Time in s, 0 at the start of the kept measurement window. fd is
+        Time in s, 0 at the start of the kept measurement window. f is
         periodic in ``spec.base_period``, so negative times (the run-in) are valid.
-    spec : Disturbance
+    spec : Multisine
         Integer frequency multiples, amplitudes (rad) and phases (rad).
 
     Returns
     -------
     ndarray, shape (n,)
-        fd in rad.
+        f in rad.
     """
     t = np.asarray(t, dtype=np.float64)
     wm = 2.0 * np.pi / spec.base_period
@@ -37,17 +49,19 @@ def disturbance(t: np.ndarray, spec: Disturbance) -> np.ndarray:
     return np.sum(amplitude * np.sin(k * wm * (t[None, :] + spec.time_offset) + phase), axis=0)
 
 
-def target_in_period(tau: np.ndarray, spec: Target) -> np.ndarray:
-    """Target ft at time ``tau`` (s) after the start of the segments; 0 before them.
+def segments_in_period(tau: np.ndarray, spec: Segments) -> np.ndarray:
+    """Segments' value at time ``tau`` (s) after the start of the segments; 0 before them.
 
-    A parabola segment of duration T and step S accelerates at ``4 S / T**2``
+    A parabola segment ``p`` of duration T and step S accelerates at ``4 S / T**2``
     for T/2 and decelerates equally for T/2, so position and velocity are
-    continuous. After the last segment ft holds its final level.
+    continuous; a ramp ``r`` moves at the constant velocity S / T (position
+    continuous); a hold ``c`` keeps the level. After the last segment the
+    signal holds its final level.
 
     Returns
     -------
     ndarray
-        ft in rad.
+        The signal in rad.
     """
     tau = np.asarray(tau, dtype=np.float64)
     out = np.zeros_like(tau)
@@ -60,14 +74,17 @@ def target_in_period(tau: np.ndarray, spec: Target) -> np.ndarray:
             out[inside] = level
         else:
             step = seg.step * spec.gain
-            half = seg.duration / 2.0
-            accel = 4.0 * step / seg.duration**2
             x = tau[inside] - start
-            rise = np.where(
-                x < half,
-                0.5 * accel * x**2,
-                step - 0.5 * accel * (seg.duration - x) ** 2,
-            )
+            if seg.kind == "r":
+                rise = step * x / seg.duration
+            else:
+                half = seg.duration / 2.0
+                accel = 4.0 * step / seg.duration**2
+                rise = np.where(
+                    x < half,
+                    0.5 * accel * x**2,
+                    step - 0.5 * accel * (seg.duration - x) ** 2,
+                )
             out[inside] = level + rise
             level += step
         start = end
@@ -87,9 +104,44 @@ def simulation_time(timing: Timing) -> np.ndarray:
     return (np.arange(n) - start) / timing.sim_rate
 
 
-def target(timing: Timing, spec: Target) -> np.ndarray:
-    """ft at every simulation sample (rad): each period is run-in (ft = 0) then the segments."""
+def segments(timing: Timing, spec: Segments) -> np.ndarray:
+    """At every simulation sample (rad): each period is run-in (0) then the segments."""
     n = timing.periods * timing.period_samples
     run_in = round(timing.run_in * timing.sim_rate)
     in_period = np.arange(n) % timing.period_samples - run_in
-    return target_in_period(in_period / timing.sim_rate, spec)
+    return segments_in_period(in_period / timing.sim_rate, spec)
+
+
+def file_signal(timing: Timing, spec: FileSignal) -> np.ndarray:
+    """A file's column at every simulation sample (rad), its window repeated as one period.
+
+    The ``timing.window`` seconds from ``spec.start`` are resampled from the file's
+    rate to the simulation rate by the FFT method (exact for a signal periodic in
+    the window and band-limited below both Nyquist frequencies) and repeated
+    backwards over the run-in and earlier periods.
+    """
+    first = round(spec.start * spec.rate)
+    window = spec.values[first : first + round(timing.window * spec.rate)]
+    one = sps.resample(window, timing.window_samples) if window.size != timing.window_samples else window
+    n = timing.periods * timing.period_samples
+    return one[(np.arange(n) - (n - timing.window_samples)) % timing.window_samples]
+
+
+#: Kinds of forcing function by their config type: ``f(timing, spec)`` at every simulation sample.
+FORCING = {
+    Multisine: lambda timing, spec: multisine(simulation_time(timing), spec),
+    Segments: segments,
+    FileSignal: file_signal,
+}
+
+
+def forcing(timing: Timing, spec: Forcing) -> np.ndarray:
+    """A forcing function at every simulation sample (rad), whatever its kind."""
+    return FORCING[type(spec)](timing, spec)
+
+
+def forcing_frequencies(spec: Forcing) -> np.ndarray | None:
+    """The frequencies (rad/s) of a multisine; None for the other kinds (broadband or unknown)."""
+    if isinstance(spec, Multisine):
+        return 2 * np.pi / spec.base_period * np.asarray(spec.k, dtype=np.float64)
+    return None

@@ -19,7 +19,7 @@ import numpy as np
 from scipy import signal as sps
 
 from hcid import signals
-from hcid.config import Config, HCModel
+from hcid.config import Config, HCModel, Multisine
 from hcid.hcmodel import DiscreteLoop
 from hcid.tables import CHANNELS
 
@@ -109,12 +109,16 @@ def simulate_loop(
     e = np.zeros(m + block)  # e[block + k] is e(k); the first `block` entries are the rest state
     u = np.empty(m)
     theta = np.empty(m)
+    at_input = dloop.disturbance_at == "input"
     for k0 in range(0, m, block):
         k1 = min(k0 + block, m)
         u_fb, z_fb = sps.lfilter(b_fb, a_fb, e[k0:k1], zi=z_fb)
         u[k0:k1] = u_fb + u_open[k0:k1]
-        y, z_c = sps.lfilter(b_c, a_c, u[k0:k1], zi=z_c)
-        theta[k0:k1] = y + fd[k0:k1]
+        if at_input:  # theta = Yc (u + fd)
+            theta[k0:k1], z_c = sps.lfilter(b_c, a_c, u[k0:k1] + fd[k0:k1], zi=z_c)
+        else:  # theta = Yc u + fd (the paper)
+            y, z_c = sps.lfilter(b_c, a_c, u[k0:k1], zi=z_c)
+            theta[k0:k1] = y + fd[k0:k1]
         e[block + k0 : block + k1] = ft[k0:k1] - theta[k0:k1]
     return {"ft": ft, "fd": fd, "e": e[block:], "u": u, "theta": theta, "n": n}
 
@@ -135,14 +139,29 @@ def _feedback_only(model: HCModel) -> HCModel:
     return dataclasses.replace(model, Kpt=0.0, TI=0.0, tau_pt=0.0)
 
 
+def _disturbance_lines(config: Config) -> tuple[np.ndarray, np.ndarray]:
+    """Frequencies (rad/s) and amplitudes (rad) of the disturbance's sines."""
+    dist = config.disturbance
+    if isinstance(dist, Multisine):
+        return signals.forcing_frequencies(dist), np.asarray(dist.amplitude)
+    timing = config.timing
+    fd = signals.forcing(timing, dist)[-timing.window_samples :]
+    lines = np.fft.rfft(fd)[1 : (fd.size + 1) // 2] * 2 / fd.size  # DC and Nyquist left out
+    w = 2 * np.pi / timing.window * np.arange(1, lines.size + 1)
+    return w, np.abs(lines)
+
+
 def remnant_gain(config: Config) -> float:
     """Kn that gives ``var(n)/var(u) = remnant_ratio`` in the disturbance-only task.
 
     Computed once, analytically, from the discrete loop's frequency responses
     (ft = 0, feedback path of the first model; SPEC: all models share one Kn):
-    ``u = (n - He fd) / (1 + Yc He)``, so with ``n = Kn n1``
+    ``u = (n - He D fd) / (1 + Yc He)`` with ``D = 1`` for a disturbance at the plant's
+    output and ``D = Yc`` at its input, so with ``n = Kn n1``
 
-    - ``var(u_fd) = sum_i A_i^2 / 2 |He / (1 + Yc He)|^2`` at the disturbance frequencies,
+    - ``var(u_fd) = sum_i A_i^2 / 2 |He D / (1 + Yc He)|^2`` at the disturbance frequencies
+      (a multisine's own lines; for another kind of disturbance, the DFT lines of one
+      window of it at the simulation rate, the window taken as its period),
     - ``var(n1)`` and ``var(n1 / (1 + Yc He))`` are integrals of ``|.|^2`` over
       ``[0, pi]`` of the unit-white-noise-driven discrete filters,
 
@@ -153,11 +172,13 @@ def remnant_gain(config: Config) -> float:
     if ratio == 0.0:
         return 0.0
 
-    dist = config.disturbance
-    w_dist = 2 * np.pi / dist.base_period * np.asarray(dist.k, dtype=np.float64)
+    w_dist, amplitude = _disturbance_lines(config)
     he = dloop.response("feedback", w_dist)
     yc = dloop.response("plant", w_dist)
-    var_u_fd = float(np.sum(np.asarray(dist.amplitude) ** 2 / 2 * np.abs(he / (1 + yc * he)) ** 2))
+    to_u = he / (1 + yc * he)
+    if dloop.disturbance_at == "input":
+        to_u = to_u * yc
+    var_u_fd = float(np.sum(amplitude**2 / 2 * np.abs(to_u) ** 2))
 
     # Variance of a unit-white-noise-driven discrete filter: (1/pi) int_0^pi |H|^2 dW.
     # The midpoint rule is spectrally accurate for these smooth periodic integrands
@@ -195,12 +216,12 @@ def simulate_realization(
     """
     timing = config.timing
     t = signals.simulation_time(timing)
-    fd = signals.disturbance(t, config.disturbance)
+    fd = signals.forcing(timing, config.disturbance)
     if disturbance_only:
         model = _feedback_only(model)
         ft = np.zeros_like(t)
     else:
-        ft = signals.target(timing, config.target)
+        ft = signals.forcing(timing, config.target)
     dloop = DiscreteLoop.build(model, config.loop, timing.sim_dt)
     b_n, a_n = dloop.remnant
     n = kn * sps.lfilter(b_n, a_n, white_noise(seed, t.size))

@@ -12,6 +12,9 @@ from .conftest import CI_CONFIG
 
 runner = CliRunner()
 
+#: The plant lines of configs/ci.yaml, replaced by a loop.plant in the bad-input cases.
+_PAPER_PLANT = "  Kc: 2.75                    # plant Yc = Kc*wb / (s (s + wb))\n  wb: 2.0"
+
 
 @pytest.fixture(scope="module")
 def simulated(tmp_path_factory):
@@ -56,6 +59,19 @@ def test_simulate_identical_across_jobs(simulated, name):
             "identify.direct.validation",
         ),
         (("Kc: 2.75", "Kc: [2.75]"), "loop.Kc: must be a number"),
+        # SPEC 7: plants and hypotheses that cannot be simulated.
+        (
+            (_PAPER_PLANT, "  plant: {kind: triple_integrator, K: 1}"),
+            "loop.plant.kind: unknown plant shorthand",
+        ),
+        (
+            (_PAPER_PLANT, "  plant: {kind: tf, num: [1], den: [1, 0, 0, 0, 0, 0]}"),
+            "models.FF: the feedforward path Ynms Kpt / Yc / (TI s + 1)^2 is improper",
+        ),
+        (
+            (_PAPER_PLANT, "  plant: {kind: integrator, K: 3}\n  disturbance_at: input"),
+            "models.FB: the closed loop with this plant is unstable (pole at z = 1.0047-0.0788j",
+        ),
     ],
 )
 def test_bad_config_exit_2_one_line_nothing_written(tmp_path, edit, message):
@@ -80,3 +96,37 @@ def test_bad_config_keeps_earlier_results(simulated, tmp_path):
     assert result.exit_code == 2
     assert "seeds[1]: must be an integer in [0, 2147483647], got -2" in result.stderr
     assert (run / "simulations.parquet").read_bytes() == before
+
+
+def test_forcing_file_missing_its_column_exit_2_nothing_written(tmp_path):
+    (tmp_path / "sig.csv").write_text("t,fd\n" + "".join(f"{i / 25},0.01\n" for i in range(2048)))
+    text = CI_CONFIG.read_text()
+    start, end = text.index("  disturbance:"), text.index("  target:")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(
+        text[:start] + "  disturbance: {kind: file, path: sig.csv, column: fdx, rate: 25}\n" + text[end:]
+    )
+    run = tmp_path / "run"
+    result = runner.invoke(app, ["simulate", str(bad), "--run", str(run), "--quiet"])
+    assert result.exit_code == 2
+    assert "signals.disturbance: " in result.stderr and "has no column 'fdx'" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not run.exists()
+
+
+def test_window_not_whole_samples_exit_2_nothing_written(tmp_path):
+    text = CI_CONFIG.read_text()
+    text = text.replace("  target_shift: 1.0\n", "  target_shift: 1.0\n  windows_in: seconds\n", 1)
+    text = text.replace(
+        "estimation: [129, 1088], validation: [1089, 2048]",
+        "estimation: [5.13, 43.52], validation: [43.52, 81.92]",
+        1,
+    )
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(text)
+    run = tmp_path / "run"
+    result = runner.invoke(app, ["simulate", str(bad), "--run", str(run), "--quiet"])
+    assert result.exit_code == 2
+    assert "identify.direct.estimation: 5.13 s is not a whole number of samples" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not run.exists()

@@ -105,7 +105,7 @@ def test_stage2_defaults_to_direct_grid(paper_raw):
 def test_non_finite_target_step_refused(paper_raw):
     data = _mutate(paper_raw, ("signals", "target", "segments"), [["c", 3, 0], ["p", 3.74, float("inf")]])
     with pytest.raises(
-        ConfigError, match=r"signals.target.segments\[1\]: must be \[c\|p, seconds > 0, step\]"
+        ConfigError, match=r"signals.target.segments\[1\]: must be \[c\|p\|r, seconds > 0, step\]"
     ):
         parse_config(data, "paper")
 
@@ -221,3 +221,164 @@ def test_error_messages_quote_at_most_80_characters(paper_raw):
     with pytest.raises(ConfigError) as info:
         parse_config(data, "paper")
     assert len(str(info.value)) < 160
+
+
+# --------------------------------------------------------------------------- plants (SPEC 7)
+
+
+def _with_plant(raw, plant, **loop_keys):
+    data = copy.deepcopy(raw)
+    del data["loop"]["Kc"], data["loop"]["wb"]
+    data["loop"]["plant"] = plant
+    data["loop"].update(loop_keys)
+    return data
+
+
+@pytest.mark.parametrize(
+    ("plant", "num", "den"),
+    [
+        ({"kind": "integrator", "K": 1.5}, (1.5,), (1.0, 0.0)),
+        ({"kind": "double_integrator", "K": 0.5}, (0.5,), (1.0, 0.0, 0.0)),
+        ({"kind": "second_order", "K": 2.75, "wb": 2.0}, (5.5,), (1.0, 2.0, 0.0)),
+        ({"kind": "tf", "num": [0, 0, 5.5], "den": [1, 2, 0]}, (5.5,), (1.0, 2.0, 0.0)),
+    ],
+)
+def test_plant_shorthands(paper_raw, plant, num, den):
+    # K/s, K/s^2, K wb/(s (s + wb)) and a tf with leading zeros stripped.
+    config = parse_config(_with_plant(paper_raw, plant), "x")
+    assert (config.loop.plant.num, config.loop.plant.den) == (num, den)
+    assert config.loop.disturbance_at == "output"
+
+
+def test_paper_plant_is_the_default(paper_config):
+    # No loop.plant: the paper's Kc wb / (s (s + wb)) with Kc = 2.75, wb = 2, bit for bit.
+    assert paper_config.loop.plant_spec is None
+    assert (paper_config.loop.plant.num, paper_config.loop.plant.den) == ((2.75 * 2.0,), (1.0, 2.0, 0.0))
+
+
+@pytest.mark.parametrize(
+    ("plant", "extra", "message"),
+    [
+        ({"kind": "cubic"}, {}, "loop.plant.kind: unknown plant shorthand 'cubic' (allowed: second_order, "),
+        ({"kind": "tf", "num": [1, 0, 0], "den": [1, 1]}, {}, "loop.plant: must be proper"),
+        ({"kind": "integrator", "K": 1}, {"disturbance_at": "middle"}, "loop.disturbance_at: must be one of"),
+        # Yc = (1 - s) / (s (s + 1)): its zero at s = 1 is a pole of the Inverse Feedforward Model.
+        (
+            {"kind": "tf", "num": [-1, 1], "den": [1, 1, 0]},
+            {},
+            "models.FF: the feedforward path Ynms Kpt / Yc / (TI s + 1)^2 is unstable",
+        ),
+    ],
+)
+def test_bad_plants(paper_raw, plant, extra, message):
+    with pytest.raises(ConfigError) as info:
+        parse_config(_with_plant(paper_raw, plant, **extra), "x")
+    assert message in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_plant_given_twice_is_refused(paper_raw):
+    data = copy.deepcopy(paper_raw)
+    data["loop"]["plant"] = {"kind": "integrator", "K": 1}
+    with pytest.raises(ConfigError, match="loop.Kc: give the plant either as loop.Kc and loop.wb"):
+        parse_config(data, "x")
+
+
+# --------------------------------------------------------------------------- forcing functions (SPEC 7)
+
+
+def test_forcing_function_kinds(paper_raw, tmp_path):
+    # A multisine target, a segments disturbance (with a ramp) and a file column, each parsed
+    # into its own type; a file path is read relative to the config's folder.
+    from hcid.config import FileSignal, Multisine, Segments
+
+    data = copy.deepcopy(paper_raw)
+    data["signals"]["target"] = {
+        "kind": "multisine",
+        "base_period": 81.92,
+        "k": [2, 5],
+        "amplitude": [0.1, 0.2],
+        "phase": [0, 1],
+    }
+    data["signals"]["disturbance"] = {
+        "kind": "segments",
+        "gain_deg": 1.0,
+        "segments": [["c", 2, 0], ["r", 3, 1]],
+    }
+    config = parse_config(data, "x")
+    assert isinstance(config.target, Multisine) and config.target.time_offset == 0.0
+    assert isinstance(config.disturbance, Segments) and config.disturbance.segments[1].kind == "r"
+    (tmp_path / "sig.csv").write_text("t,fd\n" + "".join(f"{i / 25},{0.01 * (i % 7)}\n" for i in range(2048)))
+    data["signals"]["disturbance"] = {"kind": "file", "path": "sig.csv", "column": "fd", "rate": 25.0}
+    config = parse_config(data, "x", tmp_path)
+    assert isinstance(config.disturbance, FileSignal) and config.disturbance.values.size == 2048
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        (
+            {"kind": "chirp"},
+            "signals.disturbance.kind: unknown forcing function 'chirp' (allowed: multisine, ",
+        ),
+        ({"kind": "file", "path": "sig.csv", "column": "nope", "rate": 25.0}, "signals.disturbance: "),
+        ({"kind": "file", "path": "absent.csv", "column": "fd", "rate": 25.0}, "absent.csv: missing"),
+        ({"kind": "file", "path": "sig.csv", "column": "fd", "rate": 25.0, "start": 10.0}, "needs 2298"),
+        (
+            {"kind": "file", "path": "sig.csv", "column": "fd", "rate": 25.0, "start": 0.01},
+            "must be whole samples",
+        ),
+    ],
+)
+def test_bad_forcing_functions(paper_raw, tmp_path, spec, message):
+    (tmp_path / "sig.csv").write_text("t,fd\n" + "".join(f"{i / 25},0.01\n" for i in range(2048)))
+    data = copy.deepcopy(paper_raw)
+    data["signals"]["disturbance"] = spec
+    with pytest.raises(ConfigError) as info:
+        parse_config(data, "x", tmp_path)
+    assert message in str(info.value) and "\n" not in str(info.value)
+    if spec.get("column") == "nope":
+        assert str(info.value).endswith("has no column 'nope'")
+
+
+# --------------------------------------------------------------------------- windows in seconds (issue 11)
+
+
+def test_windows_in_seconds_equal_the_paper_samples(paper_raw, paper_config):
+    # SPEC 3 at 25 Hz: samples 129..1088 are [5.12 s, 43.52 s), 1089..2048 are [43.52 s, 81.92 s).
+    data = copy.deepcopy(paper_raw)
+    data["identify"]["windows_in"] = "seconds"
+    for stage in ("direct", "stage2"):
+        data["identify"][stage].update(estimation=[5.12, 43.52], validation=[43.52, 81.92])
+    config = parse_config(data, "paper")
+    assert config.identify == paper_config.identify
+    assert config.to_yaml() == paper_config.to_yaml()  # the resolved config holds samples
+
+
+def test_stage2_inherits_seconds_from_direct(paper_raw, paper_config):
+    data = copy.deepcopy(paper_raw)
+    data["identify"]["windows_in"] = "seconds"
+    data["identify"]["direct"].update(estimation=[5.12, 43.52], validation=[43.52, 81.92])
+    del data["identify"]["stage2"]
+    assert parse_config(data, "paper").identify == paper_config.identify
+
+
+@pytest.mark.parametrize(
+    ("window", "message"),
+    [
+        (
+            [5.13, 43.52],
+            "identify.direct.estimation: 5.13 s is not a whole number of samples at the analysis rate 25 Hz",
+        ),
+        ([5.12, 90.0], "identify.direct.estimation: must end within the record (81.92 s, 2048 samples)"),
+        ([43.52, 5.12], "identify.direct.estimation: must be 'auto' or [start, end] in s"),
+    ],
+)
+def test_bad_windows_in_seconds(paper_raw, window, message):
+    data = copy.deepcopy(paper_raw)
+    data["identify"]["windows_in"] = "seconds"
+    data["identify"]["direct"]["estimation"] = window
+    data["identify"]["direct"]["validation"] = [43.52, 81.92]
+    with pytest.raises(ConfigError) as info:
+        parse_config(data, "paper")
+    assert message in str(info.value) and "\n" not in str(info.value)

@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 
 from hcid.cli import app
 from hcid.config import parse_config
-from hcid.errors import DataError
+from hcid.errors import ConfigError, DataError
 from hcid.measured import load_data
 
 from .conftest import CI_CONFIG, ROOT
@@ -82,9 +82,9 @@ def _one_run(table):
         ),
         (
             lambda t: t.set_column(1, "time_s", [t.column("time_s").to_numpy() * 2]),
-            "sample rate 12.5 Hz, the config's timing.output_rate is 25 Hz",
+            "sample rate 12.5 Hz, below the config's analysis rate (timing.output_rate) 25 Hz",
         ),
-        (lambda t: t.slice(0, 1500), "1500 samples, the identification windows need 2048"),
+        (lambda t: t.slice(0, 1500), "1500 samples at 25 Hz, the identification windows need 2048"),
     ],
 )
 @pytest.mark.parametrize("suffix", [".csv", ".parquet"])
@@ -234,8 +234,9 @@ def test_mat_with_shared_time_vector(tmp_path, data_config, example_table):
 
 
 def test_data_at_another_rate_with_matching_config(tmp_path, data_config_path, example_table):
-    # A 50 Hz file is accepted when timing.output_rate and the windows (in samples)
-    # match it: the config's record is then 81.92 s * 50 Hz = 4096 samples.
+    # A 50 Hz file is accepted as is when timing.output_rate and the windows (in samples)
+    # match it: the config's record is then 81.92 s * 50 Hz = 4096 samples. With the
+    # 25 Hz config it is resampled to 25 Hz on import (2048 samples).
     one = _one_run(example_table)
     cols = {c: np.repeat(one.column(c).to_numpy(), 2) for c in ("target", "disturbance", "error", "stick")}
     path = tmp_path / "fifty.csv"
@@ -247,8 +248,8 @@ def test_data_at_another_rate_with_matching_config(tmp_path, data_config_path, e
     config = parse_config(raw, "fifty")
     records = load_data(path, config)
     assert records[1]["u"].size == 4096
-    with pytest.raises(DataError, match="sample rate 50 Hz, the config's timing.output_rate is 25 Hz"):
-        load_data(path, parse_config(yaml.safe_load(data_config_path.read_text()), "x"))
+    resampled = load_data(path, parse_config(yaml.safe_load(data_config_path.read_text()), "x"))
+    assert resampled[1]["u"].size == 2048
 
 
 # --------------------------------------------------------------------------- hostile files (issue 10)
@@ -327,3 +328,147 @@ def test_only_the_windows_samples_are_identified(data_config, example_table):
     a = identify(cols, data_config.identify, "direct", rate=25.0)
     b = identify(longer, data_config.identify, "direct", rate=25.0)
     assert a.fit.to_arrow().equals(b.fit.to_arrow())
+
+
+# --------------------------------------------------------------------------- any experiment's data (issue 11)
+
+DEFAULT_NAMES = {
+    "trial": "run",
+    "time_s": "t",
+    "target": "ft",
+    "disturbance": "fd",
+    "error": "e",
+    "stick": "u",
+}
+
+
+def _data_only_config(tmp_path, last=2048, **data):
+    """The ci identification and selection sections and a data section: no simulation sections.
+
+    ``last`` is the last sample of the direct and stage-2 validation windows."""
+    raw = yaml.safe_load(CI_CONFIG.read_text())
+    for stage in ("direct", "stage2"):
+        raw["identify"][stage]["validation"] = [1089, last]
+    doc = {"name": "lab", "identify": raw["identify"], "selection": raw["selection"]}
+    doc["data"] = {"analysis_rate": 25.0, "window": 81.92, **data}
+    path = tmp_path / "lab.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def test_data_only_config_with_default_names(tmp_path, example_table, data_config):
+    # A file whose columns are t, ft, fd, e, u, run needs no mapping, and a config with only
+    # the data, identify and selection sections identifies it; the records are the mapped
+    # example's, sample for sample. Commands that simulate refuse it in one line.
+    renamed = example_table.rename_columns([DEFAULT_NAMES[c] for c in example_table.column_names])
+    path = tmp_path / "plain.csv"
+    pacsv.write_csv(renamed, path)
+    config_path = _data_only_config(tmp_path)
+    config = parse_config(yaml.safe_load(config_path.read_text()), "lab")
+    assert not config.simulates and config.models == ()
+    got, expected = load_data(path, config), load_data(EXAMPLE, data_config)
+    for run in (1, 2, 3):
+        for name in ("ft", "fd", "e", "u", "t"):
+            np.testing.assert_array_equal(got[run][name], expected[run][name])
+    run_dir = tmp_path / "run"
+    result = runner.invoke(
+        app, ["identify", str(config_path), "--data", str(path), "--run", str(run_dir), "--quiet"]
+    )
+    assert result.exit_code == 0, result.output
+    assert set(pq.read_table(run_dir / "frontier.parquet").column("model").to_pylist()) == {"data"}
+    for command in ("simulate", "calibrate-w", "run"):
+        other = tmp_path / f"run_{command}"
+        result = runner.invoke(app, [command, str(config_path), "--run", str(other), "--quiet"])
+        assert result.exit_code == 2
+        assert f"`hcid {command}` simulates and needs them" in result.stderr
+        assert len(result.stderr.strip().splitlines()) == 1 and not other.exists()
+
+
+def test_paper_config_reads_a_file_with_default_names(tmp_path, example_table, ci_config):
+    # configs/ci.yaml has no data section: a file with the default names (time as 'time',
+    # the other spelling) is read with them, under the data name 'data'.
+    names = {**DEFAULT_NAMES, "time_s": "time"}
+    path = tmp_path / "plain.csv"
+    pacsv.write_csv(example_table.rename_columns([names[c] for c in example_table.column_names]), path)
+    records = load_data(path, ci_config)
+    assert sorted(records) == [1, 2, 3] and records[1]["u"].size == 2048
+    assert ci_config.data.name == "data"
+
+
+def test_e_derived_from_theta_and_comment_lines(tmp_path, example_table, data_config):
+    # e = ft - theta when the file has the system output instead of e (SPEC 1: e = ft - theta);
+    # a logger's '#' header lines are skipped.
+    one = _one_run(example_table)
+    theta = one.column("target").to_numpy() - one.column("error").to_numpy()
+    table = pa.table(
+        {
+            "t": one.column("time_s"),
+            "ft": one.column("target"),
+            "fd": one.column("disturbance"),
+            "theta": theta,
+            "u": one.column("stick"),
+        }
+    )
+    path = tmp_path / "theta.csv"
+    pacsv.write_csv(table, path)
+    path.write_text("# logger v2\n# subject 7, condition A\n" + path.read_text())
+    config = parse_config(yaml.safe_load(_data_only_config(tmp_path).read_text()), "lab")
+    record = load_data(path, config)[1]
+    np.testing.assert_allclose(record["e"], one.column("error").to_numpy(), rtol=0, atol=1e-15)
+
+
+def test_resampling_keeps_a_slow_sine_and_removes_a_fast_one():
+    # resample_poly (Kaiser beta 5) 60 Hz -> 20 Hz: a 2 Hz sine (a fifth of the new Nyquist
+    # frequency 10 Hz) keeps its amplitude to 0.1% and its phase to 0.1 deg away from the
+    # record's ends (the filter spans 10 max(up, down) = 30 input samples, 0.5 s); one at 15 Hz,
+    # above the new Nyquist frequency, is removed (left below 0.1% of its amplitude).
+    from hcid.measured import resample, resampling_factors
+
+    up, down = resampling_factors(60.0, 20.0)
+    t = np.arange(0, 45.0, 1 / 60)
+    t_out = np.arange(0, 45.0, 1 / 20)
+    inner = (t_out > 1.0) & (t_out < 44.0)
+    slow = resample(np.sin(2 * np.pi * 2.0 * t + 0.3), up, down)
+    basis = np.c_[np.sin(2 * np.pi * 2.0 * t_out), np.cos(2 * np.pi * 2.0 * t_out)][inner]
+    a, b = np.linalg.lstsq(basis, slow[inner], rcond=None)[0]  # a sin + b cos = r sin(. + phi)
+    assert np.hypot(a, b) == pytest.approx(1.0, rel=1e-3)
+    assert np.degrees(np.arctan2(b, a)) == pytest.approx(np.degrees(0.3), abs=0.1)
+    fast = resample(np.sin(2 * np.pi * 15.0 * t), up, down)
+    assert np.max(np.abs(fast[inner])) < 1e-3
+    assert slow.size == t_out.size
+
+
+@pytest.mark.parametrize(
+    ("rates", "ok"),
+    [((60.0, 20.0), (1, 3)), ((60.0, 25.0), (5, 12)), ((59.94, 20.0), None), ((1000.0, 3.0), None)],
+)
+def test_resampling_ratios(rates, ok):
+    from hcid.measured import resampling_factors
+
+    if ok is not None:
+        assert resampling_factors(*rates) == ok
+    else:
+        with pytest.raises(DataError, match="exactly"):
+            resampling_factors(*rates)
+
+
+def test_lead_in_is_skipped_after_resampling(tmp_path, example_table):
+    # A 75 Hz file (the 25 Hz example repeated x3 in time, so 3 x 25 Hz) with a 2 s lead-in:
+    # resampled to 25 Hz, then the first 50 samples are dropped.
+    one = _one_run(example_table)
+    cols = {
+        n: np.repeat(one.column(c).to_numpy(), 3) for c, n in DEFAULT_NAMES.items() if n not in ("run", "t")
+    }
+    path = tmp_path / "fast.csv"
+    pacsv.write_csv(pa.table({"t": np.arange(3 * 2048) / 75.0, **cols}), path)
+    config = parse_config(
+        yaml.safe_load(_data_only_config(tmp_path, 1998, lead_in=2.0, window=79.92).read_text()), "lab"
+    )
+    full = parse_config(yaml.safe_load(_data_only_config(tmp_path, 1998, window=79.92).read_text()), "lab")
+    cut, whole = load_data(path, config)[1], load_data(path, full)[1]
+    assert whole["u"].size == 2048 and cut["u"].size == 2048 - 50
+    np.testing.assert_array_equal(cut["u"], whole["u"][50:])
+    with pytest.raises(
+        ConfigError, match=r"data.lead_in: must be whole samples at the analysis rate \(25 Hz\), got 0.01 s"
+    ):
+        parse_config(yaml.safe_load(_data_only_config(tmp_path, lead_in=0.01).read_text()), "lab")

@@ -16,6 +16,7 @@ from .conftest import CI_CONFIG
 
 runner = CliRunner()
 FIGURES = (
+    "forcing_spectra.png",
     "signals.png",
     "vaf_vs_w.png",
     "nb_ft_vs_w.png",
@@ -184,3 +185,47 @@ def test_plots_draw_on_given_axes_and_colour_marks_by_method(ci_run):
     assert colours["W_FP direct"] == figures.method_color("direct") == "C0"
     assert colours["W_FP indirect"] == figures.method_color("indirect") == "C1"
     plt.close(fig)
+
+
+# --------------------------------------------------------------------------- other experiments (issue 11)
+
+
+def test_report_of_another_experiment(tmp_path):
+    # An integrator plant with the disturbance at its input and a ramp target: the report shows
+    # the experiment (plant, disturbance point, forcing functions and their spectra) and leaves
+    # out the paper's verdicts and Table 2 column; the paper's ci run keeps them (test above).
+    import yaml
+
+    raw = yaml.safe_load(CI_CONFIG.read_text())
+    raw["name"] = "ramps"
+    raw["seeds"] = [1]
+    raw["models"] = {
+        "FB": {"Kpt": 0.0, "Kpe": 2.0, "TL": 0.0, "tau_pe": 0.25},
+        "FF": {"Kpt": 0.8, "TI": 0.2, "tau_pt": 0.2, "Kpe": 2.0, "TL": 0.0, "tau_pe": 0.25},
+    }
+    del raw["loop"]["Kc"], raw["loop"]["wb"]
+    raw["loop"].update(plant={"kind": "integrator", "K": 1.5}, disturbance_at="input")
+    raw["signals"]["target"] = {
+        "gain_deg": 5.0,
+        "segments": [["c", 5, 0], ["r", 20, 1], ["c", 10, 0], ["r", 20, -1]],
+    }
+    config = tmp_path / "ramps.yaml"
+    config.write_text(yaml.safe_dump(raw, sort_keys=False))
+    run = tmp_path / "run"
+    result = runner.invoke(app, ["run", str(config), "--run", str(run), "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert "2.43" not in result.output  # no paper column for another experiment
+    report = build_report(run)
+    text = report.markdown.read_text()
+    assert "## Experiment" in text and "1.5/s (integrator)" in text
+    assert "at the plant input: theta = Yc (u + fd)" in text
+    assert "segments: 2 hold, 2 ramp" in text
+    assert "Verdicts" not in text and report.verdicts == []
+    assert "W_FP 0.012" not in text and "W_FN 0.26" not in text  # the paper's thresholds
+    assert (run / "report" / "forcing_spectra.png").stat().st_size > 0
+
+
+def test_paper_report_names_the_paper_experiment(report):
+    text = report.markdown.read_text()
+    assert "The paper's experiment" in text and "at the plant output: theta = Yc u + fd" in text
+    assert "Verdicts" in text

@@ -21,21 +21,24 @@ from hcid.config._checks import Section, fmt, int_range, integer, number_list
 from hcid.config.types import (
     Config,
     DataConfig,
-    Disturbance,
+    FileSignal,
+    Forcing,
     Grid,
     HCModel,
     IdentifyConfig,
     Loop,
+    Multisine,
+    Plant,
     Segment,
+    Segments,
     SelectionConfig,
     StageConfig,
-    Target,
     Timing,
     Window,
 )
 from hcid.errors import ConfigError
 
-__all__ = ["LIMITS", "load_config", "parse_config"]
+__all__ = ["DISTURBANCE_POINTS", "LIMITS", "PLANTS", "load_config", "parse_config"]
 
 #: Bounds on what a config may ask for, each checked at parse time with a one-line error:
 #: the file, its nesting, seeds, candidates per grid and per study, samples per simulation.
@@ -50,7 +53,19 @@ LIMITS = {
 }
 
 _ABSENT = object()  # a key left out (None is a value: refused where a mapping is needed)
-_DATA_COLUMNS = {"ft": "ft", "fd": "fd", "e": "e", "u": "u", "time": "t", "run": "run", "rate": "rate"}
+_DATA_COLUMNS = {
+    "ft": "ft",
+    "fd": "fd",
+    "e": "e",
+    "u": "u",
+    "theta": "theta",
+    "time": "t",
+    "run": "run",
+    "rate": "rate",
+}
+#: The sections only a config that simulates holds; a config without them (and with a
+#: ``data`` section) describes measured data only.
+SIMULATION_SECTIONS = ("models", "loop", "signals", "seeds")
 
 
 # --------------------------------------------------------------------------- models and loop
@@ -85,16 +100,107 @@ def _models_section(top: Section) -> tuple[HCModel, ...]:
     return tuple(_model(k, v) for k, v in raw.items())
 
 
+def _integrator(s: Section) -> Plant:
+    K = s.number("K", 0.0, 1e4, open_lo=True)
+    return Plant("integrator", (K,), (1.0, 0.0), f"{K:g}/s")
+
+
+def _double_integrator(s: Section) -> Plant:
+    K = s.number("K", 0.0, 1e4, open_lo=True)
+    return Plant("double_integrator", (K,), (1.0, 0.0, 0.0), f"{K:g}/s^2")
+
+
+def _second_order(s: Section) -> Plant:
+    return Plant.second_order(s.number("K", 0.0, 1e4, open_lo=True), s.number("wb", 0.0, 1e4, open_lo=True))
+
+
+def _poly_text(coefs: tuple[float, ...]) -> str:
+    n = len(coefs) - 1
+    terms = [
+        f"{c:g}" + ("" if i == n else " s" if i == n - 1 else f" s^{n - i}")
+        for i, c in enumerate(coefs)
+        if c != 0
+    ]
+    return " + ".join(terms).replace("+ -", "- ")
+
+
+def _transfer_function(s: Section) -> Plant:
+    num, den = number_list(s, "num"), number_list(s, "den")
+    for key, coefs in (("num", num), ("den", den)):
+        if len(coefs) > 11:
+            raise ConfigError(
+                f"loop.plant.{key}: must hold at most 11 coefficients (degree 10), got {len(coefs)}"
+            )
+    num = tuple(num[next((i for i, c in enumerate(num) if c != 0), len(num)) :])
+    if not num:
+        raise ConfigError("loop.plant.num: must not be all zero")
+    if den[0] == 0:
+        raise ConfigError(f"loop.plant.den: the leading coefficient must not be 0, got {list(den)}")
+    if len(num) > len(den):
+        raise ConfigError(
+            f"loop.plant: must be proper (degree of num <= degree of den), got degrees "
+            f"{len(num) - 1} and {len(den) - 1}"
+        )
+    return Plant("tf", num, den, f"({_poly_text(num)}) / ({_poly_text(den)})")
+
+
+#: Plant shorthands of ``loop.plant.kind``, each a builder from its section (SPEC 7);
+#: ``tf`` takes any proper transfer function in s. Add a shorthand here.
+PLANTS = {
+    "second_order": _second_order,
+    "integrator": _integrator,
+    "double_integrator": _double_integrator,
+    "tf": _transfer_function,
+}
+
+#: Where the disturbance enters: at the plant's output (the paper) or its input.
+DISTURBANCE_POINTS = ("output", "input")
+
+
+def _plant(loop: Section) -> Plant:
+    s = loop.section("plant")
+    kind = s.get("kind")
+    try:
+        builder = PLANTS[kind]
+    except (KeyError, TypeError):
+        raise ConfigError(
+            f"loop.plant.kind: unknown plant shorthand {fmt(kind)} (allowed: {', '.join(PLANTS)})"
+        ) from None
+    plant = builder(s)
+    s.done()
+    return plant
+
+
 def _loop_section(top: Section) -> Loop:
     s = top.section("loop")
+    if "plant" in s.data:
+        both = [k for k in ("Kc", "wb") if k in s.data]
+        if both:
+            raise ConfigError(
+                f"loop.{both[0]}: give the plant either as loop.Kc and loop.wb (the paper's "
+                "Kc wb / (s (s + wb))) or as loop.plant, not both"
+            )
+        plant = _plant(s)
+        Kc, wb = (plant.num[0] / plant.den[1], plant.den[1]) if plant.kind == "second_order" else (0.0, 0.0)
+    else:
+        plant = None
+        Kc = s.number("Kc", 0.0, 1e3, open_lo=True)
+        wb = s.number("wb", 0.0, 1e3, open_lo=True)
+    point = s.get("disturbance_at", "output")
+    if point not in DISTURBANCE_POINTS:
+        raise ConfigError(
+            f"loop.disturbance_at: must be one of {', '.join(DISTURBANCE_POINTS)}, got {fmt(point)}"
+        )
     loop = Loop(
-        Kc=s.number("Kc", 0.0, 1e3, open_lo=True),
-        wb=s.number("wb", 0.0, 1e3, open_lo=True),
+        Kc=Kc,
+        wb=wb,
         w_nms=s.number("w_nms", 0.0, 1e3, open_lo=True),
         zeta_nms=s.number("zeta_nms", 0.0, 10.0, open_lo=True),
         w_n=s.number("w_n", 0.0, 1e3, open_lo=True),
         zeta_n=s.number("zeta_n", 0.0, 10.0, open_lo=True),
         remnant_ratio=s.number("remnant_ratio", 0.0, 0.9),
+        plant_spec=plant,
+        disturbance_at=point,
     )
     s.done()
     return loop
@@ -103,56 +209,102 @@ def _loop_section(top: Section) -> Loop:
 # --------------------------------------------------------------------------- signals and timing
 
 
-def _disturbance(sig: Section) -> Disturbance:
-    s = sig.section("disturbance")
+def _multisine(s: Section) -> Multisine:
     k = s.get("k")
     if not isinstance(k, list) or not k:
-        raise ConfigError(f"signals.disturbance.k: must be a non-empty list of integers, got {fmt(k)}")
-    k_int = tuple(integer(v, f"signals.disturbance.k[{i}]", 1, 100_000) for i, v in enumerate(k))
-    disturbance = Disturbance(
+        raise ConfigError(f"{s.key('k')}: must be a non-empty list of integers, got {fmt(k)}")
+    k_int = tuple(integer(v, f"{s.key('k')}[{i}]", 1, 100_000) for i, v in enumerate(k))
+    return Multisine(
         base_period=s.number("base_period", 0.0, 1e5, open_lo=True),
-        time_offset=s.number("time_offset", -1e5, 1e5),
+        time_offset=s.number("time_offset", -1e5, 1e5, 0.0),
         k=k_int,
         amplitude=number_list(s, "amplitude", len(k_int)),
         phase=number_list(s, "phase", len(k_int)),
     )
-    s.done()
-    return disturbance
 
 
-def _segment(i: int, seg: Any) -> Segment:
-    key = f"signals.target.segments[{i}]"
+def _segment(path: str, i: int, seg: Any) -> Segment:
+    key = f"{path}.segments[{i}]"
     ok = (
         isinstance(seg, list)
         and len(seg) == 3
-        and seg[0] in ("c", "p")
+        and seg[0] in ("c", "p", "r")
         and all(isinstance(v, int | float) and not isinstance(v, bool) for v in seg[1:])
         and all(math.isfinite(v) for v in seg[1:])
         and seg[1] > 0
     )
     if not ok:
-        raise ConfigError(f"{key}: must be [c|p, seconds > 0, step], got {fmt(seg)}")
+        raise ConfigError(f"{key}: must be [c|p|r, seconds > 0, step], got {fmt(seg)}")
     if seg[0] == "c" and seg[2] != 0:
         raise ConfigError(f"{key}: a hold segment 'c' must have step 0, got {seg[2]}")
     return Segment(seg[0], float(seg[1]), float(seg[2]))
 
 
-def _target(sig: Section) -> Target:
-    s = sig.section("target")
+def _segments(s: Section) -> Segments:
     gain_deg = s.number("gain_deg", 0.0, 180.0)
     raw = s.get("segments")
     if not isinstance(raw, list) or not raw:
         raise ConfigError(
-            f"signals.target.segments: must be a non-empty list of [kind, seconds, step], got {fmt(raw)}"
+            f"{s.key('segments')}: must be a non-empty list of [kind, seconds, step], got {fmt(raw)}"
         )
-    target = Target(gain=math.radians(gain_deg), segments=tuple(_segment(i, x) for i, x in enumerate(raw)))
+    return Segments(
+        gain=math.radians(gain_deg), segments=tuple(_segment(s.path, i, x) for i, x in enumerate(raw))
+    )
+
+
+def _file_signal(s: Section, base: Path | None) -> FileSignal:
+    # A forcing function recorded in a data file: read here, at the entry point, with the
+    # data readers (hcid.measured.READERS), so that the numerical core never opens a file.
+    from hcid.errors import DataError
+    from hcid.measured import read_signal
+
+    raw_path = s.get("path")
+    column = s.get("column")
+    for key, value in (("path", raw_path), ("column", column)):
+        if not isinstance(value, str) or not value:
+            raise ConfigError(f"{s.key(key)}: must be a non-empty string, got {fmt(value)}")
+    rate = s.number("rate", 0.1, 1e5)
+    start = s.number("start", 0.0, 1e5, 0.0)
+    run = s.get("run", None)
+    if run is not None:
+        run = integer(run, s.key("run"), 0, 2**31 - 1)
+    run_column = s.get("run_column", "run")
+    if not isinstance(run_column, str) or not run_column:
+        raise ConfigError(f"{s.key('run_column')}: must be a non-empty string, got {fmt(run_column)}")
+    path = Path(raw_path)
+    if not path.is_absolute() and base is not None:
+        path = (base / path).resolve()
+        # The resolved config (a run's config.yaml, read back by `hcid report` from the run
+        # directory) names the file by its absolute path.
+        s.data["path"] = str(path)
+    try:
+        values = read_signal(path, column, run, run_column)
+    except DataError as exc:
+        raise ConfigError(f"{s.path}: {exc}") from None
+    return FileSignal(path=str(raw_path), column=column, rate=rate, start=start, values=values)
+
+
+#: Kinds of forcing function (``signals.<target|disturbance>.kind``), each a parser of its
+#: section. The target defaults to ``segments``, the disturbance to ``multisine``.
+FORCING_KINDS = {"multisine": _multisine, "segments": _segments, "file": _file_signal}
+
+
+def _forcing(sig: Section, name: str, default_kind: str, base: Path | None) -> Forcing:
+    s = sig.section(name)
+    kind = s.get("kind", default_kind)
+    if kind not in FORCING_KINDS:
+        raise ConfigError(
+            f"{s.key('kind')}: unknown forcing function {fmt(kind)} (allowed: {', '.join(FORCING_KINDS)})"
+        )
+    spec = _file_signal(s, base) if kind == "file" else FORCING_KINDS[kind](s)
     s.done()
-    return target
+    return spec
 
 
-def _signals_section(top: Section) -> tuple[Disturbance, Target]:
+def _signals_section(top: Section, base: Path | None) -> tuple[Forcing, Forcing]:
     sig = top.section("signals")
-    disturbance, target = _disturbance(sig), _target(sig)
+    disturbance = _forcing(sig, "disturbance", "multisine", base)
+    target = _forcing(sig, "target", "segments", base)
     sig.done()
     return disturbance, target
 
@@ -187,12 +339,34 @@ def _timing_section(top: Section) -> Timing:
     return timing
 
 
-def _check_against_timing(timing: Timing, target: Target, models: tuple[HCModel, ...]) -> None:
-    total = sum(s.duration for s in target.segments)
-    if total > timing.window + 1e-9:
-        raise ConfigError(
-            f"signals.target.segments: must last at most timing.window ({timing.window:g} s), got {total:g} s"
-        )
+def _check_forcing(name: str, spec: Forcing, timing: Timing) -> None:
+    key = f"signals.{name}"
+    if isinstance(spec, Segments):
+        total = sum(s.duration for s in spec.segments)
+        if total > timing.window + 1e-9:
+            raise ConfigError(
+                f"{key}.segments: must last at most timing.window ({timing.window:g} s), got {total:g} s"
+            )
+    elif isinstance(spec, FileSignal):
+        for what, secs in (("start", spec.start), ("timing.window", timing.window)):
+            if abs(secs * spec.rate - round(secs * spec.rate)) > 1e-6:
+                raise ConfigError(
+                    f"{key}.{what if what == 'start' else 'rate'}: {what} ({secs:g} s) must be whole "
+                    f"samples at the file's rate {spec.rate:g} Hz"
+                )
+        need = round((spec.start + timing.window) * spec.rate)
+        if spec.values.size < need:
+            raise ConfigError(
+                f"{key}: column {spec.column!r} of {spec.path} holds {spec.values.size} samples, the window "
+                f"from {spec.start:g} s to {spec.start + timing.window:g} s needs {need}"
+            )
+
+
+def _check_against_timing(
+    timing: Timing, signals: tuple[Forcing, Forcing], models: tuple[HCModel, ...]
+) -> None:
+    for name, spec in zip(("disturbance", "target"), signals, strict=True):
+        _check_forcing(name, spec, timing)
     for m in models:
         for key, tau in (("tau_pe", m.tau_pe), ("tau_pt", m.tau_pt)):
             if abs(tau * timing.sim_rate - round(tau * timing.sim_rate)) > 1e-6:
@@ -225,11 +399,43 @@ def _seeds_section(top: Section) -> tuple[int, ...]:
 # --------------------------------------------------------------------------- identification
 
 
-def _window(section: Section, name: str, n_record: int, auto_first: int) -> Window:
+def _seconds_window(key: str, value: Any, rate: float, n_record: int) -> list[int]:
+    """``[start, end]`` in s (end exclusive: the window holds ``(end - start) rate`` samples) as samples."""
+    ok = (
+        isinstance(value, list)
+        and len(value) == 2
+        and all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+        and 0 <= value[0] < value[1]
+    )
+    if not ok:
+        raise ConfigError(
+            f"{key}: must be 'auto' or [start, end] in s with 0 <= start < end "
+            f"(identify.windows_in is seconds), got {fmt(value)}"
+        )
+    samples = []
+    for v in value:
+        k = v * rate
+        if abs(k - round(k)) > 1e-6:
+            raise ConfigError(
+                f"{key}: {v:g} s is not a whole number of samples at the analysis rate {rate:g} Hz "
+                f"(1 sample = {1 / rate:g} s), got {fmt(value)}"
+            )
+        samples.append(round(k))
+    first, last = samples[0] + 1, samples[1]
+    if last > n_record:
+        raise ConfigError(
+            f"{key}: must end within the record ({n_record / rate:g} s, {n_record} samples), got {fmt(value)}"
+        )
+    return [first, last]
+
+
+def _window(section: Section, name: str, n_record: int, auto_first: int, rate: float, unit: str) -> Window:
     value = section.get(name)
     key = section.key(name)
     if value == "auto":
         return Window(auto_first + 1, n_record)
+    if unit == "seconds":
+        value = _seconds_window(key, value, rate, n_record)
     ok = (
         isinstance(value, list)
         and len(value) == 2
@@ -244,7 +450,8 @@ def _window(section: Section, name: str, n_record: int, auto_first: int) -> Wind
     return Window(int(value[0]), int(value[1]))
 
 
-def _stage(data: Any, path: str, defaults: dict, n_record: int) -> StageConfig:
+def _stage(data: Any, path: str, defaults: dict, timing: Timing, unit: str, given: set) -> StageConfig:
+    n_record, rate = timing.record_samples, timing.output_rate
     merged = dict(defaults)
     if data is not _ABSENT:
         if not isinstance(data, dict):
@@ -261,8 +468,11 @@ def _stage(data: Any, path: str, defaults: dict, n_record: int) -> StageConfig:
         nk2=int_range(s, "nk2", 0, 200),
     )
     max_lag = grid.max_lag
-    estimation = _window(s, "estimation", n_record, max_lag)
-    validation = _window(s, "validation", n_record, max_lag)
+    # A method's default window (its StageSpec) is in samples; one the config gives is in `unit`.
+    est_unit = unit if "estimation" in given else "samples"
+    val_unit = unit if "validation" in given else "samples"
+    estimation = _window(s, "estimation", n_record, max_lag, rate, est_unit)
+    validation = _window(s, "validation", n_record, max_lag, rate, val_unit)
     s.done()
     if estimation.first - 1 < max_lag:
         raise ConfigError(
@@ -308,15 +518,22 @@ def _identify_section(top: Section, timing: Timing) -> IdentifyConfig:
             f"identify.target_shift: must be whole samples at timing.output_rate "
             f"({timing.output_rate:g} Hz), got {target_shift:g} s"
         )
+    unit = s.get("windows_in", "samples")
+    if unit not in ("samples", "seconds"):
+        raise ConfigError(f"identify.windows_in: must be 'samples' or 'seconds', got {fmt(unit)}")
     stages = []
     for name, spec in stage_specs().items():
         defaults = dict(spec.defaults)
+        given = set()
         if spec.defaults_from is not None:
-            given = s.data.get(spec.defaults_from)
-            defaults.update(given if isinstance(given, dict) else {})
-        stages.append(
-            (name, _stage(s.get(name, _ABSENT), f"identify.{name}", defaults, timing.record_samples))
-        )
+            inherited = s.data.get(spec.defaults_from)
+            if isinstance(inherited, dict):
+                defaults.update(inherited)
+                given |= set(inherited)
+        data = s.get(name, _ABSENT)
+        if isinstance(data, dict):
+            given |= set(data)
+        stages.append((name, _stage(data, f"identify.{name}", defaults, timing, unit, given)))
     s.done()
     return IdentifyConfig(target_shift=target_shift, stages=tuple(stages))
 
@@ -372,11 +589,29 @@ def _selection_section(top: Section) -> tuple[SelectionConfig, dict]:
     return SelectionConfig(w_grid=w_grid, target_rate=target_rate, criteria=chosen), resolved
 
 
-def _data_section(top: Section, model_names: list[str]) -> DataConfig | None:
-    value = top.get("data", None)
-    if value is None:
-        return None
+def _data_timing(top: Section) -> Timing:
+    """The analysis timing of a data-only config without a timing section: data.analysis_rate, data.window."""
+    s = top.section("data")
+    rate = s.number("analysis_rate", 0.1, 10_000.0)
+    window = s.number("window", 0.0, 1e4, open_lo=True)
+    if abs(window * rate - round(window * rate)) > 1e-6:
+        raise ConfigError(
+            f"data.window: must be whole samples at data.analysis_rate ({rate:g} Hz), got {window:g} s"
+        )
+    return Timing(sim_rate=rate, output_rate=rate, run_in=0.0, window=window, periods=1)
+
+
+def default_data() -> DataConfig:
+    """The data section of a config that has none: the default column names."""
+    return DataConfig(name="data", columns=dict(_DATA_COLUMNS), w_report=(0.00715, 0.47), time_default=True)
+
+
+def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataConfig:
+    value = top.get("data", {})
     s = Section(value, "data")
+    if "timing" not in top.data:  # a data-only config: its analysis timing, read by _data_timing
+        s.get("analysis_rate")
+        s.get("window")
     name = s.get("name", "data")
     if not isinstance(name, str) or not name.isidentifier() or len(name) > 40 or name in model_names:
         raise ConfigError(
@@ -389,6 +624,7 @@ def _data_section(top: Section, model_names: list[str]) -> DataConfig | None:
         if not isinstance(col, str) or not col:
             raise ConfigError(f"data.columns.{key}: must be a column or variable name, got {fmt(col)}")
         columns[key] = col
+    time_default = "time" not in cs.data
     cs.done()
     w_raw = s.get("w_report", [0.00715, 0.47])
     if (
@@ -397,15 +633,27 @@ def _data_section(top: Section, model_names: list[str]) -> DataConfig | None:
         or not all(isinstance(w, int | float) and not isinstance(w, bool) and w > 0 for w in w_raw)
     ):
         raise ConfigError(f"data.w_report: must be a non-empty list of W > 0, got {fmt(w_raw)}")
+    lead_in = s.number("lead_in", 0.0, 1e4, 0.0)
+    rate = timing.output_rate
+    if abs(lead_in * rate - round(lead_in * rate)) > 1e-6:
+        raise ConfigError(
+            f"data.lead_in: must be whole samples at the analysis rate ({rate:g} Hz), got {lead_in:g} s"
+        )
     s.done()
-    return DataConfig(name=name, columns=columns, w_report=tuple(float(w) for w in w_raw))
+    return DataConfig(
+        name=name,
+        columns=columns,
+        w_report=tuple(float(w) for w in w_raw),
+        lead_in=lead_in,
+        time_default=time_default,
+    )
 
 
-def _fit_hc_section(top: Section, disturbance: Disturbance):
+def _fit_hc_section(top: Section, band: tuple[float, float]):
     # The settings live with the fit (hcid.hcfit.settings), parsed here once like every section.
     from hcid.hcfit.settings import parse_fit_settings
 
-    return parse_fit_settings(top.get("fit_hc", None), "fit_hc", default_band=disturbance.band)
+    return parse_fit_settings(top.get("fit_hc", None), "fit_hc", default_band=band)
 
 
 # --------------------------------------------------------------------------- entry points
@@ -506,7 +754,7 @@ def read_yaml(path: Path, what: str = "config") -> Any:
         raise ConfigError(f"{path}: not a usable {what} ({fmt(str(exc).splitlines()[0])})") from exc
 
 
-def parse_config(data: Any, name: str) -> Config:
+def parse_config(data: Any, name: str, base: Path | None = None) -> Config:
     """Check a parsed YAML document and build the :class:`Config`.
 
     Parameters
@@ -515,6 +763,8 @@ def parse_config(data: Any, name: str) -> Config:
         The result of ``yaml.safe_load``.
     name : str
         Study name used when the document has no ``name`` key (the file stem).
+    base : Path, optional
+        Folder that relative file paths in the config are read from (the config's own).
 
     Raises
     ------
@@ -523,23 +773,29 @@ def parse_config(data: Any, name: str) -> Config:
     """
     top = Section(data, "")
     study_name = _study_name(top.get("name", name))
-    models = _models_section(top)
-    loop = _loop_section(top)
-    disturbance, target = _signals_section(top)
-    timing = _timing_section(top)
-    _check_against_timing(timing, target, models)
-    seeds = _seeds_section(top)
+    simulates = "data" not in top.data or any(k in top.data for k in SIMULATION_SECTIONS)
+    if simulates:
+        models = _models_section(top)
+        loop = _loop_section(top)
+        disturbance, target = _signals_section(top, base)
+        timing = _timing_section(top)
+        _check_against_timing(timing, (disturbance, target), models)
+        seeds = _seeds_section(top)
+    else:
+        models, loop, disturbance, target, seeds = (), None, None, None, ()
+        timing = _timing_section(top) if "timing" in top.data else _data_timing(top)
     identify = _identify_section(top, timing)
     selection, selection_raw = _selection_section(top)
-    data_cfg = _data_section(top, [m.name for m in models])
-    fit_hc = _fit_hc_section(top, disturbance)
+    data_cfg = _data_section(top, [m.name for m in models], timing)
+    fit_hc = _fit_hc_section(top, Config.band_of(disturbance, timing))
     top.done()
     _check_study_size(identify, seeds, models)
-    # The closed loops' stability needs the discretised paths (hcid.hcmodel): checked
-    # here so that an unstable hypothesis is refused before anything is simulated.
-    from hcid.hcmodel import check_closed_loops
+    if simulates:
+        # The closed loops' stability needs the discretised paths (hcid.hcmodel): checked
+        # here so that an unstable hypothesis is refused before anything is simulated.
+        from hcid.hcmodel import check_closed_loops
 
-    check_closed_loops(models, loop, timing.sim_dt)
+        check_closed_loops(models, loop, timing.sim_dt)
 
     raw = dict(data)
     raw["name"] = study_name
@@ -573,4 +829,4 @@ def load_config(path: str | Path) -> Config:
         If the file is missing, is not YAML, or any key is wrong (naming it).
     """
     path = Path(path)
-    return parse_config(read_yaml(path), path.stem)
+    return parse_config(read_yaml(path), path.stem, path.parent)

@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 import yaml
 
 from hcid.config._checks import GRID_LOWEST, checked_grid_range
@@ -19,15 +20,18 @@ from hcid.errors import ConfigError
 __all__ = [
     "Config",
     "DataConfig",
-    "Disturbance",
+    "FileSignal",
+    "Forcing",
     "Grid",
     "HCModel",
     "IdentifyConfig",
     "Loop",
+    "Multisine",
+    "Plant",
     "Segment",
+    "Segments",
     "SelectionConfig",
     "StageConfig",
-    "Target",
     "Timing",
     "Window",
 ]
@@ -54,8 +58,39 @@ class HCModel:
 
 
 @dataclass(frozen=True)
+class Plant:
+    """The controlled element ``Yc(s) = num(s) / den(s)``, theta per u.
+
+    ``num`` and ``den`` are polynomial coefficients in s, highest power first;
+    ``kind`` is the shorthand it was written as (``second_order``, ``integrator``,
+    ``double_integrator``) or ``tf``; ``text`` is how the report prints it.
+
+    Examples
+    --------
+    >>> Plant.second_order(2.75, 2.0).den
+    (1.0, 2.0, 0.0)
+    """
+
+    kind: str
+    num: tuple[float, ...]
+    den: tuple[float, ...]
+    text: str
+
+    @classmethod
+    def second_order(cls, K: float, wb: float) -> Plant:
+        """The paper's plant ``K wb / (s (s + wb))``."""
+        return cls("second_order", (K * wb,), (1.0, wb, 0.0), f"{K:g}*{wb:g}/(s (s + {wb:g}))")
+
+
+@dataclass(frozen=True)
 class Loop:
-    """Plant, neuromuscular and remnant-filter parameters (rad/s, unitless)."""
+    """Plant, neuromuscular and remnant-filter parameters (rad/s, unitless).
+
+    ``Kc`` and ``wb`` are the paper's plant ``Kc wb / (s (s + wb))``, used when
+    ``plant_spec`` is None (the default); a config's ``loop.plant`` sets
+    ``plant_spec`` instead. ``disturbance_at`` is ``output`` (the paper:
+    ``theta = Yc u + fd``) or ``input`` (``theta = Yc (u + fd)``).
+    """
 
     Kc: float
     wb: float
@@ -64,11 +99,21 @@ class Loop:
     w_n: float
     zeta_n: float
     remnant_ratio: float
+    plant_spec: Plant | None = None
+    disturbance_at: str = "output"
+
+    @property
+    def plant(self) -> Plant:
+        """The configured plant, or the paper's from ``Kc`` and ``wb``."""
+        return self.plant_spec if self.plant_spec is not None else Plant.second_order(self.Kc, self.wb)
 
 
 @dataclass(frozen=True)
-class Disturbance:
-    """Multisine disturbance ``fd(t) = sum A_i sin(k_i wm (t + t0) + phi_i)`` (rad)."""
+class Multisine:
+    """Sum of sines ``f(t) = sum A_i sin(k_i wm (t + t0) + phi_i)`` (rad), ``wm = 2 pi / base_period``.
+
+    The paper's disturbance (SPEC 2); periodic in ``base_period``.
+    """
 
     base_period: float
     time_offset: float
@@ -92,7 +137,7 @@ class Disturbance:
 
 @dataclass(frozen=True)
 class Segment:
-    """One target segment: ``kind`` 'c' (hold) or 'p' (parabola), seconds, step in Kt."""
+    """One segment: ``kind`` 'c' (hold), 'p' (parabola) or 'r' (ramp), seconds, step in units of the gain."""
 
     kind: str
     duration: float
@@ -100,11 +145,30 @@ class Segment:
 
 
 @dataclass(frozen=True)
-class Target:
-    """Parabola target: segments after the run-in, gain Kt in rad."""
+class Segments:
+    """Segments after each period's run-in (the paper's target, SPEC 2), gain in rad."""
 
     gain: float
     segments: tuple[Segment, ...]
+
+
+@dataclass(frozen=True)
+class FileSignal:
+    """A forcing function read from a column of a data file (CSV, Parquet or .mat).
+
+    ``values`` (rad) are the column's samples at ``rate`` Hz; the measurement
+    window starts ``start`` s into them and is taken as one period of the signal.
+    """
+
+    path: str
+    column: str
+    rate: float
+    start: float
+    values: np.ndarray = field(repr=False, compare=False, hash=False)
+
+
+#: A forcing function (target or disturbance): one of the kinds of ``signals.<name>.kind``.
+Forcing = Multisine | Segments | FileSignal
 
 
 @dataclass(frozen=True)
@@ -270,24 +334,34 @@ class SelectionConfig:
 class DataConfig:
     """How to read measured data: a label and the names of the columns (or .mat variables).
 
-    ``columns`` maps ft, fd, e, u, time, run and rate to names in the file;
-    ``w_report`` are the W values at which the report shows the data's models.
+    ``columns`` maps ft, fd, e, u, theta, time, run and rate to names in the file
+    (defaults: the same names, time ``t``; ``e`` may be missing when ``theta``, the
+    system output, is there: then ``e = ft - theta``); ``time_default`` says the
+    time column was not named, so ``time`` is accepted too. ``w_report`` are the W
+    values at which the report shows the data's models; ``lead_in`` (s, whole
+    samples at the analysis rate) is skipped at the start of every run, after the
+    data are resampled to the analysis rate.
     """
 
     name: str
     columns: dict[str, str]
     w_report: tuple[float, ...]
+    lead_in: float = 0.0
+    time_default: bool = False
 
 
 @dataclass(frozen=True)
 class Config:
-    """A whole study."""
+    """A whole study, or a data-only config (no models, loop, signals or seeds: ``simulates`` is False).
+
+    ``data`` is always set after parsing (the default column names when the config has
+    no ``data`` section)."""
 
     name: str
     models: tuple[HCModel, ...]
-    loop: Loop
-    disturbance: Disturbance
-    target: Target
+    loop: Loop | None
+    disturbance: Forcing | None
+    target: Forcing | None
     timing: Timing
     seeds: tuple[int, ...]
     identify: IdentifyConfig
@@ -297,6 +371,39 @@ class Config:
     #: section ``fit_hc``; typed loosely because the analyses sit above the config).
     fit_hc: Any = None
     raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False, hash=False)
+
+    @property
+    def simulates(self) -> bool:
+        """Whether the config holds the simulation sections (models, loop, signals, seeds)."""
+        return self.loop is not None
+
+    def require_simulation(self, command: str) -> None:
+        """Refuse a command that simulates on a data-only config.
+
+        Raises
+        ------
+        ConfigError
+            Naming the missing sections and the command.
+        """
+        if not self.simulates:
+            raise ConfigError(
+                f"models, loop, signals, timing, seeds: missing; `hcid {command}` simulates and needs "
+                "them (this config describes measured data only)"
+            )
+
+    @staticmethod
+    def band_of(disturbance: Forcing | None, timing: Timing) -> tuple[float, float]:
+        """The disturbance band (rad/s) where identified models are expected to be accurate:
+        a multisine's lowest and highest frequency (SPEC 5: 0.23..17.33 rad/s for the paper);
+        for any other disturbance, or none, the window's fundamental to the analysis Nyquist."""
+        if isinstance(disturbance, Multisine):
+            return disturbance.band
+        return 2 * math.pi / timing.window, math.pi * timing.output_rate
+
+    @property
+    def disturbance_band(self) -> tuple[float, float]:
+        """:meth:`band_of` this config's disturbance and timing."""
+        return self.band_of(self.disturbance, self.timing)
 
     def model(self, name: str) -> HCModel:
         for m in self.models:

@@ -17,7 +17,7 @@ Two targets (:data:`TARGETS`):
 - ``frequency`` (the authors' approach, the default): minimise
   ``sum_w |H_arx - H_par|^2 / |H_arx|^2`` over both paths on a log grid of the
   disturbance band (:func:`band_grid`; the config's
-  :attr:`hcid.config.Disturbance.band`), the relative complex error.
+  :attr:`hcid.config.Config.disturbance_band`), the relative complex error.
 - ``time``: minimise ``sum (u - u_par)^2`` over the estimation rows, where
   ``u_par = Hft_par ft + He_par e`` is simulated from the measured, unshifted ft
   and e (:func:`simulate_hc`).

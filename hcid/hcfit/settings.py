@@ -135,7 +135,7 @@ class FitSettings:
     band : tuple of float, or None
         ``(lo, hi)`` of the frequency target's log grid (rad/s). None until
         resolved: :func:`parse_fit_settings` fills in the config's disturbance
-        band (:attr:`hcid.config.Disturbance.band`, SPEC 5) when the config
+        band (:attr:`hcid.config.Config.disturbance_band`, SPEC 5) when the config
         gives none.
     points : int
         Points of that grid.
@@ -213,7 +213,7 @@ def parse_fit_settings(
         Dotted key of the mapping, prefixed to error messages.
     default_band : tuple of float, optional
         The band (rad/s) when ``data`` gives none: the config's disturbance
-        band (:attr:`hcid.config.Disturbance.band`).
+        band (:attr:`hcid.config.Config.disturbance_band`).
 
     Raises
     ------

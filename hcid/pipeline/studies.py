@@ -69,6 +69,7 @@ def simulate_study(
     Writes ``config.yaml``, ``simulations.parquet`` and
     ``simulation_summary.parquet`` in ``run_dir``, each atomically.
     """
+    config.require_simulation("simulate")
     check_run_dir(config, run_dir, "simulate", force=force)
     start = time.perf_counter()
     kn = remnant_gain(config)
@@ -229,6 +230,7 @@ def identify_study(
         records = {(config.data.name, run): rec for run, rec in data.items()}
         keys = list(records)
     else:
+        config.require_simulation("identify (without --data)")
         if not (run_dir / tables.SIMULATIONS.file).exists():
             simulation = simulate_study(config, run_dir, jobs=jobs, show_progress=show_progress)
         keys = [(m.name, s) for m in config.models for s in config.seeds]
@@ -439,6 +441,7 @@ def run_study(
     show_progress: bool = True,
 ) -> StudyRun:
     """Simulate (if missing), identify every method (what is not done yet), then sweep W."""
+    config.require_simulation("run")
     start = time.perf_counter()
     identification = identify_study(
         config,
@@ -484,6 +487,7 @@ def calibrate_study(
     """
     from hcid.calibration import calibrate
 
+    config.require_simulation("calibrate-w")
     fb = next((m for m in config.models if not m.has_feedforward), None)
     ff = next((m for m in config.models if m.has_feedforward), None)
     if fb is None or ff is None:

@@ -31,7 +31,8 @@ class ReportData:
 
     @property
     def verdicts(self) -> list:
-        return self.sections["verdicts"][1]
+        verdicts = self.sections["verdicts"]
+        return verdicts[1] if verdicts is not None else []
 
 
 @dataclass(frozen=True)

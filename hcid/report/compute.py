@@ -44,8 +44,8 @@ def frequency_grid(n: int = 200) -> np.ndarray:
 
 def disturbance_band(config: Config) -> tuple[float, float]:
     """Lowest and highest disturbance frequency (rad/s), where estimates are expected to be
-    accurate (SPEC 5: 0.23..17.33 rad/s for the paper's 20 sines)."""
-    return config.disturbance.band
+    accurate (SPEC 5: 0.23..17.33 rad/s for the paper's 20 sines); :attr:`Config.disturbance_band`."""
+    return config.disturbance_band
 
 
 # --------------------------------------------------------------------------- curves over W

@@ -19,6 +19,7 @@ __all__ = [
     "plot_calibration",
     "plot_data_structure",
     "plot_errors",
+    "plot_forcing_spectra",
     "plot_nb_ft",
     "plot_signals",
     "plot_vaf",
@@ -209,6 +210,29 @@ def plot_errors(
         if axes[0, col].get_legend_handles_labels()[0]:
             axes[0, col].legend(fontsize=8)
     fig.suptitle(title, parse_math=False)  # user strings are not mathtext
+    fig.tight_layout()
+    return fig
+
+
+def plot_forcing_spectra(spectra: dict[str, tuple[np.ndarray, np.ndarray]], nyquist: float, axes=None):
+    """Amplitude spectra of the forcing functions (deg vs rad/s, log-log); lines below 1e-6 of the
+    peak are left out."""
+    fig, axes = _figure(axes, 1, 1, figsize=(9, 3.8))
+    ax = axes[0, 0]
+    for i, (name, (w, amp)) in enumerate(spectra.items()):
+        keep = amp > 1e-6 * max(amp.max(), 1e-300)
+        ax.vlines(w[keep], 1e-6, np.degrees(amp[keep]), color=f"C{i}", lw=0.8)
+        ax.plot(w[keep], np.degrees(amp[keep]), "o", ms=3, color=f"C{i}", label=name)
+    ax.axvline(nyquist, color="k", ls=":", lw=0.8, label="analysis Nyquist")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    peaks = [np.degrees(a.max()) for _, a in spectra.values() if a.size]
+    if peaks:
+        ax.set_ylim(max(peaks) * 1e-4, max(peaks) * 2)
+    ax.set_xlabel("frequency (rad/s)")
+    ax.set_ylabel("amplitude (deg)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
     fig.tight_layout()
     return fig
 

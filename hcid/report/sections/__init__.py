@@ -7,9 +7,19 @@ figure drawings to the :class:`~hcid.report.document.Doc`). To add a section or
 a figure, write or extend one module here and list it in :data:`SECTIONS`.
 """
 
-from hcid.report.sections import calibration, curves, data, facts, hcfit, responses, simulation, verdicts
+from hcid.report.sections import (
+    calibration,
+    curves,
+    data,
+    experiment,
+    facts,
+    hcfit,
+    responses,
+    simulation,
+    verdicts,
+)
 
-#: The sections in report order.
-SECTIONS = (facts, simulation, curves, responses, verdicts, calibration, data, hcfit)
+#: The sections in report order; the verdicts appear only for the paper's experiment.
+SECTIONS = (facts, experiment, simulation, curves, responses, verdicts, calibration, data, hcfit)
 
 __all__ = ["SECTIONS"]

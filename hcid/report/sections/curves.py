@@ -20,6 +20,7 @@ class CurvesData:
     threshold_marks: dict[str, float]
     criterion_labels: list[str]
     thresholds: list[dict]
+    is_paper: bool = True
 
 
 def compute(run, done) -> CurvesData | None:
@@ -39,6 +40,7 @@ def compute(run, done) -> CurvesData | None:
         threshold_marks=threshold_marks,
         criterion_labels=list(marks),
         thresholds=rows,
+        is_paper=not run.config.simulates or paper.is_paper_experiment(run.config),
     )
 
 
@@ -72,7 +74,7 @@ def render(data: CurvesData | None, doc: Doc) -> None:
                     *(f"{r[c]:.3g}" if r[c] is not None else "-" for c in columns),
                     "-" if r["w_fp"] is None else f"{r['w_fp']:.3g}",
                     "-" if r["w_fn"] is None else f"{r['w_fn']:.3g}",
-                    _paper_threshold(r),
+                    _paper_threshold(r) if data.is_paper else "-",
                 ]
                 for r in data.thresholds
             ],

@@ -27,11 +27,12 @@ def _range(r) -> str:
 
 def compute(run, done) -> list[list[str]]:
     config = run.config
-    facts = [
-        ["config", config.name],
-        ["models", ", ".join(m.name for m in config.models)],
-        ["seeds", f"{len(config.seeds)} ({config.seeds[0]}..{config.seeds[-1]})"],
-    ]
+    facts = [["config", config.name]]
+    if config.simulates:
+        facts.append(["models", ", ".join(m.name for m in config.models)])
+        facts.append(["seeds", f"{len(config.seeds)} ({config.seeds[0]}..{config.seeds[-1]})"])
+    else:
+        facts.append(["config kind", "measured data only (no simulation sections)"])
     for method in methods.METHODS.values():
         for spec in method.stages:
             g = config.identify.stage(spec.name).grid

@@ -25,6 +25,7 @@ def compute(run, done) -> SimulationData | None:
     if run.summary is None:
         return None
     s = run.summary.to_pydict()
+    is_paper = paper.is_paper_experiment(run.config)
     rows = []
     for m in run.config.models:
         idx = [i for i, n in enumerate(s["model"]) if n == m.name]
@@ -32,7 +33,7 @@ def compute(run, done) -> SimulationData | None:
             continue
         rms = np.array([s["rms_e_deg"][i] for i in idx])
         ratio = np.array([s["noise_ratio_disturbance_only"][i] for i in idx])
-        ref = paper.RMS_E_DEG.get(m.name)
+        ref = paper.RMS_E_DEG.get(m.name) if is_paper else None
         rows.append(
             [
                 m.name,

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+from hcid import paper
 from hcid.report.document import Doc
 from hcid.report.verdicts import Verdict, compute_verdicts
 
 TITLE = "8. Verdicts: the paper's claims (SPEC section 6) against this run"
 
 
-def compute(run, done) -> tuple[bool, list[Verdict]]:
+def compute(run, done) -> tuple[bool, list[Verdict]] | None:
+    """The verdicts, or None for another experiment than the paper's (its claims do not apply)."""
+    if run.config.simulates and not paper.is_paper_experiment(run.config):
+        return None
     curves = done.get("curves")
     responses = done.get("responses")
     verdicts = compute_verdicts(
@@ -22,7 +26,9 @@ def compute(run, done) -> tuple[bool, list[Verdict]]:
     return run.summary is not None, verdicts
 
 
-def render(data: tuple[bool, list[Verdict]], doc: Doc) -> None:
+def render(data: tuple[bool, list[Verdict]] | None, doc: Doc) -> None:
+    if data is None:  # not the paper's experiment: no section
+        return
     simulated, verdicts = data
     doc.text(f"## {TITLE}")
     if not simulated:
