@@ -15,15 +15,51 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from hcid.arx.engine import GridFit, best, fit_grid
 from hcid.config.types import IdentifyConfig, StageConfig
+from hcid.errors import ConfigError
 
-__all__ = ["Method", "MethodResult", "StageChoice", "StageSpec", "choose", "fit_stage", "shift_forward"]
+__all__ = [
+    "Method",
+    "MethodResult",
+    "StageChoice",
+    "StageOption",
+    "StageSpec",
+    "choose",
+    "fit_stage",
+    "one_of",
+    "shift_forward",
+]
+
+
+@dataclass(frozen=True)
+class StageOption:
+    """A key of a stage's config section beyond its grid and windows (e.g. stage 1's ``rows``).
+
+    ``parse(value, key)`` checks a configured value and returns it as stored
+    (hashable: lists become tuples), raising :class:`hcid.errors.ConfigError`
+    that names ``key`` (the dotted path) otherwise. The default reproduces SPEC.
+    """
+
+    default: Any
+    parse: Callable[[Any, str], Any]
+    help: str = ""
+
+
+def one_of(*choices: str) -> Callable[[Any, str], str]:
+    """A :attr:`StageOption.parse` accepting one of the given words."""
+
+    def parse(value: Any, key: str) -> str:
+        if value not in choices:
+            raise ConfigError(f"{key}: must be one of {', '.join(choices)}, got {value!r}")
+        return value
+
+    return parse
 
 
 @dataclass(frozen=True)
@@ -43,17 +79,31 @@ class StageSpec:
     defaults_from : str or None
         A stage whose keys, as given in the config, override ``defaults``
         (stage 2 of the indirect method takes the direct method's grid).
+    options : mapping of str to StageOption
+        Further keys its config section may hold, with their defaults; the
+        config keeps the values that differ from the default
+        (:attr:`hcid.config.StageConfig.options`), read back with :meth:`option`.
     """
 
     name: str
     inputs: tuple[str, str, str]
     defaults: Mapping[str, Any]
     defaults_from: str | None = None
+    options: Mapping[str, StageOption] = field(default_factory=dict)
+
+    def option(self, stage: StageConfig, name: str) -> Any:
+        """The value of option ``name`` in a parsed stage: as configured, else its default."""
+        return dict(stage.options).get(name, self.options[name].default)
 
 
 @dataclass(frozen=True)
 class StageChoice:
-    """The model a non-final stage hands on: its structure, V and candidate counts."""
+    """The model a non-final stage hands on: its structure, V and candidate counts.
+
+    ``signal`` is its simulated output over the whole record, the signal it
+    hands on (e_r for the indirect method's stage 1); not tabulated with the
+    choice, but compared with the noise-free simulated signal where one is known.
+    """
 
     stage: str
     na: int
@@ -65,6 +115,7 @@ class StageChoice:
     n_candidates: int
     n_unstable: int
     seconds: float
+    signal: np.ndarray | None = field(default=None, repr=False, compare=False)
 
 
 @dataclass(frozen=True)
