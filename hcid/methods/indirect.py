@@ -29,7 +29,16 @@ from typing import Any
 from hcid.arx.engine import fit_grid, simulate
 from hcid.config.types import Grid
 from hcid.errors import ConfigError
-from hcid.methods.base import Method, MethodResult, StageOption, StageSpec, choose, fit_stage, one_of, shift_forward
+from hcid.methods.base import (
+    Method,
+    MethodResult,
+    StageOption,
+    StageSpec,
+    choose,
+    fit_stage,
+    one_of,
+    shift_forward,
+)
 from hcid.methods.direct import DIRECT_DEFAULTS
 
 #: SPEC 3: the stage-1 grid (64,260 candidates); its windows run from the grid's largest lag on.
@@ -57,8 +66,7 @@ def _orders(value: Any, key: str) -> tuple[int, ...]:
             ok = False
     if not ok:
         raise ConfigError(
-            f"{key}: must be [na, nb_ft, nb_fd, nk_ft, nk_fd] with na >= 1 and the others >= 0, "
-            f"got {value!r}"
+            f"{key}: must be [na, nb_ft, nb_fd, nk_ft, nk_fd] with na >= 1 and the others >= 0, got {value!r}"
         )
     return tuple(value)
 

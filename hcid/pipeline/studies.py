@@ -117,7 +117,14 @@ def _handoff_part(model, seed, method, stages, choices, noise_free) -> pa.Table:
         if truth is not None and choice.signal is not None:
             vaf = float((1.0 - np.sum((truth - choice.signal) ** 2) / np.sum(truth**2)) * 100.0)
         rows.append(
-            {"model": model, "seed": seed, "method": method, "stage": spec.name, "signal": name, "vaf_noise_free": vaf}
+            {
+                "model": model,
+                "seed": seed,
+                "method": method,
+                "stage": spec.name,
+                "signal": name,
+                "vaf_noise_free": vaf,
+            }
         )
     return pa.Table.from_pylist(rows, schema=tables.HANDOFF.arrow)
 
@@ -465,10 +472,7 @@ def _thresholds(config: Config, chosen, segments: dict, nb_ft: dict) -> pa.Table
                     "w_fp": None if ff else selection.false_positive_threshold(segments[key], nb_ft[key]),
                     "w_fn": selection.false_negative_threshold(segments[key], nb_ft[key]) if ff else None,
                     **_uncertainty(method.name, ff, segments[key], nb_ft[key]),
-                    **{
-                        tables.rate_column(c): float(r)
-                        for c, r in zip(marks, at_marks.rate, strict=True)
-                    },
+                    **{tables.rate_column(c): float(r) for c, r in zip(marks, at_marks.rate, strict=True)},
                 }
             )
     return pa.Table.from_pylist(rows, schema=tables.thresholds([c.column for c in chosen]).arrow)
@@ -480,7 +484,9 @@ def _rates(config: Config, segments: dict, nb_ft: dict, w: np.ndarray) -> pa.Tab
         for method in methods.METHODS:
             key = (model.name, method)
             if key in segments:
-                curve = calibration.error_rates(method, model.name, _error(model), segments[key], nb_ft[key], w)
+                curve = calibration.error_rates(
+                    method, model.name, _error(model), segments[key], nb_ft[key], w
+                )
                 parts.append(curve.to_arrow())
     return tables.concat(parts) if parts else tables.RATES.arrow.empty_table()
 

@@ -23,6 +23,8 @@ _READS = {
     "thresholds": (tables.thresholds(), None),
     "runlog": (tables.RUN_LOG, None),
     "calibration": (tables.CALIBRATION, None),
+    "rates": (tables.RATES, None),
+    "handoff": (tables.HANDOFF, None),
 }
 
 
@@ -44,6 +46,8 @@ class RunTables:
     runlog: pa.Table | None
     calibration: pa.Table | None
     choices: dict[str, pa.Table]
+    rates: pa.Table | None = None
+    handoff: pa.Table | None = None
 
     def simulations(self) -> dict | None:
         """The simulated records by (model, seed), or None without simulations."""

@@ -7,9 +7,19 @@ figure drawings to the :class:`~hcid.report.document.Doc`). To add a section or
 a figure, write or extend one module here and list it in :data:`SECTIONS`.
 """
 
-from hcid.report.sections import calibration, curves, data, facts, responses, simulation, verdicts
+from hcid.report.sections import (
+    calibration,
+    curves,
+    data,
+    facts,
+    handoff,
+    rates,
+    responses,
+    simulation,
+    verdicts,
+)
 
 #: The sections in report order.
-SECTIONS = (facts, simulation, curves, responses, verdicts, calibration, data)
+SECTIONS = (facts, simulation, curves, rates, responses, handoff, verdicts, calibration, data)
 
 __all__ = ["SECTIONS"]
