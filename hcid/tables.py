@@ -23,9 +23,10 @@ file                            one row per                                    w
 ``thresholds.parquet``          method and model                               ``hcid sweep-w``
 ``rates.parquet``               method, model and W of the grid: the false-    ``hcid sweep-w``
                                 positive (FB) or false-negative (FF) rate
-``handoff.parquet``             model, seed, method and choosing stage: the    ``hcid identify``
-                                handed-on signal (e_r) against the noise-free
-                                simulated one
+``handoff.parquet``             model, seed, method and choosing stage: VAF    ``hcid identify``
+                                of the handed-on signal (e_r) against the
+                                noise-free simulated one, over the next
+                                stage's rows and over the whole record
 ``calibration.parquet``         method and W of the grid                       ``hcid calibrate-w``
 ``run_log.parquet``             stage run (wall seconds)                       every computing stage
 ==============================  =============================================  ==========================
@@ -179,7 +180,7 @@ RATES = _schema(
 HANDOFF = _schema(
     "handoff.parquet",
     [("model", _STR), ("seed", _INT), ("method", _STR), ("stage", _STR), ("signal", _STR)]
-    + [("vaf_noise_free", _F64)],
+    + [("vaf_noise_free", _F64), ("vaf_noise_free_record", _F64)],
     (*_METHOD_KEY, "stage"),
 )
 RUN_LOG = _schema(

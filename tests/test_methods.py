@@ -253,6 +253,7 @@ def test_a_stage1_variant_on_the_ci_config_flows_to_its_tables_and_report(ci_raw
         ("FF", "stage1", "e"),
     }
     assert all(50.0 < r["vaf_noise_free"] <= 100.0 for r in handoff)
+    assert all(r["vaf_noise_free_record"] <= 100.0 for r in handoff)
     assert "rows: zero_initial" in (run / "config.yaml").read_text()
     data = compute_report(run)
     facts = dict(data.sections["facts"])

@@ -253,14 +253,13 @@ def test_w_fn_verdict_by_the_bootstrap_interval(ci_config):
         ]
         return pa.Table.from_pylist(rows, schema=tables.thresholds().arrow)
 
-    def verdict(th):
-        return next(
-            v
-            for v in compute_verdicts(ci_config, None, None, th, None, None)
-            if v.claim.startswith("FF mean")
-        )
+    def verdicts(th):
+        return {v.claim: v for v in compute_verdicts(ci_config, None, None, th, None, None)}
 
-    inside = verdict(table((0.22, 0.30, 0.4), (0.2, 0.27, 0.1)))
-    assert inside.holds is True and inside.status_text == CONSISTENT
-    outside = verdict(table((0.22, 0.30, 0.4), (0.4, 0.6, 1.0)))
+    inside = verdicts(table((0.22, 0.30, 0.4), (0.2, 0.27, 0.1)))
+    for me in ("direct", "indirect"):
+        assert inside[f"FF mean nb_ft >= 2, {me}"].holds is True
+        assert inside[f"FF mean nb_ft >= 2, {me}"].status_text == CONSISTENT
+    assert "P*(W_FN >= 0.26) = 0.1" in inside["FF mean nb_ft >= 2, indirect"].this_run
+    outside = verdicts(table((0.22, 0.30, 0.4), (0.4, 0.6, 1.0)))["FF mean nb_ft >= 2, indirect"]
     assert outside.holds is False and outside.status_text == "does not hold"

@@ -99,37 +99,52 @@ def _identify_task(
     stages = methods.get(method).choice_stages
     parts = results.frontier_part(model, seed, result, stages)
     if stages:
-        parts["handoff"] = _handoff_part(model, seed, method, stages, result.choices, noise_free)
+        parts["handoff"] = handoff_part(
+            model, seed, methods.get(method), settings, result.choices, noise_free
+        )
     return (model, seed, method), parts
 
 
-def _handoff_part(model, seed, method, stages, choices, noise_free) -> pa.Table:
-    """VAF (%, whole record) of each handed-on signal against the noise-free simulated one.
+def handoff_part(model, seed, method, settings, choices, noise_free) -> pa.Table:
+    """VAF (%) of each handed-on signal against the noise-free simulated one.
 
     A choosing stage's output (e for stage 1) simulated without remnant is what
     its handed-on signal (e_r) estimates; measured data have none (NaN).
+    ``vaf_noise_free`` is taken over the rows the next stage fits and validates
+    on (what it uses), ``vaf_noise_free_record`` over the whole record, whose
+    first samples no stage-1 V looks at unless stage 1 fits from the first sample.
     """
     rows = []
-    for spec, choice in zip(stages, choices, strict=True):
+    for i, (spec, choice) in enumerate(zip(method.choice_stages, choices, strict=True)):
         name = spec.inputs[2]
+        nxt = settings.stage(method.stages[i + 1].name)
+        used = slice(
+            min(nxt.estimation.first, nxt.validation.first) - 1, max(nxt.estimation.last, nxt.validation.last)
+        )
         truth = None if noise_free is None else noise_free.get(name)
-        vaf = np.nan
+        vaf = vaf_record = np.nan
         if truth is not None and choice.signal is not None:
-            vaf = float((1.0 - np.sum((truth - choice.signal) ** 2) / np.sum(truth**2)) * 100.0)
+            vaf = _vaf(truth[used], choice.signal[used])
+            vaf_record = _vaf(truth, choice.signal)
         rows.append(
             {
                 "model": model,
                 "seed": seed,
-                "method": method,
+                "method": method.name,
                 "stage": spec.name,
                 "signal": name,
                 "vaf_noise_free": vaf,
+                "vaf_noise_free_record": vaf_record,
             }
         )
     return pa.Table.from_pylist(rows, schema=tables.HANDOFF.arrow)
 
 
-def _noise_free(config: Config) -> dict[str, dict[str, np.ndarray]]:
+def _vaf(truth: np.ndarray, estimate: np.ndarray) -> float:
+    return float((1.0 - np.sum((truth - estimate) ** 2) / np.sum(truth**2)) * 100.0)
+
+
+def noise_free_records(config: Config) -> dict[str, dict[str, np.ndarray]]:
     """Every model's record simulated without remnant (the same for every seed), by channel."""
     out = {}
     for m in config.models:
@@ -285,7 +300,7 @@ def identify_study(
         done.update(results.read_parts(run_dir, _part_kinds()))
     record_config(config, run_dir)
     rate = config.timing.output_rate
-    noise_free = _noise_free(config) if data_path is None else {}
+    noise_free = noise_free_records(config) if data_path is None else {}
     tasks = [
         (config.identify, rate, model, seed, method, records[(model, seed)], noise_free.get(model))
         for model, seed in keys
