@@ -3,7 +3,9 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test test-all lint bench robustness clean
+.PHONY: run test test-all lint bench robustness clean indirect-variants
+
+VARIANTS := $(sort $(wildcard configs/indirect_variants/*.yaml))
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -14,6 +16,14 @@ $(STAMP): pyproject.toml
 run: $(STAMP)
 	$(BIN)/hcid run configs/paper.yaml
 	$(BIN)/hcid report runs/paper
+
+# The indirect method's stage-1 variants (README "The indirect method's W_FP"): FB only, indirect
+# only, 50 realizations each (about 6 minutes on 2 idle cores), then their comparison report.
+indirect-variants: $(STAMP)
+	for c in $(VARIANTS); do \
+		$(BIN)/hcid identify $$c --method indirect --jobs 2 --quiet && $(BIN)/hcid sweep-w $$c || exit 1; \
+	done
+	$(BIN)/python -m hcid.report.variants runs/indirect_variants $(VARIANTS)
 
 test: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -q -m "not slow" tests

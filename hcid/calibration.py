@@ -22,7 +22,14 @@ from scipy import stats
 from hcid import tables
 from hcid.selection import Segments
 
-__all__ = ["Calibration", "calibrate", "clopper_pearson"]
+__all__ = ["ERRORS", "Calibration", "RateCurve", "calibrate", "clopper_pearson", "error_rates"]
+
+#: The two errors of SPEC 4 and 9, by name: which selected nb_ft counts as wrong.
+#: FB realizations (no feedforward) are judged for false positives, FF ones for false negatives.
+ERRORS = {
+    "false_positive": lambda nb: nb > 0,
+    "false_negative": lambda nb: nb < 2,
+}
 
 
 def clopper_pearson(k: np.ndarray, n: int, level: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
@@ -36,6 +43,59 @@ def clopper_pearson(k: np.ndarray, n: int, level: float = 0.95) -> tuple[np.ndar
 
 def _counts(segments: list[Segments], nb_ft: list[np.ndarray], w: np.ndarray, positive) -> np.ndarray:
     return np.sum([positive(nb[s.at(w)]) for s, nb in zip(segments, nb_ft, strict=True)], axis=0)
+
+
+@dataclass(frozen=True)
+class RateCurve:
+    """The share of realizations making one error, at each W, with its exact 95% band (SPEC 9)."""
+
+    method: str
+    model: str
+    error: str
+    w: np.ndarray
+    k: np.ndarray
+    n: int
+    rate: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+
+    def to_arrow(self) -> pa.Table:
+        m = self.w.size
+        return pa.Table.from_pydict(
+            {
+                "method": [self.method] * m,
+                "model": [self.model] * m,
+                "error": [self.error] * m,
+                "w": self.w,
+                "k": self.k.astype(np.int64),
+                "n": [self.n] * m,
+                "rate": self.rate,
+                "low": self.low,
+                "high": self.high,
+            },
+            schema=tables.RATES.arrow,
+        )
+
+
+def error_rates(
+    method: str, model: str, error: str, segments: list[Segments], nb_ft: list[np.ndarray], w: np.ndarray
+) -> RateCurve:
+    """Rate of ``error`` (a key of :data:`ERRORS`) over realizations at each W, exactly, with
+    Clopper-Pearson 95% bands.
+
+    Examples
+    --------
+    >>> from hcid.selection import Segments
+    >>> seg = Segments(np.array([0, 1]), np.array([0.0, 0.01]), np.array([0.01, np.inf]))
+    >>> c = error_rates("direct", "FB", "false_positive", [seg, seg], [np.array([2, 0])] * 2, [0.005, 0.02])
+    >>> c.rate.tolist(), c.high.tolist()
+    ([1.0, 0.0], [1.0, 0.8418861169915811])
+    """
+    w = np.asarray(w, dtype=np.float64)
+    n = len(segments)
+    k = _counts(segments, nb_ft, w, ERRORS[error])
+    low, high = clopper_pearson(k, n)
+    return RateCurve(method, model, error, w, k, n, k / n, low, high)
 
 
 @dataclass(frozen=True)

@@ -286,7 +286,7 @@ def report(
         typer.echo(f"missing stages: {', '.join(result.missing)} (reported what is there)")
     width = max((len(v.claim) for v in result.verdicts), default=10)
     for v in result.verdicts:
-        mark = {True: "holds", False: "DOES NOT HOLD", None: "not evaluated"}[v.holds]
+        mark = v.status_text if v.holds is not False else "DOES NOT HOLD"
         typer.echo(f"{v.claim:<{width}}  {mark:<14} {v.this_run}")
     typer.echo(f"report: {result.html}")
 

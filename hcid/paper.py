@@ -6,6 +6,8 @@ are those of the paper's own analysis that are not properties of a config.
 
 #: Table 2: RMS(e) in deg per model.
 RMS_E_DEG = {"FB": 2.43, "FF": 1.22}
+#: Section 4: realizations per model, the n of the paper's W_FP (an extreme over n realizations).
+N_REALIZATIONS = 50
 #: Section 5.2: the largest W with a false positive (FB), per method.
 W_FP = {"direct": 1.2e-2, "indirect": 3.7e-2}
 #: Section 5.2: FF mean nb_ft >= 2 up to this W, both methods.

@@ -20,12 +20,16 @@ import numpy as np
 from hcid.errors import IdentificationError
 
 __all__ = [
+    "Bootstrap",
     "Segments",
     "breakpoints",
     "select_at",
     "select_brute_force",
+    "false_negative_bootstrap",
     "false_negative_threshold",
+    "false_positive_extent",
     "false_positive_threshold",
+    "threshold_exceedance",
 ]
 
 
@@ -133,12 +137,66 @@ def false_positive_threshold(segments: list[Segments], nb_ft: list[np.ndarray]) 
     no realization is ever a false positive; inf when one stays a false positive
     for every W.
     """
-    w_fp = 0.0
-    for seg, nb in zip(segments, nb_ft, strict=True):
-        positive = nb[seg.index] > 0
-        if positive.any():
-            w_fp = max(w_fp, float(seg.w_to[np.flatnonzero(positive)[-1]]))
-    return w_fp
+    extents = [false_positive_extent(seg, nb) for seg, nb in zip(segments, nb_ft, strict=True)]
+    return max(extents, default=0.0)
+
+
+def false_positive_extent(segments: Segments, nb_ft: np.ndarray) -> float:
+    """L: the largest W at which one realization selects nb_ft > 0 (SPEC 9); 0 if never.
+
+    The right end of its last interval with nb_ft > 0 (selections hold on
+    ``[w_from, w_to)``, so L is a supremum); inf if it stays a false positive.
+    W_FP of a study is the largest L.
+
+    Examples
+    --------
+    >>> seg = Segments(np.array([0, 1, 2]), np.array([0.0, 0.01, 0.2]), np.array([0.01, 0.2, np.inf]))
+    >>> false_positive_extent(seg, np.array([3, 1, 0]))
+    0.2
+    """
+    positive = np.asarray(nb_ft)[segments.index] > 0
+    return float(segments.w_to[np.flatnonzero(positive)[-1]]) if positive.any() else 0.0
+
+
+def threshold_exceedance(extents: np.ndarray, w: float, n: int) -> float:
+    """P(W_FP >= w) for a study of ``n`` realizations: ``1 - (1 - q(w))^n`` (SPEC 9).
+
+    ``q(w)`` is the share of the given realizations whose L (from
+    :func:`false_positive_extent`) is at least ``w``: the plug-in estimate of
+    the chance that one realization is still a false positive just below w.
+    W_FP is the largest of n independent L, hence the power.
+
+    Parameters
+    ----------
+    extents : ndarray, shape (m,)
+        L of each realization of this run.
+    w : float
+        The threshold to compare with (e.g. the paper's W_FP).
+    n : int
+        Realizations of the study whose W_FP is meant (the paper's: 50).
+
+    Examples
+    --------
+    >>> threshold_exceedance(np.array([0.0, 0.0, 0.02, 0.0]), 0.01, 2)  # q = 1/4
+    0.4375
+    """
+    extents = np.asarray(extents, dtype=np.float64)
+    q = float(np.mean(extents >= w))
+    return float(1.0 - (1.0 - q) ** n)
+
+
+def _nb_ft_at_breakpoints(segments: list[Segments], nb_ft: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(W, nb_ft per realization x W) at the union of the realizations' breakpoints."""
+    at = np.unique(np.concatenate([s.w_from for s in segments]))
+    values = np.array([nb[s.at(at)] for s, nb in zip(segments, nb_ft, strict=True)], dtype=np.float64)
+    return at, values
+
+
+def _first_below(at: np.ndarray, means: np.ndarray, level: float) -> np.ndarray:
+    """Per row of ``means``, the first W of ``at`` with a mean below ``level`` (inf if none)."""
+    below = means < level
+    first = np.argmax(below, axis=-1)
+    return np.where(below.any(axis=-1), at[first], np.inf)
 
 
 def false_negative_threshold(segments: list[Segments], nb_ft: list[np.ndarray], level: float = 2.0) -> float:
@@ -148,7 +206,49 @@ def false_negative_threshold(segments: list[Segments], nb_ft: list[np.ndarray], 
     breakpoints, so it is evaluated exactly there. 0 when it starts below the
     level; inf when it never drops below it.
     """
-    candidates = np.unique(np.concatenate([s.w_from for s in segments]))
-    means = np.mean([nb[s.at(candidates)] for s, nb in zip(segments, nb_ft, strict=True)], axis=0)
-    below = np.flatnonzero(means < level)
-    return float(candidates[below[0]]) if below.size else float("inf")
+    at, values = _nb_ft_at_breakpoints(segments, nb_ft)
+    return float(_first_below(at, values.mean(axis=0), level))
+
+
+@dataclass(frozen=True)
+class Bootstrap:
+    """A percentile bootstrap of a threshold over realizations.
+
+    ``low``, ``high``: the ``confidence`` interval; ``share_at_or_above(w)``
+    the share of resampled thresholds at or above w.
+    """
+
+    values: np.ndarray
+    low: float
+    high: float
+    confidence: float
+
+    def share_at_or_above(self, w: float) -> float:
+        return float(np.mean(self.values >= w))
+
+
+def false_negative_bootstrap(
+    segments: list[Segments],
+    nb_ft: list[np.ndarray],
+    level: float = 2.0,
+    *,
+    confidence: float = 0.95,
+    resamples: int = 2000,
+    seed: int = 0,
+) -> Bootstrap:
+    """Percentile bootstrap of W_FN over realizations (SPEC 9), seeded so reports are deterministic.
+
+    Each resample draws as many realizations as there are, with replacement,
+    and takes the W at which their mean selected nb_ft first drops below
+    ``level``, exactly (at the breakpoints). The interval's ends are the
+    ``(1 - confidence)/2`` and ``(1 + confidence)/2`` quantiles, taken as
+    order statistics (no interpolation, so inf stays inf).
+    """
+    at, values = _nb_ft_at_breakpoints(segments, nb_ft)
+    n = values.shape[0]
+    rng = np.random.default_rng(seed)
+    weights = np.stack([np.bincount(rng.integers(0, n, n), minlength=n) for _ in range(resamples)])
+    draws = _first_below(at, weights @ values / n, level)
+    alpha = (1.0 - confidence) / 2.0
+    low, high = np.quantile(draws, [alpha, 1.0 - alpha], method="inverted_cdf")
+    return Bootstrap(values=draws, low=float(low), high=float(high), confidence=confidence)

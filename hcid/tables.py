@@ -21,6 +21,12 @@ file                            one row per                                    w
 ``selection.parquet``           model, seed, method and W of the grid          ``hcid sweep-w``
 ``breakpoints.parquet``         model, seed, method and interval of W          ``hcid sweep-w``
 ``thresholds.parquet``          method and model                               ``hcid sweep-w``
+``rates.parquet``               method, model and W of the grid: the false-    ``hcid sweep-w``
+                                positive (FB) or false-negative (FF) rate
+``handoff.parquet``             model, seed, method and choosing stage: VAF    ``hcid identify``
+                                of the handed-on signal (e_r) against the
+                                noise-free simulated one, over the next
+                                stage's rows and over the whole record
 ``calibration.parquet``         method and W of the grid                       ``hcid calibrate-w``
 ``hc_parameters.parquet``       record, method, W and HC parameter             ``hcid fit-hc``
 ``residuals.parquet``           record, method, W, residual series and lag     ``hcid fit-hc``
@@ -39,10 +45,12 @@ __all__ = [
     "BREAKPOINTS",
     "CALIBRATION",
     "FRONTIER",
+    "HANDOFF",
     "HC_PARAMETERS",
     "IDENTIFY_LOG",
     "MEASURED",
     "ORDER_COLUMNS",
+    "RATES",
     "RESIDUALS",
     "RUN_LOG",
     "SELECTED_COLUMNS",
@@ -50,7 +58,9 @@ __all__ = [
     "SIMULATIONS",
     "SIMULATION_SUMMARY",
     "Schema",
+    "UNCERTAINTY_COLUMNS",
     "concat",
+    "rate_column",
     "split_by_key",
     "stage_choice",
     "thresholds",
@@ -166,6 +176,18 @@ CALIBRATION = _schema(
     + [(c, _F64) for c in ("target_rate", "safe_low", "safe_high", "recommended")],
     ("method", "w"),
 )
+RATES = _schema(
+    "rates.parquet",
+    [("method", _STR), ("model", _STR), ("error", _STR), ("w", _F64), ("k", _INT), ("n", _INT)]
+    + [(c, _F64) for c in ("rate", "low", "high")],
+    ("method", "model", "w"),
+)
+HANDOFF = _schema(
+    "handoff.parquet",
+    [("model", _STR), ("seed", _INT), ("method", _STR), ("stage", _STR), ("signal", _STR)]
+    + [("vaf_noise_free", _F64), ("vaf_noise_free_record", _F64)],
+    (*_METHOD_KEY, "stage"),
+)
 RUN_LOG = _schema(
     "run_log.parquet",
     [("stage", _STR), ("seconds", _F64), ("jobs", _INT), ("finished", _STR)],
@@ -188,13 +210,28 @@ def stage_choice(stage: str, inputs: Sequence[str]) -> Schema:
     )
 
 
+#: Sampling uncertainty of the thresholds (SPEC 9), added after the first release: optional on reading.
+#: ``p_w_fp_at_paper``: P(W_FP >= the paper's W_FP) for a study of the paper's 50 realizations;
+#: ``w_fn_low``, ``w_fn_high``: bootstrap 95% interval of W_FN; ``p_w_fn_at_paper``: the bootstrap
+#: share of W_FN at or above the paper's.
+UNCERTAINTY_COLUMNS = ("p_w_fp_at_paper", "w_fn_low", "w_fn_high", "p_w_fn_at_paper")
+
+
+def rate_column(criterion_column: str) -> str:
+    """The column of the error rate at a criterion's W (``w_bic`` -> ``rate_at_w_bic``)."""
+    return f"rate_at_{criterion_column}"
+
+
 def thresholds(criterion_columns: Sequence[str] = ()) -> Schema:
-    """``thresholds.parquet``: per method and model, Nf, each criterion's W, W_FP (FB) and W_FN (FF).
+    """``thresholds.parquet``: per method and model, Nf, each criterion's W, W_FP (FB) and W_FN (FF),
+    their sampling uncertainty, and the error rate (FB: false positive, FF: false negative) at
+    each criterion's W.
 
     ``criterion_columns`` are the ``w_<name>`` columns of the configured criteria
     (:attr:`hcid.criteria.Criterion.column`); a reader passes none and finds them
     by name.
     """
+    rates = [rate_column(c) for c in criterion_columns]
     return _schema(
         "thresholds.parquet",
         [
@@ -205,9 +242,11 @@ def thresholds(criterion_columns: Sequence[str] = ()) -> Schema:
             ("nf", _INT),
         ]
         + [(c, _F64) for c in criterion_columns]
-        + [("w_fp", _F64), ("w_fn", _F64)],
+        + [("w_fp", _F64), ("w_fn", _F64)]
+        + [(c, _F64) for c in UNCERTAINTY_COLUMNS]
+        + [(c, _F64) for c in rates],
         ("method", "model"),
-        optional=tuple(criterion_columns),
+        optional=(*criterion_columns, *UNCERTAINTY_COLUMNS, *rates),
     )
 
 

@@ -55,3 +55,33 @@ def test_clopper_pearson_exact_values():
     low, high = clopper_pearson(np.array([0, 50]), 50)
     assert low[0] == 0.0 and high[0] == pytest.approx(1 - 0.025 ** (1 / 50), rel=1e-9)
     assert high[1] == 1.0 and low[1] == pytest.approx(0.025 ** (1 / 50), rel=1e-9)
+
+
+def test_clopper_pearson_against_the_exact_binomial_interval():
+    # Source: scipy.stats.binomtest(k, n).proportion_ci(method="exact"), an independent
+    # implementation of Clopper and Pearson (1934); e.g. 14 of 200 (7%): [0.0388, 0.1146].
+    from scipy.stats import binomtest
+
+    for k, n in ((0, 50), (1, 50), (3, 50), (14, 200), (100, 200), (200, 200)):
+        low, high = clopper_pearson(np.array([k]), n)
+        ci = binomtest(k, n).proportion_ci(confidence_level=0.95, method="exact")
+        assert (low[0], high[0]) == pytest.approx((ci.low, ci.high), rel=1e-9, abs=1e-12)
+    low, high = clopper_pearson(np.array([14]), 200)
+    assert (low[0], high[0]) == pytest.approx((0.0388, 0.1146), abs=1e-4)
+
+
+def test_error_rates_count_realizations_exactly_with_exact_bands():
+    from hcid.calibration import error_rates
+
+    fb, ff = _twins()
+    w = np.array([0.005, 0.01, 0.4])
+    fp = error_rates("direct", "FB", "false_positive", *fb, w)
+    assert fp.k.tolist() == [1, 0, 0] and fp.n == 2  # [0, 0.01) half-open: none at 0.01
+    fn = error_rates("direct", "FF", "false_negative", *ff, w)
+    assert fn.rate.tolist() == [0.0, 0.0, 0.5]
+    low, high = clopper_pearson(np.array([1]), 2)
+    assert (fp.low[0], fp.high[0]) == (low[0], high[0])
+    # 1 of 2: Beta(1, 2) and Beta(2, 1) quantiles, [1 - sqrt(0.975), sqrt(0.975)] = [0.0126, 0.9874]
+    assert (low[0], high[0]) == pytest.approx((1 - 0.975**0.5, 0.975**0.5), rel=1e-9)
+    table = fp.to_arrow()
+    assert table.column_names == ["method", "model", "error", "w", "k", "n", "rate", "low", "high"]

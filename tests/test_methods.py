@@ -212,3 +212,77 @@ def test_final_signals_rebuild_what_the_final_stage_was_fitted_to(ci_config, pap
     wrong = dataclasses.replace(result.choices[0], v=result.choices[0].v * 1.01)
     with pytest.raises(IdentificationError, match="stage1: refitting the chosen candidate"):
         methods.get("indirect").final_signals(paper_record, settings, shift, (wrong,))
+
+
+# --------------------------------------------------------------------------- stage-1 options
+
+
+def _with_stage1(ci_raw, **options):
+    raw = copy.deepcopy(ci_raw)
+    raw["identify"]["stage1"].update(options)
+    return parse_config(raw, "variant")
+
+
+def test_stage1_zero_initial_fixed_matches_the_reference_on_every_sample(record, ci_raw):
+    # rows: zero_initial fits and validates on all 2048 samples with zero regressors before the
+    # record; model: fixed fits only fixed_orders. Source of truth: the plain lstsq + lfilter
+    # twin (hcid.arx.reference) on the same rows, with e made noisy so the fit is not exact.
+    from hcid.arx.reference import fit_reference
+
+    rng = np.random.default_rng(11)
+    noisy = dict(record, e=record["e"] + 0.05 * rng.standard_normal(record["e"].size))
+    cfg = _with_stage1(ci_raw, rows="zero_initial", model="fixed", fixed_orders=[2, 3, 2, 2, 1])
+    result = identify(noisy, cfg.identify, "indirect", rate=25.0)
+    choice = result.choices[0]
+    assert (choice.na, choice.nb1, choice.nb2, choice.nk1, choice.nk2) == (2, 3, 2, 2, 1)
+    assert choice.n_candidates == 1
+    ft_s = shift_forward(noisy["ft"], 25)
+    every = slice(0, 2048)
+    ref = fit_reference(ft_s, noisy["fd"], noisy["e"], 2, 3, 2, 2, 1, every, every)
+    assert choice.v == pytest.approx(float(ref.v[0]), rel=1e-8)
+    # The default (rows from the grid's largest lag, best of the grid) is another fit.
+    default = identify(noisy, parse_config(ci_raw, "d").identify, "indirect", rate=25.0).choices[0]
+    assert default.n_candidates > 1 and default.v != pytest.approx(choice.v, rel=1e-6)
+
+
+def test_stage1_options_are_checked_and_kept_out_of_a_default_config(ci_raw):
+    from hcid.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"identify\.stage1\.rows: must be one of auto, zero_initial"):
+        _with_stage1(copy.deepcopy(ci_raw), rows="all")
+    with pytest.raises(ConfigError, match=r"identify\.stage1\.fixed_orders: must be \[na, nb_ft"):
+        _with_stage1(copy.deepcopy(ci_raw), fixed_orders=[0, 2, 2, 6, 6])
+    default = parse_config(copy.deepcopy(ci_raw), "d")
+    assert default.identify.stage("stage1").options == ()
+    assert "rows" not in default.to_yaml() and "fixed_orders" not in default.to_yaml()
+    stated = _with_stage1(copy.deepcopy(ci_raw), rows="auto", model="best")  # the defaults, stated
+    assert stated.to_yaml() == default.to_yaml().replace("name: d", "name: variant")
+
+
+def test_a_stage1_variant_on_the_ci_config_flows_to_its_tables_and_report(ci_raw, tmp_path):
+    # configs/ci.yaml (seed 1) with stage 1 on every sample and the authors' fixed orders: the
+    # stage-1 table holds those orders, handoff.parquet the VAF of e_r against the noise-free e,
+    # the resolved config the options, and the report's facts name them.
+    from hcid.pipeline import identify_study, sweep_study
+    from hcid.report.build import compute_report
+
+    cfg = _with_stage1(ci_raw, rows="zero_initial", model="fixed", fixed_orders=[4, 2, 2, 6, 6])
+    run = tmp_path / "variant"
+    identify_study(cfg, run, ("indirect",), jobs=1, show_progress=False)
+    sweep_study(cfg, run)
+    stage1 = pq.read_table(run / "stage1.parquet").to_pylist()
+    assert {(r["na"], r["nb_ft"], r["nb_fd"], r["nk_ft"], r["nk_fd"]) for r in stage1} == {(4, 2, 2, 6, 6)}
+    handoff = pq.read_table(run / "handoff.parquet").to_pylist()
+    assert {(r["model"], r["stage"], r["signal"]) for r in handoff} == {
+        ("FB", "stage1", "e"),
+        ("FF", "stage1", "e"),
+    }
+    assert all(50.0 < r["vaf_noise_free"] <= 100.0 for r in handoff)
+    assert all(r["vaf_noise_free_record"] <= 100.0 for r in handoff)
+    assert "rows: zero_initial" in (run / "config.yaml").read_text()
+    data = compute_report(run)
+    facts = dict(data.sections["facts"])
+    assert (
+        "rows zero_initial, model fixed, fixed_orders (4, 2, 2, 6, 6)" in facts["indirect: stage stage1 grid"]
+    )
+    assert data.sections["handoff"] is not None

@@ -4,6 +4,7 @@ import shutil
 import struct
 import subprocess
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
@@ -104,20 +105,20 @@ def _verdict(report, claim):
 
 
 def test_verdict_flips_with_threshold_table(ci_run, tmp_path):
-    # The W_FP verdict follows from thresholds.parquet: put W_FP(direct) at the paper's
-    # 1.2e-2 and it holds; at 1e-4 (more than a factor 2 off) it does not.
+    # The W_FP verdict follows from thresholds.parquet (SPEC 9 rule since issue 13): with
+    # P(W_FP >= paper) = 0.5 the paper's value is consistent within sampling; with 0 it does not hold.
     run = tmp_path / "altered"
     shutil.copytree(ci_run, run)
     table = pq.read_table(run / "thresholds.parquet")
     rows = table.to_pylist()
-    for value, holds in ((1.2e-2, True), (1e-4, False)):
+    for p, holds in ((0.5, True), (0.0, False)):
         for r in rows:
             if r["method"] == "direct" and not r["has_feedforward"]:
-                r["w_fp"] = value
+                r["p_w_fp_at_paper"] = p
         pq.write_table(pa.Table.from_pylist(rows, schema=table.schema), run / "thresholds.parquet")
-        verdict = _verdict(build_report(run, tmp_path / f"out{value}"), "W_FP direct")
+        verdict = _verdict(build_report(run, tmp_path / f"out{p}"), "W_FP direct")
         assert verdict.holds is holds
-        assert f"{value:.3g}" in verdict.this_run
+        assert f"P(W_FP >= 0.012) = {p:.3g}" in verdict.this_run
 
 
 def test_partial_run_reports_what_is_there(tmp_path):
@@ -229,3 +230,85 @@ def test_paper_report_names_the_paper_experiment(report):
     text = report.markdown.read_text()
     assert "The paper's experiment" in text and "at the plant output: theta = Yc u + fd" in text
     assert "Verdicts" in text
+
+
+# --------------------------------------------------------------------------- sampling verdicts (SPEC 9)
+
+
+def _fb_thresholds(extents_by_method: dict, n_study: int = 50):
+    """thresholds rows as sweep-w writes them, from given per-realization L of FB."""
+    import pyarrow as pa
+
+    from hcid import paper, selection, tables
+
+    rows = []
+    for method, extents in extents_by_method.items():
+        rows.append(
+            {
+                "method": method,
+                "model": "FB",
+                "has_feedforward": False,
+                "n_realizations": len(extents),
+                "nf": 960,
+                "w_fp": float(max(extents)),
+                "w_fn": None,
+                "p_w_fp_at_paper": selection.threshold_exceedance(extents, paper.W_FP[method], n_study),
+            }
+        )
+    return pa.Table.from_pylist(rows, schema=tables.thresholds().arrow)
+
+
+def test_w_fp_verdict_by_the_sampling_rule(ci_config):
+    # Constructed per-realization L (200 FB realizations) whose answer is known:
+    # direct: 10 of 200 reach the paper's 0.012 -> P = 1 - 0.95^50 = 0.923: consistent within sampling;
+    # indirect: none reaches 0.037 (all L <= 0.0115) -> P = 0: does not hold, whatever the factor.
+    from hcid.report.verdicts import CONSISTENT, compute_verdicts
+
+    direct = np.concatenate([np.zeros(150), np.full(40, 0.005), np.full(10, 0.013)])
+    indirect = np.concatenate([np.zeros(186), np.full(14, 0.0115)])
+    th = _fb_thresholds({"direct": direct, "indirect": indirect})
+    verdicts = {v.claim: v for v in compute_verdicts(ci_config, None, None, th, None, None)}
+    d, i = verdicts["W_FP direct"], verdicts["W_FP indirect"]
+    assert d.holds is True and d.status_text == CONSISTENT
+    assert "P(W_FP >= 0.012) = 0.923" in d.this_run
+    assert i.holds is False and i.status_text == "does not hold"
+    assert "P(W_FP >= 0.037) = 0" in i.this_run
+    # A paper value far below every realization's L is implausible too: P = 1 > 0.975.
+    th = _fb_thresholds({"direct": np.full(200, 0.05), "indirect": indirect})
+    verdicts = {v.claim: v for v in compute_verdicts(ci_config, None, None, th, None, None)}
+    assert verdicts["W_FP direct"].holds is False
+
+
+def test_w_fn_verdict_by_the_bootstrap_interval(ci_config):
+    # The paper's 0.26 inside both methods' bootstrap intervals: consistent; outside one: does not hold.
+    from hcid import tables
+    from hcid.report.verdicts import CONSISTENT, compute_verdicts
+
+    def table(direct, indirect):
+        rows = [
+            {
+                "method": me,
+                "model": "FF",
+                "has_feedforward": True,
+                "n_realizations": 200,
+                "nf": 960,
+                "w_fp": None,
+                "w_fn": (lo + hi) / 2,
+                "w_fn_low": lo,
+                "w_fn_high": hi,
+                "p_w_fn_at_paper": p,
+            }
+            for me, (lo, hi, p) in (("direct", direct), ("indirect", indirect))
+        ]
+        return pa.Table.from_pylist(rows, schema=tables.thresholds().arrow)
+
+    def verdicts(th):
+        return {v.claim: v for v in compute_verdicts(ci_config, None, None, th, None, None)}
+
+    inside = verdicts(table((0.22, 0.30, 0.4), (0.2, 0.27, 0.1)))
+    for me in ("direct", "indirect"):
+        assert inside[f"FF mean nb_ft >= 2, {me}"].holds is True
+        assert inside[f"FF mean nb_ft >= 2, {me}"].status_text == CONSISTENT
+    assert "P*(W_FN >= 0.26) = 0.1" in inside["FF mean nb_ft >= 2, indirect"].this_run
+    outside = verdicts(table((0.22, 0.30, 0.4), (0.4, 0.6, 1.0)))["FF mean nb_ft >= 2, indirect"]
+    assert outside.holds is False and outside.status_text == "does not hold"

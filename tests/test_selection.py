@@ -75,3 +75,50 @@ def test_false_negative_threshold_is_first_mean_below_two():
     seg_b = selection.Segments(np.array([0, 1]), np.array([0.0, 0.3]), np.array([0.3, np.inf]))
     nb_a, nb_b = np.array([4, 1]), np.array([3, 0])
     assert selection.false_negative_threshold([seg_a, seg_b], [nb_a, nb_b]) == 0.3
+
+
+# --------------------------------------------------------------------------- sampling (SPEC 9)
+
+
+def _realization(w_from, nb):
+    """One realization selecting rows 0, 1, ... on [w_from[i], w_from[i+1]), with those nb_ft."""
+    w_from = np.asarray(w_from, dtype=float)
+    return selection.Segments(np.arange(w_from.size), w_from, np.append(w_from[1:], np.inf)), np.asarray(nb)
+
+
+def test_false_positive_extent_is_the_end_of_the_last_positive_interval():
+    # Positive on [0, 0.01) and again on [0.02, 0.05): L = 0.05; never positive: L = 0; W_FP = max L.
+    a = _realization([0.0, 0.01, 0.02, 0.05], [2, 0, 1, 0])
+    b = _realization([0.0], [0])
+    assert selection.false_positive_extent(*a) == 0.05
+    assert selection.false_positive_extent(*b) == 0.0
+    assert selection.false_positive_threshold([a[0], b[0]], [a[1], b[1]]) == 0.05
+
+
+def test_threshold_exceedance_is_one_minus_the_chance_that_no_realization_reaches_w():
+    # 200 realizations, 2 with L >= 0.037: q = 0.01, so a study of 50 has W_FP >= 0.037 with
+    # probability 1 - 0.99^50 = 0.39499 (exact formula); none with L >= 0.1: probability 0.
+    extents = np.concatenate([np.full(198, 0.008), [0.04, 0.05]])
+    assert selection.threshold_exceedance(extents, 0.037, 50) == pytest.approx(1 - 0.99**50, rel=1e-12)
+    assert selection.threshold_exceedance(extents, 0.1, 50) == 0.0
+    # at or above: L equal to w counts (W_FP is the supremum of the false-positive W)
+    assert selection.threshold_exceedance(extents, 0.05, 1) == pytest.approx(1 / 200)
+
+
+def test_false_negative_bootstrap_is_degenerate_for_identical_realizations_and_seeded():
+    # Every realization drops from nb_ft 2 to 0 at W = 0.3: every resample has W_FN = 0.3.
+    same = [_realization([0.0, 0.3], [2, 0]) for _ in range(10)]
+    boot = selection.false_negative_bootstrap([s for s, _ in same], [nb for _, nb in same])
+    assert (boot.low, boot.high) == (0.3, 0.3)
+    assert boot.share_at_or_above(0.26) == 1.0 and boot.share_at_or_above(0.31) == 0.0
+    # Half drop at 0.1, half at 0.5 (nb_ft 3 -> 0): the mean drops below 2 where the resample's
+    # share of early droppers exceeds 1/3; the interval lies between the two and is reproducible.
+    mixed = [_realization([0.0, 0.1], [3, 0]) for _ in range(20)] + [
+        _realization([0.0, 0.5], [3, 0]) for _ in range(20)
+    ]
+    segs, nbs = [s for s, _ in mixed], [nb for _, nb in mixed]
+    one = selection.false_negative_bootstrap(segs, nbs, seed=3)
+    two = selection.false_negative_bootstrap(segs, nbs, seed=3)
+    assert set(np.unique(one.values)) <= {0.1, 0.5}
+    np.testing.assert_array_equal(one.values, two.values)
+    assert selection.false_negative_threshold(segs, nbs) == 0.1  # mean 1.5 from W = 0.1 on

@@ -10,6 +10,7 @@ the criteria of :mod:`hcid.criteria`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from pathlib import Path
@@ -493,8 +494,22 @@ def _stage(data: Any, path: str, defaults: dict, timing: Timing, unit: str, give
     return StageConfig(grid=grid, estimation=estimation, validation=validation)
 
 
+def _stage_options(data: Any, path: str, options: dict) -> tuple[Any, tuple[tuple[str, Any], ...]]:
+    """Split a stage section's method-declared option keys off its grid and windows and check them.
+
+    Returns the rest of the section and the options whose value differs from
+    the default (so a config that states a default resolves like one that omits it).
+    """
+    if not options or not isinstance(data, dict):
+        return data, ()
+    rest = {k: v for k, v in data.items() if k not in options}
+    parsed = ((k, o.parse(data[k], f"{path}.{k}")) for k, o in options.items() if k in data)
+    return rest, tuple((k, v) for k, v in parsed if v != options[k].default)
+
+
 def _stage_raw(stage: StageConfig) -> dict:
     g = stage.grid
+    options = {k: list(v) if isinstance(v, tuple) else v for k, v in stage.options}
     return {
         "na": list(g.na),
         "nb1": list(g.nb1),
@@ -503,6 +518,7 @@ def _stage_raw(stage: StageConfig) -> dict:
         "nk2": list(g.nk2),
         "estimation": [stage.estimation.first, stage.estimation.last],
         "validation": [stage.validation.first, stage.validation.last],
+        **options,
     }
 
 
@@ -530,10 +546,11 @@ def _identify_section(top: Section, timing: Timing) -> IdentifyConfig:
             if isinstance(inherited, dict):
                 defaults.update(inherited)
                 given |= set(inherited)
-        data = s.get(name, _ABSENT)
+        data, options = _stage_options(s.get(name, _ABSENT), f"identify.{name}", spec.options)
         if isinstance(data, dict):
             given |= set(data)
-        stages.append((name, _stage(data, f"identify.{name}", defaults, timing, unit, given)))
+        stage = _stage(data, f"identify.{name}", defaults, timing, unit, given)
+        stages.append((name, dataclasses.replace(stage, options=options)))
     s.done()
     return IdentifyConfig(target_shift=target_shift, stages=tuple(stages))
 

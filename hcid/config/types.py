@@ -287,11 +287,17 @@ class Window:
 
 @dataclass(frozen=True)
 class StageConfig:
-    """One identification stage: its grid, estimation and validation windows."""
+    """One identification stage: its grid, estimation and validation windows.
+
+    ``options`` holds the stage's further keys (declared by its method,
+    :attr:`hcid.methods.StageSpec.options`) whose configured value differs from
+    the default, as ``(name, value)`` pairs; empty for the SPEC behaviour.
+    """
 
     grid: Grid
     estimation: Window
     validation: Window
+    options: tuple[tuple[str, Any], ...] = ()
 
 
 @dataclass(frozen=True)

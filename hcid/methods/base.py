@@ -15,25 +15,52 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from hcid.arx.engine import GridFit, best, fit_grid
 from hcid.config.types import Grid, IdentifyConfig, StageConfig
-from hcid.errors import IdentificationError
+from hcid.errors import ConfigError, IdentificationError
 
 __all__ = [
     "Method",
     "MethodResult",
     "StageChoice",
+    "StageOption",
     "StageSpec",
     "choose",
     "fit_stage",
+    "one_of",
     "refit",
     "shift_forward",
 ]
+
+
+@dataclass(frozen=True)
+class StageOption:
+    """A key of a stage's config section beyond its grid and windows (e.g. stage 1's ``rows``).
+
+    ``parse(value, key)`` checks a configured value and returns it as stored
+    (hashable: lists become tuples), raising :class:`hcid.errors.ConfigError`
+    that names ``key`` (the dotted path) otherwise. The default reproduces SPEC.
+    """
+
+    default: Any
+    parse: Callable[[Any, str], Any]
+    help: str = ""
+
+
+def one_of(*choices: str) -> Callable[[Any, str], str]:
+    """A :attr:`StageOption.parse` accepting one of the given words."""
+
+    def parse(value: Any, key: str) -> str:
+        if value not in choices:
+            raise ConfigError(f"{key}: must be one of {', '.join(choices)}, got {value!r}")
+        return value
+
+    return parse
 
 
 @dataclass(frozen=True)
@@ -53,17 +80,31 @@ class StageSpec:
     defaults_from : str or None
         A stage whose keys, as given in the config, override ``defaults``
         (stage 2 of the indirect method takes the direct method's grid).
+    options : mapping of str to StageOption
+        Further keys its config section may hold, with their defaults; the
+        config keeps the values that differ from the default
+        (:attr:`hcid.config.StageConfig.options`), read back with :meth:`option`.
     """
 
     name: str
     inputs: tuple[str, str, str]
     defaults: Mapping[str, Any]
     defaults_from: str | None = None
+    options: Mapping[str, StageOption] = field(default_factory=dict)
+
+    def option(self, stage: StageConfig, name: str) -> Any:
+        """The value of option ``name`` in a parsed stage: as configured, else its default."""
+        return dict(stage.options).get(name, self.options[name].default)
 
 
 @dataclass(frozen=True)
 class StageChoice:
-    """The model a non-final stage hands on: its structure, V and candidate counts."""
+    """The model a non-final stage hands on: its structure, V and candidate counts.
+
+    ``signal`` is its simulated output over the whole record, the signal it
+    hands on (e_r for the indirect method's stage 1); not tabulated with the
+    choice, but compared with the noise-free simulated signal where one is known.
+    """
 
     stage: str
     na: int
@@ -75,6 +116,7 @@ class StageChoice:
     n_candidates: int
     n_unstable: int
     seconds: float
+    signal: np.ndarray | None = field(default=None, repr=False, compare=False)
 
 
 @dataclass(frozen=True)
@@ -170,9 +212,9 @@ def fit_stage(stage: StageConfig, i1: np.ndarray, i2: np.ndarray, o: np.ndarray,
 
 
 def refit(
-    stage: StageConfig, choice: StageChoice, i1: np.ndarray, i2: np.ndarray, o: np.ndarray
+    choice: StageChoice, i1: np.ndarray, i2: np.ndarray, o: np.ndarray, estimation: slice, validation: slice
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(a, b1, b2)`` of a stage's chosen candidate, fitted again on the stage's windows.
+    """``(a, b1, b2)`` of a stage's chosen candidate, fitted again on the rows it was chosen on.
 
     The one candidate of ``choice`` is estimated alone (a one-point grid), which
     gives the grid fit's coefficients up to rounding (:func:`hcid.arx.fit_grid`,
@@ -191,7 +233,7 @@ def refit(
         nk1=(choice.nk1, choice.nk1),
         nk2=(choice.nk2, choice.nk2),
     )
-    fit = fit_grid(i1, i2, o, grid, stage.estimation.rows(), stage.validation.rows())
+    fit = fit_grid(i1, i2, o, grid, estimation, validation)
     v = float(fit.v[0])
     if not (np.isfinite(v) and abs(v - choice.v) <= 1e-6 * abs(choice.v)):
         raise IdentificationError(

@@ -51,6 +51,7 @@ def known_files() -> list[str]:
         tables.SIMULATIONS, tables.SIMULATION_SUMMARY, tables.MEASURED, tables.FRONTIER,
         tables.IDENTIFY_LOG, tables.SELECTION, tables.BREAKPOINTS, tables.thresholds(),
         tables.CALIBRATION, tables.RUN_LOG, tables.HC_PARAMETERS, tables.RESIDUALS,
+        tables.RATES, tables.HANDOFF,
     ]  # fmt: skip
     files = [s.file for s in schemas] + ["config.yaml", results.MANIFEST, LOCK]
     files += [tables.stage_choice(s.name, s.inputs).file for m in METHODS.values() for s in m.choice_stages]

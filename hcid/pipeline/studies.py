@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from hcid import criteria, methods, results, selection, tables
+from hcid import calibration, criteria, methods, paper, results, selection, tables
 from hcid.config import Config, IdentifyConfig
 from hcid.errors import ConfigError, DataError, IdentificationError
 from hcid.pipeline.parallel import parallel_map
@@ -91,13 +91,71 @@ def simulate_study(
 
 
 def _identify_task(
-    settings: IdentifyConfig, rate: float, model: str, seed: int, method: str, record: dict[str, np.ndarray]
+    settings: IdentifyConfig,
+    rate: float,
+    model: str,
+    seed: int,
+    method: str,
+    record: dict[str, np.ndarray],
+    noise_free: dict[str, np.ndarray] | None = None,
 ):
     result = methods.identify(record, settings, method, rate=rate, threads=1)
+    stages = methods.get(method).choice_stages
     worker = f"{socket.gethostname()}:{os.getpid()}"  # the process that ran it (log only)
-    return (model, seed, method), results.frontier_part(
-        model, seed, result, methods.get(method).choice_stages, worker
-    )
+    parts = results.frontier_part(model, seed, result, stages, worker)
+    if stages:
+        parts["handoff"] = handoff_part(
+            model, seed, methods.get(method), settings, result.choices, noise_free
+        )
+    return (model, seed, method), parts
+
+
+def handoff_part(model, seed, method, settings, choices, noise_free) -> pa.Table:
+    """VAF (%) of each handed-on signal against the noise-free simulated one.
+
+    A choosing stage's output (e for stage 1) simulated without remnant is what
+    its handed-on signal (e_r) estimates; measured data have none (NaN).
+    ``vaf_noise_free`` is taken over the rows the next stage fits and validates
+    on (what it uses), ``vaf_noise_free_record`` over the whole record, whose
+    first samples no stage-1 V looks at unless stage 1 fits from the first sample.
+    """
+    rows = []
+    for i, (spec, choice) in enumerate(zip(method.choice_stages, choices, strict=True)):
+        name = spec.inputs[2]
+        nxt = settings.stage(method.stages[i + 1].name)
+        used = slice(
+            min(nxt.estimation.first, nxt.validation.first) - 1, max(nxt.estimation.last, nxt.validation.last)
+        )
+        truth = None if noise_free is None else noise_free.get(name)
+        vaf = vaf_record = np.nan
+        if truth is not None and choice.signal is not None:
+            vaf = _vaf(truth[used], choice.signal[used])
+            vaf_record = _vaf(truth, choice.signal)
+        rows.append(
+            {
+                "model": model,
+                "seed": seed,
+                "method": method.name,
+                "stage": spec.name,
+                "signal": name,
+                "vaf_noise_free": vaf,
+                "vaf_noise_free_record": vaf_record,
+            }
+        )
+    return pa.Table.from_pylist(rows, schema=tables.HANDOFF.arrow)
+
+
+def _vaf(truth: np.ndarray, estimate: np.ndarray) -> float:
+    return float((1.0 - np.sum((truth - estimate) ** 2) / np.sum(truth**2)) * 100.0)
+
+
+def noise_free_records(config: Config) -> dict[str, dict[str, np.ndarray]]:
+    """Every model's record simulated without remnant (the same for every seed), by channel."""
+    out = {}
+    for m in config.models:
+        rec = simulate_realization(config, m, config.seeds[0], 0.0)
+        out[m.name] = {name: getattr(rec, name) for name in tables.SIGNALS}
+    return out
 
 
 @dataclass(frozen=True)
@@ -125,6 +183,7 @@ def _part_kinds() -> dict[str, dict[str, tables.Schema]]:
             "frontier": tables.FRONTIER,
             "log": tables.IDENTIFY_LOG,
             **{s.name: tables.stage_choice(s.name, s.inputs) for s in m.choice_stages},
+            **({"handoff": tables.HANDOFF} if m.choice_stages else {}),
         }
         for name, m in methods.METHODS.items()
     }
@@ -150,12 +209,16 @@ def _existing(run_dir: Path) -> dict[tuple[str, int, str], dict[str, pa.Table]]:
     for name, schema in _choice_schemas().items():
         table = results.read_optional(schema, run_dir, schema.key)
         choices[name] = tables.split_by_key(table, schema.key) if table is not None else {}
+    handoff = results.read_optional(tables.HANDOFF, run_dir)
+    handoffs = tables.split_by_key(handoff, key) if handoff is not None else {}
     out = {}
     for k, table in tables.split_by_key(frontier, key).items():
         method = methods.METHODS.get(k[2])
         if k not in logs or method is None:
             continue
         entry = {"frontier": table, "log": logs[k]}
+        if k in handoffs:
+            entry["handoff"] = handoffs[k]
         for stage in method.choice_stages:
             if k[:2] in choices[stage.name]:
                 entry[stage.name] = choices[stage.name][k[:2]]
@@ -250,8 +313,9 @@ def identify_study(
         done.update(results.read_parts(run_dir, _part_kinds()))
     record_config(config, run_dir)
     rate = config.timing.output_rate
+    noise_free = noise_free_records(config) if data_path is None else {}
     tasks = [
-        (config.identify, rate, model, seed, method, records[(model, seed)])
+        (config.identify, rate, model, seed, method, records[(model, seed)], noise_free.get(model))
         for model, seed in keys
         for method in names
         if (model, seed, method) not in done
@@ -281,6 +345,9 @@ def identify_study(
         if parts:
             choices[name] = tables.concat(parts)
             results.write(schema, choices[name], run_dir)
+    handoff = [done[k]["handoff"] for k in order if "handoff" in done[k]]
+    if handoff:
+        results.write(tables.HANDOFF, tables.concat(handoff), run_dir)
     results.clear_parts(run_dir)
     if tasks:
         results.append_run_log(run_dir, f"identify ({len(tasks)} tasks)", time.perf_counter() - start, jobs)
@@ -326,6 +393,7 @@ class SweepRun:
     thresholds: pa.Table
     criteria: tuple[criteria.Criterion, ...]
     run_dir: Path
+    rates: pa.Table | None = None
 
 
 @holds_run_dir(create=False)
@@ -334,8 +402,11 @@ def sweep_study(config: Config, run_dir: Path) -> SweepRun:
 
     Writes ``selection.parquet`` (one row per model, seed, method and W),
     ``breakpoints.parquet`` (the exact intervals of W over which each
-    selection holds) and ``thresholds.parquet`` (each configured criterion's W,
-    W_FP and W_FN per method and model, computed from the breakpoints).
+    selection holds), ``thresholds.parquet`` (each configured criterion's W,
+    W_FP and W_FN per method and model with their sampling uncertainty, and
+    the error rate at each criterion's W, computed from the breakpoints) and
+    ``rates.parquet`` (the false-positive rate of a model without feedforward,
+    the false-negative rate of one with it, over the W grid with exact 95% bands).
     """
     check_run_dir(config, run_dir, "select")
     frontier = results.read(
@@ -360,11 +431,13 @@ def sweep_study(config: Config, run_dir: Path) -> SweepRun:
     breakpoints_table = tables.concat(bp_parts)
     chosen = criteria.configured(config.selection.criteria)
     thresholds = _thresholds(config, chosen, segments, nb_ft)
+    rates = _rates(config, segments, nb_ft, w)
     record_config(config, run_dir)
     results.write(tables.SELECTION, selection_table, run_dir)
     results.write(tables.BREAKPOINTS, breakpoints_table, run_dir)
     results.write(tables.thresholds([c.column for c in chosen]), thresholds, run_dir)
-    return SweepRun(selection_table, breakpoints_table, thresholds, chosen, run_dir)
+    results.write(tables.RATES, rates, run_dir)
+    return SweepRun(selection_table, breakpoints_table, thresholds, chosen, run_dir, rates)
 
 
 def _selections(frontier: pa.Table, run_dir: Path) -> dict[tuple[str, int, str], tuple]:
@@ -393,6 +466,26 @@ def _rows_table(model, seed, method, w_columns: dict, cols: dict, rows: np.ndarr
     return pa.table(data)
 
 
+def _error(model) -> str:
+    """The error a model's realizations are judged for (SPEC 4): FB false positives, FF false negatives."""
+    return "false_negative" if model.has_feedforward else "false_positive"
+
+
+def _uncertainty(method: str, ff: bool, segs: list, nbs: list) -> dict:
+    """SPEC 9: P(W_FP >= the paper's) for a study of the paper's size; a bootstrap interval of W_FN."""
+    if not ff:
+        extents = [selection.false_positive_extent(s, nb) for s, nb in zip(segs, nbs, strict=True)]
+        ref = paper.W_FP.get(method)
+        p = None if ref is None else selection.threshold_exceedance(extents, ref, paper.N_REALIZATIONS)
+        return {"p_w_fp_at_paper": p}
+    boot = selection.false_negative_bootstrap(segs, nbs)
+    return {
+        "w_fn_low": boot.low,
+        "w_fn_high": boot.high,
+        "p_w_fn_at_paper": boot.share_at_or_above(paper.W_FN),
+    }
+
+
 def _thresholds(config: Config, chosen, segments: dict, nb_ft: dict) -> pa.Table:
     rows = []
     for model in config.models:
@@ -402,6 +495,10 @@ def _thresholds(config: Config, chosen, segments: dict, nb_ft: dict) -> pa.Table
                 continue
             nf = method.nf(config.identify)
             ff = model.has_feedforward
+            marks = {c.column: c.w(nf) for c in chosen}
+            at_marks = calibration.error_rates(
+                method.name, model.name, _error(model), segments[key], nb_ft[key], list(marks.values())
+            )
             rows.append(
                 {
                     "method": method.name,
@@ -409,12 +506,27 @@ def _thresholds(config: Config, chosen, segments: dict, nb_ft: dict) -> pa.Table
                     "has_feedforward": ff,
                     "n_realizations": len(segments[key]),
                     "nf": nf,
-                    **{c.column: c.w(nf) for c in chosen},
+                    **marks,
                     "w_fp": None if ff else selection.false_positive_threshold(segments[key], nb_ft[key]),
                     "w_fn": selection.false_negative_threshold(segments[key], nb_ft[key]) if ff else None,
+                    **_uncertainty(method.name, ff, segments[key], nb_ft[key]),
+                    **{tables.rate_column(c): float(r) for c, r in zip(marks, at_marks.rate, strict=True)},
                 }
             )
     return pa.Table.from_pylist(rows, schema=tables.thresholds([c.column for c in chosen]).arrow)
+
+
+def _rates(config: Config, segments: dict, nb_ft: dict, w: np.ndarray) -> pa.Table:
+    parts = []
+    for model in config.models:
+        for method in methods.METHODS:
+            key = (model.name, method)
+            if key in segments:
+                curve = calibration.error_rates(
+                    method, model.name, _error(model), segments[key], nb_ft[key], w
+                )
+                parts.append(curve.to_arrow())
+    return tables.concat(parts) if parts else tables.RATES.arrow.empty_table()
 
 
 # --------------------------------------------------------------------------- the whole study

@@ -21,6 +21,8 @@ __all__ = [
     "plot_errors",
     "plot_forcing_spectra",
     "plot_nb_ft",
+    "plot_rate_curves",
+    "plot_rates",
     "plot_signals",
     "plot_vaf",
     "save",
@@ -327,5 +329,63 @@ def plot_calibration(table, name: str, axes=None):
         )
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8, loc="center left")
+    fig.tight_layout()
+    return fig
+
+
+def plot_rates(table, marks: dict[str, float], name: str, axes=None):
+    """Error rates over W with exact 95% bands (``rates.parquet``), one panel per method: the
+    false-positive rate of each model without feedforward, the false-negative rate of each with it."""
+    methods = methods_in((None, m) for m in table.column("method").to_pylist())
+    fig, axes = _figure(axes, 1, len(methods), figsize=(5.8 * len(methods), 4.3))
+    rows = table.to_pylist()
+    colors = {"false_positive": "tab:red", "false_negative": "tab:purple"}
+    words = {"false_positive": "false-positive rate", "false_negative": "false-negative rate"}
+    for ax, method in zip(axes[0], methods, strict=True):
+        models = list(dict.fromkeys(x["model"] for x in rows if x["method"] == method))
+        for i, model in enumerate(models):
+            r = [x for x in rows if x["method"] == method and x["model"] == model]
+            w = np.array([x["w"] for x in r])
+            error = r[0]["error"]
+            color = colors.get(error, "0.3")
+            ax.step(
+                w,
+                [x["rate"] for x in r],
+                STYLES[i % 2],
+                where="post",
+                color=color,
+                label=f"{model}: {words.get(error, error)} (n = {r[0]['n']})",
+            )
+            ax.fill_between(
+                w, [x["low"] for x in r], [x["high"] for x in r], step="post", color=color, alpha=0.15
+            )
+        _w_lines(ax, {k: v for k, v in marks.items() if len(k.split()) == 1 or method in k.split()})
+        ax.set_xscale("log")
+        ax.set_ylim(-0.02, 1.02)
+        ax.set_xlabel("W (penalty per parameter, -)")
+        ax.set_ylabel("rate over realizations (-)")
+        ax.set_title(f"{name}: {method} method")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8, loc="center left")
+    fig.tight_layout()
+    return fig
+
+
+def plot_rate_curves(curves: dict[str, dict[str, np.ndarray]], marks: dict[str, float], title: str, ax=None):
+    """Several rate curves (``w``, ``rate``, ``low``, ``high`` each) with their bands on one log-W axis."""
+    fig, ax = _figure(ax, 1, 1, figsize=(8, 4.3))
+    ax = ax.ravel()[0]
+    for i, (label, c) in enumerate(curves.items()):
+        color = f"C{i % 10}"
+        ax.step(c["w"], c["rate"], where="post", color=color, label=label)
+        ax.fill_between(c["w"], c["low"], c["high"], step="post", color=color, alpha=0.12)
+    _w_lines(ax, marks)
+    ax.set_xscale("log")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_xlabel("W (penalty per parameter, -)")
+    ax.set_ylabel("false-positive rate (-)")
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
     fig.tight_layout()
     return fig

@@ -25,6 +25,8 @@ _READS = {
     "calibration": (tables.CALIBRATION, None),
     "hc_parameters": (tables.HC_PARAMETERS, None),
     "residuals": (tables.RESIDUALS, None),
+    "rates": (tables.RATES, None),
+    "handoff": (tables.HANDOFF, None),
 }
 
 
@@ -48,6 +50,8 @@ class RunTables:
     choices: dict[str, pa.Table]
     hc_parameters: pa.Table | None = None
     residuals: pa.Table | None = None
+    rates: pa.Table | None = None
+    handoff: pa.Table | None = None
 
     def simulations(self) -> dict | None:
         """The simulated records by (model, seed), or None without simulations."""

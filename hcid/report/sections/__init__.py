@@ -13,13 +13,27 @@ from hcid.report.sections import (
     data,
     experiment,
     facts,
+    handoff,
     hcfit,
+    rates,
     responses,
     simulation,
     verdicts,
 )
 
 #: The sections in report order; the verdicts appear only for the paper's experiment.
-SECTIONS = (facts, experiment, simulation, curves, responses, verdicts, calibration, data, hcfit)
+SECTIONS = (
+    facts,
+    experiment,
+    simulation,
+    curves,
+    rates,
+    responses,
+    handoff,
+    verdicts,
+    calibration,
+    data,
+    hcfit,
+)
 
 __all__ = ["SECTIONS"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from hcid import paper
+from hcid import paper, tables
 from hcid.report import compute as calc
 from hcid.report import figures
 from hcid.report.document import Doc
@@ -63,7 +63,12 @@ def render(data: CurvesData | None, doc: Doc) -> None:
         lambda: figures.plot_nb_ft(data.curves, data.threshold_marks),
     )
     if data.thresholds:
-        columns = [c for c in data.thresholds[0] if c.startswith("w_") and c not in ("w_fp", "w_fn")]
+        # The criteria's W columns (w_aic, ...), not the thresholds' sampling columns (w_fn_low, ...).
+        columns = [
+            c
+            for c in data.thresholds[0]
+            if c.startswith("w_") and c not in ("w_fp", "w_fn") and c not in tables.UNCERTAINTY_COLUMNS
+        ]
         doc.table(
             ["method", "model", "Nf", *(c.upper() for c in columns), "W_FP", "W_FN", "paper"],
             [

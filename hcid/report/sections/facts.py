@@ -21,6 +21,11 @@ def _versions() -> str:
     return ", ".join(out)
 
 
+def _options(spec, stage) -> str:
+    """A stage's options in effect, when any differs from its default (SPEC behaviour otherwise)."""
+    return "".join(f", {k} {spec.option(stage, k)}" for k in spec.options) if stage.options else ""
+
+
 def _range(r) -> str:
     return f"{r[0]}..{r[1]}"
 
@@ -41,7 +46,8 @@ def compute(run, done) -> list[list[str]]:
                 [
                     f"{method.name}: stage {spec.name} grid",
                     f"na {_range(g.na)}, nb_{i1} {_range(g.nb1)}, nb_{i2} {_range(g.nb2)}, "
-                    f"nk_{i1} {_range(g.nk1)}, nk_{i2} {_range(g.nk2)}",
+                    f"nk_{i1} {_range(g.nk1)}, nk_{i2} {_range(g.nk2)}"
+                    + _options(spec, config.identify.stage(spec.name)),
                 ]
             )
     w = config.selection.w_grid

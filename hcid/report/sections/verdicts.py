@@ -40,7 +40,7 @@ def render(data: tuple[bool, list[Verdict]] | None, doc: Doc) -> None:
                 v.claim,
                 v.paper,
                 v.this_run,
-                {True: "holds", False: "does not hold", None: "not evaluated"}[v.holds],
+                v.status_text,
                 v.rule,
             ]
             for v in verdicts
