@@ -14,7 +14,7 @@ from typing import Any
 
 from hcid.errors import HcidError
 
-__all__ = ["BACKENDS", "check_backend", "parallel_map"]
+__all__ = ["BACKENDS", "check_backend", "check_scheduler", "parallel_map"]
 
 BACKENDS = ("loky", "dask")
 
@@ -86,6 +86,14 @@ def _loky_stream(func, tasks, jobs) -> Iterator:
     return Parallel(n_jobs=jobs, backend="loky", return_as="generator")(
         delayed(func)(*task) for task in tasks
     )
+
+
+def check_scheduler(backend: str, scheduler: str | None, timeout: float = 60.0) -> None:
+    """Refuse, before any work, a dask scheduler that cannot be reached or has no worker."""
+    check_backend(backend)
+    if backend == "dask" and scheduler is not None:
+        with contextlib.ExitStack() as stack:
+            _client(scheduler, 1, timeout, stack)
 
 
 def _client(scheduler: str | None, jobs: int, timeout: float, stack: contextlib.ExitStack):

@@ -21,7 +21,7 @@ import pyarrow as pa
 from hcid import calibration, criteria, methods, paper, results, selection, tables
 from hcid.config import Config, IdentifyConfig
 from hcid.errors import ConfigError, DataError, IdentificationError
-from hcid.pipeline.parallel import parallel_map
+from hcid.pipeline.parallel import check_scheduler, parallel_map
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
 from hcid.simulate import remnant_gain, simulate_realization
 
@@ -287,6 +287,7 @@ def identify_study(
     names = tuple(methods.METHODS) if method_names is None else tuple(method_names)
     for name in names:
         methods.get(name)
+    check_scheduler(backend, scheduler, worker_timeout)  # refused before anything is read or written
     simulation = None
     if data_path is not None:
         data = _import_data(config, run_dir, data_path)

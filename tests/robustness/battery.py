@@ -503,7 +503,7 @@ def rundir_cases() -> list[Case]:
     def edited_config_yaml(tmp: Path) -> list[str]:
         _ready_run(tmp)
         path = tmp / "run" / "config.yaml"
-        path.write_text(path.read_text().replace("- 1\n", "- 7\n", 1))
+        path.write_text(path.read_text().replace("seeds:\n- 1\n", "seeds:\n- 7\n", 1))
         return ["report", str(tmp / "run")]
 
     def run_config_non_utf8(tmp: Path) -> list[str]:
