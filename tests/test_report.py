@@ -21,6 +21,7 @@ FIGURES = (
     "signals.png",
     "vaf_vs_w.png",
     "nb_ft_vs_w.png",
+    "rates_vs_w.png",
     "bode_FB_bic.png",
     "bode_FF_bic.png",
     "bode_FF_w047.png",

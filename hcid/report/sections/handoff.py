@@ -79,4 +79,17 @@ def render(data: HandoffData | None, doc: Doc) -> None:
         "record, whose first samples stage 1 does not fit unless it starts from the first sample. "
         "Stage options: " + ("; ".join(data.options) if data.options else "the SPEC 3 defaults") + "."
     )
-    doc.table(["method", "stage", "model", "signal", "n", "median VAF %", "5th pct %", "min %"], data.rows)
+    doc.table(
+        [
+            "method",
+            "stage",
+            "model",
+            "signal",
+            "n",
+            "median VAF %",
+            "5th pct %",
+            "min %",
+            "whole record, median VAF %",
+        ],
+        data.rows,
+    )
