@@ -26,7 +26,6 @@ FIGURES = (
     "bode_FF_bic.png",
     "bode_FF_w047.png",
     "errors_bic.png",
-    "rates_vs_w.png",
 )
 
 
