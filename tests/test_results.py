@@ -80,7 +80,9 @@ def test_stage_choice_schema_names_its_inputs():
 
 def test_thresholds_schema_takes_the_criteria_columns():
     schema = tables.thresholds(["w_aic", "w_mbic"])
-    assert "w_mbic" in schema.names and schema.optional == ("w_aic", "w_mbic")
+    assert "w_mbic" in schema.names and schema.optional[:2] == ("w_aic", "w_mbic")
+    # Issue 13's sampling columns and rates at the criteria are optional too: older tables read.
+    assert set(tables.UNCERTAINTY_COLUMNS) | {"rate_at_w_aic", "rate_at_w_mbic"} == set(schema.optional[2:])
     row = {"method": "direct", "model": "FB", "has_feedforward": False, "n_realizations": 1}
     row.update(nf=960, w_fp=0.1, w_fn=None)
     old = pa.Table.from_pylist([row], schema=tables.thresholds().arrow)  # no criterion column

@@ -359,7 +359,9 @@ def plot_rates(table, marks: dict[str, float], name: str, axes=None):
             ax.fill_between(
                 w, [x["low"] for x in r], [x["high"] for x in r], step="post", color=color, alpha=0.15
             )
-        _w_lines(ax, {k: v for k, v in marks.items() if len(k.split()) == 1 or method in k.split()})
+        # Marks of this method, and marks shared by every method (no method named in the label).
+        mine = {k: v for k, v in marks.items() if method in k.split() or not set(k.split()) & set(METHODS)}
+        _w_lines(ax, mine)
         ax.set_xscale("log")
         ax.set_ylim(-0.02, 1.02)
         ax.set_xlabel("W (penalty per parameter, -)")
