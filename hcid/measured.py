@@ -66,7 +66,7 @@ def _read_mat(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
 
     try:
         mat = scipy.io.loadmat(path)
-    except (ValueError, OSError, NotImplementedError, TypeError) as exc:
+    except Exception as exc:  # noqa: BLE001 (a damaged file makes scipy's reader raise almost anything)
         raise DataError(f"{path}: not a readable MATLAB file ({str(exc).splitlines()[0][:80]})") from exc
     out = {}
     for name, var in wanted.items():
