@@ -112,7 +112,10 @@ def _limit():
 def run_case(case: Case, keep: bool = False) -> tuple[bool, str, float]:
     tmp = Path(tempfile.mkdtemp(prefix="hcid-battery-"))
     try:
-        argv = case.setup(tmp)
+        try:
+            argv = case.setup(tmp)
+        except Exception as exc:  # noqa: BLE001 (a broken case is reported, not a crash of the battery)
+            return False, f"setup failed: {type(exc).__name__}: {str(exc)[:150]}", 0.0
         before = _digest_tree(tmp / "run")
         env = dict(os.environ, OPENBLAS_NUM_THREADS="1", PYTHONWARNINGS="default")
         start = time.perf_counter()
@@ -189,7 +192,7 @@ def config_cases() -> list[Case]:
         cases.append(Case(f"unknown key under {'.'.join(path)}", _simulate(data), "refused"))
     grid_bad = [("na", [0, 3]), ("na", [3, 1]), ("nb1", [0, 100]), ("nk1", [-1, 3]), ("nk2", "x"),
                 ("estimation", [0, 10]), ("estimation", [1, 5000]), ("validation", [2048, 2048]),
-                ("validation", "all"), ("na", [1, 30])]  # fmt: skip
+                ("validation", "all")]  # fmt: skip
     for key, value in grid_bad:
         cases.append(
             Case(
@@ -198,6 +201,14 @@ def config_cases() -> list[Case]:
                 "refused",
             )
         )  # noqa: E501
+    cases.append(
+        Case(
+            "identify.direct.na = [1, 30] (valid)",
+            _simulate(_mutated(("identify", "direct", "na"), [1, 30])),
+            "accepted",
+            ("simulations.parquet",),
+        )
+    )
     cases += [
         Case("identify.direct null", _simulate(_mutated(("identify", "direct"), None)), "refused"),
         Case("identify.stage1 a list", _simulate(_mutated(("identify", "stage1"), [1, 2])), "refused"),
@@ -378,12 +389,7 @@ def config_cases() -> list[Case]:
             "accepted",
             ("simulations.parquet", "config.yaml", "hcid-run.json"),
         ),
-        Case(
-            "'$' in the name, report",
-            _study_and_report(_mutated(("name",), "a$b$c")),
-            "accepted",
-            ("report/report.md",),
-        ),  # noqa: E501
+        Case("'$' in the name", _simulate(_mutated(("name",), "a$b$c")), "refused"),
     ]
     return cases
 
@@ -399,16 +405,6 @@ def _bytes(tmp: Path, data: bytes) -> Path:
     path = tmp / "c.yaml"
     path.write_bytes(data)
     return path
-
-
-def _study_and_report(data):
-    def setup(tmp: Path) -> list[str]:
-        config = _write_config(tmp, data)
-        subprocess.run([*HCID, "run", str(config), "--run", str(tmp / "run"), "--quiet", "--jobs", "1"], cwd=tmp,
-                       check=True, capture_output=True)  # fmt: skip
-        return ["report", str(tmp / "run")]
-
-    return setup
 
 
 # --------------------------------------------------------------------------- run directory cases
@@ -831,6 +827,7 @@ def main() -> int:
     parser.add_argument("--only", default="")
     parser.add_argument("--list", action="store_true")
     parser.add_argument("--keep", action="store_true")
+    parser.add_argument("--start", type=int, default=1, help="first case number (to resume a long battery)")
     args = parser.parse_args()
     cases = [c for c in all_cases() if args.only in c.name]
     if args.list:
@@ -842,6 +839,8 @@ def main() -> int:
     failures = []
     start = time.perf_counter()
     for i, case in enumerate(cases, 1):
+        if i < args.start:
+            continue
         handled, verdict, seconds = run_case(case, args.keep)
         ok += handled
         refused += handled and verdict.startswith("refused")
@@ -850,8 +849,9 @@ def main() -> int:
         print(f"{i:4d} {mark} {seconds:6.1f} s  {case.name:<48.48} {verdict[:110]}", flush=True)
         if not handled:
             failures.append(case.name)
+    ran = len(cases) - args.start + 1
     print(
-        f"\n{ok} of {len(cases)} cases handled ({refused} refused in one line, {accepted} accepted); "
+        f"\n{ok} of {ran} cases handled ({refused} refused in one line, {accepted} accepted); "
         f"{len(failures)} not handled; {time.perf_counter() - start:.0f} s"
     )
     for name in failures:
