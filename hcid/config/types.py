@@ -123,12 +123,12 @@ class Multisine:
 
     @property
     def band(self) -> tuple[float, float]:
-        """Lowest and highest disturbance frequency (rad/s): where identified models are
+        """Lowest and highest frequency (rad/s); for the disturbance, where identified models are
         expected to be accurate (SPEC 5: 0.23..17.33 rad/s for the paper's 20 sines).
 
         Examples
         --------
-        >>> Disturbance(81.92, 8.09, (3, 226), (1.0, 1.0), (0.0, 0.0)).band
+        >>> Multisine(81.92, 8.09, (3, 226), (1.0, 1.0), (0.0, 0.0)).band
         (0.23009711818284617, 17.333982903107746)
         """
         base = 2.0 * math.pi / self.base_period
