@@ -128,7 +128,7 @@ class Multisine:
 
         Examples
         --------
-        >>> Disturbance(81.92, 8.09, (3, 226), (1.0, 1.0), (0.0, 0.0)).band
+        >>> Multisine(81.92, 8.09, (3, 226), (1.0, 1.0), (0.0, 0.0)).band
         (0.23009711818284617, 17.333982903107746)
         """
         base = 2.0 * math.pi / self.base_period
