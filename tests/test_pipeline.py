@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+import yaml
 from typer.testing import CliRunner
 
 from hcid import pipeline, selection, tables
@@ -171,19 +172,25 @@ def _dask_worker(address: str) -> subprocess.Popen:
 def test_dask_all_workers_lost_fails_in_one_line_within_the_timeout(ci_runs, tmp_path):
     # Two workers without nannies on a loopback scheduler; both are killed (-9) once the
     # first task is done: hcid must end with one line within --worker-timeout (plus polling).
+    # The tasks fit the paper's grids (SPEC 3: ~1.4 s each on one core, 12 tasks), so that
+    # most are still pending at the kill however fast the machine is.
     distributed = pytest.importorskip("dask.distributed")
     run = tmp_path / "lost"
     run.mkdir()
     for name in ("simulations.parquet", "config.yaml"):
         shutil.copy(ci_runs[1] / name, run / name)
+    raw = yaml.safe_load(CI_CONFIG.read_text())
+    raw["identify"] = {"target_shift": raw["identify"]["target_shift"]}  # the paper's grids
+    config = tmp_path / "ci_paper_grids.yaml"
+    config.write_text(yaml.safe_dump(raw))
     with distributed.LocalCluster(
         n_workers=0, processes=True, dashboard_address=None, host="127.0.0.1"
     ) as cluster:
         workers = [_dask_worker(cluster.scheduler_address) for _ in range(2)]
         try:
-            cmd = [str(Path(sys.executable).parent / "hcid"), "identify", str(CI_CONFIG), "--run", str(run),
+            cmd = [str(Path(sys.executable).parent / "hcid"), "identify", str(config), "--run", str(run),
                    "--backend", "dask", "--scheduler", cluster.scheduler_address, "--worker-timeout", "8",
-                   "--quiet"]  # fmt: skip
+                   "--force", "--quiet"]  # fmt: skip
             proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
             deadline = time.monotonic() + 240
             while not list((run / ".parts").glob("*/*.log.parquet")) and time.monotonic() < deadline:
