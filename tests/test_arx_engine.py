@@ -584,7 +584,8 @@ def test_pruned_frontier_equals_the_old_kernel_on_random_records(seed):
     o = lfilter([0, 0, 0.4, 0.2], [1, -1.2, 0.5], i1) + lfilter([0, 0.3], [1, -0.6], i2)
     o += 0.3 * rng.standard_normal(n)
     na_hi, nb1_hi, nb2_hi = (int(x) for x in rng.integers(2, 4, 3))
-    grid = Grid(na=(1, na_hi), nb1=(0, nb1_hi), nb2=(0, nb2_hi), nk1=(0, 3), nk2=(1, 3))
+    # 24 delay pairs: more than one batch of lanes, so the later ones are pruned.
+    grid = Grid(na=(1, na_hi), nb1=(0, nb1_hi), nb2=(0, nb2_hi), nk1=(0, 5), nk2=(1, 4))
     rows = (slice(20, 200), slice(int(rng.integers(150, 250)), n))
     pruned, counts = _fit_grid(i1, i2, o, grid, *rows, 1, False, legacy=False)
     old = _legacy(i1, i2, o, grid, *rows, keep_candidates=True)

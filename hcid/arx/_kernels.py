@@ -23,11 +23,20 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from hcid.arx import _simd
+
 # Samples simulated between two finiteness checks.
 _BLOCK = 256
 # Samples of one step of simulate_lanes: input part, recursion, then a
 # pruning check on the validation rows.
 _CHUNK = 128
+# Lanes of simulate_wide, and the values past the record its input step
+# reads (a chunk's input part is computed in whole quadruples of samples).
+LANES = _simd.LANES
+TAIL = 3
+# The vector steps are LLVM IR: without the JIT, every block takes the
+# plain four-lane path (simulate_lanes), the vector path's twin.
+_WIDE = not numba.config.DISABLE_JIT
 
 
 @njit(cache=True)
@@ -177,6 +186,37 @@ def simulate_into(a, na, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, x, yp, ypad)
         if not abs(y1) < np.inf:
             return stop
     return n
+
+
+@njit(cache=True)
+def simulate_rows(theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, out):
+    """Simulate many models with :func:`simulate_into`, one row of ``out`` each.
+
+    Row r is the model ``theta[r] = [a1..a_na, b1_0.., b2_0..]`` (orders
+    ``na[r]``, ``nb1[r]``, ``nb2[r]``; delays ``nk1[r]``, ``nk2[r]``); its
+    output is exactly :func:`hcid.arx.engine.simulate`'s, NaN from the end
+    of the first block that is not finite on.
+    """
+    n = out.shape[1]
+    x = np.empty(n)
+    most = 2
+    for r in range(out.shape[0]):
+        most = max(most, na[r])
+    yp = np.empty(most + n)
+    a = np.empty(most + 1)
+    for r in range(out.shape[0]):
+        k = na[r]
+        a[0] = 1.0
+        a[2] = 0.0
+        for i in range(k):
+            a[i + 1] = theta[r, i]
+        b1 = theta[r, k : k + max(nb1[r], 1)]
+        b2 = theta[r, k + nb1[r] : k + nb1[r] + max(nb2[r], 1)]
+        for i in range(k):
+            yp[i] = 0.0
+        done = simulate_into(a, k, b1, nb1[r], nk1[r], b2, nb2[r], nk2[r], i1p, i2p, pad, x, yp, k)
+        for i in range(n):
+            out[r, i] = yp[k + i] if i < done else np.nan
 
 
 @njit(cache=True)
@@ -603,6 +643,79 @@ def _finite_or_inf(v):
 
 
 @njit(cache=True)
+def simulate_wide(
+    coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, i1p, i2p, pad, o, val_start, val_stop, bound,
+    off1, off2, xt, yh, eacc, v_out, pruned,
+):  # fmt: skip
+    """:func:`simulate_lanes` for ``LANES`` lanes, on explicit vectors (:mod:`hcid.arx._simd`).
+
+    Lanes ``0 .. n_lanes - 1`` are candidates laid out as in
+    :func:`simulate_lanes` with ``LANES`` for 4 (``coef[i * LANES + l]``,
+    ``b1[l]``, ``nk1[l]``, ...); the others must hold ``a = [1, 0, ...]``,
+    zero B and zero delays and are ignored. Same arithmetic per lane, same
+    pruning rule and chunks, so V (or a pruned lane's lower bound) is
+    bit-identical to :func:`simulate_lanes`'. Requires ``na <= _simd.MAX_NA``
+    and inputs with ``TAIL`` readable values after the record.
+
+    Scratch: ``off1``, ``off2`` int64 (LANES,); ``xt`` (_CHUNK * LANES,);
+    ``yh`` ((max(na, 2) + _CHUNK) * LANES,), the last rows of one chunk
+    moved to its top for the next; ``eacc`` (4 * LANES,).
+    """
+    n = o.shape[0]
+    n_val = val_stop - val_start
+    quad_end = val_start + 4 * (n_val // 4)
+    h = max(na, 2)
+    for k in range(h * LANES):
+        yh[k] = 0.0
+    for k in range(4 * LANES):
+        eacc[k] = 0.0
+    live = np.zeros(LANES, dtype=np.bool_)
+    for lane in range(n_lanes):
+        live[lane] = True
+        v_out[lane] = np.inf
+        pruned[lane] = False
+    n_live = n_lanes
+    k0 = 0
+    while k0 < n:
+        r = (val_start - k0) % _CHUNK
+        k1 = min(k0 + (r if r > 0 else _CHUNK), n)
+        m = k1 - k0
+        for lane in range(LANES):
+            off1[lane] = pad - nk1[lane] + k0
+            off2[lane] = pad - nk2[lane] + k0
+        _simd.lane_inputs(b1, nb1, off1, i1p, b2, nb2, off2, i2p, (m + 3) // 4 * 4, xt)
+        _simd.lane_recursion(coef, na, xt, m, yh, h, o, k0, val_start, val_stop, quad_end, eacc)
+        last = (h + m - 1) * LANES
+        for lane in range(n_lanes):
+            if live[lane] and not abs(yh[last + lane]) < np.inf:
+                live[lane] = False
+                n_live -= 1
+        if k1 > val_start and k1 < n:
+            for lane in range(n_lanes):
+                if live[lane]:
+                    p = _partial_v(eacc, lane, n_val)
+                    if p < np.inf and p > bound:
+                        v_out[lane] = p
+                        pruned[lane] = True
+                        live[lane] = False
+                        n_live -= 1
+            if n_live == 0:
+                return k1
+        for k in range(h * LANES):
+            yh[k] = yh[m * LANES + k]
+        k0 = k1
+    for lane in range(n_lanes):
+        if live[lane]:
+            v_out[lane] = _finite_or_inf(_partial_v(eacc, lane, n_val))
+    return n
+
+
+@njit(cache=True)
+def _partial_v(eacc, lane, n_val):
+    return ((eacc[lane] + eacc[LANES + lane]) + (eacc[2 * LANES + lane] + eacc[3 * LANES + lane])) / n_val
+
+
+@njit(cache=True)
 def _simulate_block(
     row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
     val_start, val_stop, prune, v_all, counts,
@@ -610,10 +723,13 @@ def _simulate_block(
     """Simulate the stable candidates of one order triple (one candidate block).
 
     Candidates waiting with ``v_all = NaN`` (stable, see :func:`_fit_unit`)
-    run four at a time, best prediction error first: the first four in full,
-    which makes ``bound``, the best V so far, tight at once; the others
-    stop as soon as their partial V exceeds it (``prune``). ``counts[row]``
-    receives the numbers simulated in full and pruned, and the work done.
+    run ``LANES`` at a time (:func:`simulate_wide`; four at a time with
+    :func:`simulate_lanes` without the JIT or above ``_simd.MAX_NA``), best
+    prediction error first: the first batch (the remainder of the division
+    into batches) in full, which makes ``bound``, the best V so far, tight
+    at once; the others stop as soon as their partial V exceeds it
+    (``prune``). ``counts[row]`` receives the numbers
+    simulated in full and pruned, and the work done.
     """
     na, nb1, nb2 = block_orders[row, 0], block_orders[row, 1], block_orders[row, 2]
     start, size = block_start[row], block_size[row]
@@ -631,24 +747,50 @@ def _simulate_block(
     if m == 0:
         return
     order = np.argsort(keys[:m], kind="mergesort")
-    coef = np.zeros((max(na, 2) + 1) * 4)
-    b1 = np.zeros((4, max(nb1, 1)))
-    b2 = np.zeros((4, max(nb2, 1)))
-    nk1 = np.zeros(4, dtype=np.int64)
-    nk2 = np.zeros(4, dtype=np.int64)
-    lanes = np.empty(4, dtype=np.int64)
-    xs = np.empty((4, _CHUNK))
-    yh = np.empty((na + n) * 4)
-    v4 = np.empty(4)
-    pruned = np.empty(4, dtype=np.bool_)
+    wide = _WIDE and na <= _simd.MAX_NA
+    width = LANES if wide else 4
+    h = max(na, 2)
+    coef = np.zeros((h + 1) * width)
+    b1 = np.zeros((width, max(nb1, 1)))
+    b2 = np.zeros((width, max(nb2, 1)))
+    nk1 = np.zeros(width, dtype=np.int64)
+    nk2 = np.zeros(width, dtype=np.int64)
+    lanes = np.empty(width, dtype=np.int64)
+    v = np.empty(width)
+    pruned = np.empty(width, dtype=np.bool_)
+    if wide:
+        off1 = np.empty(LANES, dtype=np.int64)
+        off2 = np.empty(LANES, dtype=np.int64)
+        xt = np.empty(_CHUNK * LANES)
+        yh = np.empty((h + _CHUNK) * LANES)
+        eacc = np.empty(4 * LANES)
+    else:
+        xs = np.empty((4, _CHUNK))
+        yh = np.empty((na + n) * 4)
     bound = np.inf
     n_full = 0
     n_pruned = 0
     samples = 0
-    for first in range(0, m, 4):
-        for lane in range(4):
-            # A short last batch repeats its first candidate in the idle lanes.
-            pick = first + lane if first + lane < m else first
+    # The fewest batches; the first takes the remainder, so that every
+    # later batch is full and runs against a bound.
+    first = 0
+    used = m - (m - 1) // width * width
+    while first < m:
+        for lane in range(width):
+            if lane >= used and wide:
+                # An idle vector lane: a = [1, 0, ...], no input; ignored.
+                coef[lane] = 1.0
+                for i in range(h):
+                    coef[(i + 1) * width + lane] = 0.0
+                for j in range(nb1):
+                    b1[lane, j] = 0.0
+                for j in range(nb2):
+                    b2[lane, j] = 0.0
+                nk1[lane] = 0
+                nk2[lane] = 0
+                continue
+            # A short first batch of four repeats its first candidate in the idle lanes.
+            pick = first + lane if lane < used else first
             c = waiting[order[pick]]
             lanes[lane] = c
             within = c - start
@@ -656,25 +798,32 @@ def _simulate_block(
             nk2[lane] = nk2_lo + within % n_d2 if nb2 > 0 else 0
             coef[lane] = 1.0
             for i in range(na):
-                coef[(i + 1) * 4 + lane] = theta_all[c, i]
+                coef[(i + 1) * width + lane] = theta_all[c, i]
             for j in range(nb1):
                 b1[lane, j] = theta_all[c, na + j]
             for j in range(nb2):
                 b2[lane, j] = theta_all[c, na + nb1 + j]
-        done = simulate_lanes(
-            coef, na, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, o, val_start, val_stop,
-            bound, xs, yh, v4, pruned,
-        )  # fmt: skip
-        used = min(4, m - first)
+        if wide:
+            done = simulate_wide(
+                coef, na, b1, nb1, nk1, b2, nb2, nk2, used, i1p, i2p, pad, o, val_start, val_stop,
+                bound, off1, off2, xt, yh, eacc, v, pruned,
+            )  # fmt: skip
+        else:
+            done = simulate_lanes(
+                coef, na, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, o, val_start, val_stop,
+                bound, xs, yh, v, pruned,
+            )  # fmt: skip
         samples += done * used
         for lane in range(used):
-            v_all[lanes[lane]] = v4[lane]
+            v_all[lanes[lane]] = v[lane]
             if pruned[lane]:
                 n_pruned += 1
             else:
                 n_full += 1
-            if prune and v4[lane] < bound:
-                bound = v4[lane]
+            if prune and v[lane] < bound:
+                bound = v[lane]
+        first += used
+        used = width
     counts[row, 0] = n_full
     counts[row, 1] = n_pruned
     counts[row, 2] = samples

@@ -150,7 +150,8 @@ def _rows(name: str, rows: slice, n: int) -> tuple[int, int]:
 
 
 def _padded(x: np.ndarray, pad: int) -> np.ndarray:
-    return np.concatenate((np.zeros(pad), x))
+    # TAIL zeros after the record: the vector input step reads whole quadruples.
+    return np.concatenate((np.zeros(pad), x, np.zeros(_kernels.TAIL)))
 
 
 def _record_factor(i1p, i2p, o, grid: Grid, pad: int, start: int, stop: int) -> np.ndarray:
@@ -359,10 +360,6 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
     nk1 = np.where(fitted, cand_nk1[first], -1)
     nk2 = np.where(fitted, cand_nk2[first], -1)
     a_rows, b1_rows, b2_rows = [], [], []
-    vaf_est = np.full(start.size, np.nan)
-    vaf_val = np.full(start.size, np.nan)
-    est = slice(est_start, est_stop)
-    val = slice(val_start, val_stop)
     for row in range(start.size):
         if not fitted[row]:
             a_rows.append(np.empty(0))
@@ -371,15 +368,20 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
             continue
         na, nb1 = block_na[row], block_nb1[row]
         theta = theta_all[first[row]]
-        a = np.concatenate(([1.0], theta[:na]))
-        b1 = theta[na : na + nb1].copy()
-        b2 = theta[na + nb1 : na + nb1 + block_nb2[row]].copy()
-        a_rows.append(a)
-        b1_rows.append(b1)
-        b2_rows.append(b2)
-        o_hat = _simulate(a, b1, b2, int(nk1[row]), int(nk2[row]), i1, i2)
-        vaf_est[row] = _vaf(o[est], o_hat[est])
-        vaf_val[row] = _vaf(o[val], o_hat[val])
+        a_rows.append(np.concatenate(([1.0], theta[:na])))
+        b1_rows.append(theta[na : na + nb1].copy())
+        b2_rows.append(theta[na + nb1 : na + nb1 + block_nb2[row]].copy())
+    # VAF from the frontier rows' outputs, simulated as simulate() does.
+    rows = np.flatnonzero(fitted)
+    o_hat = np.empty((rows.size, n))
+    _kernels.simulate_rows(
+        theta_all[first[rows]], block_na[rows], block_nb1[rows], block_nb2[rows],
+        np.maximum(nk1[rows], 0), np.maximum(nk2[rows], 0), i1p, i2p, pad, o_hat,
+    )  # fmt: skip
+    vaf_est = np.full(start.size, np.nan)
+    vaf_val = np.full(start.size, np.nan)
+    vaf_est[rows] = _vaf(o[est_start:est_stop], o_hat[:, est_start:est_stop])
+    vaf_val[rows] = _vaf(o[val_start:val_stop], o_hat[:, val_start:val_stop])
 
     table = None
     if keep_candidates:
@@ -426,9 +428,12 @@ def _threads(threads) -> int:
     return min(threads, _kernels.max_threads())
 
 
-def _vaf(o: np.ndarray, o_hat: np.ndarray) -> float:
+def _vaf(o: np.ndarray, o_hat: np.ndarray) -> np.ndarray:
+    """VAF (percent) of each row of ``o_hat`` against ``o``; each row's sums
+    are numpy's pairwise sums over that row alone, as for a 1-D array."""
+    o_hat = np.ascontiguousarray(o_hat)
     with np.errstate(divide="ignore", invalid="ignore"):  # o = 0 on the rows: NaN
-        return float((1.0 - np.sum((o - o_hat) ** 2) / np.sum(o**2)) * 100.0)
+        return (1.0 - np.sum((o - o_hat) ** 2, axis=-1) / np.sum(o**2)) * 100.0
 
 
 def simulate(a, b1, b2, nk1: int, nk2: int, i1, i2) -> np.ndarray:
