@@ -33,7 +33,7 @@ _CHUNK = 128
 # Lanes of simulate_wide, and the values past the record its input step
 # reads (a chunk's input part is computed in whole quadruples of samples).
 LANES = _simd.LANES
-TAIL = 3
+TAIL = _simd.SAMPLES - 1
 # The vector steps are LLVM IR: without the JIT, every block takes the
 # plain four-lane path (simulate_lanes), the vector path's twin.
 _WIDE = not numba.config.DISABLE_JIT
@@ -189,22 +189,26 @@ def simulate_into(a, na, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, x, yp, ypad)
 
 
 @njit(cache=True)
-def simulate_rows(theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, out):
-    """Simulate many models with :func:`simulate_into`, one row of ``out`` each.
+def squared_errors(theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, o, est_start, val_start, err_est, err_val):
+    """Squared simulation errors of many models on two windows, for their VAF.
 
     Row r is the model ``theta[r] = [a1..a_na, b1_0.., b2_0..]`` (orders
-    ``na[r]``, ``nb1[r]``, ``nb2[r]``; delays ``nk1[r]``, ``nk2[r]``); its
-    output is exactly :func:`hcid.arx.engine.simulate`'s, NaN from the end
-    of the first block that is not finite on.
+    ``na[r]``, ``nb1[r]``, ``nb2[r]``; delays ``nk1[r]``, ``nk2[r]``),
+    simulated by :func:`simulate_into` as :func:`hcid.arx.engine.simulate`
+    does (NaN from the end of the first block that is not finite on);
+    ``err_est[r, i] = (o[k] - o_hat[k])^2`` for ``k = est_start + i``, and
+    ``err_val`` likewise from ``val_start``: the elements numpy's
+    ``(o - o_hat) ** 2`` would give, bit for bit.
     """
-    n = out.shape[1]
+    n = o.shape[0]
     x = np.empty(n)
+    y = np.empty(n)
     most = 2
-    for r in range(out.shape[0]):
+    for r in range(theta.shape[0]):
         most = max(most, na[r])
     yp = np.empty(most + n)
     a = np.empty(most + 1)
-    for r in range(out.shape[0]):
+    for r in range(theta.shape[0]):
         k = na[r]
         a[0] = 1.0
         a[2] = 0.0
@@ -216,7 +220,13 @@ def simulate_rows(theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, out):
             yp[i] = 0.0
         done = simulate_into(a, k, b1, nb1[r], nk1[r], b2, nb2[r], nk2[r], i1p, i2p, pad, x, yp, k)
         for i in range(n):
-            out[r, i] = yp[k + i] if i < done else np.nan
+            y[i] = yp[k + i] if i < done else np.nan
+        for i in range(err_est.shape[1]):
+            d = o[est_start + i] - y[est_start + i]
+            err_est[r, i] = d * d
+        for i in range(err_val.shape[1]):
+            d = o[val_start + i] - y[val_start + i]
+            err_val[r, i] = d * d
 
 
 @njit(cache=True)
@@ -683,7 +693,8 @@ def simulate_wide(
         for lane in range(LANES):
             off1[lane] = pad - nk1[lane] + k0
             off2[lane] = pad - nk2[lane] + k0
-        _simd.lane_inputs(b1, nb1, off1, i1p, b2, nb2, off2, i2p, (m + 3) // 4 * 4, xt)
+        steps = (m + TAIL) // _simd.SAMPLES * _simd.SAMPLES
+        _simd.lane_inputs(b1, nb1, off1, i1p, b2, nb2, off2, i2p, steps, xt)
         _simd.lane_recursion(coef, na, xt, m, yh, h, o, k0, val_start, val_stop, quad_end, eacc)
         last = (h + m - 1) * LANES
         for lane in range(n_lanes):
@@ -774,7 +785,7 @@ def _simulate_block(
     # The fewest batches; the first takes the remainder, so that every
     # later batch is full and runs against a bound.
     first = 0
-    used = m - (m - 1) // width * width
+    used = min(width, m)
     while first < m:
         for lane in range(width):
             if lane >= used and wide:
@@ -823,7 +834,7 @@ def _simulate_block(
             if prune and v[lane] < bound:
                 bound = v[lane]
         first += used
-        used = width
+        used = min(width, m - first)
     counts[row, 0] = n_full
     counts[row, 1] = n_pruned
     counts[row, 2] = samples

@@ -30,6 +30,10 @@ from numba.extending import intrinsic
 _WIDTH = 4
 _GROUPS = 4
 LANES = _WIDTH * _GROUPS
+# Samples of one step of lane_inputs: two vectors per lane, so that every
+# broadcast coefficient serves two multiplies.
+_HALVES = 2
+SAMPLES = _HALVES * _WIDTH
 # Largest na with a vector recursion (each na is its own unrolled loop).
 MAX_NA = 12
 
@@ -76,17 +80,17 @@ def _transpose(builder, rows):
 
 
 @intrinsic
-def lane_inputs(typingctx, b1, nb1, off1, i1p, b2, nb2, off2, i2p, m4, xt):
-    """Input part ``B1 i1 + B2 i2`` of every lane for chunk samples ``q < m4`` into ``xt``.
+def lane_inputs(typingctx, b1, nb1, off1, i1p, b2, nb2, off2, i2p, m8, xt):
+    """Input part ``B1 i1 + B2 i2`` of every lane for chunk samples ``q < m8`` into ``xt``.
 
     ``b1`` (LANES, >= nb1) holds lane l's B1 in row l; tap j of lane l at
-    sample q reads ``i1p[off1[l] + q - j]``, likewise for input 2. ``m4``
-    must be a multiple of 4 (samples past the chunk are computed and
-    ignored, so the inputs must hold 3 readable values past the record).
-    Per sample the terms are added as in ``simulate_into``: 0, then b1[0],
-    b1[1], ..., then b2[0], ...
+    sample q reads ``i1p[off1[l] + q - j]``, likewise for input 2. ``m8``
+    must be a multiple of ``SAMPLES`` (samples past the chunk are computed
+    and ignored, so the inputs must hold ``SAMPLES - 1`` readable values
+    past the record). Per sample the terms are added as in
+    ``simulate_into``: 0, then b1[0], b1[1], ..., then b2[0], ...
     """
-    sig = types.void(b1, nb1, off1, i1p, b2, nb2, off2, i2p, m4, xt)
+    sig = types.void(b1, nb1, off1, i1p, b2, nb2, off2, i2p, m8, xt)
 
     def codegen(context, builder, signature, args):
         ty = signature.args
@@ -99,25 +103,31 @@ def lane_inputs(typingctx, b1, nb1, off1, i1p, b2, nb2, off2, i2p, m4, xt):
                  _data(context, builder, ty[at + 3], args[at + 3]))  # fmt: skip
             )
         out = _data(context, builder, ty[9], args[9])
-        acc = [cgutils.alloca_once(builder, _VEC) for _ in range(_WIDTH)]
-        with cgutils.for_range_slice(builder, _c(0), args[8], _c(4)) as (q, _):
+        # acc[h][w]: lane w of the group at samples q + 4h .. q + 4h + 3.
+        acc = [[cgutils.alloca_once(builder, _VEC) for _ in range(_WIDTH)] for _ in range(_HALVES)]
+        with cgutils.for_range_slice(builder, _c(0), args[8], _c(SAMPLES)) as (q, _):
             for g in range(_GROUPS):
-                for w in range(_WIDTH):
-                    builder.store(_ZERO, acc[w])
+                lanes = [g * _WIDTH + w for w in range(_WIDTH)]
+                for half in acc:
+                    for a in half:
+                        builder.store(_ZERO, a)
                 for b_ptr, stride, nb, off, ip in inputs:
-                    lanes = [g * _WIDTH + w for w in range(_WIDTH)]
                     starts = [builder.add(builder.load(builder.gep(off, [_c(lane)])), q) for lane in lanes]
                     rows = [builder.mul(_c(lane), stride) for lane in lanes]
                     with cgutils.for_range(builder, nb) as loop:
                         j = loop.index
                         for w in range(_WIDTH):
                             coef = _splat(builder, builder.load(builder.gep(b_ptr, [builder.add(rows[w], j)])))
-                            x = _load(builder, ip, builder.sub(starts[w], j))
-                            builder.store(builder.fadd(builder.load(acc[w]), builder.fmul(coef, x)), acc[w])
-                by_sample = _transpose(builder, [builder.load(a) for a in acc])
-                for s in range(4):
-                    row = builder.mul(builder.add(q, _c(s)), _c(LANES))
-                    _store(builder, by_sample[s], out, builder.add(row, _c(g * _WIDTH)))
+                            at = builder.sub(starts[w], j)
+                            for h in range(_HALVES):
+                                x = _load(builder, ip, builder.add(at, _c(h * _WIDTH)))
+                                total = builder.fadd(builder.load(acc[h][w]), builder.fmul(coef, x))
+                                builder.store(total, acc[h][w])
+                for h in range(_HALVES):
+                    by_sample = _transpose(builder, [builder.load(a) for a in acc[h]])
+                    for s in range(_WIDTH):
+                        row = builder.mul(builder.add(q, _c(h * _WIDTH + s)), _c(LANES))
+                        _store(builder, by_sample[s], out, builder.add(row, _c(g * _WIDTH)))
         return context.get_dummy_value()
 
     return sig, codegen

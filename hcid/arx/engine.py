@@ -373,15 +373,16 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
         b2_rows.append(theta[na + nb1 : na + nb1 + block_nb2[row]].copy())
     # VAF from the frontier rows' outputs, simulated as simulate() does.
     rows = np.flatnonzero(fitted)
-    o_hat = np.empty((rows.size, n))
-    _kernels.simulate_rows(
-        theta_all[first[rows]], block_na[rows], block_nb1[rows], block_nb2[rows],
-        np.maximum(nk1[rows], 0), np.maximum(nk2[rows], 0), i1p, i2p, pad, o_hat,
+    err_est = np.empty((rows.size, est_stop - est_start))
+    err_val = np.empty((rows.size, val_stop - val_start))
+    _kernels.squared_errors(
+        theta_all[first[rows]], block_na[rows], block_nb1[rows], block_nb2[rows], nk1[rows], nk2[rows],
+        i1p, i2p, pad, o, est_start, val_start, err_est, err_val,
     )  # fmt: skip
     vaf_est = np.full(start.size, np.nan)
     vaf_val = np.full(start.size, np.nan)
-    vaf_est[rows] = _vaf(o[est_start:est_stop], o_hat[:, est_start:est_stop])
-    vaf_val[rows] = _vaf(o[val_start:val_stop], o_hat[:, val_start:val_stop])
+    vaf_est[rows] = _vaf(err_est, o[est_start:est_stop])
+    vaf_val[rows] = _vaf(err_val, o[val_start:val_stop])
 
     table = None
     if keep_candidates:
@@ -428,12 +429,15 @@ def _threads(threads) -> int:
     return min(threads, _kernels.max_threads())
 
 
-def _vaf(o: np.ndarray, o_hat: np.ndarray) -> np.ndarray:
-    """VAF (percent) of each row of ``o_hat`` against ``o``; each row's sums
-    are numpy's pairwise sums over that row alone, as for a 1-D array."""
-    o_hat = np.ascontiguousarray(o_hat)
+def _vaf(squared_errors: np.ndarray, o: np.ndarray) -> np.ndarray:
+    """VAF (percent) per row of squared errors ``(o - o_hat)^2`` on the rows of ``o``.
+
+    Each row's sum is numpy's pairwise sum over that row alone, as for a
+    1-D array, so a row's VAF equals ``(1 - sum((o - o_hat)**2) /
+    sum(o**2)) * 100`` computed on its own.
+    """
     with np.errstate(divide="ignore", invalid="ignore"):  # o = 0 on the rows: NaN
-        return (1.0 - np.sum((o - o_hat) ** 2, axis=-1) / np.sum(o**2)) * 100.0
+        return (1.0 - np.sum(squared_errors, axis=-1) / np.sum(o**2)) * 100.0
 
 
 def simulate(a, b1, b2, nk1: int, nk2: int, i1, i2) -> np.ndarray:
