@@ -11,7 +11,7 @@ import pyarrow as pa
 import pytest
 from scipy.signal import lfilter
 
-from hcid.arx import _kernels
+from hcid.arx import _kernels, _lanes
 from hcid.arx.engine import GridFit, _fit_grid, best, fit_grid, simulate
 from hcid.arx.grid import Grid, candidates, n_parameters
 from hcid.arx.reference import fit_reference
@@ -508,8 +508,8 @@ def test_lanes_are_bit_identical_to_the_single_candidate_kernel(n, rows):
         v = np.empty(4)
         pruned = np.empty(4, dtype=np.bool_)
         yh = np.empty((na + n) * 4)
-        xs = np.empty((4, _kernels._CHUNK))
-        done = _kernels.simulate_lanes(
+        xs = np.empty((4, _lanes._CHUNK))
+        done = _lanes.simulate_lanes(
             coef, na, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, o, *rows, np.inf, xs, yh, v, pruned
         )
         assert done == n and not pruned.any()
@@ -541,20 +541,154 @@ def test_lanes_prune_only_above_the_bound_and_flag_unstable_lanes():
     b1 = scale[:, None] * np.ones((4, 2))
     args = (coef, 1, b1, 2, np.array([1, 1, 1, 1]), np.zeros((4, 1)), 0, np.zeros(4, dtype=np.int64),
             i1p, i1p, pad, o, *rows)  # fmt: skip
-    xs = np.empty((4, _kernels._CHUNK))
+    xs = np.empty((4, _lanes._CHUNK))
     yh = np.empty((1 + n) * 4)
     full = np.empty(4)
     flags = np.empty(4, dtype=np.bool_)
     with np.errstate(over="ignore", invalid="ignore"):
-        _kernels.simulate_lanes(*args, np.inf, xs, yh, full, flags)
+        _lanes.simulate_lanes(*args, np.inf, xs, yh, full, flags)
         assert full[3] == np.inf and np.all(np.isfinite(full[:3]))
         bound = full[0]  # lane 1 (3x the output) is worse, lane 2 better
         assert full[1] > bound > full[2]
         v = np.empty(4)
-        _kernels.simulate_lanes(*args, bound, xs, yh, v, flags)
+        _lanes.simulate_lanes(*args, bound, xs, yh, v, flags)
     assert flags[1] and bound < v[1] <= full[1]
     assert not flags[0] and not flags[2] and not flags[3]
     assert v[0] == full[0] and v[2] == full[2] and v[3] == np.inf
+
+
+_NO_JIT = pytest.mark.skipif(
+    numba.config.DISABLE_JIT, reason="the vector steps are LLVM IR: they run only compiled"
+)
+
+
+def _wide_batch(rng, na, nb1, nb2, n_lanes, n):
+    """``n_lanes`` random candidates in simulate_wide's layout, the idle lanes as it wants them."""
+    lanes = [_random_candidate(rng, na, nb1, nb2) for _ in range(n_lanes)]
+    width = _lanes.LANES
+    coef = np.zeros((max(na, 2) + 1) * width)
+    coef[:width] = 1.0
+    b1 = np.zeros((width, max(nb1, 1)))
+    b2 = np.zeros((width, max(nb2, 1)))
+    nk1 = np.zeros(width, dtype=np.int64)
+    nk2 = np.zeros(width, dtype=np.int64)
+    nk1[:n_lanes] = rng.integers(0, 12, n_lanes)
+    nk2[:n_lanes] = rng.integers(0, 12, n_lanes)
+    for lane, (a, c1, c2) in enumerate(lanes):
+        coef[lane : (na + 1) * width : width] = a
+        b1[lane, :nb1] = c1
+        b2[lane, :nb2] = c2
+    return lanes, coef, b1, b2, nk1, nk2
+
+
+def _run_wide(coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, i1p, i2p, pad, o, rows, bound):
+    width, n = _lanes.LANES, o.size
+    v = np.empty(width)
+    pruned = np.zeros(width, dtype=np.bool_)
+    scratch = (
+        np.empty(width, dtype=np.int64), np.empty(width, dtype=np.int64), np.empty(_lanes._CHUNK * width),
+        np.empty((max(na, 2) + _lanes._CHUNK) * width), np.empty(4 * width),
+    )  # fmt: skip
+    done = _lanes.simulate_wide(
+        coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, i1p, i2p, pad, o, *rows, bound, *scratch, v, pruned
+    )
+    assert 0 < done <= n
+    return v[:n_lanes], pruned[:n_lanes]
+
+
+@_NO_JIT
+@pytest.mark.parametrize(
+    ("n", "rows"),
+    [
+        (2048, (1088, 2048)),  # the direct validation window
+        (2048, (29, 2048)),  # stage 1: 2019 rows, a tail of 3 after the quadruples
+        (301, (7, 290)),  # shorter than three chunks, a last chunk not a multiple of 8
+    ],
+)
+def test_vector_lanes_are_bit_identical_to_the_single_candidate_kernel(n, rows):
+    # simulate_wide (explicit <4 x double> steps) against simulate_into +
+    # _validation_mse, candidate by candidate: every V bit for bit (STYLE 4),
+    # for every na with a vector recursion, long B (stage 1's 25) and a
+    # dropped input, full and partly idle batches.
+    rng = np.random.default_rng(n + rows[0])
+    pad = 40
+    tail = np.zeros(_lanes.TAIL)
+    i1p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
+    i2p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
+    o = rng.standard_normal(n)
+    orders = [(na, int(rng.integers(0, 8)), int(rng.integers(0, 5))) for na in range(1, 13)]
+    orders += [(3, 25, 10), (10, 0, 7), (1, 1, 0)]
+    for na, nb1, nb2 in orders:
+        n_lanes = int(rng.choice([1, 5, _lanes.LANES]))
+        lanes, coef, b1, b2, nk1, nk2 = _wide_batch(rng, na, nb1, nb2, n_lanes, n)
+        v, pruned = _run_wide(coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, i1p, i2p, pad, o, rows, np.inf)
+        assert not pruned.any()
+        for lane, (a, c1, c2) in enumerate(lanes):
+            yp = np.zeros(na + n)
+            one = _kernels.simulate_into(
+                np.r_[a, 0.0], na, np.r_[c1, 0.0], nb1, nk1[lane], np.r_[c2, 0.0], nb2, nk2[lane],
+                i1p, i2p, pad, np.empty(n), yp, na,
+            )  # fmt: skip
+            assert one == n
+            assert v[lane] == _kernels._validation_mse(yp, na, o, *rows), (na, nb1, nb2, lane)
+
+
+@_NO_JIT
+def test_vector_lanes_prune_and_flag_exactly_as_the_four_lane_kernel():
+    # With the same bound, simulate_wide prunes the same candidates at the
+    # same chunk (so with the same partial V) as simulate_lanes, its plain
+    # twin, and flags the same overflowing ones with inf.
+    rng = np.random.default_rng(11)
+    n, pad, rows = 2048, 40, (1088, 2048)
+    tail = np.zeros(_lanes.TAIL)
+    i1p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
+    i2p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
+    o = rng.standard_normal(n)
+    na, nb1, nb2 = 3, 2, 2
+    lanes, coef, b1, b2, nk1, nk2 = _wide_batch(rng, na, nb1, nb2, _lanes.LANES, n)
+    width = _lanes.LANES
+    coef[width + 5] = -2.5  # lane 5: a1 = -2.5, a root outside the unit circle: overflows
+    coef[2 * width + 5] = 0.0
+    coef[3 * width + 5] = 0.0
+    b1[7] *= 30.0  # lane 7: far worse than the others
+    with np.errstate(over="ignore", invalid="ignore"):
+        full, _ = _run_wide(coef, na, b1, nb1, nk1, b2, nb2, nk2, width, i1p, i2p, pad, o, rows, np.inf)
+        bound = float(np.median(full[np.isfinite(full)]))
+        v, pruned = _run_wide(coef, na, b1, nb1, nk1, b2, nb2, nk2, width, i1p, i2p, pad, o, rows, bound)
+        twin_v = np.empty(width)
+        twin_pruned = np.empty(width, dtype=np.bool_)
+        for first in range(0, width, 4):
+            four = slice(first, first + 4)
+            quad = np.zeros((na + 1) * 4)
+            for i in range(na + 1):
+                quad[i * 4 : i * 4 + 4] = coef[i * width + first : i * width + first + 4]
+            _lanes.simulate_lanes(
+                quad, na, b1[four].copy(), nb1, nk1[four].copy(), b2[four].copy(), nb2, nk2[four].copy(),
+                i1p, i2p, pad, o, *rows, bound, np.empty((4, _lanes._CHUNK)), np.empty((na + n) * 4),
+                twin_v[four], twin_pruned[four],
+            )  # fmt: skip
+    assert full[5] == np.inf and v[5] == np.inf and not pruned[5]
+    assert pruned[7] and bound < v[7] <= full[7]
+    assert pruned.sum() >= 5  # the worse half, minus the overflowing lane
+    np.testing.assert_array_equal(pruned, twin_pruned)
+    np.testing.assert_array_equal(v, twin_v)
+    np.testing.assert_array_equal(v[~pruned], full[~pruned])
+
+
+def test_orders_above_the_vector_recursion_take_the_four_lane_path():
+    # na above _lanes.MAX_NA runs simulate_lanes; the frontier is still the old kernel's.
+    rng = np.random.default_rng(4)
+    n = 600
+    i1, i2 = rng.standard_normal((2, n))
+    o = lfilter([0, 0.5, 0.2], [1, -0.9, 0.2], i1) + lfilter([0, 0.3], [1, -0.5], i2)
+    o += 0.2 * rng.standard_normal(n)
+
+    top = _lanes.MAX_NA + 1
+    grid = Grid(na=(top - 1, top), nb1=(0, 2), nb2=(1, 2), nk1=(0, 5), nk2=(1, 4))
+    rows = (slice(40, 300), slice(300, n))
+    pruned, counts = _fit_grid(i1, i2, o, grid, *rows, 1, False, legacy=False)
+    _assert_same_frontier(pruned, _legacy(i1, i2, o, grid, *rows))
+    assert counts[:, 1].sum() > 0
 
 
 def _assert_same_frontier(one: GridFit, two: GridFit):

@@ -4,7 +4,8 @@
 a :class:`~hcid.arx.grid.Grid` and keeps the frontier: the best candidate of
 each order triple ``(na, nb1, nb2)``, the only ones model selection can ever
 pick (SPEC section 4). :func:`simulate` and :func:`best` complete the public
-interface; the kernels live in :mod:`hcid.arx._kernels`.
+interface; the kernels live in :mod:`hcid.arx._kernels` (fitting) and
+:mod:`hcid.arx._lanes` (simulating many candidates side by side).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from hcid.arx import _kernels
+from hcid.arx import _kernels, _lanes
 from hcid.arx.grid import Grid, candidates, max_lag, n_parameters, order_blocks
 from hcid.errors import DataError, IdentificationError
 
@@ -151,7 +152,7 @@ def _rows(name: str, rows: slice, n: int) -> tuple[int, int]:
 
 def _padded(x: np.ndarray, pad: int) -> np.ndarray:
     # TAIL zeros after the record: the vector input step reads whole quadruples.
-    return np.concatenate((np.zeros(pad), x, np.zeros(_kernels.TAIL)))
+    return np.concatenate((np.zeros(pad), x, np.zeros(_lanes.TAIL)))
 
 
 def _record_factor(i1p, i2p, o, grid: Grid, pad: int, start: int, stop: int) -> np.ndarray:
@@ -345,9 +346,9 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
             args = (orders, start, size, bounds, theta_all, score, i1p, i2p, pad, o,
                     val_start, val_stop, not keep_candidates, v_all, counts)  # fmt: skip
             if threads == 1:
-                _kernels.simulate_blocks(*args)
+                _lanes.simulate_blocks(*args)
             else:
-                _kernels.run_parallel(_kernels.simulate_blocks_parallel, args, threads)
+                _kernels.run_parallel(_lanes.simulate_blocks_parallel, args, threads)
 
     # Frontier: lexsort is stable, so equal V keep the candidate order, in
     # which nk1 and then nk2 increase inside a block.

@@ -1,0 +1,709 @@
+"""Lane kernels of the ARX grid engine: many candidates simulated side by side (private).
+
+The candidates of one order triple are simulated ``LANES`` at a time,
+pruned against the best V of their triple so far (see
+:func:`simulate_wide`, :func:`_simulate_block`). numba vectorises loops
+over samples, but the ARX recursion is a chain through the samples: only
+independent candidates (lanes) can share a vector, and numba leaves LLVM's
+SLP vectoriser, which would pack them, off. The two steps of
+:func:`simulate_wide` (:func:`lane_inputs`, :func:`lane_recursion`) are
+therefore numba intrinsics that emit LLVM IR on ``<4 x double>`` vectors,
+one vector per four lanes, ``_GROUPS`` vectors side by side so that their
+multiply-add chains overlap.
+
+Every lane does the arithmetic of :func:`hcid.arx._kernels.simulate_into`
+(the same IEEE-754 operations in the same order: ``fmul`` and ``fadd`` /
+``fsub`` without fast-math flags, which LLVM may neither reassociate nor
+fuse), so a lane's V is bit-identical to it; the tests compare them.
+:func:`simulate_lanes` (four lanes in plain numba) is the vector path's
+twin, and the path without the JIT (the intrinsics run only compiled) and
+above ``MAX_NA``.
+
+This module calls no kernel of :mod:`hcid.arx._kernels` (nor the reverse):
+numba's on-disk cache of a function is invalidated by a change of its own
+file only, so kernels that call each other share a file.
+
+Layouts of the vector steps (``LANES`` lanes, flat float64 arrays):
+``xt[q * LANES + l]`` the input part of lane l at chunk sample q;
+``yh[row * LANES + l]`` the simulated output; ``coef[i * LANES + l]`` the
+coefficient a_i of lane l (``a_2 = 0`` when na = 1); ``eacc[p * LANES + l]``
+the four partial sums of squared errors of lane l.
+"""
+
+import numba
+import numpy as np
+from llvmlite import ir
+from numba import njit, prange, types
+from numba.core import cgutils
+from numba.extending import intrinsic
+
+
+# Doubles per vector (AVX2) and vectors per step.
+_WIDTH = 4
+_GROUPS = 4
+LANES = _WIDTH * _GROUPS
+# Samples of one step of lane_inputs: two vectors per lane, so that every
+# broadcast coefficient serves two multiplies.
+_HALVES = 2
+SAMPLES = _HALVES * _WIDTH
+# Largest na with a vector recursion (each na is its own unrolled loop).
+MAX_NA = 12
+
+# Samples of one step of simulate_lanes / simulate_wide: input part,
+# recursion, then a pruning check on the validation rows.
+_CHUNK = 128
+# Values past the record that the vector input step reads (it computes
+# whole steps of SAMPLES samples); the engine pads the inputs with them.
+TAIL = SAMPLES - 1
+# Without the JIT every block takes the plain four-lane path.
+_WIDE = not numba.config.DISABLE_JIT
+
+
+_VEC = ir.VectorType(ir.DoubleType(), _WIDTH)
+_I64 = ir.IntType(64)
+_I32 = ir.IntType(32)
+_ZERO = ir.Constant(_VEC, [0.0] * _WIDTH)
+
+
+def _c(value):
+    return ir.Constant(_I64, value)
+
+
+def _data(context, builder, ty, value):
+    return context.make_array(ty)(context, builder, value).data
+
+
+def _load(builder, ptr, index):
+    return builder.load(builder.bitcast(builder.gep(ptr, [index]), _VEC.as_pointer()), align=8)
+
+
+def _store(builder, value, ptr, index):
+    builder.store(value, builder.bitcast(builder.gep(ptr, [index]), _VEC.as_pointer()), align=8)
+
+
+def _splat(builder, scalar):
+    one = builder.insert_element(ir.Constant(_VEC, None), scalar, ir.Constant(_I32, 0))
+    return builder.shuffle_vector(one, ir.Constant(_VEC, None), ir.Constant(ir.VectorType(_I32, 4), [0] * 4))
+
+
+def _transpose(builder, rows):
+    """4 x 4 transpose: rows[w] holds lane w at samples q..q+3; returns sample s at lanes 0..3."""
+    mask = lambda *m: ir.Constant(ir.VectorType(_I32, 4), list(m))  # noqa: E731
+    lo01 = builder.shuffle_vector(rows[0], rows[1], mask(0, 4, 2, 6))
+    hi01 = builder.shuffle_vector(rows[0], rows[1], mask(1, 5, 3, 7))
+    lo23 = builder.shuffle_vector(rows[2], rows[3], mask(0, 4, 2, 6))
+    hi23 = builder.shuffle_vector(rows[2], rows[3], mask(1, 5, 3, 7))
+    return [
+        builder.shuffle_vector(lo01, lo23, mask(0, 1, 4, 5)),
+        builder.shuffle_vector(hi01, hi23, mask(0, 1, 4, 5)),
+        builder.shuffle_vector(lo01, lo23, mask(2, 3, 6, 7)),
+        builder.shuffle_vector(hi01, hi23, mask(2, 3, 6, 7)),
+    ]
+
+
+@intrinsic
+def lane_inputs(typingctx, b1, nb1, off1, i1p, b2, nb2, off2, i2p, m8, xt):
+    """Input part ``B1 i1 + B2 i2`` of every lane for chunk samples ``q < m8`` into ``xt``.
+
+    ``b1`` (LANES, >= nb1) holds lane l's B1 in row l; tap j of lane l at
+    sample q reads ``i1p[off1[l] + q - j]``, likewise for input 2. ``m8``
+    must be a multiple of ``SAMPLES`` (samples past the chunk are computed
+    and ignored, so the inputs must hold ``SAMPLES - 1`` readable values
+    past the record). Per sample the terms are added as in
+    ``simulate_into``: 0, then b1[0], b1[1], ..., then b2[0], ...
+    """
+    sig = types.void(b1, nb1, off1, i1p, b2, nb2, off2, i2p, m8, xt)
+
+    def codegen(context, builder, signature, args):
+        ty = signature.args
+        inputs = []
+        for at in (0, 4):
+            b_arr = context.make_array(ty[at])(context, builder, args[at])
+            stride = cgutils.unpack_tuple(builder, b_arr.shape)[1]
+            inputs.append(
+                (b_arr.data, stride, args[at + 1], _data(context, builder, ty[at + 2], args[at + 2]),
+                 _data(context, builder, ty[at + 3], args[at + 3]))  # fmt: skip
+            )
+        out = _data(context, builder, ty[9], args[9])
+        # acc[h][w]: lane w of the group at samples q + 4h .. q + 4h + 3.
+        acc = [[cgutils.alloca_once(builder, _VEC) for _ in range(_WIDTH)] for _ in range(_HALVES)]
+        with cgutils.for_range_slice(builder, _c(0), args[8], _c(SAMPLES)) as (q, _):
+            for g in range(_GROUPS):
+                lanes = [g * _WIDTH + w for w in range(_WIDTH)]
+                for half in acc:
+                    for a in half:
+                        builder.store(_ZERO, a)
+                for b_ptr, stride, nb, off, ip in inputs:
+                    starts = [builder.add(builder.load(builder.gep(off, [_c(lane)])), q) for lane in lanes]
+                    rows = [builder.mul(_c(lane), stride) for lane in lanes]
+                    with cgutils.for_range(builder, nb) as loop:
+                        j = loop.index
+                        for w in range(_WIDTH):
+                            coef = _splat(builder, builder.load(builder.gep(b_ptr, [builder.add(rows[w], j)])))
+                            at = builder.sub(starts[w], j)
+                            for h in range(_HALVES):
+                                x = _load(builder, ip, builder.add(at, _c(h * _WIDTH)))
+                                total = builder.fadd(builder.load(acc[h][w]), builder.fmul(coef, x))
+                                builder.store(total, acc[h][w])
+                for h in range(_HALVES):
+                    by_sample = _transpose(builder, [builder.load(a) for a in acc[h]])
+                    for s in range(_WIDTH):
+                        row = builder.mul(builder.add(q, _c(h * _WIDTH + s)), _c(LANES))
+                        _store(builder, by_sample[s], out, builder.add(row, _c(g * _WIDTH)))
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def lane_recursion(typingctx, coef, na, xt, m, yh, row0, o, k0, val_start, val_stop, quad_end, eacc):
+    """Recursion of every lane for chunk samples ``q < m``, and their squared errors.
+
+    Writes ``yh`` rows ``row0 .. row0 + m - 1`` from ``xt`` and the
+    ``max(na, 2)`` rows before ``row0``; a sample ``k = k0 + q`` on the
+    validation rows adds ``(y - o[k])^2`` to partial sum ``(k - val_start)
+    % 4`` (0 from ``quad_end`` on) of ``eacc``. Returns False, doing
+    nothing, if na is not in 1..MAX_NA.
+    """
+    sig = types.boolean(coef, na, xt, m, yh, row0, o, k0, val_start, val_stop, quad_end, eacc)
+
+    def codegen(context, builder, signature, args):
+        ty = signature.args
+        coef_p = _data(context, builder, ty[0], args[0])
+        na_v, m_v, row0_v = args[1], args[3], args[5]
+        xt_p = _data(context, builder, ty[2], args[2])
+        yh_p = _data(context, builder, ty[4], args[4])
+        o_p = _data(context, builder, ty[6], args[6])
+        k0_v, start_v, stop_v, quad_v = args[7], args[8], args[9], args[10]
+        e_p = _data(context, builder, ty[11], args[11])
+        handled = cgutils.alloca_once_value(builder, cgutils.false_bit)
+        y1 = [cgutils.alloca_once(builder, _VEC) for _ in range(_GROUPS)]
+        y2 = [cgutils.alloca_once(builder, _VEC) for _ in range(_GROUPS)]
+        done = builder.append_basic_block("lanes.done")
+        default = builder.append_basic_block("lanes.other_na")
+        switch = builder.switch(na_v, default)
+        with builder.goto_block(default):
+            builder.branch(done)
+        for order in range(1, MAX_NA + 1):
+            block = builder.append_basic_block(f"lanes.na{order}")
+            switch.add_case(ir.Constant(na_v.type, order), block)
+            with builder.goto_block(block):
+                _recursion(builder, order, coef_p, xt_p, m_v, yh_p, row0_v, o_p, k0_v, start_v, stop_v,
+                           quad_v, e_p, y1, y2)  # fmt: skip
+                builder.store(cgutils.true_bit, handled)
+                builder.branch(done)
+        builder.position_at_end(done)
+        return builder.load(handled)
+
+    return sig, codegen
+
+
+def _recursion(builder, na, coef, xt, m, yh, row0, o, k0, val_start, val_stop, quad_end, eacc, y1, y2):
+    """The sample loop for one na, fully unrolled over lags and groups."""
+    lags = max(na, 2)
+    a = [[_load(builder, coef, _c(i * LANES + g * _WIDTH)) for g in range(_GROUPS)] for i in range(lags + 1)]
+    first = builder.mul(row0, _c(LANES))
+    for g in range(_GROUPS):
+        builder.store(_load(builder, yh, builder.add(first, _c(g * _WIDTH - LANES))), y1[g])
+        builder.store(_load(builder, yh, builder.add(first, _c(g * _WIDTH - 2 * LANES))), y2[g])
+    with cgutils.for_range(builder, m) as loop:
+        q = loop.index
+        base = builder.add(first, builder.mul(q, _c(LANES)))
+        ys = []
+        for g in range(_GROUPS):
+            at = builder.add(base, _c(g * _WIDTH))
+            # simulate_into: older lags first into two partial sums, then a2 y2, a1 y1.
+            s0 = s1 = None
+            i = na
+            while i > 3:
+                s0 = _accumulate(builder, s0, a[i][g], _load(builder, yh, builder.add(at, _c(-i * LANES))))
+                s1 = _accumulate(builder, s1, a[i - 1][g], _load(builder, yh, builder.add(at, _c(-(i - 1) * LANES))))
+                i -= 2
+            if i == 3:
+                s0 = _accumulate(builder, s0, a[3][g], _load(builder, yh, builder.add(at, _c(-3 * LANES))))
+            x = _load(builder, xt, builder.add(builder.mul(q, _c(LANES)), _c(g * _WIDTH)))
+            total = builder.fadd(_ZERO if s0 is None else s0, _ZERO if s1 is None else s1)
+            prev1, prev2 = builder.load(y1[g]), builder.load(y2[g])
+            y = builder.fsub(builder.fsub(builder.fsub(x, total), builder.fmul(a[2][g], prev2)),
+                             builder.fmul(a[1][g], prev1))  # fmt: skip
+            _store(builder, y, yh, at)
+            builder.store(prev1, y2[g])
+            builder.store(y, y1[g])
+            ys.append(y)
+        k = builder.add(k0, q)
+        inside = builder.and_(builder.icmp_signed(">=", k, val_start), builder.icmp_signed("<", k, val_stop))
+        with builder.if_then(inside):
+            part = builder.select(
+                builder.icmp_signed("<", k, quad_end), builder.and_(builder.sub(k, val_start), _c(3)), _c(0)
+            )
+            target = _splat(builder, builder.load(builder.gep(o, [k])))
+            row = builder.mul(part, _c(LANES))
+            for g, y in enumerate(ys):
+                at = builder.add(row, _c(g * _WIDTH))
+                d = builder.fsub(y, target)
+                _store(builder, builder.fadd(_load(builder, eacc, at), builder.fmul(d, d)), eacc, at)
+
+
+def _accumulate(builder, partial, a, y):
+    """``partial + a * y``, the partial sum starting from 0.0 as in simulate_into."""
+    return builder.fadd(_ZERO if partial is None else partial, builder.fmul(a, y))
+
+
+@njit(cache=True)
+def inputs_into(b, nb, nk, ip, pad, k0, k1, x):
+    """Add ``B i(k - nk)`` to ``x[k - k0]`` for ``k0 <= k < k1``, term after term.
+
+    The order of :func:`simulate_into`'s input part (``x`` starts at 0, then
+    ``b[0]``, ``b[1]``, ... of input 1, then of input 2), so each ``x[k]``
+    is the same sum of the same products, bit for bit.
+    """
+    m = k1 - k0
+    for j in range(nb):
+        c = b[j]
+        base = pad - nk - j + k0
+        src = ip[base : base + m]
+        for k in range(m):
+            x[k] += c * src[k]
+
+
+@njit(cache=True)
+def simulate_lanes(
+    coef, na, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, o, val_start, val_stop, bound, xs, yh, v_out,
+    pruned,
+):  # fmt: skip
+    """Simulate four candidates of one order triple side by side, pruning on V.
+
+    Lane l is the candidate ``a = coef[l::4]`` (``coef[i * 4 + l]`` holds
+    a_i, length ``(na + 1) * 4``, ``a_2 = 0`` padded when na = 1),
+    ``b1[l, :nb1]``, ``b2[l, :nb2]``, delays ``nk1[l]``, ``nk2[l]``. Each
+    lane does exactly the arithmetic of :func:`simulate_into` and
+    :func:`_validation_mse` (same operations, same order), so an unpruned
+    lane's V is bit-identical to theirs; the four lanes are independent
+    chains that keep the floating-point units busy while one waits on its
+    loop-carried multiply-add (``y(k-1)``).
+
+    Pruning: at the end of each ``_CHUNK`` of validation rows a lane whose
+    partial V, ``((s0 + s1) + (s2 + s3)) / n_val`` over the rows so far,
+    exceeds ``bound`` stops: its final V could only be larger (sums of
+    squares grow, rounding is monotone), so ``v_out[l]`` receives that
+    partial V, a lower bound strictly above ``bound``. A lane whose output
+    stops being finite gets ``inf``, as in :func:`simulate_into`. The batch
+    ends when every lane has stopped or the record ends.
+
+    Parameters
+    ----------
+    xs : float64 array, shape (4, _CHUNK)
+        Scratch for the input part.
+    yh : float64 array, shape ((na + n) * 4,)
+        Scratch: the outputs, interleaved by lane after ``na`` rows of zeros.
+    v_out : float64 array, shape (4,)
+        Out: V, a pruned lane's lower bound, or inf.
+    pruned : bool array, shape (4,)
+        Out: which lanes were pruned.
+
+    Returns
+    -------
+    int
+        Number of samples simulated (the same for every lane).
+    """
+    n = o.shape[0]
+    n_val = val_stop - val_start
+    quad_end = val_start + 4 * (n_val // 4)
+    for k in range(na * 4):
+        yh[k] = 0.0
+    # a_1, a_2 in registers, like simulate_into.
+    a1_0, a1_1, a1_2, a1_3 = coef[4], coef[5], coef[6], coef[7]
+    a2_0, a2_1, a2_2, a2_3 = coef[8], coef[9], coef[10], coef[11]
+    y1_0 = y1_1 = y1_2 = y1_3 = 0.0
+    y2_0 = y2_1 = y2_2 = y2_3 = 0.0
+    # Validation sums per lane: four partial sums, as in _validation_mse.
+    e00 = e01 = e02 = e03 = 0.0
+    e10 = e11 = e12 = e13 = 0.0
+    e20 = e21 = e22 = e23 = 0.0
+    e30 = e31 = e32 = e33 = 0.0
+    live0 = live1 = live2 = live3 = True
+    for lane in range(4):
+        v_out[lane] = np.inf
+        pruned[lane] = False
+    k0 = 0
+    while k0 < n:
+        # Chunks end on val_start + multiples of _CHUNK, so the pruning
+        # checks fall on whole quadruples of validation rows.
+        r = (val_start - k0) % _CHUNK
+        k1 = min(k0 + (r if r > 0 else _CHUNK), n)
+        m = k1 - k0
+        for lane in range(4):
+            for k in range(m):
+                xs[lane, k] = 0.0
+            inputs_into(b1[lane], nb1, nk1[lane], i1p, pad, k0, k1, xs[lane])
+            inputs_into(b2[lane], nb2, nk2[lane], i2p, pad, k0, k1, xs[lane])
+        for k in range(k0, k1):
+            q = np.uint64(k - k0)
+            base = np.uint64((na + k) * 4)
+            s00 = s01 = s02 = s03 = 0.0
+            s10 = s11 = s12 = s13 = 0.0
+            i = na
+            while i > 3:
+                c0 = np.uint64(i * 4)
+                c1 = np.uint64((i - 1) * 4)
+                s00 += coef[c0] * yh[base - c0]
+                s01 += coef[c0 + np.uint64(1)] * yh[base - c0 + np.uint64(1)]
+                s02 += coef[c0 + np.uint64(2)] * yh[base - c0 + np.uint64(2)]
+                s03 += coef[c0 + np.uint64(3)] * yh[base - c0 + np.uint64(3)]
+                s10 += coef[c1] * yh[base - c1]
+                s11 += coef[c1 + np.uint64(1)] * yh[base - c1 + np.uint64(1)]
+                s12 += coef[c1 + np.uint64(2)] * yh[base - c1 + np.uint64(2)]
+                s13 += coef[c1 + np.uint64(3)] * yh[base - c1 + np.uint64(3)]
+                i -= 2
+            if i == 3:
+                s00 += coef[12] * yh[base - np.uint64(12)]
+                s01 += coef[13] * yh[base - np.uint64(11)]
+                s02 += coef[14] * yh[base - np.uint64(10)]
+                s03 += coef[15] * yh[base - np.uint64(9)]
+            y_0 = ((xs[0, q] - (s00 + s10)) - a2_0 * y2_0) - a1_0 * y1_0
+            y_1 = ((xs[1, q] - (s01 + s11)) - a2_1 * y2_1) - a1_1 * y1_1
+            y_2 = ((xs[2, q] - (s02 + s12)) - a2_2 * y2_2) - a1_2 * y1_2
+            y_3 = ((xs[3, q] - (s03 + s13)) - a2_3 * y2_3) - a1_3 * y1_3
+            yh[base] = y_0
+            yh[base + np.uint64(1)] = y_1
+            yh[base + np.uint64(2)] = y_2
+            yh[base + np.uint64(3)] = y_3
+            y2_0, y2_1, y2_2, y2_3 = y1_0, y1_1, y1_2, y1_3
+            y1_0, y1_1, y1_2, y1_3 = y_0, y_1, y_2, y_3
+        # Validation rows of this chunk: whole quadruples, then the tail
+        # (rows from quad_end on) into the first partial sum.
+        k = max(k0, val_start)
+        stop = min(k1, val_stop)
+        while k + 4 <= min(stop, quad_end):
+            b = (na + k) * 4
+            d = yh[b] - o[k]
+            e00 += d * d
+            d = yh[b + 4] - o[k + 1]
+            e01 += d * d
+            d = yh[b + 8] - o[k + 2]
+            e02 += d * d
+            d = yh[b + 12] - o[k + 3]
+            e03 += d * d
+            d = yh[b + 1] - o[k]
+            e10 += d * d
+            d = yh[b + 5] - o[k + 1]
+            e11 += d * d
+            d = yh[b + 9] - o[k + 2]
+            e12 += d * d
+            d = yh[b + 13] - o[k + 3]
+            e13 += d * d
+            d = yh[b + 2] - o[k]
+            e20 += d * d
+            d = yh[b + 6] - o[k + 1]
+            e21 += d * d
+            d = yh[b + 10] - o[k + 2]
+            e22 += d * d
+            d = yh[b + 14] - o[k + 3]
+            e23 += d * d
+            d = yh[b + 3] - o[k]
+            e30 += d * d
+            d = yh[b + 7] - o[k + 1]
+            e31 += d * d
+            d = yh[b + 11] - o[k + 2]
+            e32 += d * d
+            d = yh[b + 15] - o[k + 3]
+            e33 += d * d
+            k += 4
+        while k < stop:
+            b = (na + k) * 4
+            d = yh[b] - o[k]
+            e00 += d * d
+            d = yh[b + 1] - o[k]
+            e10 += d * d
+            d = yh[b + 2] - o[k]
+            e20 += d * d
+            d = yh[b + 3] - o[k]
+            e30 += d * d
+            k += 1
+        # A non-finite output stays non-finite (module doc of
+        # simulate_into): such a lane is unstable, V = inf.
+        if live0 and not abs(y1_0) < np.inf:
+            live0 = False
+        if live1 and not abs(y1_1) < np.inf:
+            live1 = False
+        if live2 and not abs(y1_2) < np.inf:
+            live2 = False
+        if live3 and not abs(y1_3) < np.inf:
+            live3 = False
+        if k1 > val_start and k1 < n:
+            # Partial V: finite and above the bound means pruned.
+            if live0:
+                p = ((e00 + e01) + (e02 + e03)) / n_val
+                if p < np.inf and p > bound:
+                    v_out[0] = p
+                    pruned[0] = True
+                    live0 = False
+            if live1:
+                p = ((e10 + e11) + (e12 + e13)) / n_val
+                if p < np.inf and p > bound:
+                    v_out[1] = p
+                    pruned[1] = True
+                    live1 = False
+            if live2:
+                p = ((e20 + e21) + (e22 + e23)) / n_val
+                if p < np.inf and p > bound:
+                    v_out[2] = p
+                    pruned[2] = True
+                    live2 = False
+            if live3:
+                p = ((e30 + e31) + (e32 + e33)) / n_val
+                if p < np.inf and p > bound:
+                    v_out[3] = p
+                    pruned[3] = True
+                    live3 = False
+            if not (live0 or live1 or live2 or live3):
+                return k1
+        k0 = k1
+    if live0:
+        v_out[0] = _finite_or_inf(((e00 + e01) + (e02 + e03)) / n_val)
+    if live1:
+        v_out[1] = _finite_or_inf(((e10 + e11) + (e12 + e13)) / n_val)
+    if live2:
+        v_out[2] = _finite_or_inf(((e20 + e21) + (e22 + e23)) / n_val)
+    if live3:
+        v_out[3] = _finite_or_inf(((e30 + e31) + (e32 + e33)) / n_val)
+    return n
+
+
+@njit(cache=True)
+def _finite_or_inf(v):
+    return v if v < np.inf else np.inf
+
+
+@njit(cache=True)
+def simulate_wide(
+    coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, i1p, i2p, pad, o, val_start, val_stop, bound,
+    off1, off2, xt, yh, eacc, v_out, pruned,
+):  # fmt: skip
+    """:func:`simulate_lanes` for ``LANES`` lanes, on explicit vectors (the vector steps).
+
+    Lanes ``0 .. n_lanes - 1`` are candidates laid out as in
+    :func:`simulate_lanes` with ``LANES`` for 4 (``coef[i * LANES + l]``,
+    ``b1[l]``, ``nk1[l]``, ...); the others must hold ``a = [1, 0, ...]``,
+    zero B and zero delays and are ignored. Same arithmetic per lane, same
+    pruning rule and chunks, so V (or a pruned lane's lower bound) is
+    bit-identical to :func:`simulate_lanes`'. Requires ``na <= MAX_NA``
+    and inputs with ``TAIL`` readable values after the record.
+
+    Scratch: ``off1``, ``off2`` int64 (LANES,); ``xt`` (_CHUNK * LANES,);
+    ``yh`` ((max(na, 2) + _CHUNK) * LANES,), the last rows of one chunk
+    moved to its top for the next; ``eacc`` (4 * LANES,).
+    """
+    n = o.shape[0]
+    n_val = val_stop - val_start
+    quad_end = val_start + 4 * (n_val // 4)
+    h = max(na, 2)
+    for k in range(h * LANES):
+        yh[k] = 0.0
+    for k in range(4 * LANES):
+        eacc[k] = 0.0
+    live = np.zeros(LANES, dtype=np.bool_)
+    for lane in range(n_lanes):
+        live[lane] = True
+        v_out[lane] = np.inf
+        pruned[lane] = False
+    n_live = n_lanes
+    k0 = 0
+    while k0 < n:
+        r = (val_start - k0) % _CHUNK
+        k1 = min(k0 + (r if r > 0 else _CHUNK), n)
+        m = k1 - k0
+        for lane in range(LANES):
+            off1[lane] = pad - nk1[lane] + k0
+            off2[lane] = pad - nk2[lane] + k0
+        steps = (m + TAIL) // SAMPLES * SAMPLES
+        lane_inputs(b1, nb1, off1, i1p, b2, nb2, off2, i2p, steps, xt)
+        lane_recursion(coef, na, xt, m, yh, h, o, k0, val_start, val_stop, quad_end, eacc)
+        last = (h + m - 1) * LANES
+        for lane in range(n_lanes):
+            if live[lane] and not abs(yh[last + lane]) < np.inf:
+                live[lane] = False
+                n_live -= 1
+        if k1 > val_start and k1 < n:
+            for lane in range(n_lanes):
+                if live[lane]:
+                    p = _partial_v(eacc, lane, n_val)
+                    if p < np.inf and p > bound:
+                        v_out[lane] = p
+                        pruned[lane] = True
+                        live[lane] = False
+                        n_live -= 1
+            if n_live == 0:
+                return k1
+        for k in range(h * LANES):
+            yh[k] = yh[m * LANES + k]
+        k0 = k1
+    for lane in range(n_lanes):
+        if live[lane]:
+            v_out[lane] = _finite_or_inf(_partial_v(eacc, lane, n_val))
+    return n
+
+
+@njit(cache=True)
+def _partial_v(eacc, lane, n_val):
+    return ((eacc[lane] + eacc[LANES + lane]) + (eacc[2 * LANES + lane] + eacc[3 * LANES + lane])) / n_val
+
+
+@njit(cache=True)
+def _simulate_block(
+    row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
+    val_start, val_stop, prune, v_all, counts,
+):  # fmt: skip
+    """Simulate the stable candidates of one order triple (one candidate block).
+
+    Candidates waiting with ``v_all = NaN`` (stable, see :func:`_fit_unit`)
+    run ``LANES`` at a time (:func:`simulate_wide`; four at a time with
+    :func:`simulate_lanes` without the JIT or above ``MAX_NA``), best
+    prediction error first: the first batch (the remainder of the division
+    into batches) in full, which makes ``bound``, the best V so far, tight
+    at once; the others stop as soon as their partial V exceeds it
+    (``prune``). ``counts[row]`` receives the numbers
+    simulated in full and pruned, and the work done.
+    """
+    na, nb1, nb2 = block_orders[row, 0], block_orders[row, 1], block_orders[row, 2]
+    start, size = block_start[row], block_size[row]
+    nk1_lo, nk2_lo = bounds[3, 0], bounds[4, 0]
+    n_d2 = bounds[4, 1] - bounds[4, 0] + 1 if nb2 > 0 else 1
+    n = o.shape[0]
+    waiting = np.empty(size, dtype=np.int64)
+    keys = np.empty(size)
+    m = 0
+    for c in range(start, start + size):
+        if np.isnan(v_all[c]):
+            waiting[m] = c
+            keys[m] = -score[c]
+            m += 1
+    if m == 0:
+        return
+    order = np.argsort(keys[:m], kind="mergesort")
+    wide = _WIDE and na <= MAX_NA
+    width = LANES if wide else 4
+    h = max(na, 2)
+    coef = np.zeros((h + 1) * width)
+    b1 = np.zeros((width, max(nb1, 1)))
+    b2 = np.zeros((width, max(nb2, 1)))
+    nk1 = np.zeros(width, dtype=np.int64)
+    nk2 = np.zeros(width, dtype=np.int64)
+    lanes = np.empty(width, dtype=np.int64)
+    v = np.empty(width)
+    pruned = np.empty(width, dtype=np.bool_)
+    if wide:
+        off1 = np.empty(LANES, dtype=np.int64)
+        off2 = np.empty(LANES, dtype=np.int64)
+        xt = np.empty(_CHUNK * LANES)
+        yh = np.empty((h + _CHUNK) * LANES)
+        eacc = np.empty(4 * LANES)
+    else:
+        xs = np.empty((4, _CHUNK))
+        yh = np.empty((na + n) * 4)
+    bound = np.inf
+    n_full = 0
+    n_pruned = 0
+    samples = 0
+    # The fewest batches; the first takes the remainder, so that every
+    # later batch is full and runs against a bound.
+    first = 0
+    used = min(width, m)
+    while first < m:
+        for lane in range(width):
+            if lane >= used and wide:
+                # An idle vector lane: a = [1, 0, ...], no input; ignored.
+                coef[lane] = 1.0
+                for i in range(h):
+                    coef[(i + 1) * width + lane] = 0.0
+                for j in range(nb1):
+                    b1[lane, j] = 0.0
+                for j in range(nb2):
+                    b2[lane, j] = 0.0
+                nk1[lane] = 0
+                nk2[lane] = 0
+                continue
+            # A short first batch of four repeats its first candidate in the idle lanes.
+            pick = first + lane if lane < used else first
+            c = waiting[order[pick]]
+            lanes[lane] = c
+            within = c - start
+            nk1[lane] = nk1_lo + within // n_d2 if nb1 > 0 else 0
+            nk2[lane] = nk2_lo + within % n_d2 if nb2 > 0 else 0
+            coef[lane] = 1.0
+            for i in range(na):
+                coef[(i + 1) * width + lane] = theta_all[c, i]
+            for j in range(nb1):
+                b1[lane, j] = theta_all[c, na + j]
+            for j in range(nb2):
+                b2[lane, j] = theta_all[c, na + nb1 + j]
+        if wide:
+            done = simulate_wide(
+                coef, na, b1, nb1, nk1, b2, nb2, nk2, used, i1p, i2p, pad, o, val_start, val_stop,
+                bound, off1, off2, xt, yh, eacc, v, pruned,
+            )  # fmt: skip
+        else:
+            done = simulate_lanes(
+                coef, na, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, o, val_start, val_stop,
+                bound, xs, yh, v, pruned,
+            )  # fmt: skip
+        samples += done * used
+        for lane in range(used):
+            v_all[lanes[lane]] = v[lane]
+            if pruned[lane]:
+                n_pruned += 1
+            else:
+                n_full += 1
+            if prune and v[lane] < bound:
+                bound = v[lane]
+        first += used
+        used = min(width, m - first)
+    counts[row, 0] = n_full
+    counts[row, 1] = n_pruned
+    counts[row, 2] = samples
+
+
+@njit(cache=True)
+def simulate_blocks(
+    block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
+    val_start, val_stop, prune, v_all, counts,
+):  # fmt: skip
+    """Serial driver of the simulations: :func:`_simulate_block` for every order triple.
+
+    Parameters
+    ----------
+    block_orders : int64 array, shape (n_blocks, 3)
+        ``(na, nb1, nb2)`` of each candidate block.
+    block_start, block_size : int64 arrays, shape (n_blocks,)
+        Where each block starts in the candidate order, and its length.
+    theta_all, score, v_all :
+        As written by :func:`fit_units` with ``simulate`` False; v_all's
+        NaN entries are replaced by V (or a pruned lower bound above the
+        block's best V).
+    prune : bool
+        False: every stable candidate is simulated in full.
+    counts : int64 array, shape (n_blocks, 3)
+        Out per block: candidates simulated in full, candidates pruned, and
+        candidate-samples simulated (lanes times samples).
+    """
+    for row in range(block_start.shape[0]):
+        _simulate_block(
+            row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
+            val_start, val_stop, prune, v_all, counts,
+        )  # fmt: skip
+
+
+@njit(cache=True, parallel=True)
+def simulate_blocks_parallel(
+    block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
+    val_start, val_stop, prune, v_all, counts, n_threads,
+):  # fmt: skip
+    """Parallel driver: thread t takes blocks t, t + n_threads, ...; each block alone
+    decides its pruning, so the result is bit-identical to :func:`simulate_blocks`."""
+    n_blocks = block_start.shape[0]
+    for t in prange(n_threads):
+        for row in range(t, n_blocks, n_threads):
+            _simulate_block(
+                row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
+                pad, o, val_start, val_stop, prune, v_all, counts,
+            )  # fmt: skip
