@@ -4,7 +4,8 @@ On one paper record (FF, seed 1), on one core, side by side in one run:
 the engine (pruned, four candidates per lane batch), the old kernel (one
 candidate at a time, every candidate simulated in full; the engine's twin
 in the tests) and the reference loop (lstsq + lfilter + roots) on a random
-sample of the same grid; then the stage-1 grid. Repeats alternate between
+sample of the same grid; then the stage-1 grid and stage 2 (the direct grid
+with stage 1's output e_r), whose rates per candidate the issue compares. Repeats alternate between
 the engine and the old kernel so that load from other work on the machine
 hits both alike. Frontiers of the engine and the old kernel must be equal.
 """
@@ -21,7 +22,7 @@ import numpy as np  # noqa: E402
 from _paper_record import paper_record  # noqa: E402
 
 from hcid.arx import Grid, candidates  # noqa: E402
-from hcid.arx.engine import _fit_grid  # noqa: E402
+from hcid.arx.engine import _fit_grid, best, simulate  # noqa: E402
 from hcid.arx.reference import fit_reference  # noqa: E402
 
 # SPEC section 3.
@@ -105,7 +106,12 @@ def main():
     )
 
     stage1_rate, _ = _side_by_side("stage 1", stage1, STAGE1_GRID, STAGE1_ROWS)
-    print(f"{'stage 1 vs direct per candidate':<34} {stage1_rate / engine_rate:7.2f} x the direct rate")
+    # Stage 2 as the indirect method runs it: the direct grid with e_r, stage 1's best output.
+    fit, _ = _fit(stage1, STAGE1_GRID, STAGE1_ROWS, False)
+    row = best(fit)
+    e_r = simulate(fit.a[row], fit.b1[row], fit.b2[row], fit.nk1[row], fit.nk2[row], *stage1[:2])
+    stage2_rate, _ = _side_by_side("stage 2", (record["ft_s"], e_r, record["u"]), DIRECT_GRID, DIRECT_ROWS)
+    print(f"{'stage 1 vs stage 2 per candidate':<34} {stage1_rate / stage2_rate:7.2f} x the stage-2 rate")
 
 
 if __name__ == "__main__":

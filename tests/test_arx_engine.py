@@ -675,6 +675,42 @@ def test_vector_lanes_prune_and_flag_exactly_as_the_four_lane_kernel():
     np.testing.assert_array_equal(v[~pruned], full[~pruned])
 
 
+@_NO_JIT
+def test_frontier_errors_on_vector_lanes_equal_the_plain_kernel():
+    # squared_errors_wide (models of one na in a batch, B padded with zeros)
+    # against squared_errors, the frontier VAF's plain kernel: every element
+    # bit for bit; an overflowing model is left to the plain kernel.
+    rng = np.random.default_rng(8)
+    n, pad = 700, 30
+    tail = np.zeros(_lanes.TAIL)
+    i1p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
+    i2p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
+    o = rng.standard_normal(n)
+    orders = [(na, int(rng.integers(0, 9)), int(rng.integers(0, 6))) for na in (1, 1, 2, 3, 3, 3) for _ in range(7)]
+    orders.sort()
+    theta = np.zeros((len(orders), 10 + 8 + 5))
+    for r, (na, nb1, nb2) in enumerate(orders):
+        a, c1, c2 = _random_candidate(rng, na, nb1, nb2)
+        theta[r, : na + nb1 + nb2] = np.r_[a[1:], c1, c2]
+    na, nb1, nb2 = (np.array(x, dtype=np.int64) for x in zip(*orders, strict=True))
+    bad = int(np.flatnonzero((na == 1) & (nb1 > 0))[0])
+    theta[bad, 0] = -3.0  # a root at 3: the output overflows (3^646 > 1.8e308) within n
+
+    nk1, nk2 = rng.integers(0, 10, (2, len(orders)))
+    plain_est, plain_val = np.empty((len(orders), 400)), np.empty((len(orders), 200))
+    wide_est, wide_val = np.full_like(plain_est, -1.0), np.full_like(plain_val, -1.0)
+    done = np.zeros(len(orders), dtype=bool)
+    with np.errstate(over="ignore", invalid="ignore"):
+        _kernels.squared_errors(theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, o, 100, 500, plain_est, plain_val)
+        _lanes.squared_errors_wide(
+            theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, o, 100, 500, wide_est, wide_val, done
+        )
+    assert not done[bad] and done.sum() == len(orders) - 1
+    np.testing.assert_array_equal(wide_est[done], plain_est[done])
+    np.testing.assert_array_equal(wide_val[done], plain_val[done])
+    assert np.isnan(plain_val[bad, -1])
+
+
 def test_orders_above_the_vector_recursion_take_the_four_lane_path():
     # na above _lanes.MAX_NA runs simulate_lanes; the frontier is still the old kernel's.
     rng = np.random.default_rng(4)

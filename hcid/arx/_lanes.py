@@ -722,3 +722,83 @@ def simulate_blocks_parallel(
                 row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
                 pad, o, val_start, val_stop, prune, v_all, counts,
             )  # fmt: skip
+
+
+@njit(cache=True)
+def squared_errors_wide(theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, o, est_start, val_start, err_est, err_val, done):
+    """:func:`hcid.arx._kernels.squared_errors` on the vector steps, ``LANES`` models at a time.
+
+    Consecutive rows of the same na share a batch, their B padded with zero
+    coefficients to the batch's longest (``x + 0.0 * i`` is ``x``: the same
+    values, bit for bit but for a zero's sign, which no square keeps), so
+    every element equals the plain kernel's. ``done[r]`` is False for a
+    model whose output is not finite at the end of the record; its rows
+    are left for the plain kernel (whose NaN-from-the-block rule they need).
+    """
+    n = o.shape[0]
+    rows = theta.shape[0]
+    n_est = err_est.shape[1]
+    n_val = err_val.shape[1]
+    off1 = np.empty(LANES, dtype=np.int64)
+    off2 = np.empty(LANES, dtype=np.int64)
+    xt = np.empty(_CHUNK * LANES)
+    eacc = np.zeros(4 * LANES)
+    first = 0
+    while first < rows:
+        k = na[first]
+        last = first
+        while last + 1 < rows and last + 1 - first < LANES and na[last + 1] == k:
+            last += 1
+        used = last - first + 1
+        m1 = 0
+        m2 = 0
+        for r in range(first, last + 1):
+            m1 = max(m1, nb1[r])
+            m2 = max(m2, nb2[r])
+        h = max(k, 2)
+        coef = np.zeros((h + 1) * LANES)
+        b1 = np.zeros((LANES, max(m1, 1)))
+        b2 = np.zeros((LANES, max(m2, 1)))
+        lane_nk1 = np.zeros(LANES, dtype=np.int64)
+        lane_nk2 = np.zeros(LANES, dtype=np.int64)
+        for lane in range(LANES):
+            coef[lane] = 1.0
+        for lane in range(used):
+            r = first + lane
+            for i in range(k):
+                coef[(i + 1) * LANES + lane] = theta[r, i]
+            for j in range(nb1[r]):
+                b1[lane, j] = theta[r, k + j]
+            for j in range(nb2[r]):
+                b2[lane, j] = theta[r, k + nb1[r] + j]
+            lane_nk1[lane] = nk1[r]
+            lane_nk2[lane] = nk2[r]
+        yh = np.zeros((h + _CHUNK) * LANES)
+        for k0 in range(0, n, _CHUNK):
+            k1 = min(k0 + _CHUNK, n)
+            m = k1 - k0
+            for lane in range(LANES):
+                off1[lane] = pad - lane_nk1[lane] + k0
+                off2[lane] = pad - lane_nk2[lane] + k0
+            steps = (m + TAIL) // SAMPLES * SAMPLES
+            lane_inputs(b1, m1, off1, i1p, b2, m2, off2, i2p, steps, xt)
+            # No validation rows (start = stop = n): no squared-error sums.
+            lane_recursion(coef, k, xt, m, yh, h, o, k0, n, n, n, eacc)
+            for lane in range(used):
+                r = first + lane
+                for q in range(m):
+                    y = yh[(h + q) * LANES + lane]
+                    at = k0 + q - est_start
+                    if 0 <= at < n_est:
+                        d = o[k0 + q] - y
+                        err_est[r, at] = d * d
+                    at = k0 + q - val_start
+                    if 0 <= at < n_val:
+                        d = o[k0 + q] - y
+                        err_val[r, at] = d * d
+            if k1 == n:
+                for lane in range(used):
+                    done[first + lane] = abs(yh[(h + m - 1) * LANES + lane]) < np.inf
+            for i in range(h * LANES):
+                yh[i] = yh[m * LANES + i]
+        first = last + 1

@@ -376,10 +376,17 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
     rows = np.flatnonzero(fitted)
     err_est = np.empty((rows.size, est_stop - est_start))
     err_val = np.empty((rows.size, val_stop - val_start))
-    _kernels.squared_errors(
-        theta_all[first[rows]], block_na[rows], block_nb1[rows], block_nb2[rows], nk1[rows], nk2[rows],
-        i1p, i2p, pad, o, est_start, val_start, err_est, err_val,
-    )  # fmt: skip
+    models = (theta_all[first[rows]], block_na[rows], block_nb1[rows], block_nb2[rows], nk1[rows], nk2[rows])
+    plain = np.ones(rows.size, dtype=bool)
+    if _lanes._WIDE:
+        done = np.zeros(rows.size, dtype=bool)
+        _lanes.squared_errors_wide(*models, i1p, i2p, pad, o, est_start, val_start, err_est, err_val, done)
+        plain = ~done
+    if plain.any():  # without the JIT, or an output that is not finite (NaN rule of simulate())
+        some = (np.ascontiguousarray(x[plain]) for x in models)
+        est_part, val_part = err_est[plain], err_val[plain]
+        _kernels.squared_errors(*some, i1p, i2p, pad, o, est_start, val_start, est_part, val_part)
+        err_est[plain], err_val[plain] = est_part, val_part
     vaf_est = np.full(start.size, np.nan)
     vaf_val = np.full(start.size, np.nan)
     vaf_est[rows] = _vaf(err_est, o[est_start:est_stop])
