@@ -686,7 +686,9 @@ def test_frontier_errors_on_vector_lanes_equal_the_plain_kernel():
     i1p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
     i2p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
     o = rng.standard_normal(n)
-    orders = [(na, int(rng.integers(0, 9)), int(rng.integers(0, 6))) for na in (1, 1, 2, 3, 3, 3) for _ in range(7)]
+    orders = [
+        (na, int(rng.integers(0, 9)), int(rng.integers(0, 6))) for na in (1, 1, 2, 3, 3, 3) for _ in range(7)
+    ]
     orders.sort()
     theta = np.zeros((len(orders), 10 + 8 + 5))
     for r, (na, nb1, nb2) in enumerate(orders):
@@ -701,7 +703,9 @@ def test_frontier_errors_on_vector_lanes_equal_the_plain_kernel():
     wide_est, wide_val = np.full_like(plain_est, -1.0), np.full_like(plain_val, -1.0)
     done = np.zeros(len(orders), dtype=bool)
     with np.errstate(over="ignore", invalid="ignore"):
-        _kernels.squared_errors(theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, o, 100, 500, plain_est, plain_val)
+        _kernels.squared_errors(
+            theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, o, 100, 500, plain_est, plain_val
+        )
         _lanes.squared_errors_wide(
             theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, o, 100, 500, wide_est, wide_val, done
         )

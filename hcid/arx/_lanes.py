@@ -39,7 +39,6 @@ from numba import njit, prange, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-
 # Doubles per vector and vectors per step (8 x 2 measured 10% faster than
 # 4 x 4 on an AVX-512 machine: benchmarks/arx_engine.py).
 _WIDTH = 8
@@ -117,17 +116,17 @@ def _transpose(builder, rows):
 
 
 @intrinsic
-def lane_inputs(typingctx, b1, nb1, off1, i1p, b2, nb2, off2, i2p, m8, xt):
-    """Input part ``B1 i1 + B2 i2`` of every lane for chunk samples ``q < m8`` into ``xt``.
+def lane_inputs(typingctx, b1, nb1, off1, i1p, b2, nb2, off2, i2p, steps, xt):
+    """Input part ``B1 i1 + B2 i2`` of every lane for chunk samples ``q < steps`` into ``xt``.
 
     ``b1`` (LANES, >= nb1) holds lane l's B1 in row l; tap j of lane l at
-    sample q reads ``i1p[off1[l] + q - j]``, likewise for input 2. ``m8``
+    sample q reads ``i1p[off1[l] + q - j]``, likewise for input 2. ``steps``
     must be a multiple of ``SAMPLES`` (samples past the chunk are computed
     and ignored, so the inputs must hold ``SAMPLES - 1`` readable values
     past the record). Per sample the terms are added as in
     ``simulate_into``: 0, then b1[0], b1[1], ..., then b2[0], ...
     """
-    sig = types.void(b1, nb1, off1, i1p, b2, nb2, off2, i2p, m8, xt)
+    sig = types.void(b1, nb1, off1, i1p, b2, nb2, off2, i2p, steps, xt)
 
     def codegen(context, builder, signature, args):
         ty = signature.args
@@ -136,8 +135,13 @@ def lane_inputs(typingctx, b1, nb1, off1, i1p, b2, nb2, off2, i2p, m8, xt):
             b_arr = context.make_array(ty[at])(context, builder, args[at])
             stride = cgutils.unpack_tuple(builder, b_arr.shape)[1]
             inputs.append(
-                (b_arr.data, stride, args[at + 1], _data(context, builder, ty[at + 2], args[at + 2]),
-                 _data(context, builder, ty[at + 3], args[at + 3]))  # fmt: skip
+                (
+                    b_arr.data,
+                    stride,
+                    args[at + 1],
+                    _data(context, builder, ty[at + 2], args[at + 2]),
+                    _data(context, builder, ty[at + 3], args[at + 3]),
+                )  # fmt: skip
             )
         out = _data(context, builder, ty[9], args[9])
         # acc[h][w]: lane w of the group at samples q + 4h .. q + 4h + 3.
@@ -154,7 +158,9 @@ def lane_inputs(typingctx, b1, nb1, off1, i1p, b2, nb2, off2, i2p, m8, xt):
                     with cgutils.for_range(builder, nb) as loop:
                         j = loop.index
                         for w in range(_WIDTH):
-                            coef = _splat(builder, builder.load(builder.gep(b_ptr, [builder.add(rows[w], j)])))
+                            coef = _splat(
+                                builder, builder.load(builder.gep(b_ptr, [builder.add(rows[w], j)]))
+                            )
                             at = builder.sub(starts[w], j)
                             for h in range(_HALVES):
                                 x = _load(builder, ip, builder.add(at, _c(h * _WIDTH)))
@@ -232,7 +238,9 @@ def _recursion(builder, na, coef, xt, m, yh, row0, o, k0, val_start, val_stop, q
             i = na
             while i > 3:
                 s0 = _accumulate(builder, s0, a[i][g], _load(builder, yh, builder.add(at, _c(-i * LANES))))
-                s1 = _accumulate(builder, s1, a[i - 1][g], _load(builder, yh, builder.add(at, _c(-(i - 1) * LANES))))
+                s1 = _accumulate(
+                    builder, s1, a[i - 1][g], _load(builder, yh, builder.add(at, _c(-(i - 1) * LANES)))
+                )
                 i -= 2
             if i == 3:
                 s0 = _accumulate(builder, s0, a[3][g], _load(builder, yh, builder.add(at, _c(-3 * LANES))))
@@ -725,7 +733,9 @@ def simulate_blocks_parallel(
 
 
 @njit(cache=True)
-def squared_errors_wide(theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, o, est_start, val_start, err_est, err_val, done):
+def squared_errors_wide(
+    theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, o, est_start, val_start, err_est, err_val, done
+):
     """:func:`hcid.arx._kernels.squared_errors` on the vector steps, ``LANES`` models at a time.
 
     Consecutive rows of the same na share a batch, their B padded with zero

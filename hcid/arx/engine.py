@@ -275,12 +275,13 @@ def fit_grid(
     same kernel, so it matches bit for bit.
 
     Speed: the simulations dominate. The stable candidates of each order
-    triple are simulated four at a time (independent recursions side by
-    side), those with the smallest prediction error first; without
-    ``keep_candidates`` a candidate stops once its partial V exceeds the
-    best V of its triple so far, which cannot change the frontier (V only
-    grows). ``benchmarks/arx_engine.py`` times the paper grids against the
-    old one-at-a-time kernel and the reference loop.
+    triple are simulated 16 at a time, one SIMD lane each, with the
+    arithmetic of the one-at-a-time kernel (:mod:`hcid.arx._lanes`), those
+    with the smallest prediction error first; without ``keep_candidates``
+    a candidate stops once its partial V exceeds the best V of its triple
+    so far, which cannot change the frontier (V only grows).
+    ``benchmarks/arx_engine.py`` times the paper grids against the old
+    one-at-a-time kernel and the reference loop.
     """
     fit, _ = _fit_grid(
         i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_candidates, legacy=False
