@@ -589,8 +589,9 @@ def _run_wide(coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, i1p, i2p, pad, o, r
         np.empty(width, dtype=np.int64), np.empty(width, dtype=np.int64), np.empty(_lanes._CHUNK * width),
         np.empty((max(na, 2) + _lanes._CHUNK) * width), np.empty(4 * width),
     )  # fmt: skip
+    bounds = np.array(np.broadcast_to(bound, width), dtype=np.float64)
     done = _lanes.simulate_wide(
-        coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, i1p, i2p, pad, o, *rows, bound, *scratch, v, pruned
+        coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, i1p, i2p, pad, o, *rows, bounds, *scratch, v, pruned
     )
     assert 0 < done <= n
     return v[:n_lanes], pruned[:n_lanes]
@@ -673,6 +674,15 @@ def test_vector_lanes_prune_and_flag_exactly_as_the_four_lane_kernel():
     np.testing.assert_array_equal(pruned, twin_pruned)
     np.testing.assert_array_equal(v, twin_v)
     np.testing.assert_array_equal(v[~pruned], full[~pruned])
+    # A bound per lane (lanes of different blocks share a batch): lanes 8..
+    # with no bound yet run in full, the others are pruned as before.
+    mixed = np.where(np.arange(width) < 8, bound, np.inf)
+    with np.errstate(over="ignore", invalid="ignore"):
+        v2, pruned2 = _run_wide(coef, na, b1, nb1, nk1, b2, nb2, nk2, width, i1p, i2p, pad, o, rows, mixed)
+    assert not pruned2[8:].any()
+    np.testing.assert_array_equal(pruned2[:8], pruned[:8])
+    np.testing.assert_array_equal(v2[:8], v[:8])
+    np.testing.assert_array_equal(v2[8:], full[8:])
 
 
 @_NO_JIT

@@ -509,9 +509,10 @@ def simulate_wide(
     :func:`simulate_lanes` with ``LANES`` for 4 (``coef[i * LANES + l]``,
     ``b1[l]``, ``nk1[l]``, ...); the others must hold ``a = [1, 0, ...]``,
     zero B and zero delays and are ignored. Same arithmetic per lane, same
-    pruning rule and chunks, so V (or a pruned lane's lower bound) is
-    bit-identical to :func:`simulate_lanes`'. Requires ``na <= MAX_NA``
-    and inputs with ``TAIL`` readable values after the record.
+    pruning rule and chunks, with a bound per lane (``bound[l]``, float64
+    (LANES,)), so V (or a pruned lane's lower bound) is bit-identical to
+    :func:`simulate_lanes`' with that lane's bound. Requires ``na <=
+    MAX_NA`` and inputs with ``TAIL`` readable values after the record.
 
     Scratch: ``off1``, ``off2`` int64 (LANES,); ``xt`` (_CHUNK * LANES,);
     ``yh`` ((max(na, 2) + _CHUNK) * LANES,), the last rows of one chunk
@@ -551,7 +552,7 @@ def simulate_wide(
             for lane in range(n_lanes):
                 if live[lane]:
                     p = _partial_v(eacc, lane, n_val)
-                    if p < np.inf and p > bound:
+                    if p < np.inf and p > bound[lane]:
                         v_out[lane] = p
                         pruned[lane] = True
                         live[lane] = False
@@ -573,26 +574,8 @@ def _partial_v(eacc, lane, n_val):
 
 
 @njit(cache=True)
-def _simulate_block(
-    row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
-    val_start, val_stop, prune, v_all, counts,
-):  # fmt: skip
-    """Simulate the stable candidates of one order triple (one candidate block).
-
-    Candidates waiting with ``v_all = NaN`` (stable, see :func:`_fit_unit`)
-    run ``LANES`` at a time (:func:`simulate_wide`; four at a time with
-    :func:`simulate_lanes` without the JIT or above ``MAX_NA``), best
-    prediction error first: the first batch (the remainder of the division
-    into batches) in full, which makes ``bound``, the best V so far, tight
-    at once; the others stop as soon as their partial V exceeds it
-    (``prune``). ``counts[row]`` receives the numbers
-    simulated in full and pruned, and the work done.
-    """
-    na, nb1, nb2 = block_orders[row, 0], block_orders[row, 1], block_orders[row, 2]
-    start, size = block_start[row], block_size[row]
-    nk1_lo, nk2_lo = bounds[3, 0], bounds[4, 0]
-    n_d2 = bounds[4, 1] - bounds[4, 0] + 1 if nb2 > 0 else 1
-    n = o.shape[0]
+def _waiting_by_score(v_all, score, start, size):
+    """The block's candidates waiting with V = NaN, best prediction error first."""
     waiting = np.empty(size, dtype=np.int64)
     keys = np.empty(size)
     m = 0
@@ -601,89 +584,194 @@ def _simulate_block(
             waiting[m] = c
             keys[m] = -score[c]
             m += 1
-    if m == 0:
-        return
-    order = np.argsort(keys[:m], kind="mergesort")
-    wide = _WIDE and na <= MAX_NA
-    width = LANES if wide else 4
-    h = max(na, 2)
-    coef = np.zeros((h + 1) * width)
-    b1 = np.zeros((width, max(nb1, 1)))
-    b2 = np.zeros((width, max(nb2, 1)))
-    nk1 = np.zeros(width, dtype=np.int64)
-    nk2 = np.zeros(width, dtype=np.int64)
-    lanes = np.empty(width, dtype=np.int64)
-    v = np.empty(width)
-    pruned = np.empty(width, dtype=np.bool_)
-    if wide:
-        off1 = np.empty(LANES, dtype=np.int64)
-        off2 = np.empty(LANES, dtype=np.int64)
-        xt = np.empty(_CHUNK * LANES)
-        yh = np.empty((h + _CHUNK) * LANES)
-        eacc = np.empty(4 * LANES)
-    else:
-        xs = np.empty((4, _CHUNK))
-        yh = np.empty((na + n) * 4)
+    return waiting[np.argsort(keys[:m], kind="mergesort")]
+
+
+@njit(cache=True)
+def _simulate_block(
+    row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
+    val_start, val_stop, prune, v_all, counts,
+):  # fmt: skip
+    """Simulate the stable candidates of one order triple four at a time (:func:`simulate_lanes`).
+
+    The plain path: without the JIT, and above ``MAX_NA``. Candidates
+    waiting with ``v_all = NaN`` (stable, see
+    :func:`hcid.arx._kernels.fit_units`) run best prediction error first:
+    the first four in full, which makes ``bound``, the best V so far, tight
+    at once; the others stop as soon as their partial V exceeds it
+    (``prune``). ``counts[row]`` receives the numbers simulated in full and
+    pruned, and the work done.
+    """
+    na, nb1, nb2 = block_orders[row, 0], block_orders[row, 1], block_orders[row, 2]
+    start = block_start[row]
+    nk1_lo, nk2_lo = bounds[3, 0], bounds[4, 0]
+    n_d2 = bounds[4, 1] - bounds[4, 0] + 1 if nb2 > 0 else 1
+    n = o.shape[0]
+    waiting = _waiting_by_score(v_all, score, start, block_size[row])
+    m = waiting.shape[0]
+    coef = np.zeros((max(na, 2) + 1) * 4)
+    b1 = np.zeros((4, max(nb1, 1)))
+    b2 = np.zeros((4, max(nb2, 1)))
+    nk1 = np.zeros(4, dtype=np.int64)
+    nk2 = np.zeros(4, dtype=np.int64)
+    lanes = np.empty(4, dtype=np.int64)
+    xs = np.empty((4, _CHUNK))
+    yh = np.empty((na + n) * 4)
+    v4 = np.empty(4)
+    pruned = np.empty(4, dtype=np.bool_)
     bound = np.inf
-    n_full = 0
-    n_pruned = 0
-    samples = 0
-    # The fewest batches; the first takes the remainder, so that every
-    # later batch is full and runs against a bound.
-    first = 0
-    used = min(width, m)
-    while first < m:
-        for lane in range(width):
-            if lane >= used and wide:
-                # An idle vector lane: a = [1, 0, ...], no input; ignored.
-                coef[lane] = 1.0
-                for i in range(h):
-                    coef[(i + 1) * width + lane] = 0.0
-                for j in range(nb1):
-                    b1[lane, j] = 0.0
-                for j in range(nb2):
-                    b2[lane, j] = 0.0
-                nk1[lane] = 0
-                nk2[lane] = 0
-                continue
-            # A short first batch of four repeats its first candidate in the idle lanes.
-            pick = first + lane if lane < used else first
-            c = waiting[order[pick]]
+    for first in range(0, m, 4):
+        for lane in range(4):
+            # A short last batch repeats its first candidate in the idle lanes.
+            c = waiting[first + lane if first + lane < m else first]
             lanes[lane] = c
             within = c - start
             nk1[lane] = nk1_lo + within // n_d2 if nb1 > 0 else 0
             nk2[lane] = nk2_lo + within % n_d2 if nb2 > 0 else 0
             coef[lane] = 1.0
             for i in range(na):
-                coef[(i + 1) * width + lane] = theta_all[c, i]
+                coef[(i + 1) * 4 + lane] = theta_all[c, i]
             for j in range(nb1):
                 b1[lane, j] = theta_all[c, na + j]
             for j in range(nb2):
                 b2[lane, j] = theta_all[c, na + nb1 + j]
-        if wide:
-            done = simulate_wide(
-                coef, na, b1, nb1, nk1, b2, nb2, nk2, used, i1p, i2p, pad, o, val_start, val_stop,
-                bound, off1, off2, xt, yh, eacc, v, pruned,
-            )  # fmt: skip
-        else:
-            done = simulate_lanes(
-                coef, na, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, o, val_start, val_stop,
-                bound, xs, yh, v, pruned,
-            )  # fmt: skip
-        samples += done * used
+        done = simulate_lanes(
+            coef, na, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, o, val_start, val_stop,
+            bound, xs, yh, v4, pruned,
+        )  # fmt: skip
+        used = min(4, m - first)
+        counts[row, 2] += done * used
         for lane in range(used):
-            v_all[lanes[lane]] = v[lane]
-            if pruned[lane]:
-                n_pruned += 1
-            else:
-                n_full += 1
-            if prune and v[lane] < bound:
-                bound = v[lane]
-        first += used
-        used = min(width, m - first)
-    counts[row, 0] = n_full
-    counts[row, 1] = n_pruned
-    counts[row, 2] = samples
+            v_all[lanes[lane]] = v4[lane]
+            counts[row, 1 if pruned[lane] else 0] += 1
+            if prune and v4[lane] < bound:
+                bound = v4[lane]
+
+
+@njit(cache=True)
+def _simulate_run(
+    first_row, stop_row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
+    pad, o, val_start, val_stop, prune, v_all, counts,
+):  # fmt: skip
+    """Simulate the stable candidates of blocks ``first_row .. stop_row - 1`` (one na and
+    nb1), ``LANES`` at a time on the vector steps (:func:`simulate_wide`).
+
+    The blocks' waiting candidates form one queue, block after block, each
+    block's best prediction error first, cut into batches of ``LANES``: a
+    block's last candidates share a batch with the next block's first, so
+    few lanes idle (stage 1's blocks hold 25 candidates). A lane stops once
+    its partial V exceeds the best V of its own block so far (``prune``;
+    inf until the block has one), which cannot change the frontier. A
+    batch that spans two blocks pads B with zero coefficients to its longer
+    nb2: ``x + 0.0 * i`` is ``x``, the same value bit for bit but for a zero's sign, which
+    V's squares do not keep, so every V is what the block alone would give.
+    ``counts`` as in :func:`_simulate_block`.
+    """
+    na, nb1 = block_orders[first_row, 0], block_orders[first_row, 1]
+    nk1_lo, nk2_lo = bounds[3, 0], bounds[4, 0]
+    total = 0
+    m2 = 0
+    for row in range(first_row, stop_row):
+        m2 = max(m2, block_orders[row, 2])
+        total += block_size[row]
+    queue = np.empty(total, dtype=np.int64)
+    owner = np.empty(total, dtype=np.int64)
+    m = 0
+    for row in range(first_row, stop_row):
+        waiting = _waiting_by_score(v_all, score, block_start[row], block_size[row])
+        for c in waiting:
+            queue[m] = c
+            owner[m] = row
+            m += 1
+    best = np.full(stop_row - first_row, np.inf)
+    h = max(na, 2)
+    coef = np.zeros((h + 1) * LANES)
+    b1 = np.zeros((LANES, max(nb1, 1)))
+    b2 = np.zeros((LANES, max(m2, 1)))
+    nk1 = np.zeros(LANES, dtype=np.int64)
+    nk2 = np.zeros(LANES, dtype=np.int64)
+    lane_bound = np.empty(LANES)
+    v = np.empty(LANES)
+    pruned = np.empty(LANES, dtype=np.bool_)
+    off1 = np.empty(LANES, dtype=np.int64)
+    off2 = np.empty(LANES, dtype=np.int64)
+    xt = np.empty(_CHUNK * LANES)
+    yh = np.empty((h + _CHUNK) * LANES)
+    eacc = np.empty(4 * LANES)
+    for first in range(0, m, LANES):
+        used = min(LANES, m - first)
+        batch_nb2 = 0
+        for lane in range(used):
+            batch_nb2 = max(batch_nb2, block_orders[owner[first + lane], 2])
+        coef[:] = 0.0
+        b1[:, :] = 0.0
+        b2[:, :] = 0.0
+        nk1[:] = 0
+        nk2[:] = 0
+        for lane in range(LANES):
+            coef[lane] = 1.0  # an idle lane: a = [1, 0, ...], no input; ignored
+        for lane in range(used):
+            c = queue[first + lane]
+            row = owner[first + lane]
+            nb2 = block_orders[row, 2]
+            n_d2 = bounds[4, 1] - bounds[4, 0] + 1 if nb2 > 0 else 1
+            within = c - block_start[row]
+            nk1[lane] = nk1_lo + within // n_d2 if nb1 > 0 else 0
+            nk2[lane] = nk2_lo + within % n_d2 if nb2 > 0 else 0
+            for i in range(na):
+                coef[(i + 1) * LANES + lane] = theta_all[c, i]
+            for j in range(nb1):
+                b1[lane, j] = theta_all[c, na + j]
+            for j in range(nb2):
+                b2[lane, j] = theta_all[c, na + nb1 + j]
+            lane_bound[lane] = best[row - first_row]
+        done = simulate_wide(
+            coef, na, b1, nb1, nk1, b2, batch_nb2, nk2, used, i1p, i2p, pad, o, val_start, val_stop,
+            lane_bound, off1, off2, xt, yh, eacc, v, pruned,
+        )  # fmt: skip
+        for lane in range(used):
+            c = queue[first + lane]
+            row = owner[first + lane]
+            v_all[c] = v[lane]
+            counts[row, 1 if pruned[lane] else 0] += 1
+            counts[row, 2] += done
+            if prune and v[lane] < best[row - first_row]:
+                best[row - first_row] = v[lane]
+
+
+@njit(cache=True)
+def _runs(block_orders):
+    """First block of each run :func:`_simulate_group` takes at once, then the number of
+    blocks: consecutive blocks of one (na, nb1) on the vector path, any other block alone."""
+    n_blocks = block_orders.shape[0]
+    firsts = np.empty(n_blocks + 1, dtype=np.int64)
+    g = 0
+    for row in range(n_blocks):
+        na, nb1 = block_orders[row, 0], block_orders[row, 1]
+        same = row > 0 and na == block_orders[row - 1, 0] and nb1 == block_orders[row - 1, 1]
+        if not (same and _WIDE and na <= MAX_NA):
+            firsts[g] = row
+            g += 1
+    firsts[g] = n_blocks
+    return firsts[: g + 1]
+
+
+@njit(cache=True)
+def _simulate_group(
+    g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
+    val_start, val_stop, prune, v_all, counts,
+):  # fmt: skip
+    first_row, stop_row = firsts[g], firsts[g + 1]
+    if _WIDE and block_orders[first_row, 0] <= MAX_NA:
+        _simulate_run(
+            first_row, stop_row, block_orders, block_start, block_size, bounds, theta_all, score,
+            i1p, i2p, pad, o, val_start, val_stop, prune, v_all, counts,
+        )  # fmt: skip
+    else:
+        _simulate_block(
+            first_row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
+            pad, o, val_start, val_stop, prune, v_all, counts,
+        )  # fmt: skip
 
 
 @njit(cache=True)
@@ -691,7 +779,8 @@ def simulate_blocks(
     block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
     val_start, val_stop, prune, v_all, counts,
 ):  # fmt: skip
-    """Serial driver of the simulations: :func:`_simulate_block` for every order triple.
+    """Serial driver of the simulations: every order triple, the runs of blocks of one
+    (na, nb1) by :func:`_simulate_run`, or each block alone by :func:`_simulate_block`.
 
     Parameters
     ----------
@@ -705,14 +794,15 @@ def simulate_blocks(
         block's best V).
     prune : bool
         False: every stable candidate is simulated in full.
-    counts : int64 array, shape (n_blocks, 3)
+    counts : int64 array, shape (n_blocks, 3), zeros
         Out per block: candidates simulated in full, candidates pruned, and
         candidate-samples simulated (lanes times samples).
     """
-    for row in range(block_start.shape[0]):
-        _simulate_block(
-            row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
-            val_start, val_stop, prune, v_all, counts,
+    firsts = _runs(block_orders)
+    for g in range(firsts.shape[0] - 1):
+        _simulate_group(
+            g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad,
+            o, val_start, val_stop, prune, v_all, counts,
         )  # fmt: skip
 
 
@@ -721,13 +811,14 @@ def simulate_blocks_parallel(
     block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
     val_start, val_stop, prune, v_all, counts, n_threads,
 ):  # fmt: skip
-    """Parallel driver: thread t takes blocks t, t + n_threads, ...; each block alone
-    decides its pruning, so the result is bit-identical to :func:`simulate_blocks`."""
-    n_blocks = block_start.shape[0]
+    """Parallel driver: thread t takes runs t, t + n_threads, ... of :func:`simulate_blocks`;
+    each run alone decides its pruning, so the result is bit-identical to it."""
+    firsts = _runs(block_orders)
+    n_groups = firsts.shape[0] - 1
     for t in prange(n_threads):
-        for row in range(t, n_blocks, n_threads):
-            _simulate_block(
-                row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
+        for g in range(t, n_groups, n_threads):
+            _simulate_group(
+                g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
                 pad, o, val_start, val_stop, prune, v_all, counts,
             )  # fmt: skip
 
