@@ -1,8 +1,8 @@
 """Lane kernels of the ARX grid engine: many candidates simulated side by side (private).
 
-The candidates of one order triple are simulated ``LANES`` at a time,
-pruned against the best V of their triple so far (see
-:func:`simulate_wide`, :func:`_simulate_block`). numba vectorises loops
+The candidates of the order triples are simulated ``LANES`` at a time,
+each pruned against the best V of its triple so far (see
+:func:`simulate_wide`, :func:`_simulate_run`). numba vectorises loops
 over samples, but the ARX recursion is a chain through the samples: only
 independent candidates (lanes) can share a vector, and numba leaves LLVM's
 SLP vectoriser, which would pack them, off. The two steps of
@@ -17,6 +17,10 @@ Every lane does the arithmetic of :func:`hcid.arx._kernels.simulate_into`
 (the same IEEE-754 operations in the same order: ``fmul`` and ``fadd`` /
 ``fsub`` without fast-math flags, which LLVM may neither reassociate nor
 fuse), so a lane's V is bit-identical to it; the tests compare them.
+Where lanes of different B lengths share a batch, the shorter B are padded
+with zero coefficients: ``x + 0.0 * i`` is ``x`` (for finite i; the sign of
+a zero sum may flip, which changes no later value but a zero's sign, and no
+square), so V stays bit-identical.
 :func:`simulate_lanes` (four lanes in plain numba) is the vector path's
 twin, and the path without the JIT (the intrinsics run only compiled) and
 above ``MAX_NA``.
