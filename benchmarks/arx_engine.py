@@ -1,7 +1,7 @@
 """Benchmark of hcid.arx.fit_grid against its old kernel and the slow reference (``make bench``).
 
 On one paper record (FF, seed 1), on one core, side by side in one run:
-the engine (pruned, four candidates per lane batch), the old kernel (one
+the engine (pruned, 16 candidates per batch of vector lanes), the old kernel (one
 candidate at a time, every candidate simulated in full; the engine's twin
 in the tests) and the reference loop (lstsq + lfilter + roots) on a random
 sample of the same grid; then the stage-1 grid and stage 2 (the direct grid

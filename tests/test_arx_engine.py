@@ -417,9 +417,13 @@ def test_paper_frontiers(direct_fit, stage1_fit):
         assert fit.v[row] == np.min(v)
 
 
-def test_vaf_and_v_of_frontier_rows(paper_record):
+@pytest.mark.parametrize(
+    "na",
+    [(2, 3), (12, 13)],  # 13: above the vector recursion's MAX_NA, the plain kernels' rows
+)
+def test_vaf_and_v_of_frontier_rows(paper_record, na):
     # SPEC section 4 VAF formula and section 3 V, recomputed with lfilter.
-    grid = Grid(na=(2, 3), nb1=(0, 2), nb2=(1, 2), nk1=(21, 22), nk2=(5, 6))
+    grid = Grid(na=na, nb1=(0, 2), nb2=(1, 2), nk1=(21, 22), nk2=(5, 6))
     i1, i2, o = _direct(paper_record)
     fit = fit_grid(i1, i2, o, grid, *DIRECT_ROWS)
     est, val = DIRECT_ROWS
@@ -604,10 +608,12 @@ def _run_wide(coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, i1p, i2p, pad, o, r
         (2048, (1088, 2048)),  # the direct validation window
         (2048, (29, 2048)),  # stage 1: 2019 rows, a tail of 3 after the quadruples
         (301, (7, 290)),  # shorter than three chunks, a last chunk not a multiple of 8
+        (15, (0, 15)),  # one step shorter than the input step's 16 samples, rows from 0
+        (130, (0, 100)),  # rows that end a chunk and more before the record does
     ],
 )
 def test_vector_lanes_are_bit_identical_to_the_single_candidate_kernel(n, rows):
-    # simulate_wide (explicit <4 x double> steps) against simulate_into +
+    # simulate_wide (explicit <8 x double> steps) against simulate_into +
     # _validation_mse, candidate by candidate: every V bit for bit (STYLE 4),
     # for every na with a vector recursion, long B (stage 1's 25) and a
     # dropped input, full and partly idle batches.
@@ -683,6 +689,33 @@ def test_vector_lanes_prune_and_flag_exactly_as_the_four_lane_kernel():
     np.testing.assert_array_equal(pruned2[:8], pruned[:8])
     np.testing.assert_array_equal(v2[:8], v[:8])
     np.testing.assert_array_equal(v2[8:], full[8:])
+
+
+@_NO_JIT
+def test_vector_lanes_flag_an_output_that_overflows_after_the_validation_rows():
+    # V over rows 0..99 of a lane whose output overflows near sample 1,750
+    # (a root at 1.5) is finite, but the candidate is unstable: inf, as
+    # simulate_into's finiteness rule gives in fit_grid.
+    rng = np.random.default_rng(3)
+    n, pad, rows = 2048, 20, (0, 100)
+    tail = np.zeros(_lanes.TAIL)
+    i1p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
+    o = rng.standard_normal(n)
+    width = _lanes.LANES
+    lanes, coef, b1, b2, nk1, nk2 = _wide_batch(rng, 1, 2, 0, width, n)
+    coef[width + 2] = -1.5
+    with np.errstate(over="ignore", invalid="ignore"):
+        v, pruned = _run_wide(coef, 1, b1, 2, nk1, b2, 0, nk2, width, i1p, i1p, pad, o, rows, np.inf)
+        yp = np.zeros(1 + n)
+        a = np.array([1.0, -1.5, 0.0])
+        one = _kernels.simulate_into(a, 1, b1[2], 2, nk1[2], b2[2], 0, 0, i1p, i1p, pad, np.empty(n), yp, 1)
+    assert one < n and np.isfinite(_kernels._validation_mse(yp, 1, o, *rows))  # overflows late
+    assert v[2] == np.inf and not pruned.any()
+    assert np.all(np.isfinite(np.delete(v, 2)))
+    # The vector steps read whole steps past a chunk without bounds checks:
+    # inputs without the TAIL values after the record are refused.
+    with pytest.raises(ValueError, match="TAIL"):
+        _run_wide(coef, 1, b1, 2, nk1, b2, 0, nk2, width, i1p[:-1], i1p, pad, o, rows, np.inf)
 
 
 @_NO_JIT

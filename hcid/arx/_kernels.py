@@ -250,7 +250,7 @@ def _fit_unit(
     """Fit and test every candidate of work unit (k1, k2); simulate it if ``simulate``.
 
     With ``simulate`` False a stable candidate gets ``v_out = NaN`` (to be
-    simulated by :func:`simulate_blocks`) and ``score_out`` its explained
+    simulated by :func:`hcid.arx._lanes.simulate_blocks`) and ``score_out`` its explained
     sum of squares on the estimation rows, ``||c[:k]||^2`` (larger = smaller
     prediction error); unstable and singular ones get ``inf`` as before.
     """

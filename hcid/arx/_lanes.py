@@ -23,7 +23,8 @@ a zero sum may flip, which changes no later value but a zero's sign, and no
 square), so V stays bit-identical.
 :func:`simulate_lanes` (four lanes in plain numba) is the vector path's
 twin, and the path without the JIT (the intrinsics run only compiled) and
-above ``MAX_NA``.
+above ``MAX_NA``; so is :func:`hcid.arx._kernels.squared_errors` for the
+frontier's VAF.
 
 This module calls no kernel of :mod:`hcid.arx._kernels` (nor the reverse):
 numba's on-disk cache of a function is invalidated by a change of its own
@@ -61,6 +62,8 @@ _CHUNK = 128
 # Values past the record that the vector input step reads (it computes
 # whole steps of SAMPLES samples); the engine pads the inputs with them.
 TAIL = SAMPLES - 1
+# lane_inputs writes whole steps of SAMPLES into a chunk's _CHUNK rows.
+assert _CHUNK % SAMPLES == 0
 # Without the JIT every block takes the plain four-lane path.
 _WIDE = not numba.config.DISABLE_JIT
 
@@ -148,7 +151,7 @@ def lane_inputs(typingctx, b1, nb1, off1, i1p, b2, nb2, off2, i2p, steps, xt):
                 )  # fmt: skip
             )
         out = _data(context, builder, ty[9], args[9])
-        # acc[h][w]: lane w of the group at samples q + 4h .. q + 4h + 3.
+        # acc[h][w]: lane w of the group at samples q + h * _WIDTH .. q + (h + 1) * _WIDTH - 1.
         acc = [[cgutils.alloca_once(builder, _VEC) for _ in range(_WIDTH)] for _ in range(_HALVES)]
         with cgutils.for_range_slice(builder, _c(0), args[8], _c(SAMPLES)) as (q, _):
             for g in range(_GROUPS):
@@ -503,6 +506,15 @@ def _finite_or_inf(v):
 
 
 @njit(cache=True)
+def _check_lanes(i1p, i2p, pad, n, b1, b2):
+    """The vector steps read without bounds checks: refuse what they would overrun."""
+    if i1p.shape[0] < pad + n + TAIL or i2p.shape[0] < pad + n + TAIL:
+        raise ValueError("vector lanes: the inputs need pad + n + TAIL values")
+    if b1.shape[0] != LANES or b2.shape[0] != LANES:
+        raise ValueError("vector lanes: B must have one row per lane")
+
+
+@njit(cache=True)
 def simulate_wide(
     coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, i1p, i2p, pad, o, val_start, val_stop, bound,
     off1, off2, xt, yh, eacc, v_out, pruned,
@@ -523,6 +535,7 @@ def simulate_wide(
     moved to its top for the next; ``eacc`` (4 * LANES,).
     """
     n = o.shape[0]
+    _check_lanes(i1p, i2p, pad, n, b1, b2)
     n_val = val_stop - val_start
     quad_end = val_start + 4 * (n_val // 4)
     h = max(na, 2)
@@ -546,7 +559,8 @@ def simulate_wide(
             off2[lane] = pad - nk2[lane] + k0
         steps = (m + TAIL) // SAMPLES * SAMPLES
         lane_inputs(b1, nb1, off1, i1p, b2, nb2, off2, i2p, steps, xt)
-        lane_recursion(coef, na, xt, m, yh, h, o, k0, val_start, val_stop, quad_end, eacc)
+        if not lane_recursion(coef, na, xt, m, yh, h, o, k0, val_start, val_stop, quad_end, eacc):
+            raise ValueError("simulate_wide: na above MAX_NA")
         last = (h + m - 1) * LANES
         for lane in range(n_lanes):
             if live[lane] and not abs(yh[last + lane]) < np.inf:
@@ -709,7 +723,7 @@ def _simulate_run(
             batch_nb2 = max(batch_nb2, block_orders[owner[first + lane], 2])
         coef[:] = 0.0
         b1[:, :] = 0.0
-        b2[:, :] = 0.0
+        b2[:, :] = 0.0  # a lane's next candidate may have a shorter B2
         nk1[:] = 0
         nk2[:] = 0
         for lane in range(LANES):
@@ -855,6 +869,9 @@ def squared_errors_wide(
         while last + 1 < rows and last + 1 - first < LANES and na[last + 1] == k:
             last += 1
         used = last - first + 1
+        if k > MAX_NA:  # no vector recursion: done stays False, the plain kernel takes them
+            first = last + 1
+            continue
         m1 = 0
         m2 = 0
         for r in range(first, last + 1):
@@ -864,6 +881,7 @@ def squared_errors_wide(
         coef = np.zeros((h + 1) * LANES)
         b1 = np.zeros((LANES, max(m1, 1)))
         b2 = np.zeros((LANES, max(m2, 1)))
+        _check_lanes(i1p, i2p, pad, n, b1, b2)
         lane_nk1 = np.zeros(LANES, dtype=np.int64)
         lane_nk2 = np.zeros(LANES, dtype=np.int64)
         for lane in range(LANES):
@@ -888,7 +906,8 @@ def squared_errors_wide(
             steps = (m + TAIL) // SAMPLES * SAMPLES
             lane_inputs(b1, m1, off1, i1p, b2, m2, off2, i2p, steps, xt)
             # No validation rows (start = stop = n): no squared-error sums.
-            lane_recursion(coef, k, xt, m, yh, h, o, k0, n, n, n, eacc)
+            if not lane_recursion(coef, k, xt, m, yh, h, o, k0, n, n, n, eacc):
+                raise ValueError("squared_errors_wide: na above MAX_NA")
             for lane in range(used):
                 r = first + lane
                 for q in range(m):

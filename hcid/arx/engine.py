@@ -151,7 +151,7 @@ def _rows(name: str, rows: slice, n: int) -> tuple[int, int]:
 
 
 def _padded(x: np.ndarray, pad: int) -> np.ndarray:
-    # TAIL zeros after the record: the vector input step reads whole quadruples.
+    # TAIL zeros after the record: the vector input step reads whole steps of SAMPLES.
     return np.concatenate((np.zeros(pad), x, np.zeros(_lanes.TAIL)))
 
 
@@ -271,8 +271,8 @@ def fit_grid(
 
     The best of an order triple is the smallest V, ties to the smaller
     nk1, then nk2. The frontier's coefficients and V are the ones the grid
-    loop computed; VAF comes from :func:`simulate` on them, which runs the
-    same kernel, so it matches bit for bit.
+    loop computed; VAF comes from their outputs, the values :func:`simulate`
+    gives bit for bit (same arithmetic; the tests compare them).
 
     Speed: the simulations dominate. The stable candidates of each order
     triple are simulated 16 at a time, one SIMD lane each, with the
@@ -373,7 +373,7 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
         a_rows.append(np.concatenate(([1.0], theta[:na])))
         b1_rows.append(theta[na : na + nb1].copy())
         b2_rows.append(theta[na + nb1 : na + nb1 + block_nb2[row]].copy())
-    # VAF from the frontier rows' outputs, simulated as simulate() does.
+    # VAF from the frontier rows' outputs: the values simulate() gives, bit for bit.
     rows = np.flatnonzero(fitted)
     err_est = np.empty((rows.size, est_stop - est_start))
     err_val = np.empty((rows.size, val_stop - val_start))
@@ -383,7 +383,7 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
         done = np.zeros(rows.size, dtype=bool)
         _lanes.squared_errors_wide(*models, i1p, i2p, pad, o, est_start, val_start, err_est, err_val, done)
         plain = ~done
-    if plain.any():  # without the JIT, or an output that is not finite (NaN rule of simulate())
+    if plain.any():  # no JIT, na above MAX_NA, or an output not finite (simulate()'s NaN rule)
         some = (np.ascontiguousarray(x[plain]) for x in models)
         est_part, val_part = err_est[plain], err_val[plain]
         _kernels.squared_errors(*some, i1p, i2p, pad, o, est_start, val_start, est_part, val_part)
