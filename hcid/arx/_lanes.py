@@ -856,8 +856,6 @@ def squared_errors_wide(
     """
     n = o.shape[0]
     rows = theta.shape[0]
-    n_est = err_est.shape[1]
-    n_val = err_val.shape[1]
     off1 = np.empty(LANES, dtype=np.int64)
     off2 = np.empty(LANES, dtype=np.int64)
     xt = np.empty(_CHUNK * LANES)
@@ -909,20 +907,19 @@ def squared_errors_wide(
             if not lane_recursion(coef, k, xt, m, yh, h, o, k0, n, n, n, eacc):
                 raise ValueError("squared_errors_wide: na above MAX_NA")
             for lane in range(used):
-                r = first + lane
-                for q in range(m):
-                    y = yh[(h + q) * LANES + lane]
-                    at = k0 + q - est_start
-                    if 0 <= at < n_est:
-                        d = o[k0 + q] - y
-                        err_est[r, at] = d * d
-                    at = k0 + q - val_start
-                    if 0 <= at < n_val:
-                        d = o[k0 + q] - y
-                        err_val[r, at] = d * d
+                _errors_into(err_est[first + lane], est_start, yh, h, lane, o, k0, k1)
+                _errors_into(err_val[first + lane], val_start, yh, h, lane, o, k0, k1)
             if k1 == n:
                 for lane in range(used):
                     done[first + lane] = abs(yh[(h + m - 1) * LANES + lane]) < np.inf
             for i in range(h * LANES):
                 yh[i] = yh[m * LANES + i]
         first = last + 1
+
+
+@njit(cache=True)
+def _errors_into(err, start, yh, h, lane, o, k0, k1):
+    """``err[k - start] = (o[k] - y)^2`` for the chunk's samples k0 <= k < k1 in err's window."""
+    for k in range(max(k0, start), min(k1, start + err.shape[0])):
+        d = o[k] - yh[(h + k - k0) * LANES + lane]
+        err[k - start] = d * d

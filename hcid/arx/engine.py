@@ -361,18 +361,16 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
     fitted = np.isfinite(v)
     nk1 = np.where(fitted, cand_nk1[first], -1)
     nk2 = np.where(fitted, cand_nk2[first], -1)
+    # Each row's [1, a1..a_na], b1, b2: slices of one copy of the frontier's theta.
+    ones = np.ones((start.size, 1))
+    frontier = np.concatenate((ones, theta_all[first]), axis=1)
+    empty = np.empty(0)
     a_rows, b1_rows, b2_rows = [], [], []
-    for row in range(start.size):
-        if not fitted[row]:
-            a_rows.append(np.empty(0))
-            b1_rows.append(np.empty(0))
-            b2_rows.append(np.empty(0))
-            continue
-        na, nb1 = block_na[row], block_nb1[row]
-        theta = theta_all[first[row]]
-        a_rows.append(np.concatenate(([1.0], theta[:na])))
-        b1_rows.append(theta[na : na + nb1].copy())
-        b2_rows.append(theta[na + nb1 : na + nb1 + block_nb2[row]].copy())
+    for row, (na, nb1, nb2, ok) in enumerate(zip(block_na, block_nb1, block_nb2, fitted, strict=True)):
+        theta = frontier[row]
+        a_rows.append(theta[: na + 1] if ok else empty)
+        b1_rows.append(theta[na + 1 : na + 1 + nb1] if ok else empty)
+        b2_rows.append(theta[na + 1 + nb1 : na + 1 + nb1 + nb2] if ok else empty)
     # VAF from the frontier rows' outputs: the values simulate() gives, bit for bit.
     rows = np.flatnonzero(fitted)
     err_est = np.empty((rows.size, est_stop - est_start))
