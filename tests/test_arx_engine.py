@@ -566,6 +566,14 @@ _NO_JIT = pytest.mark.skipif(
 )
 
 
+def _lane_record(rng, n, pad):
+    """Random inputs padded as the engine pads them (pad zeros before, TAIL after) and an output."""
+    tail = np.zeros(_lanes.TAIL)
+    i1p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
+    i2p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
+    return i1p, i2p, rng.standard_normal(n)
+
+
 def _wide_batch(rng, na, nb1, nb2, n_lanes, n):
     """``n_lanes`` random candidates in simulate_wide's layout, the idle lanes as it wants them."""
     lanes = [_random_candidate(rng, na, nb1, nb2) for _ in range(n_lanes)]
@@ -619,10 +627,7 @@ def test_vector_lanes_are_bit_identical_to_the_single_candidate_kernel(n, rows):
     # dropped input, full and partly idle batches.
     rng = np.random.default_rng(n + rows[0])
     pad = 40
-    tail = np.zeros(_lanes.TAIL)
-    i1p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
-    i2p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
-    o = rng.standard_normal(n)
+    i1p, i2p, o = _lane_record(rng, n, pad)
     orders = [(na, int(rng.integers(0, 8)), int(rng.integers(0, 5))) for na in range(1, 13)]
     orders += [(3, 25, 10), (10, 0, 7), (1, 1, 0)]
     for na, nb1, nb2 in orders:
@@ -647,10 +652,7 @@ def test_vector_lanes_prune_and_flag_exactly_as_the_four_lane_kernel():
     # twin, and flags the same overflowing ones with inf.
     rng = np.random.default_rng(11)
     n, pad, rows = 2048, 40, (1088, 2048)
-    tail = np.zeros(_lanes.TAIL)
-    i1p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
-    i2p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
-    o = rng.standard_normal(n)
+    i1p, i2p, o = _lane_record(rng, n, pad)
     na, nb1, nb2 = 3, 2, 2
     lanes, coef, b1, b2, nk1, nk2 = _wide_batch(rng, na, nb1, nb2, _lanes.LANES, n)
     width = _lanes.LANES
@@ -725,10 +727,7 @@ def test_frontier_errors_on_vector_lanes_equal_the_plain_kernel():
     # bit for bit; an overflowing model is left to the plain kernel.
     rng = np.random.default_rng(8)
     n, pad = 700, 30
-    tail = np.zeros(_lanes.TAIL)
-    i1p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
-    i2p = np.r_[np.zeros(pad), rng.standard_normal(n), tail]
-    o = rng.standard_normal(n)
+    i1p, i2p, o = _lane_record(rng, n, pad)
     orders = [
         (na, int(rng.integers(0, 9)), int(rng.integers(0, 6))) for na in (1, 1, 2, 3, 3, 3) for _ in range(7)
     ]

@@ -592,6 +592,19 @@ def _partial_v(eacc, lane, n_val):
 
 
 @njit(cache=True)
+def _put_lane(theta, na, nb1, nb2, lane, width, coef, b1, b2):
+    """Lane ``lane`` of ``width`` holds the model ``theta = [a1..a_na, b1_0.., b2_0..]``:
+    ``coef[i * width + lane] = a_i`` (a_0 = 1), ``b1[lane]``, ``b2[lane]``."""
+    coef[lane] = 1.0
+    for i in range(na):
+        coef[(i + 1) * width + lane] = theta[i]
+    for j in range(nb1):
+        b1[lane, j] = theta[na + j]
+    for j in range(nb2):
+        b2[lane, j] = theta[na + nb1 + j]
+
+
+@njit(cache=True)
 def _waiting_by_score(v_all, score, start, size):
     """The block's candidates waiting with V = NaN, best prediction error first."""
     waiting = np.empty(size, dtype=np.int64)
@@ -646,13 +659,7 @@ def _simulate_block(
             within = c - start
             nk1[lane] = nk1_lo + within // n_d2 if nb1 > 0 else 0
             nk2[lane] = nk2_lo + within % n_d2 if nb2 > 0 else 0
-            coef[lane] = 1.0
-            for i in range(na):
-                coef[(i + 1) * 4 + lane] = theta_all[c, i]
-            for j in range(nb1):
-                b1[lane, j] = theta_all[c, na + j]
-            for j in range(nb2):
-                b2[lane, j] = theta_all[c, na + nb1 + j]
+            _put_lane(theta_all[c], na, nb1, nb2, lane, 4, coef, b1, b2)
         done = simulate_lanes(
             coef, na, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, o, val_start, val_stop,
             bound, xs, yh, v4, pruned,
@@ -736,12 +743,7 @@ def _simulate_run(
             within = c - block_start[row]
             nk1[lane] = nk1_lo + within // n_d2 if nb1 > 0 else 0
             nk2[lane] = nk2_lo + within % n_d2 if nb2 > 0 else 0
-            for i in range(na):
-                coef[(i + 1) * LANES + lane] = theta_all[c, i]
-            for j in range(nb1):
-                b1[lane, j] = theta_all[c, na + j]
-            for j in range(nb2):
-                b2[lane, j] = theta_all[c, na + nb1 + j]
+            _put_lane(theta_all[c], na, nb1, nb2, lane, LANES, coef, b1, b2)
             lane_bound[lane] = best[row - first_row]
         done = simulate_wide(
             coef, na, b1, nb1, nk1, b2, batch_nb2, nk2, used, i1p, i2p, pad, o, val_start, val_stop,
@@ -886,12 +888,7 @@ def squared_errors_wide(
             coef[lane] = 1.0
         for lane in range(used):
             r = first + lane
-            for i in range(k):
-                coef[(i + 1) * LANES + lane] = theta[r, i]
-            for j in range(nb1[r]):
-                b1[lane, j] = theta[r, k + j]
-            for j in range(nb2[r]):
-                b2[lane, j] = theta[r, k + nb1[r] + j]
+            _put_lane(theta[r], k, nb1[r], nb2[r], lane, LANES, coef, b1, b2)
             lane_nk1[lane] = nk1[r]
             lane_nk2[lane] = nk2[r]
         yh = np.zeros((h + _CHUNK) * LANES)
