@@ -37,6 +37,8 @@ coefficient a_i of lane l (``a_2 = 0`` when na = 1); ``eacc[p * LANES + l]``
 the four partial sums of squared errors of lane l.
 """
 
+from types import SimpleNamespace
+
 import numba
 import numpy as np
 from llvmlite import ir
@@ -53,6 +55,13 @@ LANES = _WIDTH * _GROUPS
 # broadcast coefficient serves two multiplies.
 _HALVES = 2
 SAMPLES = _HALVES * _WIDTH
+# Affine lanes (lane_inputs_affine): samples per step and taps whose
+# coefficients stay in registers.
+_AFFINE_SAMPLES = 4
+_TAP_BLOCK = 8
+# Fewest waiting candidates (of _WIDTH) for which an affine group beats
+# the general lanes.
+_AFFINE_MIN = 6
 # Largest na with a vector recursion (each na is its own unrolled loop).
 MAX_NA = 12
 
@@ -64,6 +73,7 @@ _CHUNK = 128
 TAIL = SAMPLES - 1
 # lane_inputs writes whole steps of SAMPLES into a chunk's _CHUNK rows.
 assert _CHUNK % SAMPLES == 0
+assert SAMPLES % _AFFINE_SAMPLES == 0
 # Without the JIT every block takes the plain four-lane path.
 _WIDE = not numba.config.DISABLE_JIT
 
@@ -181,6 +191,84 @@ def lane_inputs(typingctx, b1, nb1, off1, i1p, b2, nb2, off2, i2p, steps, xt):
         return context.get_dummy_value()
 
     return sig, codegen
+
+
+@intrinsic
+def lane_inputs_affine(typingctx, b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0, steps, xt):
+    """Input part of every lane for chunk samples ``q < steps`` into ``xt``: groups of *affine* lanes.
+
+    In group g, lane l's input 1 is delayed by ``c1[g] + l`` and input 2 by
+    ``c2[g]`` (consecutive nk1 at one nk2). With ``r1`` the reversed padded
+    input 1, ``r1[m] = i1p[len - 1 - m]``, tap j of lane l at sample t is
+    ``r1[base1[g] - t + j + l]`` (``base1 = len - 1 - pad + c1``): one
+    vector load for the group's ``_WIDTH`` lanes, no transpose; input 2 is
+    one value for all of them, ``i2p[base2[g] + t - j]`` (``base2 = pad -
+    c2``). ``b1t[j * LANES + l]`` is tap j of lane l. ``steps`` must be a
+    multiple of ``_AFFINE_SAMPLES``; the inputs need ``TAIL`` readable values
+    past the record. Per sample the terms are added as in
+    ``simulate_into``: 0, then b1[0], b1[1], ..., then b2[0], ... The taps
+    run in blocks of up to ``_TAP_BLOCK``, whose coefficients stay in
+    registers over the chunk; between blocks the partial sums wait in xt.
+    """
+    sig = types.void(b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0, steps, xt)
+
+    def codegen(context, builder, signature, args):
+        ty = signature.args
+        out = _data(context, builder, ty[10], args[10])
+        k0_v, steps_v = args[8], args[9]
+        with cgutils.for_range(builder, builder.mul(steps_v, _c(LANES))) as loop:
+            builder.store(ir.Constant(ir.DoubleType(), 0.0), builder.gep(out, [loop.index]))
+        for at, row in ((0, True), (4, False)):
+            coefs = _data(context, builder, ty[at], args[at])
+            source = _data(context, builder, ty[at + 2], args[at + 2])
+            base_p = _data(context, builder, ty[at + 3], args[at + 3])
+            nb = args[at + 1]
+            for g in range(_GROUPS):
+                base = builder.load(builder.gep(base_p, [_c(g)]))
+                taps = SimpleNamespace(coefs=coefs, source=source, base=base, row=row, group=g, k0=k0_v,
+                                       steps=steps_v, out=out)  # fmt: skip
+                full = builder.sdiv(nb, _c(_TAP_BLOCK))
+                with cgutils.for_range(builder, full) as loop:
+                    _affine_block(builder, taps, builder.mul(loop.index, _c(_TAP_BLOCK)), _TAP_BLOCK)
+                rest = builder.srem(nb, _c(_TAP_BLOCK))
+                j0 = builder.mul(full, _c(_TAP_BLOCK))
+                after = builder.append_basic_block("affine.after")
+                switch = builder.switch(rest, after)
+                for count in range(1, _TAP_BLOCK):
+                    block = builder.append_basic_block(f"affine.rest{count}")
+                    switch.add_case(ir.Constant(rest.type, count), block)
+                    with builder.goto_block(block):
+                        _affine_block(builder, taps, j0, count)
+                        builder.branch(after)
+                builder.position_at_end(after)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+def _affine_block(builder, taps, j0, count):
+    """Taps ``j0 .. j0 + count - 1`` of one input of one group added to xt, sample after sample."""
+    lane0 = _c(taps.group * _WIDTH)
+    coef = [_load(builder, taps.coefs, builder.add(builder.mul(builder.add(j0, _c(j)), _c(LANES)), lane0))
+            for j in range(count)]  # fmt: skip
+    with cgutils.for_range_slice(builder, _c(0), taps.steps, _c(_AFFINE_SAMPLES)) as (q0, _):
+        t0 = builder.add(taps.k0, q0)
+        slots = [
+            builder.add(builder.mul(builder.add(q0, _c(s)), _c(LANES)), lane0) for s in range(_AFFINE_SAMPLES)
+        ]
+        acc = [_load(builder, taps.out, slot) for slot in slots]
+        for j in range(count):
+            tap = builder.add(j0, _c(j))
+            for s in range(_AFFINE_SAMPLES):
+                if taps.row:  # r1[base - (t0 + s) + tap + l], l = 0.._WIDTH - 1
+                    at = builder.add(builder.sub(builder.sub(taps.base, t0), _c(s)), tap)
+                    x = _load(builder, taps.source, at)
+                else:  # i2p[base + t0 + s - tap], the same for every lane
+                    at = builder.sub(builder.add(builder.add(taps.base, t0), _c(s)), tap)
+                    x = _splat(builder, builder.load(builder.gep(taps.source, [at])))
+                acc[s] = builder.fadd(acc[s], builder.fmul(coef[j], x))
+        for slot, value in zip(slots, acc, strict=True):
+            _store(builder, value, taps.out, slot)
 
 
 @intrinsic
@@ -534,8 +622,55 @@ def simulate_wide(
     ``yh`` ((max(na, 2) + _CHUNK) * LANES,), the last rows of one chunk
     moved to its top for the next; ``eacc`` (4 * LANES,).
     """
+    _check_lanes(i1p, i2p, pad, o.shape[0], b1, b2)
+    used = np.arange(LANES) < n_lanes
+    none = np.empty(0, dtype=np.int64)
+    return _wide_loop(
+        coef, na, used, o, val_start, val_stop, bound, xt, yh, eacc, v_out, pruned,
+        False, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, off1, off2, i1p, none, none,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def simulate_affine(
+    coef, na, b1t, nb1, c1, b2t, nb2, c2, used, r1, i1p, i2p, pad, o, val_start, val_stop, bound,
+    xt, yh, eacc, v_out, pruned,
+):  # fmt: skip
+    """:func:`simulate_wide` for lanes in affine groups (:func:`lane_inputs_affine`).
+
+    Lane ``l = g * _WIDTH + w`` is delayed by ``c1[g] + w`` on input 1 and
+    ``c2[g]`` on input 2; its B are ``b1t[:, l]``, ``b2t[:, l]`` (tap-major,
+    shape (taps, LANES)); ``used[l]`` says whether it holds a candidate (an
+    unused lane must hold ``a = [1, 0, ...]`` and zero B; its delays are
+    its group's). ``r1`` is ``i1p`` reversed. Same arithmetic per lane,
+    pruning and results as :func:`simulate_wide`.
+    """
     n = o.shape[0]
-    _check_lanes(i1p, i2p, pad, n, b1, b2)
+    if i1p.shape[0] < pad + n + TAIL or i2p.shape[0] < pad + n + TAIL or r1.shape[0] != i1p.shape[0]:
+        raise ValueError("affine lanes: the inputs need pad + n + TAIL values, r1 as many")
+    if b1t.shape[1] != LANES or b2t.shape[1] != LANES:
+        raise ValueError("affine lanes: B must have one column per lane")
+    base1 = np.empty(_GROUPS, dtype=np.int64)
+    base2 = np.empty(_GROUPS, dtype=np.int64)
+    for g in range(_GROUPS):
+        if c1[g] < 0 or c1[g] + _WIDTH - 1 + nb1 - 1 > pad or c2[g] < 0 or c2[g] + nb2 - 1 > pad:
+            raise ValueError("affine lanes: a delay beyond the padding")
+        base1[g] = r1.shape[0] - 1 - pad + c1[g]
+        base2[g] = pad - c2[g]
+    return _wide_loop(
+        coef, na, used, o, val_start, val_stop, bound, xt, yh, eacc, v_out, pruned,
+        True, b1t, nb1, c1, b2t, nb2, c2, i1p, i2p, pad, base1, base2, r1, base1, base2,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _wide_loop(
+    coef, na, used, o, val_start, val_stop, bound, xt, yh, eacc, v_out, pruned,
+    affine, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, off1, off2, r1, base1, base2,
+):  # fmt: skip
+    """The chunk loop of :func:`simulate_wide` and :func:`simulate_affine`: input part
+    (general or affine lanes), recursion, finiteness and pruning checks."""
+    n = o.shape[0]
     n_val = val_stop - val_start
     quad_end = val_start + 4 * (n_val // 4)
     h = max(na, 2)
@@ -544,30 +679,35 @@ def simulate_wide(
     for k in range(4 * LANES):
         eacc[k] = 0.0
     live = np.zeros(LANES, dtype=np.bool_)
-    for lane in range(n_lanes):
-        live[lane] = True
-        v_out[lane] = np.inf
-        pruned[lane] = False
-    n_live = n_lanes
+    n_live = 0
+    for lane in range(LANES):
+        if used[lane]:
+            live[lane] = True
+            n_live += 1
+            v_out[lane] = np.inf
+            pruned[lane] = False
     k0 = 0
     while k0 < n:
         r = (val_start - k0) % _CHUNK
         k1 = min(k0 + (r if r > 0 else _CHUNK), n)
         m = k1 - k0
-        for lane in range(LANES):
-            off1[lane] = pad - nk1[lane] + k0
-            off2[lane] = pad - nk2[lane] + k0
         steps = (m + TAIL) // SAMPLES * SAMPLES
-        lane_inputs(b1, nb1, off1, i1p, b2, nb2, off2, i2p, steps, xt)
+        if affine:
+            lane_inputs_affine(b1, nb1, r1, base1, b2, nb2, i2p, base2, k0, steps, xt)
+        else:
+            for lane in range(LANES):
+                off1[lane] = pad - nk1[lane] + k0
+                off2[lane] = pad - nk2[lane] + k0
+            lane_inputs(b1, nb1, off1, i1p, b2, nb2, off2, i2p, steps, xt)
         if not lane_recursion(coef, na, xt, m, yh, h, o, k0, val_start, val_stop, quad_end, eacc):
             raise ValueError("simulate_wide: na above MAX_NA")
         last = (h + m - 1) * LANES
-        for lane in range(n_lanes):
+        for lane in range(LANES):
             if live[lane] and not abs(yh[last + lane]) < np.inf:
                 live[lane] = False
                 n_live -= 1
         if k1 > val_start and k1 < n:
-            for lane in range(n_lanes):
+            for lane in range(LANES):
                 if live[lane]:
                     p = _partial_v(eacc, lane, n_val)
                     if p < np.inf and p > bound[lane]:
@@ -580,7 +720,7 @@ def simulate_wide(
         for k in range(h * LANES):
             yh[k] = yh[m * LANES + k]
         k0 = k1
-    for lane in range(n_lanes):
+    for lane in range(LANES):
         if live[lane]:
             v_out[lane] = _finite_or_inf(_partial_v(eacc, lane, n_val))
     return n
@@ -674,6 +814,122 @@ def _simulate_block(
 
 
 @njit(cache=True)
+def _affine_groups(first_row, stop_row, block_orders, block_start, bounds, v_all, score):
+    """Affine groups of blocks ``first_row .. stop_row - 1``: ``_WIDTH`` candidates of one
+    block with consecutive nk1 at one nk2, at least ``_AFFINE_MIN`` of them waiting.
+
+    Returns ``(rows, firsts)``: each group's block and the candidate of its
+    lane 0 (lane w is ``first + w * n_d2``), block after block, each block's
+    groups by their best prediction error (the best of their waiting lanes).
+    """
+    nb1 = block_orders[first_row, 1]
+    n_d1 = bounds[3, 1] - bounds[3, 0] + 1
+    per_d2 = n_d1 // _WIDTH if nb1 > 0 else 0
+    total = 0
+    for row in range(first_row, stop_row):
+        total += per_d2 * (bounds[4, 1] - bounds[4, 0] + 1 if block_orders[row, 2] > 0 else 1)
+    rows = np.empty(total, dtype=np.int64)
+    firsts = np.empty(total, dtype=np.int64)
+    m = 0
+    for row in range(first_row, stop_row):
+        n_d2 = bounds[4, 1] - bounds[4, 0] + 1 if block_orders[row, 2] > 0 else 1
+        keys = np.empty(per_d2 * n_d2)
+        here = np.empty(per_d2 * n_d2, dtype=np.int64)
+        found = 0
+        for d2 in range(n_d2):
+            for g1 in range(per_d2):
+                first = block_start[row] + g1 * _WIDTH * n_d2 + d2
+                waiting = 0
+                key = np.inf
+                for w in range(_WIDTH):
+                    c = first + w * n_d2
+                    if np.isnan(v_all[c]):
+                        waiting += 1
+                        key = min(key, -score[c])
+                if waiting >= _AFFINE_MIN:
+                    keys[found] = key
+                    here[found] = first
+                    found += 1
+        for i in np.argsort(keys[:found], kind="mergesort"):
+            rows[m] = row
+            firsts[m] = here[i]
+            m += 1
+    return rows[:m], firsts[:m]
+
+
+@njit(cache=True)
+def _simulate_affine_groups(
+    first_row, stop_row, block_orders, block_start, bounds, theta_all, score, i1p, i2p, pad, o,
+    val_start, val_stop, prune, v_all, counts, best,
+):  # fmt: skip
+    """Simulate the affine groups of one run (:func:`_affine_groups`), ``_GROUPS`` per batch
+    (:func:`simulate_affine`); ``best`` (per block of the run) as in :func:`_simulate_run`."""
+    rows, firsts = _affine_groups(first_row, stop_row, block_orders, block_start, bounds, v_all, score)
+    if rows.shape[0] == 0:
+        return
+    na, nb1 = block_orders[first_row, 0], block_orders[first_row, 1]
+    m2 = 0
+    for row in range(first_row, stop_row):
+        m2 = max(m2, block_orders[row, 2])
+    h = max(na, 2)
+    r1 = i1p[::-1].copy()
+    coef = np.zeros((h + 1) * LANES)
+    b1t = np.zeros((max(nb1, 1), LANES))
+    b2t = np.zeros((max(m2, 1), LANES))
+    c1 = np.zeros(_GROUPS, dtype=np.int64)
+    c2 = np.zeros(_GROUPS, dtype=np.int64)
+    used = np.zeros(LANES, dtype=np.bool_)
+    lane_bound = np.full(LANES, np.inf)
+    who = np.zeros(LANES, dtype=np.int64)
+    v = np.empty(LANES)
+    pruned = np.empty(LANES, dtype=np.bool_)
+    xt = np.empty(_CHUNK * LANES)
+    yh = np.empty((h + _CHUNK) * LANES)
+    eacc = np.empty(4 * LANES)
+    for at in range(0, rows.shape[0], _GROUPS):
+        coef[:] = 0.0
+        b1t[:, :] = 0.0
+        b2t[:, :] = 0.0
+        used[:] = False
+        batch_nb2 = 0
+        for g in range(_GROUPS):
+            # A short last batch repeats its first group's delays in the idle group.
+            i = at + g if at + g < rows.shape[0] else at
+            row, first = rows[i], firsts[i]
+            nb2 = block_orders[row, 2]
+            n_d2 = bounds[4, 1] - bounds[4, 0] + 1 if nb2 > 0 else 1
+            within = first - block_start[row]
+            c1[g] = bounds[3, 0] + within // n_d2
+            c2[g] = bounds[4, 0] + within % n_d2 if nb2 > 0 else 0
+            for w in range(_WIDTH):
+                lane = g * _WIDTH + w
+                coef[lane] = 1.0
+                c = first + w * n_d2
+                if at + g < rows.shape[0] and np.isnan(v_all[c]):
+                    batch_nb2 = max(batch_nb2, nb2)
+                    _put_lane(theta_all[c], na, nb1, nb2, lane, LANES, coef, b1t.T, b2t.T)
+                    used[lane] = True
+                    who[lane] = c
+                    lane_bound[lane] = best[row - first_row]
+        done = simulate_affine(
+            coef, na, b1t, nb1, c1, b2t, batch_nb2, c2, used, r1, i1p, i2p, pad, o, val_start,
+            val_stop, lane_bound, xt, yh, eacc, v, pruned,
+        )  # fmt: skip
+        for g in range(_GROUPS):
+            if at + g >= rows.shape[0]:
+                continue
+            row = rows[at + g]
+            for w in range(_WIDTH):
+                lane = g * _WIDTH + w
+                if used[lane]:
+                    v_all[who[lane]] = v[lane]
+                    counts[row, 1 if pruned[lane] else 0] += 1
+                    counts[row, 2] += done
+                    if prune and v[lane] < best[row - first_row]:
+                        best[row - first_row] = v[lane]
+
+
+@njit(cache=True)
 def _simulate_run(
     first_row, stop_row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
     pad, o, val_start, val_stop, prune, v_all, counts,
@@ -694,6 +950,11 @@ def _simulate_run(
     """
     na, nb1 = block_orders[first_row, 0], block_orders[first_row, 1]
     nk1_lo, nk2_lo = bounds[3, 0], bounds[4, 0]
+    best = np.full(stop_row - first_row, np.inf)
+    _simulate_affine_groups(
+        first_row, stop_row, block_orders, block_start, bounds, theta_all, score, i1p, i2p, pad, o,
+        val_start, val_stop, prune, v_all, counts, best,
+    )  # fmt: skip
     total = 0
     m2 = 0
     for row in range(first_row, stop_row):
@@ -708,7 +969,6 @@ def _simulate_run(
             queue[m] = c
             owner[m] = row
             m += 1
-    best = np.full(stop_row - first_row, np.inf)
     h = max(na, 2)
     coef = np.zeros((h + 1) * LANES)
     b1 = np.zeros((LANES, max(nb1, 1)))
