@@ -414,6 +414,23 @@ def fit_units_parallel(
             )  # fmt: skip
 
 
+@njit(cache=True)
+def block_best(v_all, start, size):
+    """Each block's smallest V: the first of equal ones in candidate order, NaN last.
+
+    The order ``np.lexsort((v_all, block))`` gives (stable, NaN sorted
+    last), in one pass instead of a sort of every candidate.
+    """
+    first = np.empty(start.shape[0], dtype=np.int64)
+    for b in range(start.shape[0]):
+        best = start[b]
+        for c in range(start[b] + 1, start[b] + size[b]):
+            if v_all[c] < v_all[best] or (np.isnan(v_all[best]) and not np.isnan(v_all[c])):
+                best = c
+        first[b] = best
+    return first
+
+
 def max_threads() -> int:
     """Most threads the parallel kernel can use (numba's pool size)."""
     return numba.config.NUMBA_NUM_THREADS

@@ -351,10 +351,9 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
             else:
                 _kernels.run_parallel(_lanes.simulate_blocks_parallel, args, threads)
 
-    # Frontier: lexsort is stable, so equal V keep the candidate order, in
-    # which nk1 and then nk2 increase inside a block.
-    block = np.repeat(np.arange(start.size), size)
-    first = np.lexsort((v_all, block))[start]
+    # Frontier: equal V keep the candidate order, in which nk1 and then nk2
+    # increase inside a block.
+    first = _kernels.block_best(v_all, start, size)
     cand_na, cand_nb1, cand_nb2, cand_nk1, cand_nk2 = candidates(grid)
     unstable = ~np.isfinite(v_all)
     v = v_all[first]
