@@ -208,7 +208,8 @@ def lane_inputs_affine(typingctx, b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0,
     past the record. Per sample the terms are added as in
     ``simulate_into``: 0, then b1[0], b1[1], ..., then b2[0], ... The taps
     run in blocks of up to ``_TAP_BLOCK``, whose coefficients stay in
-    registers over the chunk; between blocks the partial sums wait in xt.
+    registers over the chunk; between blocks the partial sums wait in xt
+    (the first block starts from 0).
     """
     sig = types.void(b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0, steps, xt)
 
@@ -216,29 +217,37 @@ def lane_inputs_affine(typingctx, b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0,
         ty = signature.args
         out = _data(context, builder, ty[10], args[10])
         k0_v, steps_v = args[8], args[9]
-        with cgutils.for_range(builder, builder.mul(steps_v, _c(LANES))) as loop:
+        nb1_v, nb2_v = args[1], args[5]
+        # Without taps the input part is 0 (the first block below starts
+        # from 0 itself, so xt needs no clearing otherwise).
+        no_taps = builder.icmp_signed("==", builder.or_(nb1_v, nb2_v), _c(0))
+        with builder.if_then(no_taps), cgutils.for_range(builder, builder.mul(steps_v, _c(LANES))) as loop:
             builder.store(ir.Constant(ir.DoubleType(), 0.0), builder.gep(out, [loop.index]))
         for at, row in ((0, True), (4, False)):
             coefs = _data(context, builder, ty[at], args[at])
             source = _data(context, builder, ty[at + 2], args[at + 2])
             base_p = _data(context, builder, ty[at + 3], args[at + 3])
             nb = args[at + 1]
+            # The group's first block: input 1's first, or input 2's if nb1 = 0.
+            first_input = cgutils.true_bit if row else builder.icmp_signed("==", nb1_v, _c(0))
             for g in range(_GROUPS):
                 base = builder.load(builder.gep(base_p, [_c(g)]))
                 taps = SimpleNamespace(coefs=coefs, source=source, base=base, row=row, group=g, k0=k0_v,
                                        steps=steps_v, out=out)  # fmt: skip
                 full = builder.sdiv(nb, _c(_TAP_BLOCK))
                 with cgutils.for_range(builder, full) as loop:
-                    _affine_block(builder, taps, builder.mul(loop.index, _c(_TAP_BLOCK)), _TAP_BLOCK)
+                    fresh = builder.and_(first_input, builder.icmp_signed("==", loop.index, _c(0)))
+                    _affine_block(builder, taps, builder.mul(loop.index, _c(_TAP_BLOCK)), _TAP_BLOCK, fresh)
                 rest = builder.srem(nb, _c(_TAP_BLOCK))
                 j0 = builder.mul(full, _c(_TAP_BLOCK))
+                fresh = builder.and_(first_input, builder.icmp_signed("==", full, _c(0)))
                 after = builder.append_basic_block("affine.after")
                 switch = builder.switch(rest, after)
                 for count in range(1, _TAP_BLOCK):
                     block = builder.append_basic_block(f"affine.rest{count}")
                     switch.add_case(ir.Constant(rest.type, count), block)
                     with builder.goto_block(block):
-                        _affine_block(builder, taps, j0, count)
+                        _affine_block(builder, taps, j0, count, fresh)
                         builder.branch(after)
                 builder.position_at_end(after)
         return context.get_dummy_value()
@@ -246,8 +255,9 @@ def lane_inputs_affine(typingctx, b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0,
     return sig, codegen
 
 
-def _affine_block(builder, taps, j0, count):
-    """Taps ``j0 .. j0 + count - 1`` of one input of one group added to xt, sample after sample."""
+def _affine_block(builder, taps, j0, count, fresh):
+    """Taps ``j0 .. j0 + count - 1`` of one input of one group added to xt, sample after sample
+    (to 0 instead of xt's values if ``fresh``, the group's first block)."""
     lane0 = _c(taps.group * _WIDTH)
     coef = [_load(builder, taps.coefs, builder.add(builder.mul(builder.add(j0, _c(j)), _c(LANES)), lane0))
             for j in range(count)]  # fmt: skip
@@ -256,7 +266,7 @@ def _affine_block(builder, taps, j0, count):
         slots = [
             builder.add(builder.mul(builder.add(q0, _c(s)), _c(LANES)), lane0) for s in range(_AFFINE_SAMPLES)
         ]
-        acc = [_load(builder, taps.out, slot) for slot in slots]
+        acc = [builder.select(fresh, _ZERO, _load(builder, taps.out, slot)) for slot in slots]
         for j in range(count):
             tap = builder.add(j0, _c(j))
             for s in range(_AFFINE_SAMPLES):
