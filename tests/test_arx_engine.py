@@ -693,6 +693,124 @@ def test_vector_lanes_prune_and_flag_exactly_as_the_four_lane_kernel():
     np.testing.assert_array_equal(v2[8:], full[8:])
 
 
+def _affine_batch(rng, na, nb1, nb2, used, pad):
+    """Random candidates in simulate_affine's layout (tap-major B, idle lanes as it wants them)
+    and the same lanes for simulate_wide: lane w of group g delayed by c1[g] + w and c2[g]."""
+    width, groups = _lanes.LANES, _lanes._GROUPS
+    c1 = rng.integers(0, pad - (_lanes._WIDTH - 1) - max(nb1, 1) + 2, groups)
+    c2 = rng.integers(0, pad - max(nb2, 1) + 2, groups)
+    nk1 = np.repeat(c1, _lanes._WIDTH) + np.tile(np.arange(_lanes._WIDTH), groups)
+    nk2 = np.repeat(c2, _lanes._WIDTH)
+    coef = np.zeros((max(na, 2) + 1) * width)
+    coef[:width] = 1.0
+    b1 = np.zeros((width, max(nb1, 1)))
+    b2 = np.zeros((width, max(nb2, 1)))
+    lanes = {}
+    for lane in np.flatnonzero(used):
+        a, d1, d2 = lanes[lane] = _random_candidate(rng, na, nb1, nb2)
+        coef[lane : (na + 1) * width : width] = a
+        b1[lane, :nb1] = d1
+        b2[lane, :nb2] = d2
+    return lanes, coef, b1, b2, c1, c2, nk1, nk2
+
+
+def _run_affine(coef, na, b1, nb1, c1, b2, nb2, c2, used, i1p, i2p, pad, o, rows, bound):
+    width, n = _lanes.LANES, o.size
+    v = np.empty(width)
+    pruned = np.zeros(width, dtype=np.bool_)
+    done = _lanes.simulate_affine(
+        coef, na, np.ascontiguousarray(b1.T), nb1, c1, np.ascontiguousarray(b2.T), nb2, c2, used,
+        i1p[::-1].copy(), i1p, i2p, pad, o, *rows, np.array(np.broadcast_to(bound, width), dtype=np.float64),
+        np.empty(_lanes._CHUNK * width), np.empty((max(na, 2) + _lanes._CHUNK) * width), np.empty(4 * width),
+        v, pruned,
+    )  # fmt: skip
+    assert 0 < done <= n
+    return v, pruned
+
+
+@_NO_JIT
+@pytest.mark.parametrize(("n", "rows"), [(2048, (1088, 2048)), (2048, (29, 2048)), (301, (7, 290))])
+def test_affine_lanes_are_bit_identical_to_the_single_candidate_kernel(n, rows):
+    # simulate_affine (input 1 as one vector per group, input 2 as one
+    # broadcast, taps in register blocks of 8) against simulate_into +
+    # _validation_mse, lane by lane: every V bit for bit (STYLE 4). B
+    # lengths around the tap block (7, 8, 9, 17, 25), a dropped input 2,
+    # idle lanes anywhere in a group.
+    rng = np.random.default_rng(n + rows[0] + 7)
+    pad = 60
+    i1p, i2p, o = _lane_record(rng, n, pad)
+    orders = [(1, 1, 0), (2, 7, 3), (3, 8, 1), (4, 9, 8), (7, 17, 10), (12, 25, 9), (5, 3, 0)]
+    for na, nb1, nb2 in orders:
+        used = rng.random(_lanes.LANES) < 0.8
+        used[0] = True
+        lanes, coef, b1, b2, c1, c2, nk1, nk2 = _affine_batch(rng, na, nb1, nb2, used, pad)
+        v, pruned = _run_affine(coef, na, b1, nb1, c1, b2, nb2, c2, used, i1p, i2p, pad, o, rows, np.inf)
+        assert not pruned[used].any()
+        for lane, (a, d1, d2) in lanes.items():
+            yp = np.zeros(na + n)
+            one = _kernels.simulate_into(
+                np.r_[a, 0.0], na, np.r_[d1, 0.0], nb1, nk1[lane], np.r_[d2, 0.0], nb2, nk2[lane],
+                i1p, i2p, pad, np.empty(n), yp, na,
+            )  # fmt: skip
+            assert one == n
+            assert v[lane] == _kernels._validation_mse(yp, na, o, *rows), (na, nb1, nb2, lane)
+
+
+@_NO_JIT
+def test_affine_lanes_prune_exactly_as_the_general_lanes():
+    # The same candidates and bounds on the affine and the general vector
+    # steps: the same lanes pruned at the same chunk (same partial V), the
+    # same overflowing lane flagged inf.
+    rng = np.random.default_rng(23)
+    n, pad, rows = 2048, 40, (1088, 2048)
+    i1p, i2p, o = _lane_record(rng, n, pad)
+    na, nb1, nb2 = 3, 4, 2
+    used = np.ones(_lanes.LANES, dtype=bool)
+    lanes, coef, b1, b2, c1, c2, nk1, nk2 = _affine_batch(rng, na, nb1, nb2, used, pad)
+    width = _lanes.LANES
+    coef[width + 5] = -2.5  # lane 5: a root outside the unit circle: overflows
+    coef[2 * width + 5] = coef[3 * width + 5] = 0.0
+    b1[7] *= 30.0  # lane 7: far worse than the others
+    with np.errstate(over="ignore", invalid="ignore"):
+        full, _ = _run_wide(coef, na, b1, nb1, nk1, b2, nb2, nk2, width, i1p, i2p, pad, o, rows, np.inf)
+        bound = np.where(np.arange(width) < 12, np.median(full[np.isfinite(full)]), np.inf)
+        v, pruned = _run_affine(coef, na, b1, nb1, c1, b2, nb2, c2, used, i1p, i2p, pad, o, rows, bound)
+        twin_v, twin_pruned = _run_wide(
+            coef, na, b1, nb1, nk1, b2, nb2, nk2, width, i1p, i2p, pad, o, rows, bound
+        )
+    assert v[5] == np.inf and pruned[7] and 0 < pruned.sum() < 12
+    np.testing.assert_array_equal(pruned, twin_pruned)
+    np.testing.assert_array_equal(v, twin_v)
+    np.testing.assert_array_equal(v[~pruned], full[~pruned])
+
+
+@_NO_JIT
+def test_affine_lanes_refuse_what_they_would_read_past():
+    # The affine steps read without bounds checks: a delay beyond the
+    # padding, inputs without TAIL, or B not laid out per lane are refused.
+    rng = np.random.default_rng(5)
+    n, pad = 300, 20
+    i1p, i2p, o = _lane_record(rng, n, pad)
+    used = np.ones(_lanes.LANES, dtype=bool)
+    lanes, coef, b1, b2, c1, c2, nk1, nk2 = _affine_batch(rng, 2, 3, 2, used, pad)
+    args = (coef, 2, b1, 3, c1, b2, 2, c2, used, i1p, i2p, pad, o, (100, 300), np.inf)
+    _run_affine(*args)  # valid
+    too_far = np.full(
+        _lanes._GROUPS, pad - _lanes._WIDTH - 3 + 2 + 1
+    )  # lane 7, tap 2 reads before the record
+    with pytest.raises(ValueError, match="padding"):
+        _run_affine(coef, 2, b1, 3, too_far, b2, 2, c2, used, i1p, i2p, pad, o, (100, 300), np.inf)
+    with pytest.raises(ValueError, match="TAIL"):
+        _run_affine(coef, 2, b1, 3, c1, b2, 2, c2, used, i1p[:-1], i2p, pad, o, (100, 300), np.inf)
+    with pytest.raises(ValueError, match="column per lane"):
+        _lanes.simulate_affine(
+            coef, 2, b1, 3, c1, b2.T.copy(), 2, c2, used, i1p[::-1].copy(), i1p, i2p, pad, o, 100, 300,
+            np.full(_lanes.LANES, np.inf), np.empty(_lanes._CHUNK * _lanes.LANES),
+            np.empty((2 + _lanes._CHUNK) * _lanes.LANES), np.empty(4 * _lanes.LANES),
+            np.empty(_lanes.LANES), np.empty(_lanes.LANES, dtype=np.bool_),
+        )  # fmt: skip
+
+
 @_NO_JIT
 def test_vector_lanes_flag_an_output_that_overflows_after_the_validation_rows():
     # V over rows 0..99 of a lane whose output overflows near sample 1,750
@@ -811,6 +929,40 @@ def test_pruned_frontier_equals_the_old_kernel_on_random_records(seed):
     full = fit_grid(i1, i2, o, grid, *rows, keep_candidates=True)
     assert full.candidates.equals(old.candidates)
     _assert_same_frontier(full, old)
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_affine_groups_give_the_old_kernels_frontier_on_random_records(seed):
+    # 18 values of nk1: per nk2, two affine groups of 8 consecutive nk1 and
+    # two candidates left for the general lanes (and any group with more
+    # than two unstable candidates). Frontier and every V of
+    # keep_candidates equal the unpruned old kernel's, bit for bit.
+    rng = np.random.default_rng(seed)
+    n = 500
+    i1 = rng.standard_normal(n)
+    i2 = rng.standard_normal(n)
+    o = lfilter([0, 0, 0, 0, 0.4, 0.2], [1, -1.2, 0.5], i1) + lfilter([0, 0.3], [1, -0.6], i2)
+    o += 0.3 * rng.standard_normal(n)
+    grid = Grid(na=(1, 3), nb1=(0, int(rng.integers(2, 4))), nb2=(0, 2), nk1=(0, 17), nk2=(1, 3))
+    rows = (slice(40, 250), slice(int(rng.integers(200, 300)), n))
+    pruned, counts = _fit_grid(i1, i2, o, grid, *rows, 1, False, legacy=False)
+    old = _legacy(i1, i2, o, grid, *rows, keep_candidates=True)
+    _assert_same_frontier(pruned, old)
+    assert counts[:, 1].sum() > 0
+    assert counts[:, :2].sum() == pruned.n_candidates - pruned.n_unstable_total
+    full = fit_grid(i1, i2, o, grid, *rows, keep_candidates=True)
+    assert full.candidates.equals(old.candidates)
+
+
+def test_block_best_is_the_stable_lexsort_order():
+    # block_best replaced np.lexsort((v, block))[start]: the same row for
+    # every block, with ties (first wins), inf and NaN (last) in the mix.
+    rng = np.random.default_rng(9)
+    size = rng.integers(1, 30, 200)
+    start = np.r_[0, np.cumsum(size)[:-1]]
+    v = rng.choice([0.5, 1.0, 2.0, np.inf, np.nan], int(size.sum()), p=[0.2, 0.2, 0.2, 0.2, 0.2])
+    block = np.repeat(np.arange(size.size), size)
+    np.testing.assert_array_equal(_kernels.block_best(v, start, size), np.lexsort((v, block))[start])
 
 
 def test_pruned_frontier_with_two_threads(paper_record):
