@@ -13,6 +13,16 @@ multiply-add chains overlap. LLVM maps a vector to one AVX-512 register,
 or splits it into two AVX2 (four SSE2) registers on a machine without;
 the arithmetic of each lane is the same on all of them.
 
+Two input steps. The general one (:func:`lane_inputs`) takes any delays
+per lane: it sums each lane's taps over 16 samples and transposes the
+sums into lanes. An *affine group* (:func:`lane_inputs_affine`) is eight
+candidates of one triple with consecutive nk1 at one nk2: its input 1 is
+one vector load from the reversed record and its input 2 one broadcast,
+with the tap coefficients held in registers, and no transpose (1.1 to
+1.4x a whole batch). Most candidates of the direct grid (nk1 1..50) form
+such groups; stage 1 (nk1 1..5), the groups with many unstable candidates
+and the rest take the general step (:func:`_simulate_run`).
+
 Every lane does the arithmetic of :func:`hcid.arx._kernels.simulate_into`
 (the same IEEE-754 operations in the same order: ``fmul`` and ``fadd`` /
 ``fsub`` without fast-math flags, which LLVM may neither reassociate nor
@@ -945,10 +955,12 @@ def _simulate_run(
     pad, o, val_start, val_stop, prune, v_all, counts,
 ):  # fmt: skip
     """Simulate the stable candidates of blocks ``first_row .. stop_row - 1`` (one na and
-    nb1), ``LANES`` at a time on the vector steps (:func:`simulate_wide`).
+    nb1), ``LANES`` at a time on the vector steps.
 
-    The blocks' waiting candidates form one queue, block after block, each
-    block's best prediction error first, cut into batches of ``LANES``: a
+    First the affine groups (:func:`_simulate_affine_groups`), then the
+    candidates still waiting, on :func:`simulate_wide`: they form one
+    queue, block after block, each block's best prediction error first,
+    cut into batches of ``LANES``: a
     block's last candidates share a batch with the next block's first, so
     few lanes idle (stage 1's blocks hold 25 candidates). A lane stops once
     its partial V exceeds the best V of its own block so far (``prune``;
