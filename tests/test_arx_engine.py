@@ -739,7 +739,17 @@ def test_affine_lanes_are_bit_identical_to_the_single_candidate_kernel(n, rows):
     rng = np.random.default_rng(n + rows[0] + 7)
     pad = 60
     i1p, i2p, o = _lane_record(rng, n, pad)
-    orders = [(1, 1, 0), (2, 7, 3), (3, 8, 1), (4, 9, 8), (7, 17, 10), (12, 25, 9), (5, 3, 0)]
+    orders = [
+        (1, 1, 0),
+        (2, 7, 3),
+        (3, 8, 1),
+        (4, 9, 8),
+        (7, 17, 10),
+        (12, 25, 9),
+        (5, 3, 0),
+        (2, 0, 3),
+        (1, 0, 0),
+    ]
     for na, nb1, nb2 in orders:
         used = rng.random(_lanes.LANES) < 0.8
         used[0] = True
@@ -800,9 +810,16 @@ def test_affine_lanes_refuse_what_they_would_read_past():
     )  # lane 7, tap 2 reads before the record
     with pytest.raises(ValueError, match="padding"):
         _run_affine(coef, 2, b1, 3, too_far, b2, 2, c2, used, i1p, i2p, pad, o, (100, 300), np.inf)
+    too_far = np.full(_lanes._GROUPS, pad)  # input 2's tap 1 reads before the record
+    with pytest.raises(ValueError, match="padding"):
+        _run_affine(coef, 2, b1, 3, c1, b2, 2, too_far, used, i1p, i2p, pad, o, (100, 300), np.inf)
+    with pytest.raises(ValueError, match="at least nb"):  # B shorter than nb1: the step would read past it
+        _run_affine(coef, 2, b1[:, :2], 3, c1, b2, 2, c2, used, i1p, i2p, pad, o, (100, 300), np.inf)
     with pytest.raises(ValueError, match="TAIL"):
         _run_affine(coef, 2, b1, 3, c1, b2, 2, c2, used, i1p[:-1], i2p, pad, o, (100, 300), np.inf)
-    with pytest.raises(ValueError, match="column per lane"):
+    with pytest.raises(ValueError, match="at least nb"):  # the general step: B one row per lane
+        _run_wide(coef, 2, b1[:, :2], 3, nk1, b2, 2, nk2, _lanes.LANES, i1p, i2p, pad, o, (100, 300), np.inf)
+    with pytest.raises(ValueError, match="one row per lane"):
         _lanes.simulate_affine(
             coef, 2, b1, 3, c1, b2.T.copy(), 2, c2, used, i1p[::-1].copy(), i1p, i2p, pad, o, 100, 300,
             np.full(_lanes.LANES, np.inf), np.empty(_lanes._CHUNK * _lanes.LANES),
@@ -931,21 +948,33 @@ def test_pruned_frontier_equals_the_old_kernel_on_random_records(seed):
     _assert_same_frontier(full, old)
 
 
-@pytest.mark.parametrize("seed", [4, 5])
-def test_affine_groups_give_the_old_kernels_frontier_on_random_records(seed):
-    # 18 values of nk1: per nk2, two affine groups of 8 consecutive nk1 and
-    # two candidates left for the general lanes (and any group with more
-    # than two unstable candidates). Frontier and every V of
-    # keep_candidates equal the unpruned old kernel's, bit for bit.
+@pytest.mark.parametrize(
+    ("seed", "grid", "threads"),
+    [
+        # 18 values of nk1: per nk2, two affine groups of 8 consecutive nk1
+        # and two candidates left for the general lanes.
+        (4, Grid(na=(1, 3), nb1=(0, 3), nb2=(0, 2), nk1=(0, 17), nk2=(1, 3)), 1),
+        (5, Grid(na=(1, 3), nb1=(0, 2), nb2=(0, 2), nk1=(0, 17), nk2=(1, 3)), 2),
+        # Three groups per block: batches span two blocks of different nb2
+        # (B2 padded), the last batch of a run has an idle group; nb1 up to
+        # 10 takes a whole tap block and a rest.
+        (6, Grid(na=(1, 2), nb1=(0, 10), nb2=(0, 3), nk1=(0, 8), nk2=(1, 3)), 1),
+        # One group per block, na above MAX_NA next to na on the vector steps.
+        (7, Grid(na=(11, 13), nb1=(8, 9), nb2=(0, 1), nk1=(3, 12), nk2=(2, 2)), 2),
+    ],
+)
+def test_affine_groups_give_the_old_kernels_frontier_on_random_records(seed, grid, threads):
+    # Affine groups (and groups with more than two unstable candidates left
+    # to the general lanes): frontier and every V of keep_candidates equal
+    # the unpruned old kernel's, bit for bit.
     rng = np.random.default_rng(seed)
     n = 500
     i1 = rng.standard_normal(n)
     i2 = rng.standard_normal(n)
     o = lfilter([0, 0, 0, 0, 0.4, 0.2], [1, -1.2, 0.5], i1) + lfilter([0, 0.3], [1, -0.6], i2)
     o += 0.3 * rng.standard_normal(n)
-    grid = Grid(na=(1, 3), nb1=(0, int(rng.integers(2, 4))), nb2=(0, 2), nk1=(0, 17), nk2=(1, 3))
     rows = (slice(40, 250), slice(int(rng.integers(200, 300)), n))
-    pruned, counts = _fit_grid(i1, i2, o, grid, *rows, 1, False, legacy=False)
+    pruned, counts = _fit_grid(i1, i2, o, grid, *rows, threads, False, legacy=False)
     old = _legacy(i1, i2, o, grid, *rows, keep_candidates=True)
     _assert_same_frontier(pruned, old)
     assert counts[:, 1].sum() > 0

@@ -207,13 +207,14 @@ def lane_inputs(typingctx, b1, nb1, off1, i1p, b2, nb2, off2, i2p, steps, xt):
 def lane_inputs_affine(typingctx, b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0, steps, xt):
     """Input part of every lane for chunk samples ``q < steps`` into ``xt``: groups of *affine* lanes.
 
-    In group g, lane l's input 1 is delayed by ``c1[g] + l`` and input 2 by
-    ``c2[g]`` (consecutive nk1 at one nk2). With ``r1`` the reversed padded
-    input 1, ``r1[m] = i1p[len - 1 - m]``, tap j of lane l at sample t is
-    ``r1[base1[g] - t + j + l]`` (``base1 = len - 1 - pad + c1``): one
-    vector load for the group's ``_WIDTH`` lanes, no transpose; input 2 is
-    one value for all of them, ``i2p[base2[g] + t - j]`` (``base2 = pad -
-    c2``). ``b1t[j * LANES + l]`` is tap j of lane l. ``steps`` must be a
+    Lane ``l = g * _WIDTH + w`` (group g, place w) has input 1 delayed by
+    ``c1[g] + w`` and input 2 by ``c2[g]`` (consecutive nk1 at one nk2).
+    With ``r1`` the reversed padded input 1, ``r1[m] = i1p[len - 1 - m]``,
+    its tap j at sample t is ``r1[base1[g] - t + j + w]`` (``base1 = len -
+    1 - pad + c1``): one vector load for the group's ``_WIDTH`` lanes, no
+    transpose; input 2 is one value for all of them, ``i2p[base2[g] + t -
+    j]`` (``base2 = pad - c2``). ``b1t[j * LANES + l]`` is tap j of lane
+    l. ``steps`` must be a
     multiple of ``_AFFINE_SAMPLES``; the inputs need ``TAIL`` readable values
     past the record. Per sample the terms are added as in
     ``simulate_into``: 0, then b1[0], b1[1], ..., then b2[0], ... The taps
@@ -280,7 +281,7 @@ def _affine_block(builder, taps, j0, count, fresh):
         for j in range(count):
             tap = builder.add(j0, _c(j))
             for s in range(_AFFINE_SAMPLES):
-                if taps.row:  # r1[base - (t0 + s) + tap + l], l = 0.._WIDTH - 1
+                if taps.row:  # r1[base - (t0 + s) + tap + w], w = 0.._WIDTH - 1
                     at = builder.add(builder.sub(builder.sub(taps.base, t0), _c(s)), tap)
                     x = _load(builder, taps.source, at)
                 else:  # i2p[base + t0 + s - tap], the same for every lane
@@ -614,12 +615,13 @@ def _finite_or_inf(v):
 
 
 @njit(cache=True)
-def _check_lanes(i1p, i2p, pad, n, b1, b2):
-    """The vector steps read without bounds checks: refuse what they would overrun."""
+def _check_lanes(i1p, i2p, pad, n, b1, nb1, b2, nb2):
+    """The vector steps read without bounds checks: refuse what they would overrun
+    (B with one row per lane, as :func:`simulate_wide` takes it)."""
     if i1p.shape[0] < pad + n + TAIL or i2p.shape[0] < pad + n + TAIL:
         raise ValueError("vector lanes: the inputs need pad + n + TAIL values")
-    if b1.shape[0] != LANES or b2.shape[0] != LANES:
-        raise ValueError("vector lanes: B must have one row per lane")
+    if b1.shape[0] != LANES or b2.shape[0] != LANES or b1.shape[1] < nb1 or b2.shape[1] < nb2:
+        raise ValueError("vector lanes: B must have one row per lane and at least nb columns")
 
 
 @njit(cache=True)
@@ -642,7 +644,7 @@ def simulate_wide(
     ``yh`` ((max(na, 2) + _CHUNK) * LANES,), the last rows of one chunk
     moved to its top for the next; ``eacc`` (4 * LANES,).
     """
-    _check_lanes(i1p, i2p, pad, o.shape[0], b1, b2)
+    _check_lanes(i1p, i2p, pad, o.shape[0], b1, nb1, b2, nb2)
     used = np.arange(LANES) < n_lanes
     none = np.empty(0, dtype=np.int64)
     return _wide_loop(
@@ -665,11 +667,14 @@ def simulate_affine(
     its group's). ``r1`` is ``i1p`` reversed. Same arithmetic per lane,
     pruning and results as :func:`simulate_wide`.
     """
-    n = o.shape[0]
-    if i1p.shape[0] < pad + n + TAIL or i2p.shape[0] < pad + n + TAIL or r1.shape[0] != i1p.shape[0]:
-        raise ValueError("affine lanes: the inputs need pad + n + TAIL values, r1 as many")
-    if b1t.shape[1] != LANES or b2t.shape[1] != LANES:
-        raise ValueError("affine lanes: B must have one column per lane")
+    _check_lanes(i1p, i2p, pad, o.shape[0], b1t.T, nb1, b2t.T, nb2)
+    if (
+        r1.shape[0] != i1p.shape[0]
+        or c1.shape[0] != _GROUPS
+        or c2.shape[0] != _GROUPS
+        or used.shape[0] != LANES
+    ):
+        raise ValueError("affine lanes: r1 as long as i1p, one c1 and c2 per group, one used flag per lane")
     base1 = np.empty(_GROUPS, dtype=np.int64)
     base2 = np.empty(_GROUPS, dtype=np.int64)
     for g in range(_GROUPS):
@@ -720,7 +725,7 @@ def _wide_loop(
                 off2[lane] = pad - nk2[lane] + k0
             lane_inputs(b1, nb1, off1, i1p, b2, nb2, off2, i2p, steps, xt)
         if not lane_recursion(coef, na, xt, m, yh, h, o, k0, val_start, val_stop, quad_end, eacc):
-            raise ValueError("simulate_wide: na above MAX_NA")
+            raise ValueError("vector lanes: na above MAX_NA")
         last = (h + m - 1) * LANES
         for lane in range(LANES):
             if live[lane] and not abs(yh[last + lane]) < np.inf:
@@ -749,6 +754,20 @@ def _wide_loop(
 @njit(cache=True)
 def _partial_v(eacc, lane, n_val):
     return ((eacc[lane] + eacc[LANES + lane]) + (eacc[2 * LANES + lane] + eacc[3 * LANES + lane])) / n_val
+
+
+@njit(cache=True)
+def _n_d2(bounds, nb2):
+    """Delays nk2 per nk1 in a block of ``nb2`` (1 without input 2): the candidate order of
+    :func:`hcid.arx.grid.candidates`, nk1 outer and nk2 inner."""
+    return bounds[4, 1] - bounds[4, 0] + 1 if nb2 > 0 else 1
+
+
+@njit(cache=True)
+def _delays(within, nb1, nb2, bounds):
+    """(nk1, nk2) of candidate ``within`` of its block (0 for a dropped input)."""
+    n_d2 = _n_d2(bounds, nb2)
+    return (bounds[3, 0] + within // n_d2 if nb1 > 0 else 0), (bounds[4, 0] + within % n_d2 if nb2 > 0 else 0)
 
 
 @njit(cache=True)
@@ -795,8 +814,6 @@ def _simulate_block(
     """
     na, nb1, nb2 = block_orders[row, 0], block_orders[row, 1], block_orders[row, 2]
     start = block_start[row]
-    nk1_lo, nk2_lo = bounds[3, 0], bounds[4, 0]
-    n_d2 = bounds[4, 1] - bounds[4, 0] + 1 if nb2 > 0 else 1
     n = o.shape[0]
     waiting = _waiting_by_score(v_all, score, start, block_size[row])
     m = waiting.shape[0]
@@ -816,9 +833,7 @@ def _simulate_block(
             # A short last batch repeats its first candidate in the idle lanes.
             c = waiting[first + lane if first + lane < m else first]
             lanes[lane] = c
-            within = c - start
-            nk1[lane] = nk1_lo + within // n_d2 if nb1 > 0 else 0
-            nk2[lane] = nk2_lo + within % n_d2 if nb2 > 0 else 0
+            nk1[lane], nk2[lane] = _delays(c - start, nb1, nb2, bounds)
             _put_lane(theta_all[c], na, nb1, nb2, lane, 4, coef, b1, b2)
         done = simulate_lanes(
             coef, na, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, o, val_start, val_stop,
@@ -847,12 +862,12 @@ def _affine_groups(first_row, stop_row, block_orders, block_start, bounds, v_all
     per_d2 = n_d1 // _WIDTH if nb1 > 0 else 0
     total = 0
     for row in range(first_row, stop_row):
-        total += per_d2 * (bounds[4, 1] - bounds[4, 0] + 1 if block_orders[row, 2] > 0 else 1)
+        total += per_d2 * _n_d2(bounds, block_orders[row, 2])
     rows = np.empty(total, dtype=np.int64)
     firsts = np.empty(total, dtype=np.int64)
     m = 0
     for row in range(first_row, stop_row):
-        n_d2 = bounds[4, 1] - bounds[4, 0] + 1 if block_orders[row, 2] > 0 else 1
+        n_d2 = _n_d2(bounds, block_orders[row, 2])
         keys = np.empty(per_d2 * n_d2)
         here = np.empty(per_d2 * n_d2, dtype=np.int64)
         found = 0
@@ -917,10 +932,8 @@ def _simulate_affine_groups(
             i = at + g if at + g < rows.shape[0] else at
             row, first = rows[i], firsts[i]
             nb2 = block_orders[row, 2]
-            n_d2 = bounds[4, 1] - bounds[4, 0] + 1 if nb2 > 0 else 1
-            within = first - block_start[row]
-            c1[g] = bounds[3, 0] + within // n_d2
-            c2[g] = bounds[4, 0] + within % n_d2 if nb2 > 0 else 0
+            n_d2 = _n_d2(bounds, nb2)
+            c1[g], c2[g] = _delays(first - block_start[row], nb1, nb2, bounds)
             for w in range(_WIDTH):
                 lane = g * _WIDTH + w
                 coef[lane] = 1.0
@@ -971,7 +984,6 @@ def _simulate_run(
     ``counts`` as in :func:`_simulate_block`.
     """
     na, nb1 = block_orders[first_row, 0], block_orders[first_row, 1]
-    nk1_lo, nk2_lo = bounds[3, 0], bounds[4, 0]
     best = np.full(stop_row - first_row, np.inf)
     _simulate_affine_groups(
         first_row, stop_row, block_orders, block_start, bounds, theta_all, score, i1p, i2p, pad, o,
@@ -1021,10 +1033,7 @@ def _simulate_run(
             c = queue[first + lane]
             row = owner[first + lane]
             nb2 = block_orders[row, 2]
-            n_d2 = bounds[4, 1] - bounds[4, 0] + 1 if nb2 > 0 else 1
-            within = c - block_start[row]
-            nk1[lane] = nk1_lo + within // n_d2 if nb1 > 0 else 0
-            nk2[lane] = nk2_lo + within % n_d2 if nb2 > 0 else 0
+            nk1[lane], nk2[lane] = _delays(c - block_start[row], nb1, nb2, bounds)
             _put_lane(theta_all[c], na, nb1, nb2, lane, LANES, coef, b1, b2)
             lane_bound[lane] = best[row - first_row]
         done = simulate_wide(
@@ -1163,7 +1172,7 @@ def squared_errors_wide(
         coef = np.zeros((h + 1) * LANES)
         b1 = np.zeros((LANES, max(m1, 1)))
         b2 = np.zeros((LANES, max(m2, 1)))
-        _check_lanes(i1p, i2p, pad, n, b1, b2)
+        _check_lanes(i1p, i2p, pad, n, b1, m1, b2, m2)
         lane_nk1 = np.zeros(LANES, dtype=np.int64)
         lane_nk2 = np.zeros(LANES, dtype=np.int64)
         for lane in range(LANES):
