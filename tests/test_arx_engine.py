@@ -635,14 +635,21 @@ def test_vector_lanes_are_bit_identical_to_the_single_candidate_kernel(n, rows):
         lanes, coef, b1, b2, nk1, nk2 = _wide_batch(rng, na, nb1, nb2, n_lanes, n)
         v, pruned = _run_wide(coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, i1p, i2p, pad, o, rows, np.inf)
         assert not pruned.any()
-        for lane, (a, c1, c2) in enumerate(lanes):
-            yp = np.zeros(na + n)
-            one = _kernels.simulate_into(
-                np.r_[a, 0.0], na, np.r_[c1, 0.0], nb1, nk1[lane], np.r_[c2, 0.0], nb2, nk2[lane],
-                i1p, i2p, pad, np.empty(n), yp, na,
-            )  # fmt: skip
-            assert one == n
-            assert v[lane] == _kernels._validation_mse(yp, na, o, *rows), (na, nb1, nb2, lane)
+        _assert_v_of_one_candidate_kernel(dict(enumerate(lanes)), v, nk1, nk2, i1p, i2p, pad, o, rows)
+
+
+def _assert_v_of_one_candidate_kernel(lanes, v, nk1, nk2, i1p, i2p, pad, o, rows):
+    """Each lane's V (``lanes``: lane -> (a, b1, b2)) is simulate_into + _validation_mse's, bit for bit."""
+    n = o.size
+    for lane, (a, c1, c2) in lanes.items():
+        na, nb1, nb2 = a.size - 1, c1.size, c2.size
+        yp = np.zeros(na + n)
+        one = _kernels.simulate_into(
+            np.r_[a, 0.0], na, np.r_[c1, 0.0], nb1, nk1[lane], np.r_[c2, 0.0], nb2, nk2[lane],
+            i1p, i2p, pad, np.empty(n), yp, na,
+        )  # fmt: skip
+        assert one == n
+        assert v[lane] == _kernels._validation_mse(yp, na, o, *rows), (na, nb1, nb2, lane)
 
 
 @_NO_JIT
@@ -756,14 +763,7 @@ def test_affine_lanes_are_bit_identical_to_the_single_candidate_kernel(n, rows):
         lanes, coef, b1, b2, c1, c2, nk1, nk2 = _affine_batch(rng, na, nb1, nb2, used, pad)
         v, pruned = _run_affine(coef, na, b1, nb1, c1, b2, nb2, c2, used, i1p, i2p, pad, o, rows, np.inf)
         assert not pruned[used].any()
-        for lane, (a, d1, d2) in lanes.items():
-            yp = np.zeros(na + n)
-            one = _kernels.simulate_into(
-                np.r_[a, 0.0], na, np.r_[d1, 0.0], nb1, nk1[lane], np.r_[d2, 0.0], nb2, nk2[lane],
-                i1p, i2p, pad, np.empty(n), yp, na,
-            )  # fmt: skip
-            assert one == n
-            assert v[lane] == _kernels._validation_mse(yp, na, o, *rows), (na, nb1, nb2, lane)
+        _assert_v_of_one_candidate_kernel(lanes, v, nk1, nk2, i1p, i2p, pad, o, rows)
 
 
 @_NO_JIT

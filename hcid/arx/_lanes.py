@@ -646,10 +646,9 @@ def simulate_wide(
     """
     _check_lanes(i1p, i2p, pad, o.shape[0], b1, nb1, b2, nb2)
     used = np.arange(LANES) < n_lanes
-    none = np.empty(0, dtype=np.int64)
     return _wide_loop(
         coef, na, used, o, val_start, val_stop, bound, xt, yh, eacc, v_out, pruned,
-        False, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, off1, off2, i1p, none, none,
+        False, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, off1, off2, i1p,
     )  # fmt: skip
 
 
@@ -684,17 +683,22 @@ def simulate_affine(
         base2[g] = pad - c2[g]
     return _wide_loop(
         coef, na, used, o, val_start, val_stop, bound, xt, yh, eacc, v_out, pruned,
-        True, b1t, nb1, c1, b2t, nb2, c2, i1p, i2p, pad, base1, base2, r1, base1, base2,
+        True, b1t, nb1, c1, b2t, nb2, c2, i1p, i2p, pad, base1, base2, r1,
     )  # fmt: skip
 
 
 @njit(cache=True)
 def _wide_loop(
     coef, na, used, o, val_start, val_stop, bound, xt, yh, eacc, v_out, pruned,
-    affine, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, off1, off2, r1, base1, base2,
+    affine, b1, nb1, nk1, b2, nb2, nk2, i1p, i2p, pad, off1, off2, r1,
 ):  # fmt: skip
     """The chunk loop of :func:`simulate_wide` and :func:`simulate_affine`: input part
-    (general or affine lanes), recursion, finiteness and pruning checks."""
+    (general or affine lanes), recursion, finiteness and pruning checks.
+
+    General lanes: ``nk1``, ``nk2`` per lane, ``off1``, ``off2`` scratch for
+    their offsets. Affine lanes: ``off1``, ``off2`` the groups' base1 and
+    base2 (:func:`lane_inputs_affine`), ``nk1``, ``nk2`` unused.
+    """
     n = o.shape[0]
     n_val = val_stop - val_start
     quad_end = val_start + 4 * (n_val // 4)
@@ -718,7 +722,7 @@ def _wide_loop(
         m = k1 - k0
         steps = (m + TAIL) // SAMPLES * SAMPLES
         if affine:
-            lane_inputs_affine(b1, nb1, r1, base1, b2, nb2, i2p, base2, k0, steps, xt)
+            lane_inputs_affine(b1, nb1, r1, off1, b2, nb2, i2p, off2, k0, steps, xt)
         else:
             for lane in range(LANES):
                 off1[lane] = pad - nk1[lane] + k0
