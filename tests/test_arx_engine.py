@@ -994,6 +994,81 @@ def test_block_best_is_the_stable_lexsort_order():
     np.testing.assert_array_equal(_kernels.block_best(v, start, size), np.lexsort((v, block))[start])
 
 
+def _select_qr_one_column_at_a_time(src, n_src, cols, n_cols):
+    """select_qr as it was first written (each later column reflected on its own), in
+    plain Python: the slow twin of the kernel, which reflects four columns at a time."""
+    dst = np.zeros((n_cols + 1, src.shape[1]))
+    for j in range(n_cols):
+        dst[j, : cols[j] + 1] = src[cols[j], : cols[j] + 1]
+    dst[n_cols, : cols[n_cols - 1] + 1] = src[n_src, : cols[n_cols - 1] + 1]
+    for j in range(n_cols):
+        last = cols[j]
+        s = 0.0
+        for i in range(j + 1, last + 1):
+            s += dst[j, i] * dst[j, i]
+        if s == 0.0:
+            continue
+        alpha = dst[j, j]
+        beta = -np.copysign(np.sqrt(alpha * alpha + s), alpha)
+        tau = (beta - alpha) / beta
+        scale = 1.0 / (alpha - beta)
+        for i in range(j + 1, last + 1):
+            dst[j, i] *= scale
+        dst[j, j] = beta
+        for k in range(j + 1, n_cols + 1):
+            w = dst[k, j]
+            for i in range(j + 1, last + 1):
+                w += dst[j, i] * dst[k, i]
+            w *= tau
+            dst[k, j] -= w
+            for i in range(j + 1, last + 1):
+                dst[k, i] -= w * dst[j, i]
+    return dst
+
+
+@pytest.mark.parametrize("n_cols", [1, 3, 4, 5, 8, 11])  # 4 at a time, with 0..3 left over
+def test_select_qr_is_bit_identical_to_one_column_at_a_time(n_cols):
+    rng = np.random.default_rng(n_cols)
+    p = 14
+    r = np.linalg.qr(rng.standard_normal((40, p + 1)), mode="r")
+    src = np.zeros((p + 1, p))
+    src[:p] = r[:p, :p].T
+    src[p] = r[:p, p]
+    cols = np.sort(rng.choice(p, n_cols, replace=False))
+    dst = np.zeros((n_cols + 1, p))
+    _kernels.select_qr(src, p, cols, n_cols, dst)
+    slow = _select_qr_one_column_at_a_time(src, p, cols, n_cols)
+    top = cols[-1] + 1
+    for j in range(n_cols):  # the factor's column j: rows 0..j (zero below by construction)
+        assert np.array_equal(dst[j, : j + 1], slow[j, : j + 1])
+    assert np.array_equal(dst[n_cols, :top], slow[n_cols, :top])
+    # And it is a QR factor of the columns picked: R^T R = A^T A, same c norm.
+    a = r[:, cols]
+    got = np.tril(dst[:n_cols, :n_cols])
+    np.testing.assert_allclose(got @ got.T, a.T @ a, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.sum(dst[n_cols, :top] ** 2), np.sum(src[p, :top] ** 2), rtol=1e-13)
+
+
+def test_back_steps_in_two_parts_equal_one_back_substitution():
+    # _fit_unit solves A first (the last na unknowns), then B only for a
+    # stable A: the two calls must give the bits of one.
+    rng = np.random.default_rng(5)
+    k, split = 9, 4
+    f = np.zeros((k + 1, k))
+    f[:k] = np.tril(rng.standard_normal((k, k))) + 3.0 * np.eye(k)
+    f[k] = rng.standard_normal(k)
+    one, tmp = np.empty(k), f[k].copy()
+    assert _kernels.back_steps(f, k, 0, one, tmp)
+    two, tmp = np.empty(k), f[k].copy()
+    assert _kernels.back_steps(f, k, split, two, tmp)
+    assert _kernels.back_steps(f, split, 0, two, tmp)
+    assert np.array_equal(one, two)
+    # The solution of R theta = c (f holds R transposed), to rounding.
+    np.testing.assert_allclose(f[:k].T @ one, f[k], rtol=1e-12, atol=1e-12)
+    f[2, 2] = 0.0
+    assert not _kernels.back_steps(f, k, 0, one, f[k].copy())
+
+
 def test_pruned_frontier_with_two_threads(paper_record):
     grid = Grid(na=(1, 3), nb1=(0, 2), nb2=(0, 2), nk1=(20, 21), nk2=(4, 5))
     one, counts1 = _fit_grid(*_direct(paper_record), grid, *DIRECT_ROWS, 1, False, legacy=False)
