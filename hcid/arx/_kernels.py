@@ -135,14 +135,14 @@ def select_qr(src, n_src, cols, n_cols, dst):
                 dst[k + 2, i] -= w2 * h
                 dst[k + 3, i] -= w3 * h
             k += 4
-        for k in range(k, n_cols + 1):
-            w = dst[k, j]
+        for rest in range(k, n_cols + 1):
+            w = dst[rest, j]
             for i in range(j + 1, last + 1):
-                w += dst[j, i] * dst[k, i]
+                w += dst[j, i] * dst[rest, i]
             w *= tau
-            dst[k, j] -= w
+            dst[rest, j] -= w
             for i in range(j + 1, last + 1):
-                dst[k, i] -= w * dst[j, i]
+                dst[rest, i] -= w * dst[j, i]
 
 
 @njit(cache=True)
