@@ -29,6 +29,9 @@ from numba.extending import intrinsic
 # Samples simulated between two finiteness checks.
 _BLOCK = 256
 
+# Prefetch hints are an intrinsic: compiled code only (a constant there).
+_HINTS = not numba.config.DISABLE_JIT
+
 
 @intrinsic
 def _prefetch_write(typingctx, arr, index):
@@ -60,6 +63,8 @@ def _prefetch_rows(offset, c1, c2, within, v_out, theta_out, score_out):
     A unit's rows lie one per order triple, far apart: without the hint
     each store waits for its cache line (a third of the direct grid's fit).
     """
+    if not _HINTS:
+        return
     width = theta_out.shape[1]
     for c in range(offset.shape[0]):
         row = offset[c, c1, c2] + within
