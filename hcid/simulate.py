@@ -3,9 +3,11 @@
 The loop runs at the simulation rate with discretised paths (Tustin for Hft,
 He and Yc, ZOH for the remnant filter; :mod:`hcid.hcmodel`) and whole-sample
 delays. Because the feedback path holds a delay of ``L`` samples,
-the loop is simulated in blocks of ``L`` samples: within a block the feedback
-input ``e(k - L)`` is already known, so each block is two short ``lfilter``
-calls with carried state, exact to rounding (no algebraic loop, no iteration).
+the feedback input ``e(k - L)`` is known ``L`` samples ahead: the loop is
+exact to rounding with no algebraic loop and no iteration. It runs sample by
+sample in a compiled kernel doing ``lfilter``'s own arithmetic; its slow twin
+runs blocks of ``L`` samples, two ``lfilter`` calls with carried state each,
+and gives the same bits.
 The kept window is low-passed at the output Nyquist frequency by an FFT
 brick-wall (zero phase) and decimated.
 """
@@ -13,13 +15,15 @@ brick-wall (zero phase) and decimated.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy import signal as sps
 
 from hcid import signals
-from hcid.config import Config, HCModel, Multisine
+from hcid.config import Config, FileSignal, HCModel, Multisine
 from hcid.hcmodel import DiscreteLoop
 from hcid.tables import CHANNELS
 
@@ -76,7 +80,7 @@ def white_noise(seed: int, n: int) -> np.ndarray:
 
 
 def simulate_loop(
-    dloop: DiscreteLoop, ft: np.ndarray, fd: np.ndarray, n: np.ndarray
+    dloop: DiscreteLoop, ft: np.ndarray, fd: np.ndarray, n: np.ndarray, *, fast: bool = True
 ) -> dict[str, np.ndarray]:
     """Simulate the closed loop from rest at the simulation rate.
 
@@ -86,6 +90,10 @@ def simulate_loop(
         Discretised paths and delays; the feedback delay must be >= 1 sample.
     ft, fd, n : ndarray, shape (m,)
         Target, disturbance and remnant (rad), one value per simulation sample.
+    fast : bool, default True
+        Run the sample loop compiled (:func:`_loop_kernel`); False runs it
+        as blocks of ``lfilter`` calls (:func:`_loop_blocks`), its slow twin
+        in the tests. Both give the same bits.
 
     Returns
     -------
@@ -102,14 +110,26 @@ def simulate_loop(
         u_ff = sps.lfilter(b, a, ft)
         u_open[dloop.delay_ft :] += u_ff[: m - dloop.delay_ft]
 
-    b_fb, a_fb = dloop.feedback
-    b_c, a_c = dloop.plant
-    z_fb = np.zeros(max(a_fb.size, b_fb.size) - 1)
-    z_c = np.zeros(max(a_c.size, b_c.size) - 1)
     e = np.zeros(m + block)  # e[block + k] is e(k); the first `block` entries are the rest state
     u = np.empty(m)
     theta = np.empty(m)
     at_input = dloop.disturbance_at == "input"
+    if fast:
+        fb = _df2t_coefficients(*dloop.feedback)
+        plant = _df2t_coefficients(*dloop.plant)
+        _loop_kernel(*fb, *plant, block, u_open, ft, fd, at_input, e, u, theta)
+    else:
+        _loop_blocks(dloop, block, u_open, ft, fd, at_input, e, u, theta)
+    return {"ft": ft, "fd": fd, "e": e[block:], "u": u, "theta": theta, "n": n}
+
+
+def _loop_blocks(dloop, block, u_open, ft, fd, at_input, e, u, theta):
+    """The loop in blocks of ``block`` samples, two ``lfilter`` calls with carried state each."""
+    b_fb, a_fb = dloop.feedback
+    b_c, a_c = dloop.plant
+    z_fb = np.zeros(max(a_fb.size, b_fb.size) - 1)
+    z_c = np.zeros(max(a_c.size, b_c.size) - 1)
+    m = u.size
     for k0 in range(0, m, block):
         k1 = min(k0 + block, m)
         u_fb, z_fb = sps.lfilter(b_fb, a_fb, e[k0:k1], zi=z_fb)
@@ -120,7 +140,52 @@ def simulate_loop(
             y, z_c = sps.lfilter(b_c, a_c, u[k0:k1], zi=z_c)
             theta[k0:k1] = y + fd[k0:k1]
         e[block + k0 : block + k1] = ft[k0:k1] - theta[k0:k1]
-    return {"ft": ft, "fd": fd, "e": e[block:], "u": u, "theta": theta, "n": n}
+
+
+def _df2t_coefficients(b: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """b and a as lfilter's filter loop uses them: divided by a[0], zero-padded to one length (>= 2)."""
+    size = max(a.size, b.size, 2)
+    b_n = np.zeros(size)
+    a_n = np.zeros(size)
+    b_n[: b.size] = b / a[0]
+    a_n[: a.size] = a / a[0]
+    return b_n, a_n
+
+
+@njit(cache=True)
+def _df2t(b, a, x, z):
+    """One sample of a direct form II transposed filter, state ``z`` updated in place.
+
+    scipy.signal.lfilter's own loop (scipy/signal/_lfilter.c, ``DOUBLE_filt``),
+    operation for operation: ``y = z0 + b0 x``, then ``z_n = (z_{n+1} + x
+    b_{n+1}) - y a_{n+1}``, the last ``x b - y a``. No FMA: numba contracts
+    nothing without fastmath.
+    """
+    y = z[0] + b[0] * x
+    last = b.shape[0] - 1
+    for i in range(last - 1):
+        z[i] = (z[i + 1] + x * b[i + 1]) - y * a[i + 1]
+    z[last - 1] = x * b[last] - y * a[last]
+    return y
+
+
+@njit(cache=True)
+def _loop_kernel(b_fb, a_fb, b_c, a_c, block, u_open, ft, fd, at_input, e, u, theta):
+    """The loop sample by sample (compiled); the arithmetic of :func:`_loop_blocks`.
+
+    ``e(k - block)``, the feedback path's input at sample k, is known
+    ``block`` samples ahead, so a sample-by-sample loop does the blocks'
+    operations in the same order.
+    """
+    z_fb = np.zeros(b_fb.shape[0] - 1)
+    z_c = np.zeros(b_c.shape[0] - 1)
+    for k in range(u.shape[0]):
+        u[k] = _df2t(b_fb, a_fb, e[k], z_fb) + u_open[k]
+        if at_input:  # theta = Yc (u + fd)
+            theta[k] = _df2t(b_c, a_c, u[k] + fd[k], z_c)
+        else:  # theta = Yc u + fd (the paper)
+            theta[k] = _df2t(b_c, a_c, u[k], z_c) + fd[k]
+        e[block + k] = ft[k] - theta[k]
 
 
 def decimate(x: np.ndarray, factor: int) -> np.ndarray:
@@ -132,6 +197,24 @@ def decimate(x: np.ndarray, factor: int) -> np.ndarray:
     cutoff = x.size // (2 * factor)
     spectrum[cutoff:] = 0.0
     return np.fft.irfft(spectrum, n=x.size)[::factor]
+
+
+def _forcing(timing, spec) -> np.ndarray:
+    """:func:`hcid.signals.forcing`, computed once per process for the kinds made from
+    the config alone (every seed and model of a study shares them); a data file is read
+    each time. A copy: callers may write to it."""
+    if isinstance(spec, FileSignal):
+        return signals.forcing(timing, spec)
+    return _config_forcing(timing, spec).copy()
+
+
+@functools.lru_cache(maxsize=16)
+def _config_forcing(timing, spec) -> np.ndarray:
+    return signals.forcing(timing, spec)
+
+
+# The discretised loop of a model, once per process (every seed shares it; read only).
+_discrete_loop = functools.lru_cache(maxsize=16)(DiscreteLoop.build)
 
 
 def _feedback_only(model: HCModel) -> HCModel:
@@ -216,13 +299,13 @@ def simulate_realization(
     """
     timing = config.timing
     t = signals.simulation_time(timing)
-    fd = signals.forcing(timing, config.disturbance)
+    fd = _forcing(timing, config.disturbance)
     if disturbance_only:
         model = _feedback_only(model)
         ft = np.zeros_like(t)
     else:
-        ft = signals.forcing(timing, config.target)
-    dloop = DiscreteLoop.build(model, config.loop, timing.sim_dt)
+        ft = _forcing(timing, config.target)
+    dloop = _discrete_loop(model, config.loop, timing.sim_dt)
     b_n, a_n = dloop.remnant
     n = kn * sps.lfilter(b_n, a_n, white_noise(seed, t.size))
     out = simulate_loop(dloop, ft, fd, n)
