@@ -1069,6 +1069,15 @@ def test_back_steps_in_two_parts_equal_one_back_substitution():
     assert not _kernels.back_steps(f, k, 0, one, f[k].copy())
 
 
+@pytest.mark.parametrize("n", [1, 7, 8, 17, 2048])
+def test_lane_scratch_starts_on_a_cache_line(n):
+    # _aligned_zeros: 64-byte boundary (a vector of _WIDTH doubles in one cache line), n zeros.
+    for _ in range(5):
+        x = _lanes._aligned_zeros(n)
+        assert x.shape == (n,) and x.ctypes.data % 64 == 0
+        assert np.array_equal(x, np.zeros(n))
+
+
 def test_pruned_frontier_with_two_threads(paper_record):
     grid = Grid(na=(1, 3), nb1=(0, 2), nb2=(0, 2), nk1=(20, 21), nk2=(4, 5))
     one, counts1 = _fit_grid(*_direct(paper_record), grid, *DIRECT_ROWS, 1, False, legacy=False)
