@@ -5,9 +5,11 @@ He and Yc, ZOH for the remnant filter; :mod:`hcid.hcmodel`) and whole-sample
 delays. Because the feedback path holds a delay of ``L`` samples,
 the feedback input ``e(k - L)`` is known ``L`` samples ahead: the loop is
 exact to rounding with no algebraic loop and no iteration. It runs sample by
-sample in a compiled kernel doing ``lfilter``'s own arithmetic; its slow twin
-runs blocks of ``L`` samples, two ``lfilter`` calls with carried state each,
-and gives the same bits.
+sample in a compiled kernel doing ``lfilter``'s own arithmetic (for filters
+with ``a[0] = 1`` and ``len(a) = len(b) >= 2``, as every discretised path is;
+others run as blocks of ``L`` samples, two ``lfilter`` calls with carried
+state each, the kernel's slow twin, which gives the same bits where both
+apply).
 The kept window is low-passed at the output Nyquist frequency by an FFT
 brick-wall (zero phase) and decimated.
 """
@@ -23,7 +25,7 @@ from numba import njit
 from scipy import signal as sps
 
 from hcid import signals
-from hcid.config import Config, FileSignal, HCModel, Multisine
+from hcid.config import Config, HCModel, Multisine, Segments
 from hcid.hcmodel import DiscreteLoop
 from hcid.tables import CHANNELS
 
@@ -80,7 +82,7 @@ def white_noise(seed: int, n: int) -> np.ndarray:
 
 
 def simulate_loop(
-    dloop: DiscreteLoop, ft: np.ndarray, fd: np.ndarray, n: np.ndarray, *, fast: bool = True
+    dloop: DiscreteLoop, ft: np.ndarray, fd: np.ndarray, n: np.ndarray
 ) -> dict[str, np.ndarray]:
     """Simulate the closed loop from rest at the simulation rate.
 
@@ -90,10 +92,6 @@ def simulate_loop(
         Discretised paths and delays; the feedback delay must be >= 1 sample.
     ft, fd, n : ndarray, shape (m,)
         Target, disturbance and remnant (rad), one value per simulation sample.
-    fast : bool, default True
-        Run the sample loop compiled (:func:`_loop_kernel`); False runs it
-        as blocks of ``lfilter`` calls (:func:`_loop_blocks`), its slow twin
-        in the tests. Both give the same bits.
 
     Returns
     -------
@@ -114,11 +112,9 @@ def simulate_loop(
     u = np.empty(m)
     theta = np.empty(m)
     at_input = dloop.disturbance_at == "input"
-    if fast:
-        fb = _df2t_coefficients(*dloop.feedback)
-        plant = _df2t_coefficients(*dloop.plant)
-        _loop_kernel(*fb, *plant, block, u_open, ft, fd, at_input, e, u, theta)
-    else:
+    if _replicable(*dloop.feedback) and _replicable(*dloop.plant):
+        _loop_kernel(*dloop.feedback, *dloop.plant, block, u_open, ft, fd, at_input, e, u, theta)
+    else:  # filters whose lfilter arithmetic the kernel does not replicate (not the discretised paths)
         _loop_blocks(dloop, block, u_open, ft, fd, at_input, e, u, theta)
     return {"ft": ft, "fd": fd, "e": e[block:], "u": u, "theta": theta, "n": n}
 
@@ -142,14 +138,14 @@ def _loop_blocks(dloop, block, u_open, ft, fd, at_input, e, u, theta):
         e[block + k0 : block + k1] = ft[k0:k1] - theta[k0:k1]
 
 
-def _df2t_coefficients(b: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """b and a as lfilter's filter loop uses them: divided by a[0], zero-padded to one length (>= 2)."""
-    size = max(a.size, b.size, 2)
-    b_n = np.zeros(size)
-    a_n = np.zeros(size)
-    b_n[: b.size] = b / a[0]
-    a_n[: a.size] = a / a[0]
-    return b_n, a_n
+def _replicable(b: np.ndarray, a: np.ndarray) -> bool:
+    """Whether :func:`_df2t` does lfilter's exact arithmetic for (b, a).
+
+    It does for ``a[0] = 1`` and ``len(a) = len(b) >= 2``, the form every
+    discretised path has; lfilter treats others differently (a length-1
+    ``a`` by convolution; padding divided by ``a[0]``).
+    """
+    return a.size == b.size >= 2 and a[0] == 1.0
 
 
 @njit(cache=True)
@@ -171,7 +167,8 @@ def _df2t(b, a, x, z):
 
 @njit(cache=True)
 def _loop_kernel(b_fb, a_fb, b_c, a_c, block, u_open, ft, fd, at_input, e, u, theta):
-    """The loop sample by sample (compiled); the arithmetic of :func:`_loop_blocks`.
+    """The loop sample by sample (compiled); the arithmetic of :func:`_loop_blocks` for
+    filters that pass :func:`_replicable`.
 
     ``e(k - block)``, the feedback path's input at sample k, is known
     ``block`` samples ahead, so a sample-by-sample loop does the blocks'
@@ -201,11 +198,15 @@ def decimate(x: np.ndarray, factor: int) -> np.ndarray:
 
 def _forcing(timing, spec) -> np.ndarray:
     """:func:`hcid.signals.forcing`, computed once per process for the kinds made from
-    the config alone (every seed and model of a study shares them); a data file is read
-    each time. A copy: callers may write to it."""
-    if isinstance(spec, FileSignal):
-        return signals.forcing(timing, spec)
-    return _config_forcing(timing, spec).copy()
+    the config alone (every seed and model of a study shares them); any other kind
+    (a data file's column) is made each time. A copy: callers may write to it."""
+    if isinstance(spec, _CONFIG_ONLY):
+        return _config_forcing(timing, spec).copy()
+    return signals.forcing(timing, spec)
+
+
+# Forcing kinds that are a function of their (frozen, hashable) config section alone.
+_CONFIG_ONLY = (Multisine, Segments)
 
 
 @functools.lru_cache(maxsize=16)
@@ -213,8 +214,15 @@ def _config_forcing(timing, spec) -> np.ndarray:
     return signals.forcing(timing, spec)
 
 
-# The discretised loop of a model, once per process (every seed shares it; read only).
-_discrete_loop = functools.lru_cache(maxsize=16)(DiscreteLoop.build)
+@functools.lru_cache(maxsize=16)
+def _discrete_loop(model: HCModel, loop, dt: float) -> DiscreteLoop:
+    """:meth:`DiscreteLoop.build`, once per process (every seed shares it); its arrays
+    are made read-only, since every later realization of the process reads them."""
+    dloop = DiscreteLoop.build(model, loop, dt)
+    for path in (dloop.feedforward, dloop.feedback, dloop.plant, dloop.remnant):
+        for coefficients in path:
+            coefficients.flags.writeable = False
+    return dloop
 
 
 def _feedback_only(model: HCModel) -> HCModel:

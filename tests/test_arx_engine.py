@@ -441,6 +441,50 @@ def test_vaf_and_v_of_frontier_rows(paper_record, na):
         np.testing.assert_allclose(mine, o_hat, rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("rows", [DIRECT_ROWS, (slice(29, 2048), slice(29, 2048))])
+def test_vaf_of_every_frontier_row_across_the_vaf_chunks(paper_record, rows):
+    # 288 frontier rows, more than two chunks of engine._VAF_ROWS (128), with two windows and
+    # with one window for both (stage 1's case, one array of squared errors): each row's VAF
+    # is the one numpy computes from simulate()'s output of that row alone, bit for bit.
+    from hcid.arx import engine
+
+    grid = Grid(na=(1, 4), nb1=(0, 7), nb2=(0, 8), nk1=(20, 21), nk2=(4, 5))
+    i1, i2, o = _direct(paper_record)
+    fit = fit_grid(i1, i2, o, grid, *rows)
+    assert np.count_nonzero(np.isfinite(fit.v)) > 2 * engine._VAF_ROWS
+    est, val = rows
+    for row in np.flatnonzero(np.isfinite(fit.v)):
+        o_hat = simulate(fit.a[row], fit.b1[row], fit.b2[row], fit.nk1[row], fit.nk2[row], i1, i2)
+        assert (
+            fit.vaf_estimation[row]
+            == (1.0 - np.sum((o[est] - o_hat[est]) ** 2) / np.sum(o[est] ** 2)) * 100.0
+        )
+        assert (
+            fit.vaf_validation[row]
+            == (1.0 - np.sum((o[val] - o_hat[val]) ** 2) / np.sum(o[val] ** 2)) * 100.0
+        )
+
+
+def test_exactly_singular_regressions_are_counted_with_the_unstable(paper_record):
+    # fit_grid's rule: a candidate whose regression matrix is exactly rank deficient gets
+    # V = inf and is counted in n_unstable. With i2 = 0 every candidate using input 2 is
+    # singular in its B columns (A solved, then a zero pivot in B); with o = 0 every
+    # candidate is singular in its A columns (a zero pivot before any B).
+    grid = Grid(na=(1, 3), nb1=(0, 2), nb2=(0, 2), nk1=(20, 21), nk2=(4, 5))
+    i1, _, o = _direct(paper_record)
+    fit = fit_grid(i1, np.zeros_like(i1), o, grid, *DIRECT_ROWS, keep_candidates=True)
+    table = fit.candidates.to_pydict()
+    uses_i2 = np.array(table["nb2"]) > 0
+    assert np.all(np.isinf(np.array(table["v"])[uses_i2]))
+    assert np.all(np.isfinite(np.array(table["v"])[~uses_i2]))  # measured: all stable on this record
+    assert np.all(np.isinf(fit.v[fit.nb2 > 0])) and np.all(fit.nk1[fit.nb2 > 0] == -1)
+    assert fit.n_unstable_total >= np.count_nonzero(uses_i2)
+    zero = fit_grid(i1, np.ones_like(i1), np.zeros_like(o), grid, *DIRECT_ROWS)
+    assert np.all(np.isinf(zero.v)) and zero.n_unstable_total == zero.n_candidates
+    with pytest.raises(IdentificationError, match="unstable"):
+        best(zero)
+
+
 # --- threads --------------------------------------------------------------------
 
 

@@ -203,23 +203,51 @@ def test_input_disturbance_remnant_gain_gives_the_ratio(paper_config):
     ],
 )
 @pytest.mark.parametrize("model_name", ["FB", "FF"])
-def test_compiled_loop_is_bit_identical_to_the_lfilter_blocks(paper_config, plant_spec, point, model_name):
+def test_compiled_loop_is_bit_identical_to_the_lfilter_blocks(
+    paper_config, plant_spec, point, model_name, monkeypatch
+):
     # The compiled sample loop (the fast path) against its slow twin, blocks of
     # scipy.signal.lfilter calls with carried state: lfilter's own arithmetic, so equal bits.
+    from hcid import simulate
     from hcid.config import Plant
     from hcid.hcmodel import DiscreteLoop
-    from hcid.simulate import simulate_loop, white_noise
 
     loop = paper_config.loop
     if plant_spec is not None:
         loop = dataclasses.replace(loop, plant_spec=Plant(*plant_spec, "test"), disturbance_at=point)
     dloop = DiscreteLoop.build(paper_config.model(model_name), loop, 0.01)
+    assert all(simulate._replicable(*path) for path in (dloop.feedback, dloop.plant))
     t = np.arange(3000) / 100.0
     ft = 0.1 * np.sin(1.3 * t) + 0.05 * np.sin(4.1 * t + 1.0)
     fd = 0.02 * np.sin(2.2 * t) + 0.01 * np.sin(7.9 * t + 2.0)
-    n = 0.05 * white_noise(3, t.size)
-    fast = simulate_loop(dloop, ft, fd, n)
-    slow = simulate_loop(dloop, ft, fd, n, fast=False)
+    n = 0.05 * simulate.white_noise(3, t.size)
+    fast = simulate.simulate_loop(dloop, ft, fd, n)
+    monkeypatch.setattr(simulate, "_replicable", lambda b, a: False)
+    slow = simulate.simulate_loop(dloop, ft, fd, n)
     for name in ("e", "u", "theta"):
         assert np.array_equal(fast[name], slow[name]), name
     assert np.max(np.abs(fast["e"])) > 0.01  # the loop moved
+
+
+def test_only_filters_in_lfilters_own_form_take_the_compiled_loop():
+    # lfilter convolves when len(a) = 1 and divides its zero padding by a[0]: the kernel
+    # replicates neither, so such filters run as lfilter blocks.
+    from hcid.simulate import _replicable
+
+    assert _replicable(np.array([0.5, 0.2]), np.array([1.0, -0.3]))
+    assert not _replicable(np.array([2.0]), np.array([1.0]))
+    assert not _replicable(np.array([0.5, 0.2]), np.array([2.0, -0.3]))
+    assert not _replicable(np.array([0.5]), np.array([1.0, -0.3]))
+
+
+def test_cached_forcing_and_loop_are_not_shared_for_writing(paper_config):
+    # Every realization of a process reads the same cached forcing and discretised loop:
+    # a caller's write must not reach the next one.
+    from hcid.simulate import _discrete_loop, _forcing
+
+    first = _forcing(paper_config.timing, paper_config.target)
+    first[:] = 0.0
+    assert np.any(_forcing(paper_config.timing, paper_config.target) != 0.0)
+    dloop = _discrete_loop(paper_config.model("FF"), paper_config.loop, paper_config.timing.sim_dt)
+    with pytest.raises(ValueError, match="read-only"):
+        dloop.feedback[0][0] = 0.0
