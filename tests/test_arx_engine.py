@@ -442,13 +442,15 @@ def test_vaf_and_v_of_frontier_rows(paper_record, na):
 
 
 @pytest.mark.parametrize("rows", [DIRECT_ROWS, (slice(29, 2048), slice(29, 2048))])
-def test_vaf_of_every_frontier_row_across_the_vaf_chunks(paper_record, rows):
-    # 288 frontier rows, more than two chunks of engine._VAF_ROWS (128), with two windows and
-    # with one window for both (stage 1's case, one array of squared errors): each row's VAF
-    # is the one numpy computes from simulate()'s output of that row alone, bit for bit.
+def test_vaf_of_every_frontier_row_across_the_vaf_chunks(paper_record, rows, monkeypatch):
+    # 36 frontier rows in chunks of 16 (engine._VAF_ROWS, 128 in use, made small so the
+    # test stays quick as plain Python), with two windows and with one window for both
+    # (stage 1's case, one array of squared errors): each row's VAF is the one numpy
+    # computes from simulate()'s output of that row alone, bit for bit.
     from hcid.arx import engine
 
-    grid = Grid(na=(1, 4), nb1=(0, 7), nb2=(0, 8), nk1=(20, 21), nk2=(4, 5))
+    monkeypatch.setattr(engine, "_VAF_ROWS", 16)
+    grid = Grid(na=(1, 3), nb1=(0, 2), nb2=(0, 3), nk1=(20, 21), nk2=(4, 5))
     i1, i2, o = _direct(paper_record)
     fit = fit_grid(i1, i2, o, grid, *rows)
     assert np.count_nonzero(np.isfinite(fit.v)) > 2 * engine._VAF_ROWS
