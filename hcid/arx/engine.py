@@ -427,11 +427,12 @@ def _squared_errors(models, i1p, i2p, pad, o, est, val, same):
 
     ``models`` is (theta, na, nb1, nb2, nk1, nk2), one row per model; on
     the vector lanes where they can, else on the plain kernel. With
-    ``same`` (the two windows equal) both results are one array.
+    ``same`` (the two windows equal) the kernels fill one array (the
+    validation one they get is empty) and it is returned for both.
     """
     n_rows = models[0].shape[0]
     err_est = np.empty((n_rows, est[1] - est[0]))
-    err_val = err_est if same else np.empty((n_rows, val[1] - val[0]))
+    err_val = np.empty((n_rows, 0 if same else val[1] - val[0]))
     plain = np.ones(n_rows, dtype=bool)
     if _lanes._WIDE:
         done = np.zeros(n_rows, dtype=bool)
@@ -443,7 +444,7 @@ def _squared_errors(models, i1p, i2p, pad, o, est, val, same):
         _kernels.squared_errors(*some, i1p, i2p, pad, o, est[0], val[0], est_part, val_part)
         err_est[plain] = est_part
         err_val[plain] = val_part
-    return err_est, err_val
+    return err_est, err_est if same else err_val
 
 
 def _threads(threads) -> int:
