@@ -1115,6 +1115,45 @@ def test_back_steps_in_two_parts_equal_one_back_substitution():
     assert not _kernels.back_steps(f, k, 0, one, f[k].copy())
 
 
+@pytest.mark.parametrize(
+    ("m1", "m2", "na_hi"),
+    [(3, 4, 2), (0, 5, 3), (4, 0, 2), (7, 7, 7), (25, 10, 10), (2, 9, 1)],  # no i1, no i2, stage 1's size
+)
+def test_branched_groups_are_bit_identical_to_select_qr(m1, m2, na_hi):
+    # _fit_unit factors the groups (g1, g2) of a unit by branch_start /
+    # branch_step / branch_finish, sharing the steps of the first g1 + g2
+    # columns across g2; the slow twin is one select_qr per group (as
+    # before), whose columns [i1 lags 1..g1, i2 lags 1..g2, o lags] give
+    # every factor entry the fits read. Random unit factor of a unit's
+    # column layout (m1 i1 lags, m2 i2 lags, na_hi o lags, then the rhs).
+    rng = np.random.default_rng(m1 * 100 + m2 * 10 + na_hi)
+    m_u = m1 + m2 + na_hi
+    r = np.linalg.qr(rng.standard_normal((3 * m_u + 5, m_u + 1)), mode="r")
+    unit = np.zeros((m_u + 1, m_u))
+    unit[:m_u] = r[:m_u, :m_u].T
+    unit[m_u] = r[:m_u, m_u]
+    branch = np.full((m_u + 1, m_u), np.nan)  # entries a step reads before writing would show as NaN
+    group = np.full((m_u + 1, m_u), np.nan)
+    checked = 0
+    for g1 in range(m1 + 1):
+        _kernels.branch_start(unit, m1, m2, na_hi, g1, branch, group)
+        stepped = 0
+        for g2 in range(m2 + 1):
+            while stepped < g2:
+                _kernels.branch_step(branch, group, m1, m2, na_hi, g1, stepped)
+                stepped += 1
+            _kernels.branch_finish(branch, group, m1, m2, na_hi, g1, g2)
+            cols = np.concatenate((np.arange(g1), m1 + np.arange(g2), m1 + m2 + np.arange(na_hi)))
+            m_g = cols.size
+            slow = np.zeros((m_g + 1, m_u))
+            _kernels.select_qr(unit, m_u, cols, m_g, slow)
+            for j in range(m_g):  # column j of the factor: rows 0..j
+                assert np.array_equal(group[j, : j + 1], slow[j, : j + 1]), (g1, g2, j)
+            assert np.array_equal(group[m_g, :m_g], slow[m_g, :m_g]), (g1, g2)
+            checked += 1
+    assert checked == (m1 + 1) * (m2 + 1)
+
+
 @pytest.mark.parametrize("n", [1, 7, 8, 17, 2048])
 def test_lane_scratch_starts_on_a_cache_line(n):
     # _aligned_zeros: 64-byte boundary (a vector of _WIDTH doubles in one cache line), n zeros.

@@ -100,58 +100,124 @@ def select_qr(src, n_src, cols, n_cols, dst):
     for i in range(top):
         dst[n_cols, i] = src[n_src, i]
     for j in range(n_cols):
-        last = cols[j]
-        s = 0.0
+        _reflect(dst, j, cols[j], j + 1, n_cols + 1)
+
+
+@njit(cache=True)
+def _reflect(f, j, last, k_lo, k_hi):
+    """Householder step of column j (row ``j`` of the transposed ``f``, rows ``j .. last``)
+    applied to the later columns ``k_lo .. k_hi - 1`` (rows of ``f``).
+
+    The step of :func:`select_qr` at column j. Each later column is
+    reflected on its own, its dot product summed in row order, so which
+    later columns share a call changes none of their values.
+    """
+    s = 0.0
+    for i in range(j + 1, last + 1):
+        s += f[j, i] * f[j, i]
+    if s == 0.0:
+        return
+    alpha = f[j, j]
+    beta = -np.copysign(np.sqrt(alpha * alpha + s), alpha)
+    tau = (beta - alpha) / beta
+    scale = 1.0 / (alpha - beta)
+    for i in range(j + 1, last + 1):
+        f[j, i] *= scale
+    f[j, j] = beta
+    # Reflect the later columns (and the rhs) four at a time: each one's
+    # dot product is still summed in row order, but four independent
+    # sums keep the adder busy (one alone waits on each add: 1.3x on
+    # stage 1's fits).
+    k = k_lo
+    while k + 4 <= k_hi:
+        w0 = f[k, j]
+        w1 = f[k + 1, j]
+        w2 = f[k + 2, j]
+        w3 = f[k + 3, j]
         for i in range(j + 1, last + 1):
-            s += dst[j, i] * dst[j, i]
-        if s == 0.0:
-            continue
-        alpha = dst[j, j]
-        beta = -np.copysign(np.sqrt(alpha * alpha + s), alpha)
-        tau = (beta - alpha) / beta
-        scale = 1.0 / (alpha - beta)
+            h = f[j, i]
+            w0 += h * f[k, i]
+            w1 += h * f[k + 1, i]
+            w2 += h * f[k + 2, i]
+            w3 += h * f[k + 3, i]
+        w0 *= tau
+        w1 *= tau
+        w2 *= tau
+        w3 *= tau
+        f[k, j] -= w0
+        f[k + 1, j] -= w1
+        f[k + 2, j] -= w2
+        f[k + 3, j] -= w3
         for i in range(j + 1, last + 1):
-            dst[j, i] *= scale
-        dst[j, j] = beta
-        # Reflect the later columns (and the rhs) four at a time: each one's
-        # dot product is still summed in row order, but four independent
-        # sums keep the adder busy (one alone waits on each add: 1.3x on
-        # stage 1's fits).
-        k = j + 1
-        while k + 4 <= n_cols + 1:
-            w0 = dst[k, j]
-            w1 = dst[k + 1, j]
-            w2 = dst[k + 2, j]
-            w3 = dst[k + 3, j]
-            for i in range(j + 1, last + 1):
-                h = dst[j, i]
-                w0 += h * dst[k, i]
-                w1 += h * dst[k + 1, i]
-                w2 += h * dst[k + 2, i]
-                w3 += h * dst[k + 3, i]
-            w0 *= tau
-            w1 *= tau
-            w2 *= tau
-            w3 *= tau
-            dst[k, j] -= w0
-            dst[k + 1, j] -= w1
-            dst[k + 2, j] -= w2
-            dst[k + 3, j] -= w3
-            for i in range(j + 1, last + 1):
-                h = dst[j, i]
-                dst[k, i] -= w0 * h
-                dst[k + 1, i] -= w1 * h
-                dst[k + 2, i] -= w2 * h
-                dst[k + 3, i] -= w3 * h
-            k += 4
-        for rest in range(k, n_cols + 1):
-            w = dst[rest, j]
-            for i in range(j + 1, last + 1):
-                w += dst[j, i] * dst[rest, i]
-            w *= tau
-            dst[rest, j] -= w
-            for i in range(j + 1, last + 1):
-                dst[rest, i] -= w * dst[j, i]
+            h = f[j, i]
+            f[k, i] -= w0 * h
+            f[k + 1, i] -= w1 * h
+            f[k + 2, i] -= w2 * h
+            f[k + 3, i] -= w3 * h
+        k += 4
+    for rest in range(k, k_hi):
+        w = f[rest, j]
+        for i in range(j + 1, last + 1):
+            w += f[j, i] * f[rest, i]
+        w *= tau
+        f[rest, j] -= w
+        for i in range(j + 1, last + 1):
+            f[rest, i] -= w * f[j, i]
+
+
+@njit(cache=True)
+def branch_start(unit, m1, m2, na_hi, g1, branch, group):
+    """Start the groups ``(g1, g2)`` of a unit factor (every g2 in turn).
+
+    A group's factor is :func:`select_qr` of the unit's columns ``[i1 lags
+    1..g1, i2 lags 1..g2, o lags 1..na_hi]`` (unit column order: m1 i1
+    lags, m2 i2 lags, na_hi o lags). The groups of one g1 share the steps
+    of their first g1 + g2 columns, so instead of one select_qr each:
+    ``branch_start``, then :func:`branch_step` for i2 lags 0, 1, .. and
+    :func:`branch_finish` for each g2 once its g2 i2 lags are stepped.
+    The steps and their order per column are select_qr's, so ``group``
+    holds the same bits (the tests compare them).
+
+    Writes the i1 rows of ``group`` and the later columns, not yet
+    reflected, into ``branch`` (rows ``g1 + jj``: i2 lag jj; ``g1 + m2 +
+    i``: o lag i; ``g1 + m2 + na_hi``: the rhs; the same shape as
+    ``group``). The i1 lags are a triangular prefix: their steps do
+    nothing.
+    """
+    m_u = m1 + m2 + na_hi
+    for j in range(g1):
+        for i in range(j + 1):
+            group[j, i] = unit[j, i]
+    for c in range(m2 + na_hi):
+        for i in range(m1 + c + 1):
+            branch[g1 + c, i] = unit[m1 + c, i]
+    for i in range(m_u):
+        branch[g1 + m2 + na_hi, i] = unit[m_u, i]
+
+
+@njit(cache=True)
+def branch_step(branch, group, m1, m2, na_hi, g1, jj):
+    """Step i2 lag ``jj`` (column ``g1 + jj`` of every group with g2 > jj) and copy its
+    final row into ``group``; i2 lags ``0 .. jj - 1`` must be stepped (:func:`branch_start`)."""
+    j = g1 + jj
+    _reflect(branch, j, m1 + jj, j + 1, g1 + m2 + na_hi + 1)
+    for i in range(m1 + jj + 1):
+        group[j, i] = branch[j, i]
+
+
+@njit(cache=True)
+def branch_finish(branch, group, m1, m2, na_hi, g1, g2):
+    """The factor of group (g1, g2) in ``group`` (as :func:`select_qr` writes it), i2 lags
+    ``0 .. g2 - 1`` stepped (:func:`branch_start`); ``branch`` is left as it was."""
+    m_g = g1 + g2 + na_hi
+    for c in range(na_hi):
+        for i in range(m1 + m2 + c + 1):
+            group[g1 + g2 + c, i] = branch[g1 + m2 + c, i]
+    for i in range(m1 + m2 + na_hi):
+        group[m_g, i] = branch[g1 + m2 + na_hi, i]
+    for c in range(na_hi):
+        j = g1 + g2 + c
+        _reflect(group, j, m1 + m2 + c, j + 1, m_g + 1)
 
 
 @njit(cache=True)
@@ -378,6 +444,7 @@ def _fit_unit(
     select_qr(rt, p, cols, m_u, unit)
 
     group = np.empty((m_u + 1, m_u))
+    branch = np.empty((m_u + 1, m_u))
     theta = np.empty(m_u)
     tmp = np.empty(m_u)
     a = np.empty(na_hi + 1)
@@ -389,22 +456,21 @@ def _fit_unit(
     yp = np.zeros(na_hi + n)
 
     for g1 in range(g1_lo, g1_hi + 1):
+        branch_start(unit, m1, m2, na_hi, g1, branch, group)
+        stepped = 0
         for g2 in range(g2_lo, g2_hi + 1):
             # Subset [i1 lags 1..g1, i2 lags 1..g2, o lags 1..na_hi]: every
             # na of the range is a prefix of this one factorisation.
             m_g = g1 + g2 + na_hi
-            for j in range(g1):
-                cols[j] = j
-            for j in range(g2):
-                cols[g1 + j] = m1 + j
-            for i in range(na_hi):
-                cols[g1 + g2 + i] = m1 + m2 + i
             # The next group's rows, while this one is fitted.
             if g2 < g2_hi:
                 _prefetch_rows(offset, g1 - nb1_lo, g2 + 1 - nb2_lo, within, v_out, theta_out, score_out)
             elif g1 < g1_hi:
                 _prefetch_rows(offset, g1 + 1 - nb1_lo, g2_lo - nb2_lo, within, v_out, theta_out, score_out)
-            select_qr(unit, m_u, cols, m_g, group)
+            while stepped < g2:
+                branch_step(branch, group, m1, m2, na_hi, g1, stepped)
+                stepped += 1
+            branch_finish(branch, group, m1, m2, na_hi, g1, g2)
             explained = 0.0
             for i in range(g1 + g2 + na_lo - 1):
                 explained += group[m_g, i] * group[m_g, i]
