@@ -648,8 +648,9 @@ def _run_wide(coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, i1p, i2p, pad, o, r
         np.empty((max(na, 2) + _lanes._CHUNK) * width), np.empty(4 * width),
     )  # fmt: skip
     bounds = np.array(np.broadcast_to(bound, width), dtype=np.float64)
+    w1, w2 = _lanes.windows(i1p), _lanes.windows(i2p)
     done = _lanes.simulate_wide(
-        coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, i1p, i2p, pad, o, *rows, bounds, *scratch, v, pruned
+        coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, w1, w2, pad, o, *rows, bounds, *scratch, v, pruned
     )
     assert 0 < done <= n
     return v[:n_lanes], pruned[:n_lanes]
@@ -930,8 +931,9 @@ def test_frontier_errors_on_vector_lanes_equal_the_plain_kernel():
             theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, o, 100, 500, plain_est, plain_val
         )
         _lanes.squared_errors_wide(
-            theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, o, 100, 500, wide_est, wide_val, done
-        )
+            theta, na, nb1, nb2, nk1, nk2, _lanes.windows(i1p), _lanes.windows(i2p), pad, o, 100, 500,
+            wide_est, wide_val, done,
+        )  # fmt: skip
     assert not done[bad] and done.sum() == len(orders) - 1
     np.testing.assert_array_equal(wide_est[done], plain_est[done])
     np.testing.assert_array_equal(wide_val[done], plain_val[done])
@@ -1161,6 +1163,18 @@ def test_lane_scratch_starts_on_a_cache_line(n):
         x = _lanes._aligned_zeros(n)
         assert x.shape == (n,) and x.ctypes.data % 64 == 0
         assert np.array_equal(x, np.zeros(n))
+
+
+@pytest.mark.parametrize("n", [1, 7, 8, 9, 2083])
+def test_input_windows_hold_every_eight_values(n):
+    # windows(ip): row t is ip[t .. t + 7] (zeros past the end), each row one
+    # aligned vector for lane_inputs. Expected from the definition, by slicing.
+    ip = np.random.default_rng(n).standard_normal(n)
+    w = _lanes.windows(ip)
+    assert w.shape == (n * 8,) and w.ctypes.data % 64 == 0
+    padded = np.concatenate((ip, np.zeros(8)))
+    expected = np.stack([padded[t : t + 8] for t in range(n)]).ravel()
+    assert np.array_equal(w, expected)
 
 
 def test_pruned_frontier_with_two_threads(paper_record):

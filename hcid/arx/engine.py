@@ -160,6 +160,12 @@ def _padded(x: np.ndarray, pad: int) -> np.ndarray:
     return np.concatenate((np.zeros(pad), x, np.zeros(_lanes.TAIL)))
 
 
+def _windows(xp: np.ndarray) -> np.ndarray:
+    """The padded input as the vector steps read it (:func:`hcid.arx._lanes.windows`); empty
+    without the JIT, whose plain path reads the input itself."""
+    return _lanes.windows(xp) if _lanes._WIDE else np.empty(0)
+
+
 def _record_factor(i1p, i2p, o, grid: Grid, pad: int, start: int, stop: int) -> np.ndarray:
     """Transposed R and c = Q^T o of the full lagged matrix (see _kernels)."""
     k = np.arange(start, stop)
@@ -325,6 +331,7 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
     pad = max_lag(grid)
     i1p = _padded(i1, pad)
     i2p = _padded(i2, pad)
+    w1, w2 = _windows(i1p), _windows(i2p)
     rt = _record_factor(i1p, i2p, o, grid, pad, est_start, est_stop)
     units = _units(grid)
     bounds = np.array([grid.na, grid.nb1, grid.nb2, grid.nk1, grid.nk2], dtype=np.int64)
@@ -349,7 +356,7 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
             # Stable candidates wait with V = NaN; simulate them per order
             # triple, pruning unless every V is wanted.
             orders = np.stack((block_na, block_nb1, block_nb2), axis=1)
-            args = (orders, start, size, bounds, theta_all, score, i1p, i2p, pad, o,
+            args = (orders, start, size, bounds, theta_all, score, i1p, i2p, w1, w2, pad, o,
                     val_start, val_stop, not keep_candidates, v_all, counts)  # fmt: skip
             if threads == 1:
                 _lanes.simulate_blocks(*args)
@@ -384,7 +391,16 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
     for chunk in range(0, rows.size, _VAF_ROWS):  # squared errors a chunk of rows at a time (in cache)
         part = slice(chunk, chunk + _VAF_ROWS)
         err_est, err_val = _squared_errors(
-            [x[part] for x in models], i1p, i2p, pad, o, (est_start, est_stop), (val_start, val_stop), same
+            [x[part] for x in models],
+            i1p,
+            i2p,
+            w1,
+            w2,
+            pad,
+            o,
+            (est_start, est_stop),
+            (val_start, val_stop),
+            same,
         )
         vaf_est[rows[part]] = _vaf(err_est, o[est_start:est_stop])
         vaf_val[rows[part]] = vaf_est[rows[part]] if same else _vaf(err_val, o[val_start:val_stop])
@@ -422,7 +438,7 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
     ), counts
 
 
-def _squared_errors(models, i1p, i2p, pad, o, est, val, same):
+def _squared_errors(models, i1p, i2p, w1, w2, pad, o, est, val, same):
     """Squared simulation errors of frontier models on the estimation and validation rows.
 
     ``models`` is (theta, na, nb1, nb2, nk1, nk2), one row per model; on
@@ -436,7 +452,7 @@ def _squared_errors(models, i1p, i2p, pad, o, est, val, same):
     plain = np.ones(n_rows, dtype=bool)
     if _lanes._WIDE:
         done = np.zeros(n_rows, dtype=bool)
-        _lanes.squared_errors_wide(*models, i1p, i2p, pad, o, est[0], val[0], err_est, err_val, done)
+        _lanes.squared_errors_wide(*models, w1, w2, pad, o, est[0], val[0], err_est, err_val, done)
         plain = ~done
     if plain.any():  # no JIT, na above MAX_NA, or an output not finite (simulate()'s NaN rule)
         some = (np.ascontiguousarray(x[plain]) for x in models)
