@@ -11,7 +11,8 @@ import pyarrow as pa
 import pytest
 from scipy.signal import lfilter
 
-from hcid.arx import _kernels, _lanes
+from hcid.arx import _kernels, _lanes, engine
+from hcid.arx import grid as engine_grid
 from hcid.arx.engine import GridFit, _fit_grid, best, fit_grid, simulate
 from hcid.arx.grid import Grid, candidates, n_parameters
 from hcid.arx.reference import fit_reference
@@ -648,9 +649,9 @@ def _run_wide(coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, i1p, i2p, pad, o, r
         np.empty((max(na, 2) + _lanes._CHUNK) * width), np.empty(4 * width),
     )  # fmt: skip
     bounds = np.array(np.broadcast_to(bound, width), dtype=np.float64)
-    w1, w2 = _lanes.windows(i1p), _lanes.windows(i2p)
+    tv1, tv2 = _lanes.tap_vectors(i1p), _lanes.tap_vectors(i2p)
     done = _lanes.simulate_wide(
-        coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, w1, w2, pad, o, *rows, bounds, *scratch, v, pruned
+        coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, tv1, tv2, pad, o, *rows, bounds, *scratch, v, pruned
     )
     assert 0 < done <= n
     return v[:n_lanes], pruned[:n_lanes]
@@ -931,13 +932,21 @@ def test_frontier_errors_on_vector_lanes_equal_the_plain_kernel():
             theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, o, 100, 500, plain_est, plain_val
         )
         _lanes.squared_errors_wide(
-            theta, na, nb1, nb2, nk1, nk2, _lanes.windows(i1p), _lanes.windows(i2p), pad, o, 100, 500,
+            theta, na, nb1, nb2, nk1, nk2, _lanes.tap_vectors(i1p), _lanes.tap_vectors(i2p), pad, o, 100, 500,
             wide_est, wide_val, done,
         )  # fmt: skip
     assert not done[bad] and done.sum() == len(orders) - 1
     np.testing.assert_array_equal(wide_est[done], plain_est[done])
     np.testing.assert_array_equal(wide_val[done], plain_val[done])
     assert np.isnan(plain_val[bad, -1])
+    # The general vector step reads whole steps past a chunk without bounds
+    # checks: tap vectors of inputs without all TAIL values are refused.
+    short = _lanes.tap_vectors(i1p[:-1])
+    with pytest.raises(ValueError, match="TAIL"):
+        _lanes.squared_errors_wide(
+            theta, na, nb1, nb2, nk1, nk2, short, _lanes.tap_vectors(i2p), pad, o, 100, 500,
+            wide_est, wide_val, done,
+        )  # fmt: skip
 
 
 def test_orders_above_the_vector_recursion_take_the_four_lane_path():
@@ -1156,6 +1165,68 @@ def test_branched_groups_are_bit_identical_to_select_qr(m1, m2, na_hi):
     assert checked == (m1 + 1) * (m2 + 1)
 
 
+@pytest.mark.parametrize(
+    "grid",
+    [
+        Grid(na=(1, 3), nb1=(2, 4), nb2=(3, 4), nk1=(3, 4), nk2=(1, 2)),  # g1 and g2 start above 1
+        Grid(na=(2, 2), nb1=(0, 2), nb2=(0, 3), nk1=(1, 2), nk2=(2, 3)),  # dropped inputs (k = -1)
+    ],
+)
+def test_fits_equal_one_select_qr_per_group(paper_record, grid):
+    # fit_units factors a unit's groups by branching (branch_start/step/finish);
+    # its slow twin: per candidate, select_qr of the unit's columns
+    # [i1 lags 1..nb1, i2 lags 1..nb2, o lags], then A and B by back_steps,
+    # as _fit_unit solves them. Every stable candidate's theta and score
+    # (the prediction-error sum) must be the same bits.
+    i1, i2, o = _direct(paper_record)
+    pad = engine_grid.max_lag(grid)
+    i1p, i2p = engine._padded(i1, pad), engine._padded(i2, pad)
+    rt = engine._record_factor(i1p, i2p, o, grid, pad, 128, 1088)
+    bounds = np.array([grid.na, grid.nb1, grid.nb2, grid.nk1, grid.nk2], dtype=np.int64)
+    block_na, block_nb1, block_nb2, start, size = engine_grid.order_blocks(grid)
+    offset = np.ascontiguousarray(start.reshape([hi - lo + 1 for lo, hi in (grid.na, grid.nb1, grid.nb2)]))
+    n_cand = int(size.sum())
+    most = grid.na[1] + grid.nb1[1] + grid.nb2[1]
+    v, theta_all, score = np.empty(n_cand), np.zeros((n_cand, most)), np.zeros(n_cand)
+    _kernels.fit_units(
+        engine._units(grid), rt, bounds, i1p, i2p, pad, o, 1088, 2048, offset, v, theta_all, score, False
+    )
+    na_hi, m1, m2 = grid.na[1], grid.nb1[1], grid.nb2[1]
+    n1 = grid.nk1[1] - grid.nk1[0] + m1 if m1 > 0 else 0
+    n2 = grid.nk2[1] - grid.nk2[0] + m2 if m2 > 0 else 0
+    p = n1 + n2 + na_hi
+    stable = 0
+    for c, (na, nb1, nb2, nk1, nk2) in enumerate(zip(*candidates(grid), strict=True)):
+        if not np.isnan(v[c]):  # unstable (inf): its theta row is not written
+            continue
+        k1 = nk1 if nb1 > 0 else -1
+        k2 = nk2 if nb2 > 0 else -1
+        u1, u2 = (m1 if k1 >= 0 else 0), (m2 if k2 >= 0 else 0)
+        m_u = u1 + u2 + na_hi
+        unit_cols = np.r_[
+            k1 - grid.nk1[0] + np.arange(u1),
+            n1 + k2 - grid.nk2[0] + np.arange(u2),
+            n1 + n2 + np.arange(na_hi),
+        ]
+        unit = np.zeros((m_u + 1, p))
+        _kernels.select_qr(rt, p, unit_cols.astype(np.int64), m_u, unit)
+        cols = np.r_[np.arange(nb1), u1 + np.arange(nb2), u1 + u2 + np.arange(na_hi)].astype(np.int64)
+        m_g = cols.size
+        group = np.zeros((m_u + 1, m_u))
+        _kernels.select_qr(unit, m_u, cols, m_g, group)
+        g, k = nb1 + nb2, nb1 + nb2 + na
+        theta, tmp = np.empty(m_u), group[m_g, :k].copy()
+        assert _kernels.back_steps(group, k, g, theta, tmp) and _kernels.back_steps(group, g, 0, theta, tmp)
+        expected = np.r_[theta[g:k], theta[:g]]
+        assert np.array_equal(theta_all[c, :k], expected), (na, nb1, nb2, nk1, nk2)
+        explained = 0.0
+        for i in range(k):
+            explained += group[m_g, i] * group[m_g, i]
+        assert score[c] == explained
+        stable += 1
+    assert stable > n_cand // 2
+
+
 @pytest.mark.parametrize("n", [1, 7, 8, 17, 2048])
 def test_lane_scratch_starts_on_a_cache_line(n):
     # _aligned_zeros: 64-byte boundary (a vector of _WIDTH doubles in one cache line), n zeros.
@@ -1170,7 +1241,7 @@ def test_input_windows_hold_every_eight_values(n):
     # windows(ip): row t is ip[t .. t + 7] (zeros past the end), each row one
     # aligned vector for lane_inputs. Expected from the definition, by slicing.
     ip = np.random.default_rng(n).standard_normal(n)
-    w = _lanes.windows(ip)
+    w = _lanes.tap_vectors(ip)
     assert w.shape == (n * 8,) and w.ctypes.data % 64 == 0
     padded = np.concatenate((ip, np.zeros(8)))
     expected = np.stack([padded[t : t + 8] for t in range(n)]).ravel()

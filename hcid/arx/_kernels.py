@@ -198,7 +198,8 @@ def branch_start(unit, m1, m2, na_hi, g1, branch, group):
 @njit(cache=True)
 def branch_step(branch, group, m1, m2, na_hi, g1, jj):
     """Step i2 lag ``jj`` (column ``g1 + jj`` of every group with g2 > jj) and copy its
-    final row into ``group``; i2 lags ``0 .. jj - 1`` must be stepped (:func:`branch_start`)."""
+    final row into ``group``; i2 lags ``0 .. jj - 1`` must be stepped already (by this
+    function, after :func:`branch_start`)."""
     j = g1 + jj
     _reflect(branch, j, m1 + jj, j + 1, g1 + m2 + na_hi + 1)
     for i in range(m1 + jj + 1):
@@ -207,8 +208,8 @@ def branch_step(branch, group, m1, m2, na_hi, g1, jj):
 
 @njit(cache=True)
 def branch_finish(branch, group, m1, m2, na_hi, g1, g2):
-    """The factor of group (g1, g2) in ``group`` (as :func:`select_qr` writes it), i2 lags
-    ``0 .. g2 - 1`` stepped (:func:`branch_start`); ``branch`` is left as it was."""
+    """The factor of group (g1, g2) in ``group`` (as :func:`select_qr` writes it), once i2
+    lags ``0 .. g2 - 1`` are stepped (:func:`branch_step`); ``branch`` is left as it was."""
     m_g = g1 + g2 + na_hi
     for c in range(na_hi):
         for i in range(m1 + m2 + c + 1):

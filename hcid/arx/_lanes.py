@@ -15,12 +15,13 @@ the arithmetic of each lane is the same on all of them.
 
 Two input steps. The general one (:func:`lane_inputs`) takes any delays
 per lane: it sums each lane's taps over 16 samples and transposes the
-sums into lanes. It reads the inputs as :func:`windows` (every run of
-eight values stored apart, eight times the record), so that each vector
-load is one aligned cache line rather than two for seven taps in eight:
-a step is bound by its loads, and stage 1 ran 1.1x faster so. An *affine group* (:func:`lane_inputs_affine`) is eight
-candidates of one triple with consecutive nk1 at one nk2: its input 1 is
-one vector load from the reversed record and its input 2 one broadcast,
+sums into lanes. It reads the inputs as :func:`tap_vectors` (every run
+of eight values stored apart, eight times the record), so that each
+vector load is one aligned cache line rather than two for seven taps in
+eight: the step is bound by its loads (stage 1: 0.90x the time). An
+*affine group* (:func:`lane_inputs_affine`) is eight candidates of one
+triple with consecutive nk1 at one nk2: its input 1 is one vector load
+from the reversed record and its input 2 one broadcast,
 with the tap coefficients held in registers, and no transpose (1.1 to
 1.4x a whole batch). Most candidates of the direct grid (nk1 1..50) form
 such groups; stage 1 (nk1 1..5), the groups with many unstable candidates
@@ -149,12 +150,12 @@ def _transpose(builder, rows):
 
 
 @intrinsic
-def lane_inputs(typingctx, b1, nb1, off1, w1, b2, nb2, off2, w2, steps, xt):
+def lane_inputs(typingctx, b1, nb1, off1, tv1, b2, nb2, off2, tv2, steps, xt):
     """Input part ``B1 i1 + B2 i2`` of every lane for chunk samples ``q < steps`` into ``xt``.
 
     ``b1`` (LANES, >= nb1) holds lane l's B1 in row l; tap j of lane l at
     sample q reads ``i1p[off1[l] + q - j]``, likewise for input 2, from
-    ``w1 = windows(i1p)`` and ``w2``: the eight values from ``i1p[t]`` on
+    ``tv1 = tap_vectors(i1p)`` and ``tv2``: the eight values from ``i1p[t]`` on
     are one aligned vector there, where a load from ``i1p`` would span two
     cache lines for seven taps in eight. ``steps`` must be a multiple of
     ``SAMPLES`` (samples past the chunk are computed and ignored, so the
@@ -162,7 +163,7 @@ def lane_inputs(typingctx, b1, nb1, off1, w1, b2, nb2, off2, w2, steps, xt):
     sample the terms are added as in ``simulate_into``: 0, then b1[0],
     b1[1], ..., then b2[0], ...
     """
-    sig = types.void(b1, nb1, off1, w1, b2, nb2, off2, w2, steps, xt)
+    sig = types.void(b1, nb1, off1, tv1, b2, nb2, off2, tv2, steps, xt)
 
     def codegen(context, builder, signature, args):
         ty = signature.args
@@ -633,7 +634,7 @@ def _aligned_zeros(n):
 
 
 @njit(cache=True)
-def windows(ip):
+def tap_vectors(ip):
     """Every window of eight values of ``ip``, one after another: ``w[t * 8 + k] = ip[t + k]``
     (0 past the end), 64-byte aligned, so that :func:`lane_inputs` loads each
     from one cache line. Eight times the record: 130 kB for a paper input."""
@@ -651,18 +652,20 @@ def _finite_or_inf(v):
 
 
 @njit(cache=True)
-def _check_lanes(x1, x2, need, b1, nb1, b2, nb2):
+def _check_lanes(x1, x2, pad, n, per_value, b1, nb1, b2, nb2):
     """The vector steps read without bounds checks: refuse what they would overrun
-    (inputs shorter than ``need``; B with one row per lane, as :func:`simulate_wide` takes it)."""
-    if x1.shape[0] < need or x2.shape[0] < need:
-        raise ValueError("vector lanes: the inputs need pad + n + TAIL values (times 8 as windows)")
+    (B with one row per lane, as :func:`simulate_wide` takes it). The inputs
+    must hold pad + n + TAIL values, ``per_value`` entries each (``_WIDTH``
+    for :func:`tap_vectors`, 1 for a padded input)."""
+    if x1.shape[0] < (pad + n + TAIL) * per_value or x2.shape[0] < (pad + n + TAIL) * per_value:
+        raise ValueError("vector lanes: the inputs need pad + n + TAIL values (as tap vectors if so taken)")
     if b1.shape[0] != LANES or b2.shape[0] != LANES or b1.shape[1] < nb1 or b2.shape[1] < nb2:
         raise ValueError("vector lanes: B must have one row per lane and at least nb columns")
 
 
 @njit(cache=True)
 def simulate_wide(
-    coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, w1, w2, pad, o, val_start, val_stop, bound,
+    coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, tv1, tv2, pad, o, val_start, val_stop, bound,
     off1, off2, xt, yh, eacc, v_out, pruned,
 ):  # fmt: skip
     """:func:`simulate_lanes` for ``LANES`` lanes, on explicit vectors (the vector steps).
@@ -675,17 +678,17 @@ def simulate_wide(
     (LANES,)), so V (or a pruned lane's lower bound) is bit-identical to
     :func:`simulate_lanes`' with that lane's bound. Requires ``na <=
     MAX_NA`` and inputs with ``TAIL`` readable values after the record,
-    given as ``w1 = windows(i1p)``, ``w2 = windows(i2p)``.
+    given as ``tv1 = tap_vectors(i1p)``, ``tv2 = tap_vectors(i2p)``.
 
     Scratch: ``off1``, ``off2`` int64 (LANES,); ``xt`` (_CHUNK * LANES,);
     ``yh`` ((max(na, 2) + _CHUNK) * LANES,), the last rows of one chunk
     moved to its top for the next; ``eacc`` (4 * LANES,).
     """
-    _check_lanes(w1, w2, (pad + o.shape[0] + TAIL) * _WIDTH, b1, nb1, b2, nb2)
+    _check_lanes(tv1, tv2, pad, o.shape[0], _WIDTH, b1, nb1, b2, nb2)
     used = np.arange(LANES) < n_lanes
     return _wide_loop(
         coef, na, used, o, val_start, val_stop, bound, xt, yh, eacc, v_out, pruned,
-        False, b1, nb1, nk1, b2, nb2, nk2, w1, w2, pad, off1, off2,
+        False, b1, nb1, nk1, b2, nb2, nk2, tv1, tv2, pad, off1, off2,
     )  # fmt: skip
 
 
@@ -703,7 +706,7 @@ def simulate_affine(
     its group's). ``r1`` is ``i1p`` reversed. Same arithmetic per lane,
     pruning and results as :func:`simulate_wide`.
     """
-    _check_lanes(i1p, i2p, pad + o.shape[0] + TAIL, b1t.T, nb1, b2t.T, nb2)
+    _check_lanes(i1p, i2p, pad, o.shape[0], 1, b1t.T, nb1, b2t.T, nb2)
     if (
         r1.shape[0] != i1p.shape[0]
         or c1.shape[0] != _GROUPS
@@ -732,7 +735,7 @@ def _wide_loop(
     """The chunk loop of :func:`simulate_wide` and :func:`simulate_affine`: input part
     (general or affine lanes), recursion, finiteness and pruning checks.
 
-    General lanes: inputs ``x1``, ``x2`` as windows (:func:`windows`), ``nk1``,
+    General lanes: inputs ``x1``, ``x2`` as :func:`tap_vectors`, ``nk1``,
     ``nk2`` per lane, ``off1``, ``off2`` scratch for their offsets. Affine
     lanes: ``x1`` the reversed i1p, ``x2`` i2p, ``off1``, ``off2`` the groups'
     base1 and base2 (:func:`lane_inputs_affine`), ``nk1``, ``nk2`` unused.
@@ -1007,7 +1010,7 @@ def _simulate_affine_groups(
 @njit(cache=True)
 def _simulate_run(
     first_row, stop_row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
-    w1, w2, pad, o, val_start, val_stop, prune, v_all, counts,
+    tv1, tv2, pad, o, val_start, val_stop, prune, v_all, counts,
 ):  # fmt: skip
     """Simulate the stable candidates of blocks ``first_row .. stop_row - 1`` (one na and
     nb1), ``LANES`` at a time on the vector steps.
@@ -1023,7 +1026,9 @@ def _simulate_run(
     batch that spans two blocks pads B with zero coefficients to its longer
     nb2: ``x + 0.0 * i`` is ``x``, the same value bit for bit but for a zero's sign, which
     V's squares do not keep, so every V is what the block alone would give.
-    ``counts`` as in :func:`_simulate_block`.
+    ``counts`` as in :func:`_simulate_block`; the inputs as in
+    :func:`simulate_blocks` (``i1p``, ``i2p`` for the affine groups, their
+    tap vectors ``tv1``, ``tv2`` for the rest).
     """
     na, nb1 = block_orders[first_row, 0], block_orders[first_row, 1]
     best = np.full(stop_row - first_row, np.inf)
@@ -1079,7 +1084,7 @@ def _simulate_run(
             _put_lane(theta_all[c], na, nb1, nb2, lane, LANES, coef, b1, b2)
             lane_bound[lane] = best[row - first_row]
         done = simulate_wide(
-            coef, na, b1, nb1, nk1, b2, batch_nb2, nk2, used, w1, w2, pad, o, val_start, val_stop,
+            coef, na, b1, nb1, nk1, b2, batch_nb2, nk2, used, tv1, tv2, pad, o, val_start, val_stop,
             lane_bound, off1, off2, xt, yh, eacc, v, pruned,
         )  # fmt: skip
         for lane in range(used):
@@ -1111,14 +1116,14 @@ def _runs(block_orders):
 
 @njit(cache=True)
 def _simulate_group(
-    g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, w1, w2,
+    g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1, tv2,
     pad, o, val_start, val_stop, prune, v_all, counts,
 ):  # fmt: skip
     first_row, stop_row = firsts[g], firsts[g + 1]
     if _WIDE and block_orders[first_row, 0] <= MAX_NA:
         _simulate_run(
             first_row, stop_row, block_orders, block_start, block_size, bounds, theta_all, score,
-            i1p, i2p, w1, w2, pad, o, val_start, val_stop, prune, v_all, counts,
+            i1p, i2p, tv1, tv2, pad, o, val_start, val_stop, prune, v_all, counts,
         )  # fmt: skip
     else:
         _simulate_block(
@@ -1129,7 +1134,7 @@ def _simulate_group(
 
 @njit(cache=True)
 def simulate_blocks(
-    block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, w1, w2, pad, o,
+    block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1, tv2, pad, o,
     val_start, val_stop, prune, v_all, counts,
 ):  # fmt: skip
     """Serial driver of the simulations: every order triple, the runs of blocks of one
@@ -1141,9 +1146,12 @@ def simulate_blocks(
         ``(na, nb1, nb2)`` of each candidate block.
     block_start, block_size : int64 arrays, shape (n_blocks,)
         Where each block starts in the candidate order, and its length.
-    w1, w2 : float64 arrays
-        ``windows(i1p)`` and ``windows(i2p)`` for the vector steps (empty
-        without the JIT, which never takes them).
+    i1p, i2p : float64 arrays
+        The inputs after ``pad`` zeros and with ``TAIL`` zeros after the
+        record (the affine and plain steps read them).
+    tv1, tv2 : float64 arrays
+        ``tap_vectors(i1p)`` and ``tap_vectors(i2p)`` for the general vector
+        step (empty without the JIT, which never takes it).
     theta_all, score, v_all :
         As written by :func:`fit_units` with ``simulate`` False; v_all's
         NaN entries are replaced by V (or a pruned lower bound above the
@@ -1157,14 +1165,14 @@ def simulate_blocks(
     firsts = _runs(block_orders)
     for g in range(firsts.shape[0] - 1):
         _simulate_group(
-            g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, w1,
-            w2, pad, o, val_start, val_stop, prune, v_all, counts,
+            g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1,
+            tv2, pad, o, val_start, val_stop, prune, v_all, counts,
         )  # fmt: skip
 
 
 @njit(cache=True, parallel=True)
 def simulate_blocks_parallel(
-    block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, w1, w2, pad, o,
+    block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1, tv2, pad, o,
     val_start, val_stop, prune, v_all, counts, n_threads,
 ):  # fmt: skip
     """Parallel driver: thread t takes runs t, t + n_threads, ... of :func:`simulate_blocks`;
@@ -1175,21 +1183,21 @@ def simulate_blocks_parallel(
         for g in range(t, n_groups, n_threads):
             _simulate_group(
                 g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
-                w1, w2, pad, o, val_start, val_stop, prune, v_all, counts,
+                tv1, tv2, pad, o, val_start, val_stop, prune, v_all, counts,
             )  # fmt: skip
 
 
 @njit(cache=True)
 def squared_errors_wide(
-    theta, na, nb1, nb2, nk1, nk2, w1, w2, pad, o, est_start, val_start, err_est, err_val, done
+    theta, na, nb1, nb2, nk1, nk2, tv1, tv2, pad, o, est_start, val_start, err_est, err_val, done
 ):
     """:func:`hcid.arx._kernels.squared_errors` on the vector steps, ``LANES`` models at a time.
 
     Consecutive rows of the same na share a batch, their B padded with zero
     coefficients to the batch's longest (``x + 0.0 * i`` is ``x``: the same
     values, bit for bit but for a zero's sign, which no square keeps), so
-    every element equals the plain kernel's. The inputs come as windows
-    (``w1 = windows(i1p)``, ``w2``). ``done[r]`` is False for a
+    every element equals the plain kernel's. The inputs come as tap
+    vectors (``tv1 = tap_vectors(i1p)``, ``tv2``). ``done[r]`` is False for a
     model whose output is not finite at the end of the record; its rows
     are left for the plain kernel (whose NaN-from-the-block rule they need).
     """
@@ -1218,7 +1226,7 @@ def squared_errors_wide(
         coef = _aligned_zeros((h + 1) * LANES)
         b1 = np.zeros((LANES, max(m1, 1)))
         b2 = np.zeros((LANES, max(m2, 1)))
-        _check_lanes(w1, w2, (pad + n + TAIL) * _WIDTH, b1, m1, b2, m2)
+        _check_lanes(tv1, tv2, pad, n, _WIDTH, b1, m1, b2, m2)
         lane_nk1 = np.zeros(LANES, dtype=np.int64)
         lane_nk2 = np.zeros(LANES, dtype=np.int64)
         for lane in range(LANES):
@@ -1236,7 +1244,7 @@ def squared_errors_wide(
                 off1[lane] = pad - lane_nk1[lane] + k0
                 off2[lane] = pad - lane_nk2[lane] + k0
             steps = (m + TAIL) // SAMPLES * SAMPLES
-            lane_inputs(b1, m1, off1, w1, b2, m2, off2, w2, steps, xt)
+            lane_inputs(b1, m1, off1, tv1, b2, m2, off2, tv2, steps, xt)
             # No validation rows (start = stop = n): no squared-error sums.
             if not lane_recursion(coef, k, xt, m, yh, h, o, k0, n, n, n, eacc):
                 raise ValueError("squared_errors_wide: na above MAX_NA")

@@ -160,10 +160,10 @@ def _padded(x: np.ndarray, pad: int) -> np.ndarray:
     return np.concatenate((np.zeros(pad), x, np.zeros(_lanes.TAIL)))
 
 
-def _windows(xp: np.ndarray) -> np.ndarray:
-    """The padded input as the vector steps read it (:func:`hcid.arx._lanes.windows`); empty
+def _tap_vectors(xp: np.ndarray) -> np.ndarray:
+    """The padded input as the vector steps read it (:func:`hcid.arx._lanes.tap_vectors`); empty
     without the JIT, whose plain path reads the input itself."""
-    return _lanes.windows(xp) if _lanes._WIDE else np.empty(0)
+    return _lanes.tap_vectors(xp) if _lanes._WIDE else np.empty(0)
 
 
 def _record_factor(i1p, i2p, o, grid: Grid, pad: int, start: int, stop: int) -> np.ndarray:
@@ -269,7 +269,8 @@ def fit_grid(
     candidate uses (numpy), then for each delay pair a QR of the selected
     columns of that R, then for each ``(nb1, nb2)`` one more QR in which
     the output lags come last, so that every ``na`` is a prefix solved by
-    back substitution. Each step is backward stable column by column, so a
+    back substitution (the QRs of one nb1 share the steps of their first
+    columns, each column stepped as its own QR would). Each step is backward stable column by column, so a
     candidate's coefficients carry a relative error of about
     ``cond(Phi_S) * eps`` (``Phi_S`` its own regression matrix on the
     estimation rows, eps = 2.2e-16), like ``numpy.linalg.lstsq``. V
@@ -331,7 +332,7 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
     pad = max_lag(grid)
     i1p = _padded(i1, pad)
     i2p = _padded(i2, pad)
-    w1, w2 = _windows(i1p), _windows(i2p)
+    tv1, tv2 = _tap_vectors(i1p), _tap_vectors(i2p)
     rt = _record_factor(i1p, i2p, o, grid, pad, est_start, est_stop)
     units = _units(grid)
     bounds = np.array([grid.na, grid.nb1, grid.nb2, grid.nk1, grid.nk2], dtype=np.int64)
@@ -356,7 +357,7 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
             # Stable candidates wait with V = NaN; simulate them per order
             # triple, pruning unless every V is wanted.
             orders = np.stack((block_na, block_nb1, block_nb2), axis=1)
-            args = (orders, start, size, bounds, theta_all, score, i1p, i2p, w1, w2, pad, o,
+            args = (orders, start, size, bounds, theta_all, score, i1p, i2p, tv1, tv2, pad, o,
                     val_start, val_stop, not keep_candidates, v_all, counts)  # fmt: skip
             if threads == 1:
                 _lanes.simulate_blocks(*args)
@@ -394,8 +395,8 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
             [x[part] for x in models],
             i1p,
             i2p,
-            w1,
-            w2,
+            tv1,
+            tv2,
             pad,
             o,
             (est_start, est_stop),
@@ -438,12 +439,12 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
     ), counts
 
 
-def _squared_errors(models, i1p, i2p, w1, w2, pad, o, est, val, same):
+def _squared_errors(models, i1p, i2p, tv1, tv2, pad, o, est, val, same):
     """Squared simulation errors of frontier models on the estimation and validation rows.
 
     ``models`` is (theta, na, nb1, nb2, nk1, nk2), one row per model; on
     the vector lanes where they can, else on the plain kernel. With
-    ``same`` (the two windows equal) the kernels fill one array (the
+    ``same`` (the estimation and validation rows equal) the kernels fill one array (the
     validation one they get is empty) and it is returned for both.
     """
     n_rows = models[0].shape[0]
@@ -452,7 +453,7 @@ def _squared_errors(models, i1p, i2p, w1, w2, pad, o, est, val, same):
     plain = np.ones(n_rows, dtype=bool)
     if _lanes._WIDE:
         done = np.zeros(n_rows, dtype=bool)
-        _lanes.squared_errors_wide(*models, w1, w2, pad, o, est[0], val[0], err_est, err_val, done)
+        _lanes.squared_errors_wide(*models, tv1, tv2, pad, o, est[0], val[0], err_est, err_val, done)
         plain = ~done
     if plain.any():  # no JIT, na above MAX_NA, or an output not finite (simulate()'s NaN rule)
         some = (np.ascontiguousarray(x[plain]) for x in models)
