@@ -1237,8 +1237,8 @@ def test_lane_scratch_starts_on_a_cache_line(n):
 
 
 @pytest.mark.parametrize("n", [1, 7, 8, 9, 2083])
-def test_input_windows_hold_every_eight_values(n):
-    # windows(ip): row t is ip[t .. t + 7] (zeros past the end), each row one
+def test_tap_vectors_hold_every_eight_values(n):
+    # tap_vectors(ip): row t is ip[t .. t + 7] (zeros past the end), each row one
     # aligned vector for lane_inputs. Expected from the definition, by slicing.
     ip = np.random.default_rng(n).standard_normal(n)
     w = _lanes.tap_vectors(ip)

@@ -635,15 +635,15 @@ def _aligned_zeros(n):
 
 @njit(cache=True)
 def tap_vectors(ip):
-    """Every window of eight values of ``ip``, one after another: ``w[t * 8 + k] = ip[t + k]``
+    """Every run of eight values of ``ip``, one after another: ``tv[t * 8 + k] = ip[t + k]``
     (0 past the end), 64-byte aligned, so that :func:`lane_inputs` loads each
     from one cache line. Eight times the record: 130 kB for a paper input."""
     n = ip.shape[0]
-    w = _aligned_zeros(n * _WIDTH)
+    tv = _aligned_zeros(n * _WIDTH)
     for t in range(n):
         for k in range(min(_WIDTH, n - t)):
-            w[t * _WIDTH + k] = ip[t + k]
-    return w
+            tv[t * _WIDTH + k] = ip[t + k]
+    return tv
 
 
 @njit(cache=True)
@@ -658,7 +658,7 @@ def _check_lanes(x1, x2, pad, n, per_value, b1, nb1, b2, nb2):
     must hold pad + n + TAIL values, ``per_value`` entries each (``_WIDTH``
     for :func:`tap_vectors`, 1 for a padded input)."""
     if x1.shape[0] < (pad + n + TAIL) * per_value or x2.shape[0] < (pad + n + TAIL) * per_value:
-        raise ValueError("vector lanes: the inputs need pad + n + TAIL values (as tap vectors if so taken)")
+        raise ValueError("vector lanes: the inputs need pad + n + TAIL values (8 each as tap vectors)")
     if b1.shape[0] != LANES or b2.shape[0] != LANES or b1.shape[1] < nb1 or b2.shape[1] < nb2:
         raise ValueError("vector lanes: B must have one row per lane and at least nb columns")
 

@@ -270,8 +270,9 @@ def fit_grid(
     columns of that R, then for each ``(nb1, nb2)`` one more QR in which
     the output lags come last, so that every ``na`` is a prefix solved by
     back substitution (the QRs of one nb1 share the steps of their first
-    columns, each column stepped as its own QR would). Each step is backward stable column by column, so a
-    candidate's coefficients carry a relative error of about
+    columns, each column stepped as its own QR would). Each step is
+    backward stable column by column, so a candidate's coefficients carry
+    a relative error of about
     ``cond(Phi_S) * eps`` (``Phi_S`` its own regression matrix on the
     estimation rows, eps = 2.2e-16), like ``numpy.linalg.lstsq``. V
     inherits that error, amplified when A has roots near the unit circle.
