@@ -5,7 +5,9 @@ write goes to a temporary file beside the target and is renamed over it, so a
 reader never sees a half-written table and an interrupted write leaves the
 previous table intact. Finished identification tasks are kept in
 ``RUN/.parts/<method>/`` until the tables are assembled, so an interrupted run
-resumes where it stopped.
+resumes where it stopped; being hcid's own scratch, read back only by the
+same version, they are Arrow IPC files (several times faster to write and
+read than Parquet, which matters at hundreds of parts a run).
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ __all__ = [
 ]
 
 PARTS = ".parts"
+_PART_SUFFIX = ".arrow"
 #: The mark of a run directory: written first, it lists every file hcid wrote there (and only
 #: those are ever deleted by hcid).
 MANIFEST = "hcid-run.json"
@@ -362,6 +365,7 @@ def frontier_part(model: str, seed: int, result, stages, worker: str = "") -> di
         pa.array([result.method] * n, pa.string()),
     ]
     frontier = pa.Table.from_arrays(keys + fit.columns, names=[*tables.FRONTIER.key, *fit.column_names])
+    frontier = frontier.cast(tables.FRONTIER.arrow)
     out = {"frontier": frontier}
     for spec, c in zip(stages, result.choices, strict=True):
         schema = tables.stage_choice(spec.name, spec.inputs)
@@ -393,7 +397,17 @@ def write_part(run_dir: Path, model: str, seed: int, method: str, parts: dict[st
         clear_parts(run_dir)  # parts go into hcid's own folder, never through a link
     folder = Path(run_dir) / PARTS / method
     for kind, table in parts.items():
-        write_table(table, folder / f"{model}__{seed}.{kind}.parquet")
+        _atomic(folder / f"{model}__{seed}.{kind}{_PART_SUFFIX}", lambda tmp, t=table: _write_ipc(t, tmp))
+
+
+def _write_ipc(table: pa.Table, path: str) -> None:
+    with pa.OSFile(path, "wb") as sink, pa.ipc.new_file(sink, table.schema) as writer:
+        writer.write_table(table)
+
+
+def _read_ipc(path: Path) -> pa.Table:
+    with pa.OSFile(str(path)) as source:
+        return pa.ipc.open_file(source).read_all()
 
 
 def read_parts(run_dir: Path, kinds: dict[str, dict[str, Schema]]) -> dict[tuple[str, int, str], dict]:
@@ -408,11 +422,11 @@ def read_parts(run_dir: Path, kinds: dict[str, dict[str, Schema]]) -> dict[tuple
     root = Path(run_dir) / PARTS
     if not root.is_dir() or root.is_symlink():
         return found
-    for path in sorted(root.glob("*/*.frontier.parquet")):
+    for path in sorted(root.glob(f"*/*.frontier{_PART_SUFFIX}")):
         method = path.parent.name
         if method not in kinds:
             continue
-        stem = path.name[: -len(".frontier.parquet")]
+        stem = path.name[: -len(f".frontier{_PART_SUFFIX}")]
         model, _, seed_text = stem.rpartition("__")
         if not seed_text.isdigit():
             continue
@@ -420,8 +434,7 @@ def read_parts(run_dir: Path, kinds: dict[str, dict[str, Schema]]) -> dict[tuple
         parts = {}
         try:
             for kind, schema in kinds[method].items():
-                part = path.with_name(f"{stem}.{kind}.parquet")
-                table = pq.read_table(part)
+                table = _read_ipc(path.with_name(f"{stem}.{kind}{_PART_SUFFIX}"))
                 if schema.problem(table) is not None or table.num_rows == 0:
                     break
                 if set(

@@ -67,7 +67,9 @@ __all__ = [
 ]
 
 _STR, _INT, _F64, _BOOL = pa.string(), pa.int64(), pa.float64(), pa.bool_()
-_LIST = pa.list_(pa.float64())
+#: Lists name their values "element", as Parquet does (and so every reader of a table sees):
+#: a table built in memory is then the same, to the byte once written, as one read back.
+_LIST = pa.list_(pa.field("element", pa.float64()))
 
 
 @dataclass(frozen=True)

@@ -127,7 +127,7 @@ def test_resume_after_interruption_gives_identical_tables(ci_runs, tmp_path, mon
     with pytest.raises(KeyboardInterrupt):
         pipeline.identify_study(ci_config, run, jobs=1, show_progress=False)
     assert not (run / "frontier.parquet").exists()
-    assert len(list((run / ".parts").glob("*/*.frontier.parquet"))) == 5
+    assert len(list((run / ".parts").glob("*/*.frontier.arrow"))) == 5
     monkeypatch.setattr(studies, "_identify_task", real)
     resumed = pipeline.identify_study(ci_config, run, jobs=1, show_progress=False)
     assert (resumed.computed, resumed.reused) == (7, 5)
@@ -193,7 +193,7 @@ def test_dask_all_workers_lost_fails_in_one_line_within_the_timeout(ci_runs, tmp
                    "--force", "--quiet"]  # fmt: skip
             proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
             deadline = time.monotonic() + 240
-            while not list((run / ".parts").glob("*/*.log.parquet")) and time.monotonic() < deadline:
+            while not list((run / ".parts").glob("*/*.log.arrow")) and time.monotonic() < deadline:
                 time.sleep(0.2)
             for w in workers:
                 w.kill()

@@ -332,8 +332,8 @@ def identify_study(
         scheduler=scheduler,
         worker_timeout=worker_timeout,
     ):
-        results.write_part(run_dir, *key, parts)
-    done.update(results.read_parts(run_dir, _part_kinds()))
+        results.write_part(run_dir, *key, parts)  # for a resume, if this run is interrupted
+        done[key] = parts
 
     order = _canonical_order(config, done)
     frontier = tables.concat([done[k]["frontier"] for k in order])

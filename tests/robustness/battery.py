@@ -485,11 +485,13 @@ def rundir_cases() -> list[Case]:
             (tmp / "run" / name).unlink()
         parts = tmp / "run" / ".parts" / "direct"
         parts.mkdir(parents=True)
-        (parts / "FB__1.frontier.parquet").write_bytes(b"PAR1 damaged")
-        (parts / "FB__1.log.parquet").write_bytes(b"")
-        pq.write_table(pa.table({"x": [1]}), parts / "FF__1.frontier.parquet")
-        pq.write_table(pa.table({"x": [1]}), parts / "FF__1.log.parquet")
-        (parts / "junk__x.frontier.parquet").write_bytes(b"")
+        (parts / "FB__1.frontier.arrow").write_bytes(b"ARROW1 damaged")
+        (parts / "FB__1.log.arrow").write_bytes(b"")
+        for kind in ("frontier", "log"):  # readable, but off the part's schema
+            path, schema = parts / f"FF__1.{kind}.arrow", pa.schema([("x", pa.int64())])
+            with pa.OSFile(str(path), "wb") as sink, pa.ipc.new_file(sink, schema) as writer:
+                writer.write_table(pa.table({"x": [1]}))
+        (parts / "junk__x.frontier.arrow").write_bytes(b"")
         return ["identify", str(config), "--run", str(tmp / "run"), "--quiet", "--jobs", "1"]
 
     def complete_rerun(tmp: Path) -> list[str]:
