@@ -3,11 +3,11 @@
 The schemas and the run directory's layout are in :mod:`hcid.tables`. Every
 write goes to a temporary file beside the target and is renamed over it, so a
 reader never sees a half-written table and an interrupted write leaves the
-previous table intact. Finished identification tasks are kept in
-``RUN/.parts/<method>/`` until the tables are assembled, so an interrupted run
-resumes where it stopped; being hcid's own scratch, read back only by the
-same version, they are Arrow IPC files (several times faster to write and
-read than Parquet, which matters at hundreds of parts a run).
+previous table intact. Finished tasks are kept in ``RUN/.parts/`` until the
+tables are assembled, so an interrupted run resumes where it stopped. Parts
+are hcid's own scratch, so they are Arrow IPC files, several times faster to
+write and read than Parquet (hundreds a run); a part hcid cannot read or
+that is off its schema (one left by an older hcid, say) is recomputed.
 """
 
 from __future__ import annotations
@@ -33,17 +33,20 @@ __all__ = [
     "frontier_part",
     "read",
     "read_optional",
+    "read_part_table",
     "read_parts",
     "realizations_table",
     "records",
     "summary_table",
     "write",
     "write_part",
+    "write_part_table",
     "write_text",
 ]
 
 PARTS = ".parts"
-_PART_SUFFIX = ".arrow"
+#: Suffix of a part file (:func:`write_part_table`).
+PART_SUFFIX = ".arrow"
 #: The mark of a run directory: written first, it lists every file hcid wrote there (and only
 #: those are ever deleted by hcid).
 MANIFEST = "hcid-run.json"
@@ -160,6 +163,7 @@ def write(schema: Schema, table: pa.Table, run_dir: str | Path) -> Path:
     problem = schema.problem(table)
     if problem is not None:  # a bug, not a user's mistake: keep the traceback
         raise AssertionError(f"{schema.file}: {problem}")
+    table = schema.conform(table)
     path = Path(run_dir) / schema.file
     if _same_table(path, table):
         return path  # nothing changed: a complete run needs no write (and may be read-only)
@@ -365,7 +369,6 @@ def frontier_part(model: str, seed: int, result, stages, worker: str = "") -> di
         pa.array([result.method] * n, pa.string()),
     ]
     frontier = pa.Table.from_arrays(keys + fit.columns, names=[*tables.FRONTIER.key, *fit.column_names])
-    frontier = frontier.cast(tables.FRONTIER.arrow)
     out = {"frontier": frontier}
     for spec, c in zip(stages, result.choices, strict=True):
         schema = tables.stage_choice(spec.name, spec.inputs)
@@ -397,15 +400,21 @@ def write_part(run_dir: Path, model: str, seed: int, method: str, parts: dict[st
         clear_parts(run_dir)  # parts go into hcid's own folder, never through a link
     folder = Path(run_dir) / PARTS / method
     for kind, table in parts.items():
-        _atomic(folder / f"{model}__{seed}.{kind}{_PART_SUFFIX}", lambda tmp, t=table: _write_ipc(t, tmp))
+        write_part_table(table, folder / f"{model}__{seed}.{kind}{PART_SUFFIX}")
 
 
-def _write_ipc(table: pa.Table, path: str) -> None:
-    with pa.OSFile(path, "wb") as sink, pa.ipc.new_file(sink, table.schema) as writer:
-        writer.write_table(table)
+def write_part_table(table: pa.Table, path: Path) -> None:
+    """Write one part file (Arrow IPC) atomically."""
+
+    def write(tmp: str) -> None:
+        with pa.OSFile(tmp, "wb") as sink, pa.ipc.new_file(sink, table.schema) as writer:
+            writer.write_table(table)
+
+    _atomic(path, write)
 
 
-def _read_ipc(path: Path) -> pa.Table:
+def read_part_table(path: Path) -> pa.Table:
+    """Read one part file (raises ``pa.ArrowException`` or ``OSError`` if damaged or missing)."""
     with pa.OSFile(str(path)) as source:
         return pa.ipc.open_file(source).read_all()
 
@@ -422,11 +431,11 @@ def read_parts(run_dir: Path, kinds: dict[str, dict[str, Schema]]) -> dict[tuple
     root = Path(run_dir) / PARTS
     if not root.is_dir() or root.is_symlink():
         return found
-    for path in sorted(root.glob(f"*/*.frontier{_PART_SUFFIX}")):
+    for path in sorted(root.glob(f"*/*.frontier{PART_SUFFIX}")):
         method = path.parent.name
         if method not in kinds:
             continue
-        stem = path.name[: -len(f".frontier{_PART_SUFFIX}")]
+        stem = path.name[: -len(f".frontier{PART_SUFFIX}")]
         model, _, seed_text = stem.rpartition("__")
         if not seed_text.isdigit():
             continue
@@ -434,7 +443,7 @@ def read_parts(run_dir: Path, kinds: dict[str, dict[str, Schema]]) -> dict[tuple
         parts = {}
         try:
             for kind, schema in kinds[method].items():
-                table = _read_ipc(path.with_name(f"{stem}.{kind}{_PART_SUFFIX}"))
+                table = read_part_table(path.with_name(f"{stem}.{kind}{PART_SUFFIX}"))
                 if schema.problem(table) is not None or table.num_rows == 0:
                     break
                 if set(

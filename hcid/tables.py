@@ -67,8 +67,8 @@ __all__ = [
 ]
 
 _STR, _INT, _F64, _BOOL = pa.string(), pa.int64(), pa.float64(), pa.bool_()
-#: Lists name their values "element", as Parquet does (and so every reader of a table sees):
-#: a table built in memory is then the same, to the byte once written, as one read back.
+#: Lists name their values "element", as Parquet does (so every reader of a table sees it);
+#: :meth:`Schema.conform` gives a table built in memory this name before it is written.
 _LIST = pa.list_(pa.field("element", pa.float64()))
 
 
@@ -92,6 +92,20 @@ class Schema:
     @property
     def arrow(self) -> pa.Schema:
         return pa.schema(list(self.fields))
+
+    def conform(self, table: pa.Table) -> pa.Table:
+        """``table`` with each of this schema's columns in the schema's exact type.
+
+        Types compare equal whatever a list names its values ("item" as built
+        in memory, "element" as read from Parquet), but a Parquet file keeps the
+        name: conformed, the same content always writes the same bytes.
+        """
+        wanted = dict(self.fields)
+        for i, name in enumerate(table.column_names):
+            kind = wanted.get(name)
+            if kind is not None and str(table.schema.field(i).type) != str(kind):
+                table = table.set_column(i, pa.field(name, kind), table.column(i).cast(kind))
+        return table
 
     def problem(self, table: pa.Table, columns: Sequence[str] | None = None) -> str | None:
         """What is wrong with ``table`` against this schema (only ``columns`` if given), or None."""

@@ -189,3 +189,34 @@ def test_report_shows_the_section(fitted, tmp_path):
     assert "| FF | direct | 0.007153 | Kpt | - | 2 | 0.8 |" in text
     assert (tmp_path / "report" / "hc_parameters_W_BIC.png").is_file()
     assert (tmp_path / "report" / "hc_residuals.png").is_file()
+
+
+def test_interrupted_fit_resumes_from_its_parts(fitted, tmp_path, monkeypatch):
+    # Parts (Arrow IPC, RUN/.parts/fit_hc/) keep the finished record-methods of an
+    # interrupted run; the resumed run fits only the rest and ends with the same bytes.
+    from hcid.pipeline import fit
+
+    config, out = fitted
+    run = tmp_path / "run"
+    shutil.copytree(out[1][0], run)
+    for name in (tables.HC_PARAMETERS.file, tables.RESIDUALS.file):
+        (run / name).unlink()
+    real, calls = fit._fit_task, {"n": 0}
+
+    def interrupted(*args):
+        calls["n"] += 1
+        if calls["n"] > 3:
+            raise KeyboardInterrupt
+        return real(*args)
+
+    monkeypatch.setattr(fit, "_fit_task", interrupted)
+    result = runner.invoke(app, ["fit-hc", str(config), "--run", str(run), "--jobs", "1", "--quiet"])
+    assert result.exit_code != 0
+    assert len(list((run / ".parts" / "fit_hc").glob("*/*.parameters.arrow"))) == 3
+    monkeypatch.setattr(fit, "_fit_task", real)
+    result = runner.invoke(app, ["fit-hc", str(config), "--run", str(run), "--jobs", "1", "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert "fitted 5 record-methods, reused 3" in result.output
+    for name in (tables.HC_PARAMETERS.file, tables.RESIDUALS.file):
+        assert (run / name).read_bytes() == (out[1][0] / name).read_bytes()
+    assert not (run / ".parts" / "fit_hc").exists()

@@ -87,3 +87,59 @@ def test_thresholds_schema_takes_the_criteria_columns():
     row.update(nf=960, w_fp=0.1, w_fn=None)
     old = pa.Table.from_pylist([row], schema=tables.thresholds().arrow)  # no criterion column
     assert tables.thresholds(["w_mbic"]).problem(old) is None  # a table of an older run reads
+
+
+# --------------------------------------------------------------------------- list naming, parts
+
+
+def _row(schema: tables.Schema, **values) -> dict:
+    """One row of ``schema``: the given values, a placeholder of each other column's type."""
+    placeholder = {pa.string(): "x", pa.int64(): 1, pa.float64(): 0.5, pa.bool_(): False}
+    return {n: values.get(n, placeholder.get(t, [0.25, -0.5])) for n, t in schema.fields}
+
+
+def _frontier(model="FB", seed=1, values_named="item") -> pa.Table:
+    rows = [_row(tables.FRONTIER, model=model, seed=seed, method="direct", na=na) for na in (1, 2)]
+    listed = pa.list_(pa.field(values_named, pa.float64()))
+    fields = [(n, listed if isinstance(t, pa.ListType) else t) for n, t in tables.FRONTIER.fields]
+    return pa.Table.from_pylist(rows, schema=pa.schema(fields))
+
+
+def test_a_list_column_writes_the_same_bytes_however_its_values_are_named(tmp_path):
+    # Arrow names a list's values "item" when it builds one, Parquet "element"
+    # when it reads one back; the types compare equal, but a Parquet file keeps
+    # the name. A frontier assembled from tables of both kinds (finished in
+    # this run, or read back from an earlier one) must write the same bytes.
+    built = _frontier(values_named="item")
+    read_back = _frontier(values_named="element")
+    assert built.schema.field("a").type == read_back.schema.field("a").type
+    paths = [
+        results.write(tables.FRONTIER, t, tmp_path / name) for name, t in (("b", built), ("r", read_back))
+    ]
+    assert paths[0].read_bytes() == paths[1].read_bytes()
+    assert pq.read_table(paths[0]).equals(read_back)
+
+
+def test_read_parts_keeps_whole_parts_of_the_realization_they_name(tmp_path):
+    kinds = {"direct": {"frontier": tables.FRONTIER, "log": tables.IDENTIFY_LOG}}
+
+    def log(model, seed):
+        return pa.Table.from_pylist(
+            [_row(tables.IDENTIFY_LOG, model=model, seed=seed, method="direct")],
+            schema=tables.IDENTIFY_LOG.arrow,
+        )
+
+    for seed in (1, 2, 3, 4):
+        results.write_part(
+            tmp_path, "FB", seed, "direct", {"frontier": _frontier(seed=seed), "log": log("FB", seed)}
+        )
+    folder = tmp_path / results.PARTS / "direct"
+    (folder / f"FB__2.log{results.PART_SUFFIX}").unlink()  # one kind missing
+    results.write_part_table(
+        _frontier(seed=1), folder / f"FB__3.frontier{results.PART_SUFFIX}"
+    )  # names seed 1
+    path = folder / f"FB__4.frontier{results.PART_SUFFIX}"
+    path.write_bytes(path.read_bytes()[:-40])  # cut off mid-write
+    found = results.read_parts(tmp_path, kinds)
+    assert set(found) == {("FB", 1, "direct")}
+    assert found[("FB", 1, "direct")]["frontier"].equals(_frontier(seed=1))

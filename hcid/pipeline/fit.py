@@ -30,7 +30,6 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute  # noqa: F401  (pa.compute)
-import pyarrow.parquet as pq
 
 from hcid import criteria, methods, results, selection, tables
 from hcid.config import Config
@@ -269,10 +268,10 @@ def _read_parts(run_dir: Path, digest: str) -> dict:
     found = {}
     if not folder.is_dir():
         return found
-    for path in sorted(folder.glob("*.parameters.parquet")):
+    for path in sorted(folder.glob(f"*.parameters{results.PART_SUFFIX}")):
         other = path.with_name(path.name.replace(".parameters.", ".residuals."))
         try:
-            found.update(_groups(pq.read_table(path), pq.read_table(other), digest))
+            found.update(_groups(results.read_part_table(path), results.read_part_table(other), digest))
         except (pa.ArrowException, OSError):
             continue  # cut off mid-write: recomputed
     return found
@@ -402,8 +401,8 @@ def fit_hc_study(
         scheduler=scheduler,
     ):
         stem = "__".join(str(k) for k in key)
-        results.write_table(params, parts_dir / f"{stem}.parameters.parquet")
-        results.write_table(res, parts_dir / f"{stem}.residuals.parquet")
+        results.write_part_table(params, parts_dir / f"{stem}.parameters{results.PART_SUFFIX}")
+        results.write_part_table(res, parts_dir / f"{stem}.residuals{results.PART_SUFFIX}")
         kept.update(_groups(params, res, digest))
 
     order = {k: i for i, k in enumerate(by_key)}
