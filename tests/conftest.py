@@ -54,3 +54,19 @@ def ci_raw():
     raw = yaml.safe_load(CI_CONFIG.read_text())
     raw["seeds"] = [1]
     return raw
+
+
+def interrupt_after(monkeypatch, module, name: str, calls: int):
+    """Make ``module.name`` raise KeyboardInterrupt from call ``calls + 1`` on (an interrupted
+    run, as Ctrl-C would stop it); returns the real function, to put back for the resume."""
+    real = getattr(module, name)
+    count = {"n": 0}
+
+    def interrupted(*args):
+        count["n"] += 1
+        if count["n"] > calls:
+            raise KeyboardInterrupt
+        return real(*args)
+
+    monkeypatch.setattr(module, name, interrupted)
+    return real

@@ -196,20 +196,14 @@ def test_interrupted_fit_resumes_from_its_parts(fitted, tmp_path, monkeypatch):
     # interrupted run; the resumed run fits only the rest and ends with the same bytes.
     from hcid.pipeline import fit
 
+    from .conftest import interrupt_after
+
     config, out = fitted
     run = tmp_path / "run"
     shutil.copytree(out[2][0], run)  # the uninterrupted run (W_BIC only; other tests add rows to out[1])
     for name in (tables.HC_PARAMETERS.file, tables.RESIDUALS.file):
         (run / name).unlink()
-    real, calls = fit._fit_task, {"n": 0}
-
-    def interrupted(*args):
-        calls["n"] += 1
-        if calls["n"] > 3:
-            raise KeyboardInterrupt
-        return real(*args)
-
-    monkeypatch.setattr(fit, "_fit_task", interrupted)
+    real = interrupt_after(monkeypatch, fit, "_fit_task", 3)
     result = runner.invoke(app, ["fit-hc", str(config), "--run", str(run), "--jobs", "1", "--quiet"])
     assert result.exit_code != 0
     assert len(list((run / ".parts" / "fit_hc").glob("*/*.parameters.arrow"))) == 3

@@ -17,7 +17,7 @@ from hcid import pipeline, selection, tables
 from hcid.cli import app
 from hcid.pipeline import studies
 
-from .conftest import CI_CONFIG
+from .conftest import CI_CONFIG, interrupt_after
 
 runner = CliRunner()
 TABLES = (
@@ -114,16 +114,7 @@ def test_resume_after_interruption_gives_identical_tables(ci_runs, tmp_path, mon
     run.mkdir()
     for name in ("simulations.parquet", "config.yaml"):
         shutil.copy(ci_runs[1] / name, run / name)
-    real = studies._identify_task
-    calls = {"n": 0}
-
-    def interrupted(*args):
-        calls["n"] += 1
-        if calls["n"] > 5:
-            raise KeyboardInterrupt
-        return real(*args)
-
-    monkeypatch.setattr(studies, "_identify_task", interrupted)
+    real = interrupt_after(monkeypatch, studies, "_identify_task", 5)
     with pytest.raises(KeyboardInterrupt):
         pipeline.identify_study(ci_config, run, jobs=1, show_progress=False)
     assert not (run / "frontier.parquet").exists()
