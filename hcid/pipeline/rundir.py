@@ -43,6 +43,16 @@ LOCK = ".hcid.lock"
 _HELD: dict[Path, list] = {}  # run directory -> [open lock file, depth] held by this process
 
 
+def _forget_held() -> None:
+    """In a forked worker: close its copies of the lock files, which stay the parent's alone."""
+    for handle, _ in _HELD.values():
+        handle.close()
+    _HELD.clear()
+
+
+os.register_at_fork(after_in_child=_forget_held)
+
+
 def known_files() -> list[str]:
     """Every file name hcid writes in a run directory."""
     from hcid.methods import METHODS
