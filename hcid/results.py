@@ -286,11 +286,17 @@ def records(table: pa.Table, path: str | Path) -> dict[tuple[str, int], dict[str
                 f"{path}: column {name!r} holds {values[i]} at model {model[i]}, seed {seed[i]}, k {k[i]}"
             )
     out: dict[tuple[str, int], dict[str, np.ndarray]] = {}
-    keys = np.char.add(np.char.add(model, "\0"), seed.astype(str))
-    _, first = np.unique(keys, return_index=True)
-    for start in np.sort(first):
+    _, model_code = np.unique(model, return_inverse=True)
+    _, seed_code = np.unique(seed, return_inverse=True)
+    key = model_code.astype(np.int64) * (int(seed_code.max(initial=0)) + 1) + seed_code
+    _, first, group, counts = np.unique(key, return_index=True, return_inverse=True, return_counts=True)
+    rows_of = np.split(
+        np.argsort(group, kind="stable"), np.cumsum(counts)[:-1]
+    )  # each group's rows, in order
+    for g in np.argsort(first):  # records in order of first appearance
+        start = first[g]
         m, s = model[start], int(seed[start])
-        rows = np.flatnonzero((model == m) & (seed == s))
+        rows = rows_of[g]
         if not np.array_equal(k[rows], np.arange(rows.size)):
             raise DataError(f"{path}: samples of model {m}, seed {s} are not k = 0..{rows.size - 1} in order")
         out[(m, s)] = {name: values[rows] for name, values in data.items()}

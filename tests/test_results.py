@@ -143,3 +143,30 @@ def test_read_parts_keeps_whole_parts_of_the_realization_they_name(tmp_path):
     found = results.read_parts(tmp_path, kinds)
     assert set(found) == {("FB", 1, "direct")}
     assert found[("FB", 1, "direct")]["frontier"].equals(_frontier(seed=1))
+
+
+def _simulations(order: np.ndarray) -> pa.Table:
+    """Three records of 5 samples (model, seed) = (B, 7), (A, 3), (B, 3), rows taken in ``order``."""
+    keys = [("B", 7), ("A", 3), ("B", 3)]
+    n = 5
+    cols = {
+        "model": [m for m, _ in keys for _ in range(n)],
+        "seed": [s for _, s in keys for _ in range(n)],
+        "k": [k for _ in keys for k in range(n)],
+    }
+    values = np.arange(len(keys) * n, dtype=float)
+    cols.update({name: values * (i + 1) for i, name in enumerate(("t", *tables.CHANNELS))})
+    return pa.Table.from_pydict(cols, schema=tables.SIMULATIONS.arrow).take(pa.array(order))
+
+
+def test_records_split_by_realization_in_order_of_first_appearance():
+    # Each record's own rows, in row order, whatever the records' rows are interleaved with.
+    contiguous = results.records(_simulations(np.arange(15)), "s.parquet")
+    assert list(contiguous) == [("B", 7), ("A", 3), ("B", 3)]
+    assert contiguous[("A", 3)]["e"].tolist() == (np.arange(5, 10) * 4.0).tolist()  # t, ft, fd, e: x 4
+    interleaved = results.records(_simulations(np.arange(15).reshape(3, 5).T.ravel()), "s.parquet")
+    assert list(interleaved) == list(contiguous)
+    for key, record in contiguous.items():
+        assert all(np.array_equal(record[c], interleaved[key][c]) for c in record)
+    with pytest.raises(DataError, match=r"^s.parquet: samples of model A, seed 3 are not k = 0..4 in order$"):
+        results.records(_simulations(np.r_[0:5, 6, 5, 7:15]), "s.parquet")

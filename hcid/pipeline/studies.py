@@ -293,8 +293,12 @@ def identify_study(
         data = _import_data(config, run_dir, data_path)
         records = {(config.data.name, run): rec for run, rec in data.items()}
         keys = list(records)
+        noise_free = {}
     else:
         config.require_simulation("identify (without --data)")
+        # Before the simulations: forked workers then start with this process's loops,
+        # forcing functions and compiled loop kernel (hcid.pipeline.parallel).
+        noise_free = noise_free_records(config)
         if not (run_dir / tables.SIMULATIONS.file).exists():
             simulation = simulate_study(config, run_dir, jobs=jobs, show_progress=show_progress)
         keys = [(m.name, s) for m in config.models for s in config.seeds]
@@ -314,7 +318,6 @@ def identify_study(
         done.update(results.read_parts(run_dir, _part_kinds()))
     record_config(config, run_dir)
     rate = config.timing.output_rate
-    noise_free = noise_free_records(config) if data_path is None else {}
     tasks = [
         (config.identify, rate, model, seed, method, records[(model, seed)], noise_free.get(model))
         for model, seed in keys
