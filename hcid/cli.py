@@ -39,7 +39,9 @@ ForceOpt = Annotated[bool, typer.Option("--force", help="Recompute what is alrea
 MethodOpt = Annotated[
     str, typer.Option("--method", help="A method (direct, indirect), a comma-separated list, or all.")
 ]
-BackendOpt = Annotated[str, typer.Option("--backend", help="loky (local processes) or dask.")]
+BackendOpt = Annotated[
+    str, typer.Option("--backend", help="loky (local worker processes, forked on Linux) or dask.")
+]
 TimeoutOpt = Annotated[
     float,
     typer.Option(

@@ -1,5 +1,6 @@
 """The local worker pool: forked workers give loky's tables, stop with their parent, keep no lock."""
 
+import contextlib
 import fcntl
 import multiprocessing
 import os
@@ -19,6 +20,7 @@ from hcid.pipeline import parallel, rundir
 
 from .conftest import CI_CONFIG
 
+HCID = str(Path(sys.executable).parent / "hcid")
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="workers are forked on Linux only")
 
 
@@ -122,30 +124,163 @@ def _children(pid: int) -> list[int]:
     return [int(p) for p in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
 
 
-def test_forked_workers_die_with_a_killed_parent(tmp_path):
-    # `hcid identify --jobs 2` killed with -9 mid-run: its workers end with it and the run
-    # directory is free. The paper's grids (SPEC 3: ~1.4 s a task on one core, 12 tasks)
-    # keep the workers busy well past the first part.
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory):
+    """configs/ci.yaml with the paper's grids (SPEC 3: ~1.4 s a task on one core, 12 tasks, so
+    the workers are busy well past the first part), simulated; a copy per test."""
+    base = tmp_path_factory.mktemp("busy")
     raw = yaml.safe_load(CI_CONFIG.read_text())
     raw["identify"] = {"target_shift": raw["identify"]["target_shift"]}
-    config = tmp_path / "ci_paper_grids.yaml"
+    config = base / "ci_paper_grids.yaml"
     config.write_text(yaml.safe_dump(raw))
+    subprocess.run([HCID, "simulate", str(config), "--run", str(base / "run"), "--quiet"], check=True)
+    return config, base / "run"
+
+
+def _identify_mid_run(simulated, tmp_path):
+    """`hcid identify --jobs 2` in a session of its own, once its first part is written."""
+    config, simulations = simulated
     run = tmp_path / "run"
-    hcid = str(Path(sys.executable).parent / "hcid")
-    subprocess.run(
-        [hcid, "simulate", str(config), "--run", str(run), "--quiet"], check=True, capture_output=True
+    shutil.copytree(simulations, run)
+    proc = subprocess.Popen(
+        [HCID, "identify", str(config), "--run", str(run), "--jobs", "2", "--quiet"],
+        start_new_session=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
-    proc = subprocess.Popen([hcid, "identify", str(config), "--run", str(run), "--jobs", "2", "--quiet"])
-    try:
-        deadline = time.monotonic() + 240
-        while not list((run / ".parts").glob("*/*.log.arrow")) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        workers = _children(proc.pid)
-        assert len(workers) == 2
-    finally:
-        proc.kill()
-        proc.wait()
-    assert _wait_gone(workers) == []
+    deadline = time.monotonic() + 240
+    while not list((run / ".parts").glob("*/*.log.arrow")) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return proc, _children(proc.pid), run
+
+
+def _run_dir_is_free(run: Path) -> None:
     with open(run / rundir.LOCK, "a+") as handle:
-        fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-    shutil.rmtree(run)
+        fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)  # raises if anyone holds it
+
+
+def test_forked_workers_die_with_a_killed_parent(simulated, tmp_path):
+    # kill -9 of hcid mid-run: its workers end with it and the run directory is free.
+    proc, workers, run = _identify_mid_run(simulated, tmp_path)
+    try:
+        assert len(workers) == 2
+        proc.kill()
+        proc.communicate()
+        assert _wait_gone(workers) == []
+        _run_dir_is_free(run)
+    finally:
+        for pid in workers:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+
+
+def test_ctrl_c_stops_the_run_and_its_workers(simulated, tmp_path):
+    # Ctrl-C in a terminal signals the whole process group: hcid stops (exit 130, as Python
+    # does, nothing on stderr), the workers with it, and the run directory is free.
+    proc, workers, run = _identify_mid_run(simulated, tmp_path)
+    try:
+        assert len(workers) == 2
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+        assert (proc.returncode, err) == (130, "")
+        assert _wait_gone(workers) == []
+        _run_dir_is_free(run)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+def test_a_failed_fork_stops_the_workers_already_forked(monkeypatch):
+    # The second fork fails (EAGAIN: too many processes). The first worker, forked before
+    # the pool started its manager thread, would wait for tasks forever (and the
+    # interpreter's exit for it) unless the pool is stopped.
+    _forking(monkeypatch, True)
+    real_fork = os.fork
+    forks = []
+
+    def fork():
+        forks.append(1)
+        if len(forks) == 2:
+            raise BlockingIOError(11, "Resource temporarily unavailable")
+        return real_fork()
+
+    monkeypatch.setattr(os, "fork", fork)
+    before = {p.pid for p in multiprocessing.active_children()}
+    with pytest.raises(BlockingIOError):
+        list(parallel.parallel_map(_nap, [(0.0,)] * 4, jobs=2, label="t", show_progress=False))
+    monkeypatch.undo()
+    assert len(forks) == 2
+    assert _wait_gone([p.pid for p in multiprocessing.active_children() if p.pid not in before]) == []
+
+
+def _interrupt_self(_: int) -> str:
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(0.2)  # time for a handler to run
+    return "not interrupted"
+
+
+def test_forked_workers_leave_ctrl_c_to_hcid(monkeypatch):
+    # The parent stops its workers on Ctrl-C; a worker's own KeyboardInterrupt would only
+    # race it (and print a traceback when it lands between tasks). A worker ignores SIGINT
+    # (its initializer); before that, it holds the one its fork inherited (the deferral).
+    _forking(monkeypatch, True)
+    out = list(parallel.parallel_map(_interrupt_self, [(1,), (2,)], jobs=2, label="t", show_progress=False))
+    assert out == ["not interrupted"] * 2
+
+
+def test_ctrl_c_inside_a_fork_does_not_kill_the_new_worker(monkeypatch):
+    # A SIGINT landing in a child before its initializer runs: held until the forks are done
+    # (the parent saw none, so none is raised), instead of killing the child.
+    _forking(monkeypatch, True)
+    real_fork = os.fork
+
+    def fork():
+        pid = real_fork()
+        if pid == 0:
+            signal.raise_signal(signal.SIGINT)
+        return pid
+
+    monkeypatch.setattr(os, "fork", fork)
+    out = list(parallel.parallel_map(_nap, [(0.0,)] * 4, jobs=2, label="t", show_progress=False))
+    assert len(out) == 4
+
+
+def _in_a_fresh_process(code: str) -> list[str]:
+    out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
+    return out.stdout.split()
+
+
+def test_can_fork_only_when_no_other_thread_runs():
+    # In a process of its own (this one may have threads of earlier tests, loky's among them).
+    code = (
+        "import threading\n"
+        "from hcid.pipeline import parallel\n"
+        "before = parallel._can_fork()\n"
+        "stop = threading.Event()\n"
+        "other = threading.Thread(target=stop.wait)\n"
+        "other.start()\n"
+        "during = parallel._can_fork()\n"
+        "stop.set()\n"
+        "other.join()\n"
+        "print(before, during, parallel._can_fork())\n"
+    )
+    assert _in_a_fresh_process(code) == ["True", "False", "True"]
+
+
+def test_can_fork_not_once_numba_threads_started():
+    # numba's thread pool, once started, stays for the process.
+    code = (
+        "from numba import njit, prange\n"
+        "from hcid.pipeline import parallel\n"
+        "before = parallel._can_fork()\n"
+        "@njit(parallel=True)\n"
+        "def total(n):\n"
+        "    s = 0.0\n"
+        "    for i in prange(n):\n"
+        "        s += i\n"
+        "    return s\n"
+        "total(100)\n"
+        "print(before, parallel._can_fork())\n"
+    )
+    assert _in_a_fresh_process(code) == ["True", "False"]

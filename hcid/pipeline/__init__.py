@@ -1,4 +1,4 @@
-"""Batch runs of a study on a joblib pool or a dask cluster, resumable, writing the run's tables.
+"""Batch runs of a study on local worker processes or a dask cluster, resumable, writing the run's tables.
 
 - :mod:`hcid.pipeline.studies`: the stages (simulate, identify, sweep W,
   calibrate W) and :func:`run_study`, which chains them.

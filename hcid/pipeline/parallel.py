@@ -4,9 +4,10 @@ Results come back in task order whatever the number of workers; every task is
 deterministic in its inputs, so the tables are identical for any ``jobs`` or
 backend.
 
-The local backend (``loky``) forks its workers from this process where that is
-safe (Linux, no other thread running, numba's thread pool not started), so
-they start with every module and compiled kernel already loaded: about 3 s a
+The local backend (named ``loky``, for the pool it uses where forking is not
+safe) forks its workers from this process on Linux when only this thread runs
+Python and numba's thread pool has not started (:func:`_can_fork`). They then
+start with every module and compiled kernel already loaded: about 3 s a
 command on this machine that loky's fresh interpreters spend importing scipy,
 python-control and numba. Elsewhere it uses joblib's loky pool.
 """
@@ -15,10 +16,13 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import sys
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from hcid.errors import HcidError
@@ -53,7 +57,8 @@ def parallel_map(
     ``jobs`` single-threaded worker processes when ``scheduler`` is None; the
     tasks always run on the cluster's workers, never in this process. A cluster
     without workers for ``worker_timeout`` seconds (none joined, or all lost)
-    ends the run with one line; finished tasks are kept by the caller.
+    ends the run with one line, and so does a local worker that dies; finished
+    tasks are kept by the caller.
     """
     from rich.progress import (
         BarColumn,
@@ -82,9 +87,17 @@ def parallel_map(
             )
         )
         bar = progress.add_task(label, total=len(tasks))
-        for result in stream:
-            progress.advance(bar)
-            yield result
+        kept = 0
+        try:
+            for result in stream:
+                progress.advance(bar)
+                kept += 1
+                yield result
+        except BrokenProcessPool:  # loky's TerminatedWorkerError is one too
+            raise HcidError(
+                f"a worker process died (killed, or out of memory?); {kept} of {len(tasks)} tasks "
+                "are kept; rerun to resume"
+            ) from None
 
 
 def _local_stream(func, tasks, jobs, stack: contextlib.ExitStack) -> Iterator:
@@ -100,12 +113,19 @@ def _local_stream(func, tasks, jobs, stack: contextlib.ExitStack) -> Iterator:
 
 
 def _can_fork() -> bool:
-    """Whether forking this process is safe: Linux, one thread, numba's (OpenMP) pool not started.
+    """Whether forking this process is safe: Linux, called from the main thread with no other
+    Python thread running, and numba's thread pool (OpenMP, TBB or workqueue) not started.
 
-    A thread other than the forking one could hold a lock the child then waits
-    for forever; a forked child cannot use a started OpenMP pool.
+    A Python thread other than the forking one could hold a lock the child then
+    waits for forever; a forked child cannot use a started numba thread pool,
+    which only library calls with ``threads > 1`` start (studies run
+    ``threads = 1``). Threads of C libraries (pyarrow's pool, jemalloc's
+    background thread) are running too: those libraries reset their state in a
+    forked child themselves.
     """
     if sys.platform != "linux" or threading.active_count() > 1:
+        return False
+    if threading.current_thread() is not threading.main_thread():
         return False
     numba = sys.modules.get("numba")
     if numba is not None:
@@ -120,9 +140,10 @@ def _can_fork() -> bool:
 def _forked_stream(func, tasks, jobs, stack: contextlib.ExitStack) -> Iterator:
     """Every task submitted at once to ``jobs`` forked workers; results in task order.
 
-    The workers fork here, at the first submit, before the progress bar starts
-    its thread. When the caller stops early (an error, Ctrl-C) the workers are
-    killed rather than left to finish their tasks, as loky does.
+    CPython forks every worker of a fork-context pool at the first submit, so
+    here, before the progress bar starts its thread. If the caller stops early
+    (an error, Ctrl-C) the workers are killed at once, their running tasks
+    abandoned (loky does the same).
     """
     import concurrent.futures
     import multiprocessing
@@ -133,28 +154,33 @@ def _forked_stream(func, tasks, jobs, stack: contextlib.ExitStack) -> Iterator:
         initializer=_forked_worker_start,
         initargs=(os.getpid(),),
     )
-    futures = [pool.submit(func, *task) for task in tasks]
-    stack.callback(_stop_pool, pool, futures)
-    return _in_order(futures)
+    futures: list = []
+    stack.callback(_stop_pool, pool, futures, len(tasks))  # first: a failed fork stops the others
+    with _ctrl_c_deferred(), warnings.catch_warnings():
+        # Python 3.12+ warns that C libraries' threads run at the fork (see _can_fork).
+        warnings.filterwarnings("ignore", r"This process .* is multi-threaded", DeprecationWarning)
+        futures.extend(pool.submit(func, *task) for task in tasks)
+    return (future.result() for future in futures)
 
 
-def _in_order(futures) -> Iterator:
-    from concurrent.futures.process import BrokenProcessPool
+@contextlib.contextmanager
+def _ctrl_c_deferred():
+    """Ctrl-C during the forks is raised after them: a SIGINT inside fork() lands in an at-fork
+    hook (which drops it) or in a child before it ignores SIGINT (which then dies)."""
+    received = []
+    previous = signal.signal(signal.SIGINT, lambda *_: received.append(1))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if received:
+        signal.raise_signal(signal.SIGINT)
 
-    for i, future in enumerate(futures):
-        try:
-            yield future.result()
-        except BrokenProcessPool:
-            raise HcidError(
-                f"a worker process died (killed, or out of memory?); {i} of {len(futures)} tasks "
-                "are kept; rerun to resume"
-            ) from None
 
-
-def _stop_pool(pool, futures) -> None:
-    finished = all(f.done() and not f.cancelled() for f in futures)
+def _stop_pool(pool, futures, n_tasks: int) -> None:
+    finished = len(futures) == n_tasks and all(f.done() and not f.cancelled() for f in futures)
     if not finished:
-        # ProcessPoolExecutor has no public way to stop a running task before Python 3.14.
+        # ProcessPoolExecutor.kill_workers() arrives in Python 3.14; until then, its processes.
         for process in list((getattr(pool, "_processes", None) or {}).values()):
             process.kill()
     pool.shutdown(wait=finished, cancel_futures=True)
@@ -163,12 +189,12 @@ def _stop_pool(pool, futures) -> None:
 def _forked_worker_start(parent: int) -> None:
     """A forked worker leaves Ctrl-C to its parent, and dies with it (even by kill -9)."""
     import ctypes
-    import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     pr_set_pdeathsig = 1
+    # Refused only under a seccomp filter: the worker then works, but outlives a parent killed -9.
     ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, signal.SIGKILL)
-    if os.getppid() != parent:  # the parent died before the line above
+    if os.getppid() != parent:  # the parent died before prctl
         os._exit(1)
 
 
