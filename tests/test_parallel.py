@@ -92,8 +92,9 @@ def test_stopping_early_kills_the_forked_workers(monkeypatch):
     assert _wait_gone(children) == [] and time.monotonic() - start < 10
 
 
-def test_a_dead_worker_is_one_error_line(monkeypatch):
-    _forking(monkeypatch, True)
+@pytest.mark.parametrize("fork", [True, False], ids=["forked", "loky"])
+def test_a_dead_worker_is_one_error_line(fork, monkeypatch):
+    _forking(monkeypatch, fork)
     with pytest.raises(
         HcidError, match=r"^a worker process died .*; 0 of 2 tasks are kept; rerun to resume$"
     ):
