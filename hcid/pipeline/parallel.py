@@ -57,8 +57,12 @@ def parallel_map(
     ``jobs`` single-threaded worker processes when ``scheduler`` is None; the
     tasks always run on the cluster's workers, never in this process. A cluster
     without workers for ``worker_timeout`` seconds (none joined, or all lost)
-    ends the run with one line, and so does a local worker that dies; finished
-    tasks are kept by the caller.
+    ends the run with one line, and so does a local worker that dies; the
+    caller keeps the finished tasks if it can (identify and fit-hc do).
+
+    A library caller that leaves the loop early should close the generator
+    (``contextlib.closing``): that stops the workers; an abandoned one lets
+    them finish every task first.
     """
     from rich.progress import (
         BarColumn,
@@ -71,32 +75,32 @@ def parallel_map(
     check_backend(backend)
     if not tasks:
         return
+    finished = 0
     with contextlib.ExitStack() as stack:
-        if backend == "dask":
-            stream = _dask_stream(func, tasks, jobs, scheduler, worker_timeout, stack)
-        else:
-            stream = _local_stream(func, tasks, jobs, stack)
-        progress = stack.enter_context(
-            Progress(
-                "[progress.description]{task.description}",
-                BarColumn(),
-                MofNCompleteColumn(),
-                TimeElapsedColumn(),
-                TimeRemainingColumn(),
-                disable=not show_progress,
-            )
-        )
-        bar = progress.add_task(label, total=len(tasks))
-        kept = 0
         try:
+            if backend == "dask":
+                stream = _dask_stream(func, tasks, jobs, scheduler, worker_timeout, stack)
+            else:
+                stream = _local_stream(func, tasks, jobs, stack)
+            progress = stack.enter_context(
+                Progress(
+                    "[progress.description]{task.description}",
+                    BarColumn(),
+                    MofNCompleteColumn(),
+                    TimeElapsedColumn(),
+                    TimeRemainingColumn(),
+                    disable=not show_progress,
+                )
+            )
+            bar = progress.add_task(label, total=len(tasks))
             for result in stream:
                 progress.advance(bar)
-                kept += 1
+                finished += 1
                 yield result
         except BrokenProcessPool:  # loky's TerminatedWorkerError is one too
             raise HcidError(
-                f"a worker process died (killed, or out of memory?); {kept} of {len(tasks)} tasks "
-                "are kept; rerun to resume"
+                f"a worker process died (killed, or out of memory?) with {finished} of {len(tasks)} "
+                "tasks finished; rerun (identify and fit-hc resume from the finished ones)"
             ) from None
 
 
@@ -126,7 +130,7 @@ def _can_fork() -> bool:
     if sys.platform != "linux" or threading.active_count() > 1:
         return False
     if threading.current_thread() is not threading.main_thread():
-        return False
+        return False  # signal handlers are the main thread's; PDEATHSIG fires when the forking thread ends
     numba = sys.modules.get("numba")
     if numba is not None:
         try:
@@ -165,10 +169,19 @@ def _forked_stream(func, tasks, jobs, stack: contextlib.ExitStack) -> Iterator:
 
 @contextlib.contextmanager
 def _ctrl_c_deferred():
-    """Ctrl-C during the forks is raised after them: a SIGINT inside fork() lands in an at-fork
-    hook (which drops it) or in a child before it ignores SIGINT (which then dies)."""
+    """Ctrl-C during the forks is raised in this process after them, and swallowed in a child.
+
+    Otherwise a SIGINT inside fork() lands in an at-fork hook (which drops it)
+    or in a child before its initializer ignores SIGINT, where the
+    KeyboardInterrupt unwinds the parent's stack as cloned (the worker dies).
+    A handler installed outside Python cannot be put back, so is left alone.
+    """
+    previous = signal.getsignal(signal.SIGINT)
+    if previous is None:
+        yield
+        return
     received = []
-    previous = signal.signal(signal.SIGINT, lambda *_: received.append(1))
+    signal.signal(signal.SIGINT, lambda *_: received.append(1))
     try:
         yield
     finally:
