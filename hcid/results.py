@@ -290,9 +290,8 @@ def records(table: pa.Table, path: str | Path) -> dict[tuple[str, int], dict[str
     _, seed_code = np.unique(seed, return_inverse=True)
     key = model_code.astype(np.int64) * (int(seed_code.max(initial=0)) + 1) + seed_code
     _, first, group, counts = np.unique(key, return_index=True, return_inverse=True, return_counts=True)
-    rows_of = np.split(
-        np.argsort(group, kind="stable"), np.cumsum(counts)[:-1]
-    )  # each group's rows, in order
+    grouped = np.argsort(group, kind="stable")  # rows by record, each record's in row order
+    rows_of = np.split(grouped, np.cumsum(counts)[:-1])
     for g in np.argsort(first):  # records in order of first appearance
         start = first[g]
         m, s = model[start], int(seed[start])

@@ -105,7 +105,7 @@ def test_a_dead_worker_is_one_error_line(fork, monkeypatch):
 def test_forked_workers_keep_no_copy_of_the_run_lock(tmp_path):
     # A forked child that outlives its parent's command must not hold the run directory.
     run = tmp_path / "run"
-    ready, started = os.pipe()  # closed with the test process
+    ready, started = os.pipe()
     with rundir.using(run):
         (run / "kept.txt").write_text("so that the directory is kept")
         child = os.fork()
@@ -115,11 +115,12 @@ def test_forked_workers_keep_no_copy_of_the_run_lock(tmp_path):
             os._exit(0)
         os.read(ready, 1)
     try:
-        with open(run / rundir.LOCK, "a+") as handle:
-            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)  # raises if the child holds it
+        _run_dir_is_free(run)  # the parent has released it; the child must not hold it
     finally:
         os.kill(child, signal.SIGKILL)
         os.waitpid(child, 0)
+        os.close(ready)
+        os.close(started)
 
 
 def _children(pid: int) -> list[int]:
