@@ -1,14 +1,17 @@
 """Benchmark of hcid.arx.fit_grid against its old kernel and the slow reference (``make bench``).
 
 On one paper record (FF, seed 1), on one core, side by side in one run:
-the engine (pruned, 16 candidates per batch of vector lanes), the old kernel (one
-candidate at a time, every candidate simulated in full; the engine's twin
-in the tests) and the reference loop (lstsq + lfilter + roots) on a random
-sample of the same grid; then the stage-1 grid and stage 2 (the direct grid
-with stage 1's output e_r), whose rates per candidate the issue compares, timed
-alternately. Repeats alternate between the engine and the old kernel so
-that load from other work on the machine hits both alike. Frontiers of the
-engine and the old kernel must be equal.
+the engine (pruned, 16 candidates per batch of vector lanes) with fused
+multiply-adds as the direct method and stage 2 run it, the engine unfused
+(as stage 1 runs it), the old kernel (one candidate at a time, every
+candidate simulated in full, unfused; the engine's twin in the tests) and
+the reference loop (lstsq + lfilter + roots) on a random sample of the same
+grid; then the stage-1 grid and stage 2 (the direct grid with stage 1's
+output e_r), whose rates per candidate the issue compares, timed
+alternately. Repeats alternate between the configurations so that load
+from other work on the machine hits them alike. The unfused engine's
+frontier must equal the old kernel's bit for bit; the fused one's holds the
+same candidates, its V within the printed relative difference.
 """
 
 import os
@@ -36,43 +39,55 @@ RATE_REPEATS = 5
 REFERENCE_SAMPLE = 1000
 
 
-def _fit(signals, grid, rows, legacy, keep=False):
-    return _fit_grid(*signals, grid, *rows, 1, keep, legacy=legacy)
+def _fit(signals, grid, rows, legacy, keep=False, fused=False):
+    return _fit_grid(*signals, grid, *rows, 1, keep, legacy=legacy, fused=fused)
 
 
-def _same_frontier(one, two) -> bool:
-    names = ("na", "nb1", "nb2", "nk1", "nk2", "v", "vaf_estimation", "vaf_validation", "n_unstable")
+def _same_frontier(one, two, v=True) -> bool:
+    names = ("na", "nb1", "nb2", "nk1", "nk2", "vaf_estimation", "vaf_validation", "n_unstable") + ("v",) * v
     same = all(np.array_equal(getattr(one, n), getattr(two, n), equal_nan=True) for n in names)
     for name in ("a", "b1", "b2"):
         same &= all(np.array_equal(x, y) for x, y in zip(getattr(one, name), getattr(two, name), strict=True))
     return bool(same and one.n_unstable_total == two.n_unstable_total)
 
 
-def _side_by_side(label, signals, grid, rows):
-    """Best of REPEATS for the engine and the old kernel, alternating; their frontiers compared."""
-    seconds = {"engine": [], "old kernel": []}
+def _side_by_side(label, signals, grid, rows, fused):
+    """Best of REPEATS for the engine (fused if ``fused``, and unfused) and the old kernel,
+    alternating; their frontiers compared. Returns the candidate rates of the engine (as
+    the method runs it) and the old kernel."""
+    configs = {"engine, fused": (False, True)} if fused else {}
+    configs |= {"engine, unfused": (False, False), "old kernel": (True, False)}
+    seconds = {name: [] for name in configs}
+    fits = {}
     for _ in range(REPEATS):
-        for name, legacy in (("engine", False), ("old kernel", True)):
+        for name, (legacy, fuse) in configs.items():
             start = time.perf_counter()
-            fit, counts = _fit(signals, grid, rows, legacy)
+            fits[name] = _fit(signals, grid, rows, legacy, fused=fuse)
             seconds[name].append(time.perf_counter() - start)
-            if legacy:
-                old = fit
-            else:
-                new, new_counts = fit, counts
+    engine = "engine, fused" if fused else "engine, unfused"
+    new, new_counts = fits[engine]
+    old = fits["old kernel"][0]
     n = new.n_candidates
     for name, values in seconds.items():
         best = min(values)
         print(f"{label + ', ' + name:<34} best {best:7.3f} s  {best / n * 1e6:6.2f} us/candidate  "
               f"({n:,} candidates)")  # fmt: skip
-    ratio = min(seconds["old kernel"]) / min(seconds["engine"])
+    for name in configs:
+        if name != "old kernel":
+            ratio = min(seconds["old kernel"]) / min(seconds[name])
+            print(f"{label + ', ' + name + ' vs old':<34} {ratio:7.2f} x   frontier identical: "
+                  f"{_same_frontier(fits[name][0], old)}")  # fmt: skip
+    if fused:
+        ratio = min(seconds["engine, unfused"]) / min(seconds["engine, fused"])
+        finite = np.isfinite(old.v)
+        rel = np.max(np.abs(new.v[finite] - old.v[finite]) / old.v[finite])
+        print(f"{label + ', fused vs unfused':<34} {ratio:7.2f} x   same candidates: "
+              f"{_same_frontier(new, old, v=False)}, V within {rel:.1e} relative")  # fmt: skip
     full, pruned, samples = new_counts.sum(axis=0)
     stable = n - new.n_unstable_total
-    same = _same_frontier(new, old)
-    print(f"{label + ', engine vs old kernel':<34} {ratio:7.2f} x   frontier identical: {same}")
     print(f"{label + ', simulated':<34} {full:,} in full, {pruned:,} pruned of {stable:,} stable; "
           f"{samples / stable:,.0f} samples per stable candidate (old: {len(signals[0]):,})")  # fmt: skip
-    return n / min(seconds["engine"]), n / min(seconds["old kernel"])
+    return n / min(seconds[engine]), n / min(seconds["old kernel"])
 
 
 def main():
@@ -85,7 +100,7 @@ def main():
     for legacy in (False, True):
         _fit(direct, small, DIRECT_ROWS, legacy)
 
-    engine_rate, old_rate = _side_by_side("direct", direct, DIRECT_GRID, DIRECT_ROWS)
+    engine_rate, old_rate = _side_by_side("direct", direct, DIRECT_GRID, DIRECT_ROWS, fused=True)
 
     columns = candidates(DIRECT_GRID)
     pick = np.random.default_rng(0).choice(columns[0].size, REFERENCE_SAMPLE, replace=False)
@@ -100,7 +115,7 @@ def main():
     print(f"{'per candidate vs reference loop':<34} engine {engine_rate / reference_rate:6.1f} x   "
           f"old kernel {old_rate / reference_rate:6.1f} x")  # fmt: skip
 
-    full, _ = _fit(direct, DIRECT_GRID, DIRECT_ROWS, False, keep=True)
+    full, _ = _fit(direct, DIRECT_GRID, DIRECT_ROWS, False, keep=True, fused=True)
     v = full.candidates["v"].to_numpy()[pick]
     both = np.isfinite(v) & ~ref.unstable
     rel = np.abs(v[both] - ref.v[both]) / ref.v[both]
@@ -110,24 +125,25 @@ def main():
         f"{rel.max():.1e}"
     )
 
-    _side_by_side("stage 1", stage1, STAGE1_GRID, STAGE1_ROWS)
+    _side_by_side("stage 1", stage1, STAGE1_GRID, STAGE1_ROWS, fused=False)
     # Stage 2 as the indirect method runs it: the direct grid with e_r, stage 1's best output.
-    fit, _ = _fit(stage1, STAGE1_GRID, STAGE1_ROWS, False)
+    fit, _ = _fit(stage1, STAGE1_GRID, STAGE1_ROWS, False, fused=False)
     row = best(fit)
     e_r = simulate(fit.a[row], fit.b1[row], fit.b2[row], fit.nk1[row], fit.nk2[row], *stage1[:2])
     stage2 = (record["ft_s"], e_r, record["u"])
-    _side_by_side("stage 2", stage2, DIRECT_GRID, DIRECT_ROWS)
+    _side_by_side("stage 2", stage2, DIRECT_GRID, DIRECT_ROWS, fused=True)
     # The issue's comparison of rates, from engine runs that alternate between the
     # two grids: the machine's speed drifts within a run, and the blocks above
-    # are timed minutes apart.
+    # are timed minutes apart. Each as the indirect method runs it: stage 1
+    # unfused, stage 2 fused.
     seconds = {"stage 1": [], "stage 2": []}
     for _ in range(RATE_REPEATS):
-        for name, signals, grid, rows in (
-            ("stage 1", stage1, STAGE1_GRID, STAGE1_ROWS),
-            ("stage 2", stage2, DIRECT_GRID, DIRECT_ROWS),
+        for name, signals, grid, rows, fused in (
+            ("stage 1", stage1, STAGE1_GRID, STAGE1_ROWS, False),
+            ("stage 2", stage2, DIRECT_GRID, DIRECT_ROWS, True),
         ):
             start = time.perf_counter()
-            fit, _ = _fit(signals, grid, rows, False)
+            fit, _ = _fit(signals, grid, rows, False, fused=fused)
             seconds[name].append((time.perf_counter() - start) / fit.n_candidates)
     one, two = min(seconds["stage 1"]), min(seconds["stage 2"])
     print(f"{'stage 1 vs stage 2 per candidate':<34} {two / one:7.2f} x the stage-2 rate   (alternating, "

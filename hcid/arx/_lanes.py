@@ -27,18 +27,26 @@ with the tap coefficients held in registers, and no transpose (1.1 to
 such groups; stage 1 (nk1 1..5), the groups with many unstable candidates
 and the rest take the general step (:func:`_simulate_run`).
 
-Every lane does the arithmetic of :func:`hcid.arx._kernels.simulate_into`
-(the same IEEE-754 operations in the same order: ``fmul`` and ``fadd`` /
-``fsub`` without fast-math flags, which LLVM may neither reassociate nor
-fuse), so a lane's V is bit-identical to it; the tests compare them.
+Two arithmetics, chosen per call (``fused``; both loops are compiled, the
+flag picks one per chunk). Unfused, every lane does the arithmetic of
+:func:`hcid.arx._kernels.simulate_into` (the same IEEE-754 operations in
+the same order: ``fmul`` and ``fadd`` / ``fsub`` without fast-math flags,
+which LLVM may neither reassociate nor fuse), so a lane's V is
+bit-identical to it; the tests compare them. Fused, each multiply-add
+(an input tap, an output lag, a squared error) is one ``llvm.fma``,
+rounded once: the same order, fewer operations and roundings (0.8x the
+time of a direct grid). ``llvm.fma`` is exact by definition, so the values
+are the same on every machine (one without FMA units computes it in
+software, slowly); the tests compare them with an exact-rational twin.
 Where lanes of different B lengths share a batch, the shorter B are padded
 with zero coefficients: ``x + 0.0 * i`` is ``x`` (for finite i; the sign of
 a zero sum may flip, which changes no later value but a zero's sign, and no
-square), so V stays bit-identical.
-:func:`simulate_lanes` (four lanes in plain numba) is the vector path's
-twin, and the path without the JIT (the intrinsics run only compiled) and
-above ``MAX_NA``; so is :func:`hcid.arx._kernels.squared_errors` for the
-frontier's VAF.
+square), so V stays bit-identical; ``fma(0.0, i, x)`` is ``x`` likewise.
+:func:`simulate_lanes` (four lanes in plain numba, always unfused) is the
+unfused vector path's twin, and the path without the JIT (the intrinsics
+run only compiled) and above ``MAX_NA``; so is
+:func:`hcid.arx._kernels.squared_errors` for the frontier's VAF, which is
+always unfused.
 
 This module calls no kernel of :mod:`hcid.arx._kernels` (nor the reverse):
 numba's on-disk cache of a function is invalidated by a change of its own
@@ -122,6 +130,34 @@ def _splat(builder, scalar):
     return builder.shuffle_vector(one, ir.Constant(_VEC, None), _mask([0] * _WIDTH))
 
 
+def _madd(builder, fused, acc, a, x):
+    """``acc + a * x``: one rounding if ``fused`` (``llvm.fma``, exact in IEEE 754 on every
+    machine), else two (``fmul``, then ``fadd``)."""
+    if fused:
+        fma = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(_VEC, [_VEC, _VEC, _VEC]), f"llvm.fma.v{_WIDTH}f64"
+        )
+        return builder.call(fma, [a, x, acc])
+    return builder.fadd(acc, builder.fmul(a, x))
+
+
+def _msub(builder, fused, x, a, y):
+    """``x - a * y``, fused (``fma(-a, y, x)``: negation is exact) or not."""
+    if fused:
+        return _madd(builder, True, x, builder.fneg(a), y)
+    return builder.fsub(x, builder.fmul(a, y))
+
+
+def _both(builder, fused, emit):
+    """``emit(True)`` if the run-time flag ``fused`` is set, else ``emit(False)``: two copies
+    of a whole loop, chosen once."""
+    with builder.if_else(fused) as (then, otherwise):
+        with then:
+            emit(True)
+        with otherwise:
+            emit(False)
+
+
 def _mask(indices):
     return ir.Constant(ir.VectorType(_I32, len(indices)), indices)
 
@@ -150,7 +186,7 @@ def _transpose(builder, rows):
 
 
 @intrinsic
-def lane_inputs(typingctx, b1, nb1, off1, tv1, b2, nb2, off2, tv2, steps, xt):
+def lane_inputs(typingctx, b1, nb1, off1, tv1, b2, nb2, off2, tv2, steps, xt, fused):
     """Input part ``B1 i1 + B2 i2`` of every lane for chunk samples ``q < steps`` into ``xt``.
 
     ``b1`` (LANES, >= nb1) holds lane l's B1 in row l; tap j of lane l at
@@ -161,9 +197,10 @@ def lane_inputs(typingctx, b1, nb1, off1, tv1, b2, nb2, off2, tv2, steps, xt):
     ``SAMPLES`` (samples past the chunk are computed and ignored, so the
     inputs must hold ``SAMPLES - 1`` readable values past the record). Per
     sample the terms are added as in ``simulate_into``: 0, then b1[0],
-    b1[1], ..., then b2[0], ...
+    b1[1], ..., then b2[0], ..., each a multiply and an add, or one fused
+    multiply-add if ``fused``.
     """
-    sig = types.void(b1, nb1, off1, tv1, b2, nb2, off2, tv2, steps, xt)
+    sig = types.void(b1, nb1, off1, tv1, b2, nb2, off2, tv2, steps, xt, fused)
 
     def codegen(context, builder, signature, args):
         ty = signature.args
@@ -183,39 +220,45 @@ def lane_inputs(typingctx, b1, nb1, off1, tv1, b2, nb2, off2, tv2, steps, xt):
         out = _data(context, builder, ty[9], args[9])
         # acc[h][w]: lane w of the group at samples q + h * _WIDTH .. q + (h + 1) * _WIDTH - 1.
         acc = [[cgutils.alloca_once(builder, _VEC) for _ in range(_WIDTH)] for _ in range(_HALVES)]
-        with cgutils.for_range_slice(builder, _c(0), args[8], _c(SAMPLES)) as (q, _):
-            for g in range(_GROUPS):
-                lanes = [g * _WIDTH + w for w in range(_WIDTH)]
-                for half in acc:
-                    for a in half:
-                        builder.store(_ZERO, a)
-                for b_ptr, stride, nb, off, ip in inputs:
-                    starts = [builder.add(builder.load(builder.gep(off, [_c(lane)])), q) for lane in lanes]
-                    rows = [builder.mul(_c(lane), stride) for lane in lanes]
-                    with cgutils.for_range(builder, nb) as loop:
-                        j = loop.index
-                        for w in range(_WIDTH):
-                            coef = _splat(
-                                builder, builder.load(builder.gep(b_ptr, [builder.add(rows[w], j)]))
-                            )
-                            at = builder.sub(starts[w], j)
-                            for h in range(_HALVES):
-                                t = builder.add(at, _c(h * _WIDTH))
-                                x = _load(builder, ip, builder.mul(t, _c(_WIDTH)))
-                                total = builder.fadd(builder.load(acc[h][w]), builder.fmul(coef, x))
-                                builder.store(total, acc[h][w])
-                for h in range(_HALVES):
-                    by_sample = _transpose(builder, [builder.load(a) for a in acc[h]])
-                    for s in range(_WIDTH):
-                        row = builder.mul(builder.add(q, _c(h * _WIDTH + s)), _c(LANES))
-                        _store(builder, by_sample[s], out, builder.add(row, _c(g * _WIDTH)))
+
+        def emit(fused):
+            with cgutils.for_range_slice(builder, _c(0), args[8], _c(SAMPLES)) as (q, _):
+                for g in range(_GROUPS):
+                    lanes = [g * _WIDTH + w for w in range(_WIDTH)]
+                    for half in acc:
+                        for a in half:
+                            builder.store(_ZERO, a)
+                    for b_ptr, stride, nb, off, ip in inputs:
+                        starts = [
+                            builder.add(builder.load(builder.gep(off, [_c(lane)])), q) for lane in lanes
+                        ]
+                        rows = [builder.mul(_c(lane), stride) for lane in lanes]
+                        with cgutils.for_range(builder, nb) as loop:
+                            j = loop.index
+                            for w in range(_WIDTH):
+                                coef = _splat(
+                                    builder, builder.load(builder.gep(b_ptr, [builder.add(rows[w], j)]))
+                                )
+                                at = builder.sub(starts[w], j)
+                                for h in range(_HALVES):
+                                    t = builder.add(at, _c(h * _WIDTH))
+                                    x = _load(builder, ip, builder.mul(t, _c(_WIDTH)))
+                                    total = _madd(builder, fused, builder.load(acc[h][w]), coef, x)
+                                    builder.store(total, acc[h][w])
+                    for h in range(_HALVES):
+                        by_sample = _transpose(builder, [builder.load(a) for a in acc[h]])
+                        for s in range(_WIDTH):
+                            row = builder.mul(builder.add(q, _c(h * _WIDTH + s)), _c(LANES))
+                            _store(builder, by_sample[s], out, builder.add(row, _c(g * _WIDTH)))
+
+        _both(builder, args[10], emit)
         return context.get_dummy_value()
 
     return sig, codegen
 
 
 @intrinsic
-def lane_inputs_affine(typingctx, b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0, steps, xt):
+def lane_inputs_affine(typingctx, b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0, steps, xt, fused):
     """Input part of every lane for chunk samples ``q < steps`` into ``xt``: groups of *affine* lanes.
 
     Lane ``l = g * _WIDTH + w`` (group g, place w) has input 1 delayed by
@@ -231,9 +274,10 @@ def lane_inputs_affine(typingctx, b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0,
     ``simulate_into``: 0, then b1[0], b1[1], ..., then b2[0], ... The taps
     run in blocks of up to ``_TAP_BLOCK``, whose coefficients stay in
     registers over the chunk; between blocks the partial sums wait in xt
-    (the first block starts from 0).
+    (the first block starts from 0). Fused multiply-adds if ``fused``, as
+    in :func:`lane_inputs`.
     """
-    sig = types.void(b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0, steps, xt)
+    sig = types.void(b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0, steps, xt, fused)
 
     def codegen(context, builder, signature, args):
         ty = signature.args
@@ -245,33 +289,39 @@ def lane_inputs_affine(typingctx, b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0,
         no_taps = builder.icmp_signed("==", builder.or_(nb1_v, nb2_v), _c(0))
         with builder.if_then(no_taps), cgutils.for_range(builder, builder.mul(steps_v, _c(LANES))) as loop:
             builder.store(ir.Constant(ir.DoubleType(), 0.0), builder.gep(out, [loop.index]))
-        for at, row in ((0, True), (4, False)):
-            coefs = _data(context, builder, ty[at], args[at])
-            source = _data(context, builder, ty[at + 2], args[at + 2])
-            base_p = _data(context, builder, ty[at + 3], args[at + 3])
-            nb = args[at + 1]
-            # The group's first block: input 1's first, or input 2's if nb1 = 0.
-            first_input = cgutils.true_bit if row else builder.icmp_signed("==", nb1_v, _c(0))
-            for g in range(_GROUPS):
-                base = builder.load(builder.gep(base_p, [_c(g)]))
-                taps = SimpleNamespace(coefs=coefs, source=source, base=base, row=row, group=g, k0=k0_v,
-                                       steps=steps_v, out=out)  # fmt: skip
-                full = builder.sdiv(nb, _c(_TAP_BLOCK))
-                with cgutils.for_range(builder, full) as loop:
-                    fresh = builder.and_(first_input, builder.icmp_signed("==", loop.index, _c(0)))
-                    _affine_block(builder, taps, builder.mul(loop.index, _c(_TAP_BLOCK)), _TAP_BLOCK, fresh)
-                rest = builder.srem(nb, _c(_TAP_BLOCK))
-                j0 = builder.mul(full, _c(_TAP_BLOCK))
-                fresh = builder.and_(first_input, builder.icmp_signed("==", full, _c(0)))
-                after = builder.append_basic_block("affine.after")
-                switch = builder.switch(rest, after)
-                for count in range(1, _TAP_BLOCK):
-                    block = builder.append_basic_block(f"affine.rest{count}")
-                    switch.add_case(ir.Constant(rest.type, count), block)
-                    with builder.goto_block(block):
-                        _affine_block(builder, taps, j0, count, fresh)
-                        builder.branch(after)
-                builder.position_at_end(after)
+
+        def emit(fused):
+            for at, row in ((0, True), (4, False)):
+                coefs = _data(context, builder, ty[at], args[at])
+                source = _data(context, builder, ty[at + 2], args[at + 2])
+                base_p = _data(context, builder, ty[at + 3], args[at + 3])
+                nb = args[at + 1]
+                # The group's first block: input 1's first, or input 2's if nb1 = 0.
+                first_input = cgutils.true_bit if row else builder.icmp_signed("==", nb1_v, _c(0))
+                for g in range(_GROUPS):
+                    base = builder.load(builder.gep(base_p, [_c(g)]))
+                    taps = SimpleNamespace(coefs=coefs, source=source, base=base, row=row, group=g, k0=k0_v,
+                                           steps=steps_v, out=out, fused=fused)  # fmt: skip
+                    full = builder.sdiv(nb, _c(_TAP_BLOCK))
+                    with cgutils.for_range(builder, full) as loop:
+                        fresh = builder.and_(first_input, builder.icmp_signed("==", loop.index, _c(0)))
+                        _affine_block(
+                            builder, taps, builder.mul(loop.index, _c(_TAP_BLOCK)), _TAP_BLOCK, fresh
+                        )
+                    rest = builder.srem(nb, _c(_TAP_BLOCK))
+                    j0 = builder.mul(full, _c(_TAP_BLOCK))
+                    fresh = builder.and_(first_input, builder.icmp_signed("==", full, _c(0)))
+                    after = builder.append_basic_block("affine.after")
+                    switch = builder.switch(rest, after)
+                    for count in range(1, _TAP_BLOCK):
+                        block = builder.append_basic_block(f"affine.rest{count}")
+                        switch.add_case(ir.Constant(rest.type, count), block)
+                        with builder.goto_block(block):
+                            _affine_block(builder, taps, j0, count, fresh)
+                            builder.branch(after)
+                    builder.position_at_end(after)
+
+        _both(builder, args[11], emit)
         return context.get_dummy_value()
 
     return sig, codegen
@@ -298,22 +348,24 @@ def _affine_block(builder, taps, j0, count, fresh):
                 else:  # i2p[base + t0 + s - tap], the same for every lane
                     at = builder.sub(builder.add(builder.add(taps.base, t0), _c(s)), tap)
                     x = _splat(builder, builder.load(builder.gep(taps.source, [at])))
-                acc[s] = builder.fadd(acc[s], builder.fmul(coef[j], x))
+                acc[s] = _madd(builder, taps.fused, acc[s], coef[j], x)
         for slot, value in zip(slots, acc, strict=True):
             _store(builder, value, taps.out, slot)
 
 
 @intrinsic
-def lane_recursion(typingctx, coef, na, xt, m, yh, row0, o, k0, val_start, val_stop, quad_end, eacc):
+def lane_recursion(typingctx, coef, na, xt, m, yh, row0, o, k0, val_start, val_stop, quad_end, eacc, fused):
     """Recursion of every lane for chunk samples ``q < m``, and their squared errors.
 
     Writes ``yh`` rows ``row0 .. row0 + m - 1`` from ``xt`` and the
     ``max(na, 2)`` rows before ``row0``; a sample ``k = k0 + q`` on the
     validation rows adds ``(y - o[k])^2`` to partial sum ``(k - val_start)
     % 4`` (0 from ``quad_end`` on) of ``eacc``. Returns False, doing
-    nothing, if na is not in 1..MAX_NA.
+    nothing, if na is not in 1..MAX_NA. Each multiply-add (``a_i y``
+    added to a partial sum or subtracted from the output, ``d^2`` added to
+    a sum of squares) is one fused operation if ``fused``.
     """
-    sig = types.boolean(coef, na, xt, m, yh, row0, o, k0, val_start, val_stop, quad_end, eacc)
+    sig = types.boolean(coef, na, xt, m, yh, row0, o, k0, val_start, val_stop, quad_end, eacc, fused)
 
     def codegen(context, builder, signature, args):
         ty = signature.args
@@ -327,26 +379,30 @@ def lane_recursion(typingctx, coef, na, xt, m, yh, row0, o, k0, val_start, val_s
         handled = cgutils.alloca_once_value(builder, cgutils.false_bit)
         y1 = [cgutils.alloca_once(builder, _VEC) for _ in range(_GROUPS)]
         y2 = [cgutils.alloca_once(builder, _VEC) for _ in range(_GROUPS)]
-        done = builder.append_basic_block("lanes.done")
-        default = builder.append_basic_block("lanes.other_na")
-        switch = builder.switch(na_v, default)
-        with builder.goto_block(default):
-            builder.branch(done)
-        for order in range(1, MAX_NA + 1):
-            block = builder.append_basic_block(f"lanes.na{order}")
-            switch.add_case(ir.Constant(na_v.type, order), block)
-            with builder.goto_block(block):
-                _recursion(builder, order, coef_p, xt_p, m_v, yh_p, row0_v, o_p, k0_v, start_v, stop_v,
-                           quad_v, e_p, y1, y2)  # fmt: skip
-                builder.store(cgutils.true_bit, handled)
+
+        def emit(fused):
+            done = builder.append_basic_block("lanes.done")
+            default = builder.append_basic_block("lanes.other_na")
+            switch = builder.switch(na_v, default)
+            with builder.goto_block(default):
                 builder.branch(done)
-        builder.position_at_end(done)
+            for order in range(1, MAX_NA + 1):
+                block = builder.append_basic_block(f"lanes.na{order}")
+                switch.add_case(ir.Constant(na_v.type, order), block)
+                with builder.goto_block(block):
+                    _recursion(builder, fused, order, coef_p, xt_p, m_v, yh_p, row0_v, o_p, k0_v, start_v,
+                               stop_v, quad_v, e_p, y1, y2)  # fmt: skip
+                    builder.store(cgutils.true_bit, handled)
+                    builder.branch(done)
+            builder.position_at_end(done)
+
+        _both(builder, args[12], emit)
         return builder.load(handled)
 
     return sig, codegen
 
 
-def _recursion(builder, na, coef, xt, m, yh, row0, o, k0, val_start, val_stop, quad_end, eacc, y1, y2):
+def _recursion(builder, fused, na, coef, xt, m, yh, row0, o, k0, val_start, val_stop, quad_end, eacc, y1, y2):
     """The sample loop for one na, fully unrolled over lags and groups."""
     lags = max(na, 2)
     a = [[_load(builder, coef, _c(i * LANES + g * _WIDTH)) for g in range(_GROUPS)] for i in range(lags + 1)]
@@ -364,18 +420,22 @@ def _recursion(builder, na, coef, xt, m, yh, row0, o, k0, val_start, val_stop, q
             s0 = s1 = None
             i = na
             while i > 3:
-                s0 = _accumulate(builder, s0, a[i][g], _load(builder, yh, builder.add(at, _c(-i * LANES))))
+                s0 = _accumulate(
+                    builder, fused, s0, a[i][g], _load(builder, yh, builder.add(at, _c(-i * LANES)))
+                )
                 s1 = _accumulate(
-                    builder, s1, a[i - 1][g], _load(builder, yh, builder.add(at, _c(-(i - 1) * LANES)))
+                    builder, fused, s1, a[i - 1][g], _load(builder, yh, builder.add(at, _c(-(i - 1) * LANES)))
                 )
                 i -= 2
             if i == 3:
-                s0 = _accumulate(builder, s0, a[3][g], _load(builder, yh, builder.add(at, _c(-3 * LANES))))
+                s0 = _accumulate(
+                    builder, fused, s0, a[3][g], _load(builder, yh, builder.add(at, _c(-3 * LANES)))
+                )
             x = _load(builder, xt, builder.add(builder.mul(q, _c(LANES)), _c(g * _WIDTH)))
             total = builder.fadd(_ZERO if s0 is None else s0, _ZERO if s1 is None else s1)
             prev1, prev2 = builder.load(y1[g]), builder.load(y2[g])
-            y = builder.fsub(builder.fsub(builder.fsub(x, total), builder.fmul(a[2][g], prev2)),
-                             builder.fmul(a[1][g], prev1))  # fmt: skip
+            y = builder.fsub(x, total)
+            y = _msub(builder, fused, _msub(builder, fused, y, a[2][g], prev2), a[1][g], prev1)
             _store(builder, y, yh, at)
             builder.store(prev1, y2[g])
             builder.store(y, y1[g])
@@ -391,12 +451,12 @@ def _recursion(builder, na, coef, xt, m, yh, row0, o, k0, val_start, val_stop, q
             for g, y in enumerate(ys):
                 at = builder.add(row, _c(g * _WIDTH))
                 d = builder.fsub(y, target)
-                _store(builder, builder.fadd(_load(builder, eacc, at), builder.fmul(d, d)), eacc, at)
+                _store(builder, _madd(builder, fused, _load(builder, eacc, at), d, d), eacc, at)
 
 
-def _accumulate(builder, partial, a, y):
+def _accumulate(builder, fused, partial, a, y):
     """``partial + a * y``, the partial sum starting from 0.0 as in simulate_into."""
-    return builder.fadd(_ZERO if partial is None else partial, builder.fmul(a, y))
+    return _madd(builder, fused, _ZERO if partial is None else partial, a, y)
 
 
 @njit(cache=True)
@@ -666,7 +726,7 @@ def _check_lanes(x1, x2, pad, n, per_value, b1, nb1, b2, nb2):
 @njit(cache=True)
 def simulate_wide(
     coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, tv1, tv2, pad, o, val_start, val_stop, bound,
-    off1, off2, xt, yh, eacc, v_out, pruned,
+    off1, off2, xt, yh, eacc, v_out, pruned, fused,
 ):  # fmt: skip
     """:func:`simulate_lanes` for ``LANES`` lanes, on explicit vectors (the vector steps).
 
@@ -687,7 +747,7 @@ def simulate_wide(
     _check_lanes(tv1, tv2, pad, o.shape[0], _WIDTH, b1, nb1, b2, nb2)
     used = np.arange(LANES) < n_lanes
     return _wide_loop(
-        coef, na, used, o, val_start, val_stop, bound, xt, yh, eacc, v_out, pruned,
+        coef, na, used, o, val_start, val_stop, bound, xt, yh, eacc, v_out, pruned, fused,
         False, b1, nb1, nk1, b2, nb2, nk2, tv1, tv2, pad, off1, off2,
     )  # fmt: skip
 
@@ -695,7 +755,7 @@ def simulate_wide(
 @njit(cache=True)
 def simulate_affine(
     coef, na, b1t, nb1, c1, b2t, nb2, c2, used, r1, i1p, i2p, pad, o, val_start, val_stop, bound,
-    xt, yh, eacc, v_out, pruned,
+    xt, yh, eacc, v_out, pruned, fused,
 ):  # fmt: skip
     """:func:`simulate_wide` for lanes in affine groups (:func:`lane_inputs_affine`).
 
@@ -722,14 +782,14 @@ def simulate_affine(
         base1[g] = r1.shape[0] - 1 - pad + c1[g]
         base2[g] = pad - c2[g]
     return _wide_loop(
-        coef, na, used, o, val_start, val_stop, bound, xt, yh, eacc, v_out, pruned,
+        coef, na, used, o, val_start, val_stop, bound, xt, yh, eacc, v_out, pruned, fused,
         True, b1t, nb1, c1, b2t, nb2, c2, r1, i2p, pad, base1, base2,
     )  # fmt: skip
 
 
 @njit(cache=True)
 def _wide_loop(
-    coef, na, used, o, val_start, val_stop, bound, xt, yh, eacc, v_out, pruned,
+    coef, na, used, o, val_start, val_stop, bound, xt, yh, eacc, v_out, pruned, fused,
     affine, b1, nb1, nk1, b2, nb2, nk2, x1, x2, pad, off1, off2,
 ):  # fmt: skip
     """The chunk loop of :func:`simulate_wide` and :func:`simulate_affine`: input part
@@ -763,13 +823,13 @@ def _wide_loop(
         m = k1 - k0
         steps = (m + TAIL) // SAMPLES * SAMPLES
         if affine:
-            lane_inputs_affine(b1, nb1, x1, off1, b2, nb2, x2, off2, k0, steps, xt)
+            lane_inputs_affine(b1, nb1, x1, off1, b2, nb2, x2, off2, k0, steps, xt, fused)
         else:
             for lane in range(LANES):
                 off1[lane] = pad - nk1[lane] + k0
                 off2[lane] = pad - nk2[lane] + k0
-            lane_inputs(b1, nb1, off1, x1, b2, nb2, off2, x2, steps, xt)
-        if not lane_recursion(coef, na, xt, m, yh, h, o, k0, val_start, val_stop, quad_end, eacc):
+            lane_inputs(b1, nb1, off1, x1, b2, nb2, off2, x2, steps, xt, fused)
+        if not lane_recursion(coef, na, xt, m, yh, h, o, k0, val_start, val_stop, quad_end, eacc, fused):
             raise ValueError("vector lanes: na above MAX_NA")
         last = (h + m - 1) * LANES
         for lane in range(LANES):
@@ -940,7 +1000,7 @@ def _affine_groups(first_row, stop_row, block_orders, block_start, bounds, v_all
 @njit(cache=True)
 def _simulate_affine_groups(
     first_row, stop_row, block_orders, block_start, bounds, theta_all, score, i1p, i2p, pad, o,
-    val_start, val_stop, prune, v_all, counts, best,
+    val_start, val_stop, prune, fused, v_all, counts, best,
 ):  # fmt: skip
     """Simulate the affine groups of one run (:func:`_affine_groups`), ``_GROUPS`` per batch
     (:func:`simulate_affine`); ``best`` (per block of the run) as in :func:`_simulate_run`."""
@@ -991,7 +1051,7 @@ def _simulate_affine_groups(
                     lane_bound[lane] = best[row - first_row]
         done = simulate_affine(
             coef, na, b1t, nb1, c1, b2t, batch_nb2, c2, used, r1, i1p, i2p, pad, o, val_start,
-            val_stop, lane_bound, xt, yh, eacc, v, pruned,
+            val_stop, lane_bound, xt, yh, eacc, v, pruned, fused,
         )  # fmt: skip
         for g in range(_GROUPS):
             if at + g >= rows.shape[0]:
@@ -1010,7 +1070,7 @@ def _simulate_affine_groups(
 @njit(cache=True)
 def _simulate_run(
     first_row, stop_row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
-    tv1, tv2, pad, o, val_start, val_stop, prune, v_all, counts,
+    tv1, tv2, pad, o, val_start, val_stop, prune, fused, v_all, counts,
 ):  # fmt: skip
     """Simulate the stable candidates of blocks ``first_row .. stop_row - 1`` (one na and
     nb1), ``LANES`` at a time on the vector steps.
@@ -1034,7 +1094,7 @@ def _simulate_run(
     best = np.full(stop_row - first_row, np.inf)
     _simulate_affine_groups(
         first_row, stop_row, block_orders, block_start, bounds, theta_all, score, i1p, i2p, pad, o,
-        val_start, val_stop, prune, v_all, counts, best,
+        val_start, val_stop, prune, fused, v_all, counts, best,
     )  # fmt: skip
     total = 0
     m2 = 0
@@ -1085,7 +1145,7 @@ def _simulate_run(
             lane_bound[lane] = best[row - first_row]
         done = simulate_wide(
             coef, na, b1, nb1, nk1, b2, batch_nb2, nk2, used, tv1, tv2, pad, o, val_start, val_stop,
-            lane_bound, off1, off2, xt, yh, eacc, v, pruned,
+            lane_bound, off1, off2, xt, yh, eacc, v, pruned, fused,
         )  # fmt: skip
         for lane in range(used):
             c = queue[first + lane]
@@ -1117,13 +1177,13 @@ def _runs(block_orders):
 @njit(cache=True)
 def _simulate_group(
     g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1, tv2,
-    pad, o, val_start, val_stop, prune, v_all, counts,
+    pad, o, val_start, val_stop, prune, fused, v_all, counts,
 ):  # fmt: skip
     first_row, stop_row = firsts[g], firsts[g + 1]
     if _WIDE and block_orders[first_row, 0] <= MAX_NA:
         _simulate_run(
             first_row, stop_row, block_orders, block_start, block_size, bounds, theta_all, score,
-            i1p, i2p, tv1, tv2, pad, o, val_start, val_stop, prune, v_all, counts,
+            i1p, i2p, tv1, tv2, pad, o, val_start, val_stop, prune, fused, v_all, counts,
         )  # fmt: skip
     else:
         _simulate_block(
@@ -1135,7 +1195,7 @@ def _simulate_group(
 @njit(cache=True)
 def simulate_blocks(
     block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1, tv2, pad, o,
-    val_start, val_stop, prune, v_all, counts,
+    val_start, val_stop, prune, fused, v_all, counts,
 ):  # fmt: skip
     """Serial driver of the simulations: every order triple, the runs of blocks of one
     (na, nb1) by :func:`_simulate_run`, or each block alone by :func:`_simulate_block`.
@@ -1166,14 +1226,14 @@ def simulate_blocks(
     for g in range(firsts.shape[0] - 1):
         _simulate_group(
             g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1,
-            tv2, pad, o, val_start, val_stop, prune, v_all, counts,
+            tv2, pad, o, val_start, val_stop, prune, fused, v_all, counts,
         )  # fmt: skip
 
 
 @njit(cache=True, parallel=True)
 def simulate_blocks_parallel(
     block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1, tv2, pad, o,
-    val_start, val_stop, prune, v_all, counts, n_threads,
+    val_start, val_stop, prune, fused, v_all, counts, n_threads,
 ):  # fmt: skip
     """Parallel driver: thread t takes runs t, t + n_threads, ... of :func:`simulate_blocks`;
     each run alone decides its pruning, so the result is bit-identical to it."""
@@ -1183,7 +1243,7 @@ def simulate_blocks_parallel(
         for g in range(t, n_groups, n_threads):
             _simulate_group(
                 g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
-                tv1, tv2, pad, o, val_start, val_stop, prune, v_all, counts,
+                tv1, tv2, pad, o, val_start, val_stop, prune, fused, v_all, counts,
             )  # fmt: skip
 
 
@@ -1244,9 +1304,9 @@ def squared_errors_wide(
                 off1[lane] = pad - lane_nk1[lane] + k0
                 off2[lane] = pad - lane_nk2[lane] + k0
             steps = (m + TAIL) // SAMPLES * SAMPLES
-            lane_inputs(b1, m1, off1, tv1, b2, m2, off2, tv2, steps, xt)
+            lane_inputs(b1, m1, off1, tv1, b2, m2, off2, tv2, steps, xt, False)
             # No validation rows (start = stop = n): no squared-error sums.
-            if not lane_recursion(coef, k, xt, m, yh, h, o, k0, n, n, n, eacc):
+            if not lane_recursion(coef, k, xt, m, yh, h, o, k0, n, n, n, eacc, False):
                 raise ValueError("squared_errors_wide: na above MAX_NA")
             for lane in range(used):
                 _errors_into(err_est[first + lane], est_start, yh, h, lane, o, k0, k1)
