@@ -102,39 +102,6 @@ def test_stage2_defaults_to_direct_grid(paper_raw):
     assert config.identify.stage("stage2").grid.nk1 == (1, 50)
 
 
-def test_arithmetic_option(paper_raw, paper_config):
-    # identify.<stage>.arithmetic (hcid.methods.base.arithmetic): fused by default for the
-    # direct and stage-2 grids, unfused for stage 1; stage 2 takes the direct method's
-    # value unless its own section sets one; stating a default changes nothing.
-    from hcid.methods import direct, indirect
-    from hcid.methods.base import fused
-
-    def arithmetic(config):
-        specs = {"direct": direct.DIRECT, "stage1": indirect.STAGE1, "stage2": indirect.STAGE2}
-        return {name: fused(spec, config.identify.stage(name)) for name, spec in specs.items()}
-
-    assert arithmetic(paper_config) == {"direct": True, "stage1": False, "stage2": True}
-    data = copy.deepcopy(paper_raw)
-    data["identify"]["direct"]["arithmetic"] = "fused"
-    data["identify"]["stage1"] = {"arithmetic": "unfused"}
-    assert parse_config(data, "paper").to_yaml() == paper_config.to_yaml()
-    data["identify"]["direct"]["arithmetic"] = "unfused"
-    del data["identify"]["stage2"]
-    config = parse_config(data, "paper")
-    assert arithmetic(config) == {"direct": False, "stage1": False, "stage2": False}
-    assert (
-        parse_config(yaml.safe_load(config.to_yaml()), "paper") == config
-    )  # the recorded config resolves alike
-    data["identify"]["stage2"] = {"arithmetic": "fused"}
-    data["identify"]["stage1"] = {"arithmetic": "fused"}
-    assert arithmetic(parse_config(data, "paper")) == {"direct": False, "stage1": True, "stage2": True}
-    data["identify"]["stage2"] = {"arithmetic": "fma"}
-    with pytest.raises(
-        ConfigError, match=r"^identify\.stage2\.arithmetic: must be one of fused, unfused, got 'fma'$"
-    ):
-        parse_config(data, "paper")
-
-
 def test_non_finite_target_step_refused(paper_raw):
     data = _mutate(paper_raw, ("signals", "target", "segments"), [["c", 3, 0], ["p", 3.74, float("inf")]])
     with pytest.raises(

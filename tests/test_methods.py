@@ -124,12 +124,7 @@ def _toy_run(record, settings, shift, threads):
 
     start = time.perf_counter()
     fit = fit_stage(
-        TOY.stages[0],
-        settings.stage("toy"),
-        shift_forward(record["ft"], shift),
-        record["e"],
-        record["u"],
-        threads,
+        settings.stage("toy"), shift_forward(record["ft"], shift), record["e"], record["u"], threads
     )
     return MethodResult("toy", fit, (), time.perf_counter() - start)
 
@@ -211,7 +206,7 @@ def test_final_signals_rebuild_what_the_final_stage_was_fitted_to(ci_config, pap
         i1, i2, o = method.final_signals(paper_record, settings, shift, result.choices)
         np.testing.assert_array_equal(i1, paper_record["ft_s"])
         np.testing.assert_array_equal(o, paper_record["u"])
-        again = fit_stage(method.final_stage, settings.stage(method.final_stage.name), i1, i2, o, 1)
+        again = fit_stage(settings.stage(method.final_stage.name), i1, i2, o, 1)
         np.testing.assert_allclose(again.v, result.fit.v, rtol=1e-6)
     # A choice made on another record is refused instead of giving a wrong e_r.
     wrong = dataclasses.replace(result.choices[0], v=result.choices[0].v * 1.01)

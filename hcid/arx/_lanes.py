@@ -38,6 +38,8 @@ rounded once: the same order, fewer operations and roundings (0.8x the
 time of a direct grid). ``llvm.fma`` is exact by definition, so the values
 are the same on every machine (one without FMA units computes it in
 software, slowly); the tests compare them with an exact-rational twin.
+The engine uses fused V for its search only and recomputes the frontier's V
+unfused (:func:`hcid.arx.engine.fit_grid`).
 Where lanes of different B lengths share a batch, the shorter B are padded
 with zero coefficients: ``x + 0.0 * i`` is ``x`` (for finite i; the sign of
 a zero sum may flip, which changes no later value but a zero's sign, and no

@@ -69,7 +69,9 @@ class GridFit:
     candidates : pyarrow.Table or None
         With ``keep_candidates=True``, one row per candidate in the order of
         :func:`hcid.arx.grid.candidates`: columns na, nb1, nb2, nk1, nk2
-        (int64) and v (float64, ``inf`` if unstable).
+        (int64) and v (float64, ``inf`` if unstable): the search's V, fused
+        unless ``fit_grid(fused=False)``, so a frontier candidate's V here may
+        differ from its row's by rounding.
     """
 
     grid: Grid
@@ -250,14 +252,17 @@ def fit_grid(
         Also return every candidate's orders, delays and V as
         ``GridFit.candidates``.
     fused : bool, default True
-        Round each multiply-add of the simulations once (fused multiply-add)
-        instead of twice. 0.8x the time of the paper's direct grid; V moves
-        by rounding only (on the paper's direct and stage-2 grids within
-        1e-12 relative of the unfused values but for 5 of 89,600 frontier
-        rows, at most 4.1e-12; the paper's stage-1 grid by up to 4.5e-10).
-        The candidates' coefficients, stability and VAF are the same
-        either way. Without the JIT and for na > 12 the simulations are
-        unfused whatever ``fused`` says.
+        Let the search's simulations round each multiply-add once (fused
+        multiply-add) instead of twice: 0.8x the time of the paper's direct
+        grid. The search's V (pruning, each triple's best, the candidates
+        table) then move by rounding (on a paper record by at most 9.3e-12
+        relative on the direct grid, 6.9e-10 on stage 1), but the frontier's
+        V is recomputed from its rows' unfused outputs (with their VAF), so
+        the frontier equals the unfused one bit for bit unless two candidates
+        of a triple are within that rounding of each other (never in the
+        paper study or ``configs/ci.yaml``; then the other is kept). Without
+        the JIT and for na > 12 the simulations are unfused whatever ``fused``
+        says.
 
     Returns
     -------
@@ -293,9 +298,9 @@ def fit_grid(
     are unstable. Normal equations would square the condition number.
 
     The best of an order triple is the smallest V, ties to the smaller
-    nk1, then nk2. The frontier's coefficients and V are the ones the grid
-    loop computed; VAF comes from their outputs, the values :func:`simulate`
-    gives bit for bit (unfused, as :func:`simulate`; the tests compare them).
+    nk1, then nk2. The frontier's coefficients are the ones the grid loop
+    computed; its V and VAF come from their outputs, the values
+    :func:`simulate` gives bit for bit (unfused; the tests compare them).
 
     Speed: the simulations dominate. The stable candidates of each order
     triple are simulated 16 at a time, one SIMD lane each, fused or with the
@@ -394,7 +399,9 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
         a_rows.append(theta[: na + 1] if ok else empty)
         b1_rows.append(theta[na + 1 : na + 1 + nb1] if ok else empty)
         b2_rows.append(theta[na + 1 + nb1 : na + 1 + nb1 + nb2] if ok else empty)
-    # VAF from the frontier rows' outputs: the values simulate() gives, bit for bit.
+    # VAF from the frontier rows' outputs: the values simulate() gives, bit for bit. Their V
+    # too: the search may have fused its multiply-adds (``fused``), the frontier's V is that
+    # of simulate()'s output, as the one-candidate kernel computes it.
     rows = np.flatnonzero(fitted)
     models = (theta_all[first[rows]], block_na[rows], block_nb1[rows], block_nb2[rows], nk1[rows], nk2[rows])
     vaf_est = np.full(start.size, np.nan)
@@ -416,6 +423,10 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
         )
         vaf_est[rows[part]] = _vaf(err_est, o[est_start:est_stop])
         vaf_val[rows[part]] = vaf_est[rows[part]] if same else _vaf(err_val, o[val_start:val_stop])
+        unfused = np.empty(err_val.shape[0])
+        _kernels.mse_of_squares(err_val, unfused)
+        # (An output finite fused but not unfused, a case never seen, keeps the search's V.)
+        v[rows[part]] = np.where(np.isfinite(unfused), unfused, v[rows[part]])
 
     table = None
     if keep_candidates:

@@ -541,18 +541,12 @@ def _identify_section(top: Section, timing: Timing) -> IdentifyConfig:
     for name, spec in stage_specs().items():
         defaults = dict(spec.defaults)
         given = set()
-        raw = s.get(name, _ABSENT)
         if spec.defaults_from is not None:
             inherited = s.data.get(spec.defaults_from)
             if isinstance(inherited, dict):
-                # Grid and windows become defaults; options the stage shares (arithmetic)
-                # are taken as if given here, unless the stage's own section sets them.
-                shared = {k: v for k, v in inherited.items() if k in spec.options}
-                defaults.update({k: v for k, v in inherited.items() if k not in spec.options})
-                given |= set(inherited) - set(shared)
-                if shared and (raw is _ABSENT or isinstance(raw, dict)):
-                    raw = {**shared, **({} if raw is _ABSENT else raw)}
-        data, options = _stage_options(raw, f"identify.{name}", spec.options)
+                defaults.update(inherited)
+                given |= set(inherited)
+        data, options = _stage_options(s.get(name, _ABSENT), f"identify.{name}", spec.options)
         if isinstance(data, dict):
             given |= set(data)
         stage = _stage(data, f"identify.{name}", defaults, timing, unit, given)

@@ -30,10 +30,8 @@ __all__ = [
     "StageChoice",
     "StageOption",
     "StageSpec",
-    "arithmetic",
     "choose",
     "fit_stage",
-    "fused",
     "one_of",
     "refit",
     "shift_forward",
@@ -208,27 +206,9 @@ def shift_forward(x: np.ndarray, n: int) -> np.ndarray:
     return np.concatenate([x[n:], np.zeros(n)])
 
 
-def arithmetic(default: str) -> dict[str, StageOption]:
-    """The ``arithmetic`` option of a stage that fits a grid: its simulations' multiply-adds
-    ``fused`` (one rounding each) or ``unfused`` (two: the values of hcid before fused
-    multiply-adds, bit for bit); :func:`hcid.arx.fit_grid`, ``fused``."""
-    return {
-        "arithmetic": StageOption(default, one_of("fused", "unfused"), "multiply-adds rounded once or twice")
-    }
-
-
-def fused(spec: StageSpec, stage: StageConfig) -> bool:
-    """Whether a stage's simulations fuse their multiply-adds: its ``arithmetic`` option,
-    fused for a stage that declares none."""
-    return "arithmetic" not in spec.options or spec.option(stage, "arithmetic") == "fused"
-
-
-def fit_stage(
-    spec: StageSpec, stage: StageConfig, i1: np.ndarray, i2: np.ndarray, o: np.ndarray, threads: int
-) -> GridFit:
+def fit_stage(stage: StageConfig, i1: np.ndarray, i2: np.ndarray, o: np.ndarray, threads: int) -> GridFit:
     """Fit every candidate of a stage's grid on its windows (:func:`hcid.arx.fit_grid`)."""
-    rows = (stage.estimation.rows(), stage.validation.rows())
-    return fit_grid(i1, i2, o, stage.grid, *rows, threads=threads, fused=fused(spec, stage))
+    return fit_grid(i1, i2, o, stage.grid, stage.estimation.rows(), stage.validation.rows(), threads=threads)
 
 
 def refit(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 
-from hcid.methods.base import Method, MethodResult, StageSpec, arithmetic, fit_stage, shift_forward
+from hcid.methods.base import Method, MethodResult, StageSpec, fit_stage, shift_forward
 
 #: SPEC 3: the direct grid and windows (174,447 candidates).
 DIRECT_DEFAULTS = {
@@ -21,13 +21,12 @@ DIRECT_DEFAULTS = {
 def _run(record, settings, shift, threads) -> MethodResult:
     start = time.perf_counter()
     ft_s = shift_forward(record["ft"], shift)
-    fit = fit_stage(DIRECT, settings.stage("direct"), ft_s, record["e"], record["u"], threads)
+    fit = fit_stage(settings.stage("direct"), ft_s, record["e"], record["u"], threads)
     return MethodResult("direct", fit, (), time.perf_counter() - start)
 
 
-#: Fused multiply-adds by default: 0.8x the time of the grid, V within 1e-12 relative of the
-#: unfused values on the paper's direct and stage-2 grids but for 5 of the study's 89,600
-#: frontier rows (at most 4.1e-12), every selection the same (README, "The ARX engine").
-DIRECT = StageSpec("direct", ("ft", "e", "u"), DIRECT_DEFAULTS, options=arithmetic("fused"))
-
-METHOD = Method(name="direct", stages=(DIRECT,), run=_run)
+METHOD = Method(
+    name="direct",
+    stages=(StageSpec("direct", ("ft", "e", "u"), DIRECT_DEFAULTS),),
+    run=_run,
+)

@@ -34,10 +34,8 @@ from hcid.methods.base import (
     MethodResult,
     StageOption,
     StageSpec,
-    arithmetic,
     choose,
     fit_stage,
-    fused,
     one_of,
     refit,
     shift_forward,
@@ -79,10 +77,6 @@ STAGE1_OPTIONS = {
     "rows": StageOption("auto", one_of("auto", "zero_initial"), "stage windows, or every sample from zero"),
     "model": StageOption("best", one_of("best", "fixed"), "smallest V of the grid, or fixed_orders"),
     "fixed_orders": StageOption((4, 2, 2, 6, 6), _orders, "[na, nb_ft, nb_fd, nk_ft, nk_fd] of model: fixed"),
-    # Unfused by default: fused multiply-adds move stage 1's frontier V by up to 4.5e-10
-    # relative on a paper record (the direct and stage-2 grids' by 7e-13) for 0.92x the
-    # time, so stage1.parquet keeps the values of every earlier hcid, bit for bit.
-    **arithmetic("unfused"),
 }
 
 
@@ -91,8 +85,7 @@ def _stage1_fit(settings, ft_s, fd, e, threads):
     grid = stage.grid
     if STAGE1.option(stage, "model") == "fixed":
         grid = Grid(*((v, v) for v in STAGE1.option(stage, "fixed_orders")))
-    rows = _stage1_rows(settings, e.size)
-    return fit_grid(ft_s, fd, e, grid, *rows, threads=threads, fused=fused(STAGE1, stage))
+    return fit_grid(ft_s, fd, e, grid, *_stage1_rows(settings, e.size), threads=threads)
 
 
 def _stage1_rows(settings, n: int) -> tuple[slice, slice]:
@@ -109,7 +102,7 @@ def _run(record, settings, shift, threads) -> MethodResult:
     stage1 = _stage1_fit(settings, ft_s, record["fd"], record["e"], threads)
     row, choice = choose("stage1", stage1, start)
     e_r = simulate(stage1.a[row], stage1.b1[row], stage1.b2[row], choice.nk1, choice.nk2, ft_s, record["fd"])
-    fit = fit_stage(STAGE2, settings.stage("stage2"), ft_s, e_r, record["u"], threads)
+    fit = fit_stage(settings.stage("stage2"), ft_s, e_r, record["u"], threads)
     choice = dataclasses.replace(choice, signal=e_r)
     return MethodResult("indirect", fit, (choice,), time.perf_counter() - start)
 
@@ -126,14 +119,10 @@ def _signals(record, settings, shift, choices):
 
 
 STAGE1 = StageSpec("stage1", ("ft", "fd", "e"), STAGE1_DEFAULTS, options=STAGE1_OPTIONS)
-#: Stage 2 takes the direct method's keys, its arithmetic (fused by default) too.
-STAGE2 = StageSpec(
-    "stage2", ("ft", "e", "u"), DIRECT_DEFAULTS, defaults_from="direct", options=arithmetic("fused")
-)
 
 METHOD = Method(
     name="indirect",
-    stages=(STAGE1, STAGE2),
+    stages=(STAGE1, StageSpec("stage2", ("ft", "e", "u"), DIRECT_DEFAULTS, defaults_from="direct")),
     run=_run,
     signals=_signals,
 )
