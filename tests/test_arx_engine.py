@@ -1158,6 +1158,24 @@ def test_affine_groups_give_the_old_kernels_frontier_on_random_records(seed, gri
     _assert_same_frontier(fused, old)
 
 
+@pytest.mark.parametrize("rows", [DIRECT_ROWS, STAGE1_ROWS])
+@pytest.mark.parametrize("legacy", [True, False])
+def test_frontier_v_is_its_candidates_unfused_v(paper_record, rows, legacy):
+    # The frontier's V is recomputed from its rows' outputs (mse_of_squares); unfused, it is
+    # the V the search computed for that candidate, bit for bit, old kernel and lanes alike,
+    # with separate windows and with one window for both (stage 1). na 13: the plain path.
+    grid = Grid(na=(1, 13), nb1=(0, 3), nb2=(0, 2), nk1=(20, 23), nk2=(4, 6))
+    fit, _ = _fit_grid(*_direct(paper_record), grid, *rows, 1, True, legacy=legacy, fused=False)
+    c = fit.candidates
+    names = ("na", "nb1", "nb2", "nk1", "nk2")
+    where = {key: i for i, key in enumerate(zip(*(c[k].to_pylist() for k in names), strict=True))}
+    fitted = np.flatnonzero(np.isfinite(fit.v))
+    assert fitted.size > 100
+    for row in fitted:
+        key = (fit.na[row], fit.nb1[row], fit.nb2[row], max(fit.nk1[row], 0), max(fit.nk2[row], 0))
+        assert fit.v[row] == c["v"][where[key]].as_py(), key
+
+
 @pytest.mark.parametrize(
     ("n", "start", "stop"), [(2048, 1088, 2048), (2048, 29, 2048), (40, 3, 10), (9, 0, 1)]
 )

@@ -260,7 +260,8 @@ def fit_grid(
         V is recomputed from its rows' unfused outputs (with their VAF), so
         the frontier equals the unfused one bit for bit unless two candidates
         of a triple are within that rounding of each other (never in the
-        paper study or ``configs/ci.yaml``; then the other is kept). Without
+        paper study or ``configs/ci.yaml``; the row then holds the fused
+        search's choice, with its unfused V). Without
         the JIT and for na > 12 the simulations are unfused whatever ``fused``
         says.
 
