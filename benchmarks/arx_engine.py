@@ -37,7 +37,7 @@ RATE_REPEATS = 5
 REFERENCE_SAMPLE = 1000
 
 
-def _fit(signals, grid, rows, legacy, keep=False, fused=False):
+def _fit(signals, grid, rows, legacy, *, fused, keep=False):
     return _fit_grid(*signals, grid, *rows, 1, keep, legacy=legacy, fused=fused)
 
 
@@ -91,7 +91,7 @@ def main():
     # Warm-up: compile (or load from the cache) every kernel.
     small = Grid(na=(1, 2), nb1=(0, 2), nb2=(0, 2), nk1=(1, 2), nk2=(1, 2))
     for legacy in (False, True):
-        _fit(direct, small, DIRECT_ROWS, legacy)
+        _fit(direct, small, DIRECT_ROWS, legacy, fused=True)
 
     engine_rate, old_rate = _side_by_side("direct", direct, DIRECT_GRID, DIRECT_ROWS)
 

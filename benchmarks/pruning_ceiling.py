@@ -42,6 +42,8 @@ def main() -> None:
     )  # pruned
     cand = fit.candidates.to_pydict()
     na, nb1, nb2, nk1, nk2, v = (np.asarray(cand[c]) for c in ("na", "nb1", "nb2", "nk1", "nk2", "v"))
+    # Each triple's final best V: the frontier's (recomputed unfused), where the engine prunes
+    # against the fused search's; they differ by rounding (hcid.arx.fit_grid, fused).
     best = {(a, b, c): x for a, b, c, x in zip(fit.na, fit.nb1, fit.nb2, fit.v, strict=True)}
     stable = np.flatnonzero(np.isfinite(v))
     pick = np.random.default_rng(1).choice(stable, min(SAMPLE, stable.size), replace=False)

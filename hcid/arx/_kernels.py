@@ -626,6 +626,18 @@ def block_best(v_all, start, size):
     return first
 
 
+def has_fma() -> bool:
+    """Whether numba compiles for a CPU with fused multiply-add units (its host, unless
+    ``NUMBA_CPU_NAME`` names another). Without them ``llvm.fma`` is a library call per
+    element, many times slower than a multiply and an add."""
+    name = numba.config.CPU_NAME
+    if name and name != "host":
+        return "+fma" in (numba.config.CPU_FEATURES or "")
+    from llvmlite import binding
+
+    return bool(binding.get_host_cpu_features().get("fma", False))
+
+
 def max_threads() -> int:
     """Most threads the parallel kernel can use (numba's pool size)."""
     return numba.config.NUMBA_NUM_THREADS

@@ -202,6 +202,8 @@ def lane_inputs(typingctx, b1, nb1, off1, tv1, b2, nb2, off2, tv2, steps, xt, fu
     b1[1], ..., then b2[0], ..., each a multiply and an add, or one fused
     multiply-add if ``fused``.
     """
+    if not isinstance(fused, types.Boolean):
+        return None  # a typing error: the flag chooses between two compiled loops
     sig = types.void(b1, nb1, off1, tv1, b2, nb2, off2, tv2, steps, xt, fused)
 
     def codegen(context, builder, signature, args):
@@ -279,6 +281,8 @@ def lane_inputs_affine(typingctx, b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0,
     (the first block starts from 0). Fused multiply-adds if ``fused``, as
     in :func:`lane_inputs`.
     """
+    if not isinstance(fused, types.Boolean):
+        return None  # a typing error: the flag chooses between two compiled loops
     sig = types.void(b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0, steps, xt, fused)
 
     def codegen(context, builder, signature, args):
@@ -367,6 +371,8 @@ def lane_recursion(typingctx, coef, na, xt, m, yh, row0, o, k0, val_start, val_s
     added to a partial sum or subtracted from the output, ``d^2`` added to
     a sum of squares) is one fused operation if ``fused``.
     """
+    if not isinstance(fused, types.Boolean):
+        return None  # a typing error: the flag chooses between two compiled loops
     sig = types.boolean(coef, na, xt, m, yh, row0, o, k0, val_start, val_stop, quad_end, eacc, fused)
 
     def codegen(context, builder, signature, args):
@@ -735,10 +741,11 @@ def simulate_wide(
     Lanes ``0 .. n_lanes - 1`` are candidates laid out as in
     :func:`simulate_lanes` with ``LANES`` for 4 (``coef[i * LANES + l]``,
     ``b1[l]``, ``nk1[l]``, ...); the others must hold ``a = [1, 0, ...]``,
-    zero B and zero delays and are ignored. Same arithmetic per lane, same
-    pruning rule and chunks, with a bound per lane (``bound[l]``, float64
-    (LANES,)), so V (or a pruned lane's lower bound) is bit-identical to
-    :func:`simulate_lanes`' with that lane's bound. Requires ``na <=
+    zero B and zero delays and are ignored. Same arithmetic per lane
+    (unless ``fused``: then each multiply-add rounds once, module
+    docstring), same pruning rule and chunks, with a bound per lane
+    (``bound[l]``, float64 (LANES,)), so V (or a pruned lane's lower bound)
+    is bit-identical to :func:`simulate_lanes`' with that lane's bound, unfused. Requires ``na <=
     MAX_NA`` and inputs with ``TAIL`` readable values after the record,
     given as ``tv1 = tap_vectors(i1p)``, ``tv2 = tap_vectors(i2p)``.
 
@@ -1220,6 +1227,9 @@ def simulate_blocks(
         block's best V).
     prune : bool
         False: every stable candidate is simulated in full.
+    fused : bool
+        Fused multiply-adds in the vector steps (module docstring); the
+        plain path (without the JIT, above ``MAX_NA``) is always unfused.
     counts : int64 array, shape (n_blocks, 3), zeros
         Out per block: candidates simulated in full, candidates pruned, and
         candidate-samples simulated (lanes times samples).

@@ -45,8 +45,8 @@ class GridFit:
     na, nb1, nb2 : numpy.ndarray of int64, shape (n_rows,)
         Orders of the row.
     nk1, nk2 : numpy.ndarray of int64, shape (n_rows,)
-        Delays (samples) of the row's best candidate: smallest V, ties to
-        the smaller nk1, then nk2.
+        Delays (samples) of the row's best candidate: smallest V (the
+        search's, see ``fused``), ties to the smaller nk1, then nk2.
     d : numpy.ndarray of int64, shape (n_rows,)
         Number of parameters, ``na + nb1 + nb2 + [nb1 > 0] + [nb2 > 0]``.
     v : numpy.ndarray of float64, shape (n_rows,)
@@ -217,7 +217,7 @@ def fit_grid(
     *,
     threads: int = 1,
     keep_candidates: bool = False,
-    fused: bool = True,
+    fused: bool | None = None,
 ) -> GridFit:
     """Fit every candidate of ``grid`` to one record and keep the frontier.
 
@@ -251,19 +251,22 @@ def fit_grid(
     keep_candidates : bool, default False
         Also return every candidate's orders, delays and V as
         ``GridFit.candidates``.
-    fused : bool, default True
+    fused : bool or None, default None
         Let the search's simulations round each multiply-add once (fused
-        multiply-add) instead of twice: 0.8x the time of the paper's direct
-        grid. The search's V (pruning, each triple's best, the candidates
-        table) then move by rounding (on a paper record by at most 9.3e-12
-        relative on the direct grid, 6.9e-10 on stage 1), but the frontier's
-        V is recomputed from its rows' unfused outputs (with their VAF), so
-        the frontier equals the unfused one bit for bit unless two candidates
-        of a triple are within that rounding of each other (never in the
-        paper study or ``configs/ci.yaml``; the row then holds the fused
-        search's choice, with its unfused V). Without
-        the JIT and for na > 12 the simulations are unfused whatever ``fused``
-        says.
+        multiply-add) instead of twice: 0.76x the time of the paper's direct
+        grid. None: fused if the CPU numba compiles for has FMA units
+        (without, ``llvm.fma`` is a slow library call). The search's V
+        (pruning, each triple's best, the candidates table) then move by
+        rounding (on a paper record by at most 9.3e-12 relative on the
+        direct grid, 6.9e-10 on stage 1). The results do not: a triple whose
+        two smallest V are within 1e-6 relative of each other is simulated
+        again unfused, and the frontier's V is recomputed from its rows'
+        unfused outputs (with their VAF), so the frontier is the unfused
+        one bit for bit, unless fused rounding moved a V by more than
+        5e-7 relative, or overflowed one that unfused arithmetic does not
+        (then the row keeps the search's V, and its VAF is NaN), or the
+        reverse (an unstable count one off): none seen. Without the JIT and
+        for na > 12 the simulations are unfused whatever ``fused`` says.
 
     Returns
     -------
@@ -298,14 +301,14 @@ def fit_grid(
     the 2.8e9 of stage-1 candidates with nb1 near 25; the same candidates
     are unstable. Normal equations would square the condition number.
 
-    The best of an order triple is the smallest V, ties to the smaller
-    nk1, then nk2. The frontier's coefficients are the ones the grid loop
+    The best of an order triple is the smallest V of the search, ties to
+    the smaller nk1, then nk2. The frontier's coefficients are the ones the grid loop
     computed; its V and VAF come from their outputs, the values
     :func:`simulate` gives bit for bit (unfused; the tests compare them).
 
     Speed: the simulations dominate. The stable candidates of each order
-    triple are simulated 16 at a time, one SIMD lane each, fused or with the
-    arithmetic of the one-at-a-time kernel (:mod:`hcid.arx._lanes`), those
+    triple are simulated 16 at a time, one SIMD lane each, with fused
+    multiply-adds or the arithmetic of the one-at-a-time kernel (:mod:`hcid.arx._lanes`), those
     with the smallest prediction error first; without ``keep_candidates``
     a candidate stops once its partial V exceeds the best V of its triple
     so far, which cannot change the frontier (V only grows).
@@ -316,6 +319,14 @@ def fit_grid(
         i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_candidates, legacy=False, fused=fused
     )
     return fit
+
+
+def _fused(fused) -> bool:
+    if fused is None:
+        return _kernels.has_fma()
+    if not isinstance(fused, bool | np.bool_):
+        raise IdentificationError(f"fused: must be True, False or None, got {fused!r}")
+    return bool(fused)
 
 
 def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_candidates, *, legacy, fused):
@@ -345,6 +356,7 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
             f"coefficients), got {est_stop - est_start}"
         )
     threads = _threads(threads)
+    fused = _fused(fused)
 
     pad = max_lag(grid)
     i1p = _padded(i1, pad)
@@ -374,12 +386,26 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
             # Stable candidates wait with V = NaN; simulate them per order
             # triple, pruning unless every V is wanted.
             orders = np.stack((block_na, block_nb1, block_nb2), axis=1)
-            args = (orders, start, size, bounds, theta_all, score, i1p, i2p, tv1, tv2, pad, o,
-                    val_start, val_stop, not keep_candidates, fused, v_all, counts)  # fmt: skip
-            if threads == 1:
-                _lanes.simulate_blocks(*args)
-            else:
-                _kernels.run_parallel(_lanes.simulate_blocks_parallel, args, threads)
+            waiting = np.isnan(v_all)
+
+            def simulate_blocks(blocks, fuse):
+                args = (orders[blocks], start[blocks], size[blocks], bounds, theta_all, score, i1p, i2p,
+                        tv1, tv2, pad, o, val_start, val_stop, not keep_candidates, fuse, v_all)  # fmt: skip
+                done = np.zeros((blocks.size, 3), dtype=np.int64)
+                if threads == 1:
+                    _lanes.simulate_blocks(*args, done)
+                else:
+                    _kernels.run_parallel(_lanes.simulate_blocks_parallel, (*args, done), threads)
+                counts[blocks] = done
+
+            simulate_blocks(np.arange(start.size), fused)
+            if fused:
+                # A triple whose best two V are this close could have chosen otherwise
+                # unfused: simulated again, unfused, its frontier row is the unfused one.
+                again = _near_ties(v_all, start, size)
+                if again.any():
+                    v_all[np.repeat(again, size) & waiting] = np.nan
+                    simulate_blocks(np.flatnonzero(again), False)
 
     # Frontier: equal V keep the candidate order, in which nk1 and then nk2
     # increase inside a block.
@@ -460,6 +486,24 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
         n_unstable_total=int(np.count_nonzero(unstable)),
         candidates=table,
     ), counts
+
+
+#: Triples whose two smallest search V are within this relative distance are simulated
+#: again unfused (fit_grid, ``fused``): 1,400 times the largest difference fused arithmetic
+#: made on a paper record (6.9e-10); the closest pair there is 2.6e-6 apart.
+_TIE_RTOL = 1e-6
+
+
+def _near_ties(v_all: np.ndarray, start: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """Per block: whether its smallest V has another within ``_TIE_RTOL`` relative (a pruned
+    candidate's V is a lower bound of its own, so this misses none)."""
+    first = _kernels.block_best(v_all, start, size)
+    best = v_all[first]
+    rest = v_all.copy()
+    rest[first] = np.inf
+    with np.errstate(invalid="ignore"):
+        second = np.minimum.reduceat(rest, start)
+        return np.isfinite(best) & (second <= best * (1.0 + _TIE_RTOL))
 
 
 def _squared_errors(models, i1p, i2p, tv1, tv2, pad, o, est, val, same):
