@@ -1479,23 +1479,110 @@ def test_near_ties_are_simulated_again_unfused(paper_record, monkeypatch, thread
     assert counts[:, :2].sum() == stable  # each triple counted once, from its last simulation
 
 
+def _blocks_of(grid):
+    return engine.order_blocks(grid)[3:]
+
+
+@needs_jit
+def test_triples_searched_again_unfused_are_the_unfused_ones(paper_record, monkeypatch):
+    # Every other triple searched again (a subset that splits the runs of one (na, nb1)):
+    # their candidates' V are the unfused engine's, the others' the fused one's, and the
+    # frontier is the unfused one. Source: the fused and unfused engines themselves.
+    grid = Grid(na=(1, 3), nb1=(0, 3), nb2=(0, 2), nk1=(20, 27), nk2=(4, 6))
+    signals = _direct(paper_record)
+    unfused = fit_grid(*signals, grid, *DIRECT_ROWS, keep_candidates=True, fused=False)
+    fused = fit_grid(*signals, grid, *DIRECT_ROWS, keep_candidates=True, fused=True)
+    start, size = _blocks_of(grid)
+    every_other = np.arange(start.size) % 2 == 0
+    monkeypatch.setattr(engine, "_near_ties", lambda v, start, size: every_other)
+    mixed = fit_grid(*signals, grid, *DIRECT_ROWS, keep_candidates=True, fused=True)
+    again = np.repeat(every_other, size)
+    v, v_unfused, v_fused = (f.candidates["v"].to_numpy() for f in (mixed, unfused, fused))
+    np.testing.assert_array_equal(v[again], v_unfused[again])
+    np.testing.assert_array_equal(v[~again], v_fused[~again])
+    assert not np.array_equal(v_fused[again], v_unfused[again])  # the re-run changed something
+    _assert_same_frontier(mixed, unfused)
+
+
+@needs_jit
+def test_a_frontier_row_off_the_search_or_an_overflow_is_searched_again(paper_record, monkeypatch):
+    # A stable candidate whose fused output overflowed, and a frontier row whose unfused V
+    # is further from the search's than the margin: their triples are searched again
+    # unfused, so the frontier is the unfused one. Provoked: the fused pass's best of
+    # triple 0 made inf; the margin set to 0 (every row whose V moved is off).
+    grid = Grid(na=(1, 2), nb1=(0, 2), nb2=(0, 2), nk1=(20, 23), nk2=(4, 5))
+    signals = _direct(paper_record)
+    unfused = fit_grid(*signals, grid, *DIRECT_ROWS, keep_candidates=True, fused=False)
+    start, size = _blocks_of(grid)
+    best0 = start[0] + int(np.argmin(unfused.candidates["v"].to_numpy()[: size[0]]))
+    blocks = _lanes.simulate_blocks
+
+    def overflow_once(*args):
+        blocks(*args)
+        if args[15] and args[1][0] == start[0]:  # the fused pass over every triple
+            args[16][best0] = np.inf
+
+    monkeypatch.setattr(_lanes, "simulate_blocks", overflow_once)
+    _assert_same_frontier(fit_grid(*signals, grid, *DIRECT_ROWS, fused=True), unfused)
+    monkeypatch.setattr(_lanes, "simulate_blocks", blocks)
+    v_fused = (
+        fit_grid(*signals, grid, *DIRECT_ROWS, keep_candidates=True, fused=True).candidates["v"].to_numpy()
+    )
+    v_unfused = unfused.candidates["v"].to_numpy()
+    best = _kernels.block_best(v_unfused, start, size)
+    off = np.isfinite(v_unfused[best]) & (v_fused[best] != v_unfused[best])  # rows the margin 0 rejects
+    assert off.any() and (~off).any()
+    monkeypatch.setattr(engine, "_TIE_RTOL", 0.0)
+    again = fit_grid(*signals, grid, *DIRECT_ROWS, keep_candidates=True, fused=True)
+    _assert_same_frontier(again, unfused)
+    v, rerun = again.candidates["v"].to_numpy(), np.repeat(off, size)
+    np.testing.assert_array_equal(v[rerun], v_unfused[rerun])
+    np.testing.assert_array_equal(v[~rerun], v_fused[~rerun])
+
+
 def test_near_ties_finds_close_pairs_and_pruned_bounds():
     # Blocks [0, 3), [3, 5), [5, 8): a runner-up within 1e-6 (a full V or a pruned lower
     # bound), one far off, and a block with one stable candidate and NaN-free infs.
-    v = np.array([1.0, 1.0 + 5e-7, 2.0, 3.0, 3.0 * (1 + 2e-6), 4.0, np.inf, np.inf])
-    start = np.array([0, 3, 5])
-    size = np.array([3, 2, 3])
-    np.testing.assert_array_equal(engine._near_ties(v, start, size), [True, False, False])
+    # Then a block with no stable candidate, one with one, and one whose best is not first.
+    v = np.array(
+        [
+            1.0,
+            1.0 + 5e-7,
+            2.0,
+            3.0,
+            3.0 * (1 + 2e-6),
+            4.0,
+            np.inf,
+            np.inf,
+            np.inf,
+            np.inf,
+            7.0,
+            2.0,
+            2.0 - 1e-7,
+        ]
+    )
+    start = np.array([0, 3, 5, 8, 10, 11])
+    size = np.array([3, 2, 3, 2, 1, 2])
+    expected = [True, False, False, False, False, True]
+    np.testing.assert_array_equal(engine._near_ties(v, start, size), expected)
 
 
 def test_fused_must_be_a_bool_or_none(paper_record, monkeypatch):
     grid = Grid(na=(1, 1), nb1=(0, 1), nb2=(0, 1), nk1=(20, 21), nk2=(4, 5))
     with pytest.raises(IdentificationError, match=r"^fused: must be True, False or None, got 1$"):
         fit_grid(*_direct(paper_record), grid, *DIRECT_ROWS, fused=1)
-    # None: fused where the CPU has FMA units (hcid.arx._kernels.has_fma).
-    monkeypatch.setattr(numba.config, "CPU_NAME", "generic")
-    monkeypatch.setattr(numba.config, "CPU_FEATURES", "+sse2,+avx")
-    assert not _kernels.has_fma()
-    monkeypatch.setattr(numba.config, "CPU_FEATURES", "+avx,+fma")
-    assert _kernels.has_fma()
+    # None: fused where numba compiles with FMA units (hcid.arx._kernels.has_fma): the
+    # features it is told (NUMBA_CPU_FEATURES), else the host's.
+    for features, expected in (
+        ("+sse2,+avx", False),
+        ("+avx,+fma", True),
+        ("+fma4", False),
+        ("+avx,-fma", False),
+    ):
+        monkeypatch.setattr(numba.config, "CPU_FEATURES", features)
+        assert _kernels.has_fma() is expected, features
+    monkeypatch.setattr(numba.config, "CPU_FEATURES", None)
+    from llvmlite import binding
+
+    assert _kernels.has_fma() is bool(binding.get_host_cpu_features().get("fma", False))
     assert engine._fused(None) is True and engine._fused(np.bool_(False)) is False

@@ -627,15 +627,17 @@ def block_best(v_all, start, size):
 
 
 def has_fma() -> bool:
-    """Whether numba compiles for a CPU with fused multiply-add units (its host, unless
-    ``NUMBA_CPU_NAME`` names another). Without them ``llvm.fma`` is a library call per
-    element, many times slower than a multiply and an add."""
-    name = numba.config.CPU_NAME
-    if name and name != "host":
-        return "+fma" in (numba.config.CPU_FEATURES or "")
-    from llvmlite import binding
+    """Whether numba compiles for a CPU with fused multiply-add units: the features it
+    compiles with (``NUMBA_CPU_FEATURES`` if set, else the host's). Without them
+    ``llvm.fma`` is a library call per element, many times slower than a multiply and an
+    add."""
+    features = numba.config.CPU_FEATURES
+    if features is None:
+        from llvmlite import binding
 
-    return bool(binding.get_host_cpu_features().get("fma", False))
+        return bool(binding.get_host_cpu_features().get("fma", False))
+    flags = {f[1:]: f[0] == "+" for f in features.split(",") if f}
+    return flags.get("fma", False)
 
 
 def max_threads() -> int:

@@ -70,8 +70,8 @@ class GridFit:
         With ``keep_candidates=True``, one row per candidate in the order of
         :func:`hcid.arx.grid.candidates`: columns na, nb1, nb2, nk1, nk2
         (int64) and v (float64, ``inf`` if unstable): the search's V, fused
-        unless ``fit_grid(fused=False)``, so a frontier candidate's V here may
-        differ from its row's by rounding.
+        (but in triples searched again unfused) unless ``fit_grid(fused=False)``,
+        so a frontier candidate's V here may differ from its row's by rounding.
     """
 
     grid: Grid
@@ -253,20 +253,21 @@ def fit_grid(
         ``GridFit.candidates``.
     fused : bool or None, default None
         Let the search's simulations round each multiply-add once (fused
-        multiply-add) instead of twice: 0.76 to 0.78x the time of the paper's direct
-        grid. None: fused if the CPU numba compiles for has FMA units
+        multiply-add) instead of twice: 0.76 to 0.78x the time of the paper's
+        direct grid. None: fused if the CPU numba compiles for has FMA units
         (without, ``llvm.fma`` is a slow library call). The search's V
         (pruning, each triple's best, the candidates table) then move by
         rounding (on a paper record by at most 9.3e-12 relative on the
-        direct grid, 6.9e-10 on stage 1). The results do not: a triple whose
-        two smallest V are within 1e-6 relative of each other is simulated
-        again unfused, and the frontier's V is recomputed from its rows'
-        unfused outputs (with their VAF), so the frontier is the unfused
-        one bit for bit, unless fused rounding moved a V by more than
-        5e-7 relative, or overflowed one that unfused arithmetic does not
-        (then the row keeps the search's V, and its VAF is NaN), or the
-        reverse (an unstable count one off): none seen. Without the JIT and
-        for na > 12 the simulations are unfused whatever ``fused`` says.
+        direct grid, 6.9e-10 on stage 1). The results do not: the frontier's
+        V is recomputed from its rows' unfused outputs (with their VAF), and
+        a triple is searched again unfused if its two smallest V are within
+        1e-6 relative of each other, if a stable candidate's output
+        overflowed, or if its frontier row's unfused V is not finite or more
+        than 2.5e-7 from the search's. So the frontier and the unstable
+        counts are the unfused search's bit for bit, unless fused rounding
+        moved some other candidate's V by more than 5e-7 relative while
+        moving the best's by less than 2.5e-7 (none seen). Without the JIT
+        and for na > 12 the simulations are unfused whatever ``fused`` says.
 
     Returns
     -------
@@ -396,24 +397,48 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
                     _lanes.simulate_blocks(*args, done)
                 else:
                     _kernels.run_parallel(_lanes.simulate_blocks_parallel, (*args, done), threads)
-                counts[blocks] = done
+                counts[blocks, :2] = done[:, :2]  # each candidate once: its last simulation
+                counts[blocks, 2] += done[:, 2]  # the work: every simulation
 
             simulate_blocks(np.arange(start.size), fused)
-            if fused:
-                # A triple whose best two V are this close could have chosen otherwise
-                # unfused: simulated again, unfused, its frontier row is the unfused one.
-                again = _near_ties(v_all, start, size)
-                if again.any():
-                    v_all[np.repeat(again, size) & waiting] = np.nan
-                    simulate_blocks(np.flatnonzero(again), False)
+            # Triples searched fused but whose choice fused rounding could have changed
+            # are searched again unfused (fit_grid, ``fused``); not those that ran
+            # unfused anyway (no JIT, na above the vector recursion's).
+            fused_blocks = fused & _lanes._WIDE & (block_na <= _lanes.MAX_NA)
+            again = fused_blocks & _near_ties(v_all, start, size)
+            # A stable candidate whose fused output overflowed might not overflow unfused.
+            again |= fused_blocks & np.logical_or.reduceat(waiting & np.isinf(v_all), start)
+            if again.any():
+                v_all[np.repeat(again, size) & waiting] = np.nan
+                simulate_blocks(np.flatnonzero(again), False)
 
     # Frontier: equal V keep the candidate order, in which nk1 and then nk2
-    # increase inside a block.
-    first = _kernels.block_best(v_all, start, size)
+    # increase inside a block. Its V and VAF come from the frontier rows' outputs:
+    # the values simulate() gives, bit for bit, whatever arithmetic the search used.
     cand_na, cand_nb1, cand_nb2, cand_nk1, cand_nk2 = candidates(grid)
+    layout = (block_na, block_nb1, block_nb2, cand_nk1, cand_nk2)
+    windows = ((est_start, est_stop), (val_start, val_stop))
+    first = _kernels.block_best(v_all, start, size)
+    v, vaf_est, vaf_val = _frontier_outputs(
+        first, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows
+    )
+    if not legacy and fused:
+        # A row whose unfused V is not finite, or further from the search's than the
+        # tie margin assumes (never seen): its triple is searched again unfused.
+        search = v_all[first]
+        with np.errstate(invalid="ignore"):  # inf - inf where the triple has no stable candidate
+            moved = ~(np.abs(v - search) <= 0.25 * _TIE_RTOL * np.abs(v))
+        off = fused_blocks & np.isfinite(search) & moved
+        if off.any():
+            v_all[np.repeat(off, size) & waiting] = np.nan
+            with np.errstate(over="ignore", invalid="ignore"):
+                simulate_blocks(np.flatnonzero(off), False)
+            first = _kernels.block_best(v_all, start, size)
+            v, vaf_est, vaf_val = _frontier_outputs(
+                first, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows
+            )
     unstable = ~np.isfinite(v_all)
-    v = v_all[first]
-    fitted = np.isfinite(v)
+    fitted = np.isfinite(v_all[first])
     nk1 = np.where(fitted, cand_nk1[first], -1)
     nk2 = np.where(fitted, cand_nk2[first], -1)
     # Each row's [1, a1..a_na], b1, b2: slices of one copy of the frontier's theta.
@@ -426,34 +451,6 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
         a_rows.append(theta[: na + 1] if ok else empty)
         b1_rows.append(theta[na + 1 : na + 1 + nb1] if ok else empty)
         b2_rows.append(theta[na + 1 + nb1 : na + 1 + nb1 + nb2] if ok else empty)
-    # VAF from the frontier rows' outputs: the values simulate() gives, bit for bit. Their V
-    # too: the search may have fused its multiply-adds (``fused``), the frontier's V is that
-    # of simulate()'s output, as the one-candidate kernel computes it.
-    rows = np.flatnonzero(fitted)
-    models = (theta_all[first[rows]], block_na[rows], block_nb1[rows], block_nb2[rows], nk1[rows], nk2[rows])
-    vaf_est = np.full(start.size, np.nan)
-    vaf_val = np.full(start.size, np.nan)
-    same = (est_start, est_stop) == (val_start, val_stop)  # stage 1: one window for both
-    for chunk in range(0, rows.size, _VAF_ROWS):  # squared errors a chunk of rows at a time (in cache)
-        part = slice(chunk, chunk + _VAF_ROWS)
-        err_est, err_val = _squared_errors(
-            [x[part] for x in models],
-            i1p,
-            i2p,
-            tv1,
-            tv2,
-            pad,
-            o,
-            (est_start, est_stop),
-            (val_start, val_stop),
-            same,
-        )
-        vaf_est[rows[part]] = _vaf(err_est, o[est_start:est_stop])
-        vaf_val[rows[part]] = vaf_est[rows[part]] if same else _vaf(err_val, o[val_start:val_stop])
-        unfused = np.empty(err_val.shape[0])
-        _kernels.mse_of_squares(err_val, unfused)
-        # (An output finite fused but not unfused, a case never seen, keeps the search's V.)
-        v[rows[part]] = np.where(np.isfinite(unfused), unfused, v[rows[part]])
 
     table = None
     if keep_candidates:
@@ -488,9 +485,44 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
     ), counts
 
 
+def _frontier_outputs(first, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows):
+    """V, VAF on the estimation rows and VAF on the validation rows of each block's candidate
+    ``first``, from its output as :func:`simulate` gives it (unfused). ``layout`` is the
+    blocks' (na, nb1, nb2) and the candidates' (nk1, nk2). A block without a finite search V
+    keeps it and NaN VAF; so does a row whose output is not finite (never seen: the search
+    found it finite)."""
+    block_na, block_nb1, block_nb2, cand_nk1, cand_nk2 = layout
+    (est_start, est_stop), (val_start, val_stop) = windows
+    v = v_all[first]
+    rows = np.flatnonzero(np.isfinite(v))
+    chosen = first[rows]
+    models = (
+        theta_all[chosen],
+        block_na[rows],
+        block_nb1[rows],
+        block_nb2[rows],
+        cand_nk1[chosen],
+        cand_nk2[chosen],
+    )
+    vaf_est = np.full(first.size, np.nan)
+    vaf_val = np.full(first.size, np.nan)
+    same = (est_start, est_stop) == (val_start, val_stop)  # stage 1: one window for both
+    for chunk in range(0, rows.size, _VAF_ROWS):  # squared errors a chunk of rows at a time (in cache)
+        part = slice(chunk, chunk + _VAF_ROWS)
+        err_est, err_val = _squared_errors(
+            [x[part] for x in models], i1p, i2p, tv1, tv2, pad, o, *windows, same
+        )
+        vaf_est[rows[part]] = _vaf(err_est, o[est_start:est_stop])
+        vaf_val[rows[part]] = vaf_est[rows[part]] if same else _vaf(err_val, o[val_start:val_stop])
+        unfused = np.empty(err_val.shape[0])
+        _kernels.mse_of_squares(err_val, unfused)
+        v[rows[part]] = np.where(np.isfinite(unfused), unfused, v[rows[part]])
+    return v, vaf_est, vaf_val
+
+
 #: Triples whose two smallest search V are within this relative distance are simulated
-#: again unfused (fit_grid, ``fused``): 1,400 times the largest difference fused arithmetic
-#: made on a paper record (6.9e-10). There no two full V are closer than 2.6e-6, but a pruned
+#: again unfused (fit_grid, ``fused``): about 700 times the largest difference fused
+#: arithmetic made on a paper record (6.9e-10; both V of a pair can move). There no two full V are closer than 2.6e-6, but a pruned
 #: candidate's lower bound can be: 1 of 2,860 stage-1 triples, 1 of 448 direct and 2 of 448
 #: stage-2 triples are simulated again (0.3 to 0.6% of each grid's candidates).
 _TIE_RTOL = 1e-6
