@@ -522,9 +522,10 @@ def _frontier_outputs(first, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, 
 
 #: Triples whose two smallest search V are within this relative distance are simulated
 #: again unfused (fit_grid, ``fused``): about 700 times the largest difference fused
-#: arithmetic made on a paper record (6.9e-10; both V of a pair can move). There no two full V are closer than 2.6e-6, but a pruned
-#: candidate's lower bound can be: 1 of 2,860 stage-1 triples, 1 of 448 direct and 2 of 448
-#: stage-2 triples are simulated again (0.3 to 0.6% of each grid's candidates).
+#: arithmetic made on a paper record (6.9e-10; both V of a pair can move). There no two
+#: full V are closer than 2.6e-6, but a pruned candidate's lower bound can be: 1 of 2,860
+#: stage-1 triples, 1 of 448 direct and 2 of 448 stage-2 triples are simulated again (0.3
+#: to 0.6% of each grid's candidates).
 _TIE_RTOL = 1e-6
 
 
