@@ -400,6 +400,12 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
                 counts[blocks, :2] = done[:, :2]  # each candidate once: its last simulation
                 counts[blocks, 2] += done[:, 2]  # the work: every simulation
 
+            def search_again_unfused(again):
+                """The stable candidates of the blocks ``again`` (a mask) simulated anew, unfused."""
+                v_all[np.repeat(again, size) & waiting] = np.nan
+                with np.errstate(over="ignore", invalid="ignore"):
+                    simulate_blocks(np.flatnonzero(again), False)
+
             simulate_blocks(np.arange(start.size), fused)
             # Triples searched fused but whose choice fused rounding could have changed
             # are searched again unfused (fit_grid, ``fused``); not those that ran
@@ -409,8 +415,7 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
             # A stable candidate whose fused output overflowed might not overflow unfused.
             again |= fused_blocks & np.logical_or.reduceat(waiting & np.isinf(v_all), start)
             if again.any():
-                v_all[np.repeat(again, size) & waiting] = np.nan
-                simulate_blocks(np.flatnonzero(again), False)
+                search_again_unfused(again)
 
     # Frontier: equal V keep the candidate order, in which nk1 and then nk2
     # increase inside a block. Its V and VAF come from the frontier rows' outputs:
@@ -430,9 +435,7 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
             moved = ~(np.abs(v - search) <= 0.25 * _TIE_RTOL * np.abs(v))
         off = fused_blocks & np.isfinite(search) & moved
         if off.any():
-            v_all[np.repeat(off, size) & waiting] = np.nan
-            with np.errstate(over="ignore", invalid="ignore"):
-                simulate_blocks(np.flatnonzero(off), False)
+            search_again_unfused(off)
             first = _kernels.block_best(v_all, start, size)
             v, vaf_est, vaf_val = _frontier_outputs(
                 first, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows
