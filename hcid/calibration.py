@@ -20,7 +20,7 @@ import pyarrow as pa
 from scipy import stats
 
 from hcid import tables
-from hcid.selection import Segments
+from hcid.selection import SelectionPath
 
 __all__ = ["ERRORS", "Calibration", "RateCurve", "calibrate", "clopper_pearson", "error_rates"]
 
@@ -41,7 +41,7 @@ def clopper_pearson(k: np.ndarray, n: int, level: float = 0.95) -> tuple[np.ndar
     return low, high
 
 
-def _counts(segments: list[Segments], nb_ft: list[np.ndarray], w: np.ndarray, positive) -> np.ndarray:
+def _counts(segments: list[SelectionPath], nb_ft: list[np.ndarray], w: np.ndarray, positive) -> np.ndarray:
     return np.sum([positive(nb[s.at(w)]) for s, nb in zip(segments, nb_ft, strict=True)], axis=0)
 
 
@@ -78,15 +78,15 @@ class RateCurve:
 
 
 def error_rates(
-    method: str, model: str, error: str, segments: list[Segments], nb_ft: list[np.ndarray], w: np.ndarray
+    method: str, model: str, error: str, segments: list[SelectionPath], nb_ft: list[np.ndarray], w: np.ndarray
 ) -> RateCurve:
     """Rate of ``error`` (a key of :data:`ERRORS`) over realizations at each W, exactly, with
     Clopper-Pearson 95% bands.
 
     Examples
     --------
-    >>> from hcid.selection import Segments
-    >>> seg = Segments(np.array([0, 1]), np.array([0.0, 0.01]), np.array([0.01, np.inf]))
+    >>> from hcid.selection import SelectionPath
+    >>> seg = SelectionPath(np.array([0, 1]), np.array([0.0, 0.01]), np.array([0.01, np.inf]))
     >>> c = error_rates("direct", "FB", "false_positive", [seg, seg], [np.array([2, 0])] * 2, [0.005, 0.02])
     >>> c.rate.tolist(), np.round(c.high, 4).tolist()  # k = 0 of 2: 1 - 0.025^(1/2)
     ([1.0, 0.0], [1.0, 0.8419])
@@ -150,8 +150,8 @@ class Calibration:
 
 def calibrate(
     method: str,
-    fb: tuple[list[Segments], list[np.ndarray]],
-    ff: tuple[list[Segments], list[np.ndarray]],
+    fb: tuple[list[SelectionPath], list[np.ndarray]],
+    ff: tuple[list[SelectionPath], list[np.ndarray]],
     w: np.ndarray,
     target_rate: float = 0.0,
 ) -> Calibration:

@@ -32,7 +32,7 @@ def _root() -> None:
 
 
 ConfigArg = Annotated[Path, typer.Argument(help="Study config (YAML).", show_default=False)]
-RunOpt = Annotated[Path | None, typer.Option("--run", help="Run directory [default: runs/<config name>].")]
+RunOpt = Annotated[Path | None, typer.Option("--run", help="Run directory (default: runs/<config name>).")]
 JobsOpt = Annotated[int, typer.Option("--jobs", min=1, max=256, help="Worker processes.")]
 QuietOpt = Annotated[bool, typer.Option("--quiet", help="No progress bar.")]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Recompute what is already done.")]
@@ -50,7 +50,7 @@ TimeoutOpt = Annotated[
 ]
 SchedulerOpt = Annotated[
     str | None,
-    typer.Option("--scheduler", help="dask scheduler address tcp://host:port [default: a local cluster]."),
+    typer.Option("--scheduler", help="dask scheduler address tcp://host:port (default: a local cluster)."),
 ]
 
 
@@ -59,16 +59,10 @@ def _user_errors(func):
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
-        import warnings
-
         from hcid.errors import HcidError
 
         try:
-            with warnings.catch_warnings():
-                # Overflow in an unstable candidate's simulation or a log of an absent path is
-                # handled where it happens (V = inf, counted; NaN skipped): not a user's concern.
-                warnings.simplefilter("ignore", RuntimeWarning)
-                return func(*args, **kwargs)
+            return func(*args, **kwargs)
         except HcidError as exc:
             typer.echo(f"hcid: error: {exc}", err=True)
             raise typer.Exit(code=2) from None
@@ -76,12 +70,12 @@ def _user_errors(func):
     return wrapper
 
 
-def _load(config: Path, run: Path | None, backend: str = "loky"):
-    """The parsed config and its run directory; a bad --backend is refused before any work."""
+def _load(config: Path, run: Path | None, backend: str = "loky", scheduler: str | None = None):
+    """The parsed config and its run directory; a bad --backend or --scheduler is refused before any work."""
     from hcid.config import load_config
     from hcid.pipeline import check_backend
 
-    check_backend(backend)
+    check_backend(backend, scheduler)
     cfg = load_config(config)
     return cfg, (run if run is not None else Path("runs") / cfg.name)
 
@@ -137,7 +131,7 @@ def identify(
     """Identify every model x seed of CONFIG (or every run of --data); writes RUN/frontier.parquet."""
     from hcid.pipeline import identify_study
 
-    cfg, run_dir = _load(config, run, backend)
+    cfg, run_dir = _load(config, run, backend, scheduler)
     result = identify_study(
         cfg,
         run_dir,
@@ -179,7 +173,7 @@ def run_all(
     """Simulate, identify every method and sweep W, skipping what is already done."""
     from hcid.pipeline import run_study
 
-    cfg, run_dir = _load(config, run, backend)
+    cfg, run_dir = _load(config, run, backend, scheduler)
     result = run_study(
         cfg,
         run_dir,
@@ -208,7 +202,7 @@ def calibrate_w(
     """Calibrate W on simulations of the config's FB and FF twins: rates, safe interval, recommended W."""
     from hcid.pipeline import calibrate_study
 
-    cfg, run_dir = _load(config, run, backend)
+    cfg, run_dir = _load(config, run, backend, scheduler)
     result = calibrate_study(
         cfg,
         run_dir,
@@ -243,7 +237,7 @@ def fit_hc(
     w: Annotated[
         list[float] | None,
         typer.Option(
-            "--w", help="W to analyse (repeat for several) [default: calibrated W if any, else W_BIC]."
+            "--w", help="W to analyse (repeat for several; default: the calibrated W if any, else W_BIC)."
         ),
     ] = None,
     method: MethodOpt = "all",
@@ -257,7 +251,7 @@ def fit_hc(
     writes RUN/hc_parameters.parquet and RUN/residuals.parquet."""
     from hcid.pipeline import fit_hc_study
 
-    cfg, run_dir = _load(config, run, backend)
+    cfg, run_dir = _load(config, run, backend, scheduler)
     result = fit_hc_study(
         cfg,
         run_dir,
@@ -277,7 +271,7 @@ def fit_hc(
 def report(
     run_dir: Annotated[Path, typer.Argument(help="Run directory.", show_default=False)],
     out: Annotated[
-        Path | None, typer.Option("--out", help="Output directory [default: RUN_DIR/report].")
+        Path | None, typer.Option("--out", help="Output directory (default: RUN_DIR/report).")
     ] = None,
 ):
     """Write RUN_DIR/report/report.md and report.html with the paper's figures and verdicts."""
@@ -291,6 +285,24 @@ def report(
         mark = v.status_text if v.holds is not False else "DOES NOT HOLD"
         typer.echo(f"{v.claim:<{width}}  {mark:<14} {v.this_run}")
     typer.echo(f"report: {result.html}")
+
+
+def main() -> None:
+    """The ``hcid`` command: a misused option or argument is one line on stderr and exit code 2."""
+    import sys
+
+    if len(sys.argv) <= 1:
+        sys.argv.append("--help")
+    try:
+        code = app(standalone_mode=False)
+    except typer.TyperException as exc:  # typer's usage errors: a bad option value, a missing argument
+        message = exc.format_message() if hasattr(exc, "format_message") else str(exc)
+        typer.echo(f"hcid: error: {' '.join(message.split())}", err=True)
+        code = getattr(exc, "exit_code", 2)
+    except typer.Abort:
+        typer.echo("hcid: aborted", err=True)
+        code = 130
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 # --------------------------------------------------------------------------- summaries

@@ -21,3 +21,19 @@ class DataError(HcidError, ValueError):
 
 class IdentificationError(HcidError, ValueError):
     """An identification request cannot be carried out on the given data."""
+
+
+#: Longest quote of a value in an error message (a message stays one readable line).
+QUOTE = 80
+
+
+def quote(value: object) -> str:
+    """A value as an error message quotes it: repr for strings, at most :data:`QUOTE` characters.
+
+    Examples
+    --------
+    >>> quote("ft"), quote(2.5), len(quote("x" * 500))
+    ("'ft'", '2.5', 80)
+    """
+    text = repr(value) if isinstance(value, str) else str(value)
+    return text if len(text) <= QUOTE else text[: QUOTE - 3] + "..."

@@ -14,6 +14,7 @@ import control
 import numpy as np
 
 from hcid.config import HCModel, Loop
+from hcid.errors import ConfigError, quote
 
 #: Discretisation of the deterministic paths (Hft, He, Yc). Tustin keeps the
 #: phase of these smooth signals (ZOH would add half a sample of lag to each);
@@ -60,11 +61,9 @@ def feedforward_path(model: HCModel, loop: Loop) -> control.TransferFunction:
     num = np.trim_zeros(np.atleast_1d(np.asarray(path.num[0][0], dtype=np.float64)), "f")
     den = np.atleast_1d(np.asarray(path.den[0][0], dtype=np.float64))
     if num.size > den.size:
-        from hcid.errors import ConfigError
-
         raise ConfigError(
             f"models.{model.name}: the feedforward path Ynms Kpt / Yc / (TI s + 1)^2 is improper "
-            f"for the plant {yc.text} (numerator degree {num.size - 1} > denominator degree "
+            f"for the plant {quote(yc.text)} (numerator degree {num.size - 1} > denominator degree "
             f"{den.size - 1}); no proper Inverse Feedforward Model exists for it"
         )
     return path
@@ -168,8 +167,8 @@ def closed_loop_poles(model: HCModel, loop: Loop, dt: float) -> np.ndarray:
 
     Examples
     --------
-    >>> from hcid.config.types import HCModel, Loop
-    >>> loop = Loop(Kc=2.75, wb=2.0, w_nms=10.1, zeta_nms=0.35, w_n=12.7, zeta_n=0.26, remnant_ratio=0.15)
+    >>> from hcid.config.types import HCModel, Loop, Plant
+    >>> loop = Loop(Plant.second_order(2.75, 2.0), 10.1, 0.35, 12.7, 0.26, remnant_ratio=0.15)
     >>> fb = HCModel("FB", 0.0, 0.0, 0.0, 0.75, 0.4, 0.24)
     >>> bool(np.max(np.abs(closed_loop_poles(fb, loop, 0.01))) < 1)
     True
@@ -200,7 +199,6 @@ def check_closed_loops(models, loop: Loop, dt: float) -> None:
     ConfigError
         ``models.<name>: the closed loop with this plant is unstable (pole at z = ..., |z| = ...)``.
     """
-    from hcid.errors import ConfigError
 
     for model in models:
         ff = feedforward_path(model, loop)
@@ -210,7 +208,7 @@ def check_closed_loops(models, loop: Loop, dt: float) -> None:
                 p = ff_poles[np.argmax(ff_poles.real)]
                 raise ConfigError(
                     f"models.{model.name}: the feedforward path Ynms Kpt / Yc / (TI s + 1)^2 is unstable "
-                    f"for the plant {loop.plant.text} (pole at s = {p.real:.3g}{p.imag:+.3g}j rad/s: "
+                    f"for the plant {quote(loop.plant.text)} (pole at s = {p.real:.3g}{p.imag:+.3g}j rad/s: "
                     "a zero of the plant in the right half-plane or at 0)"
                 )
     for model in models:

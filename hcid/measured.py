@@ -4,33 +4,95 @@ Part of the results layer (it reads files). A data file holds one or more runs
 of one subject and condition, each with ft, fd, e and u (rad) and either a
 time column or a sample rate. Names are mapped by the config's ``data``
 section. Every check fails with one line naming the file and what is wrong:
-missing columns, unequal lengths, a non-uniform or wrong sample rate, NaN or
-inf, or a record too short for the identification windows.
+a file above :data:`MAX_FILE_BYTES`, missing columns, unequal lengths, a run
+id in two places, a non-uniform or wrong sample rate, NaN, inf or a value
+beyond :data:`LARGEST`, a constant signal, or a record too short for the
+identification windows.
+
+Every signal read from a file, a data file's or a forcing function's, passes
+the same checks (:func:`check_signal`), and only the columns the config names
+are read.
 
 Layouts:
 
 - CSV / Parquet: one row per sample, a column per signal; several runs are
-  told apart by the ``run`` column (integers), else the file is one run.
-- MATLAB ``.mat``: one variable per signal, a vector (one run) or a
-  samples x runs matrix; the rate as a scalar variable (``rate`` mapping) or
-  a time vector (``time`` mapping).
+  told apart by the ``run`` column (integers; each run one contiguous block
+  of rows, its id kept as the file gives it), else the file is run 1. A CSV
+  may start with a UTF-8 byte-order mark and hold ``#`` comment lines.
+- MATLAB ``.mat``: one variable per signal, a vector (run 1) or a
+  samples x runs matrix (runs 1, 2, ...); the rate as a scalar variable
+  (``rate`` mapping) or a time vector (``time`` mapping).
 """
 
 from __future__ import annotations
 
+import csv
+import io
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 
 from hcid.config import Config, DataConfig
-from hcid.errors import DataError
+from hcid.errors import DataError, quote
 from hcid.tables import MEASURED, SIGNALS
 
-__all__ = ["READERS", "load_data", "read_signal", "records_table"]
+__all__ = [
+    "LARGEST",
+    "MAX_FILE_BYTES",
+    "READERS",
+    "check_signal",
+    "load_data",
+    "read_signal",
+    "records_table",
+]
 
-#: Largest magnitude a signal may hold: its square must not overflow in the least-squares fits.
-_LARGEST = 1e150
+#: Largest magnitude a signal may hold: its square, summed over a record and scaled by a loop's gains,
+#: must stay far from overflow (1.8e308) in the simulations and least-squares fits.
+LARGEST = 1e100
+#: Largest data file (bytes) hcid reads, checked before reading: 1 GiB, about 20 million rows
+#: of a CSV with seven columns, or an hour of six signals at 1 kHz in binary.
+MAX_FILE_BYTES = 1 << 30
+
+_BOM = b"\xef\xbb\xbf"
+_BLOCK = 1 << 20
+
+
+def check_signal(x: np.ndarray, where: str) -> np.ndarray:
+    """``x`` as contiguous float64 if every value is finite and at most :data:`LARGEST` in magnitude.
+
+    The one check every signal from a file passes (data columns and forcing functions).
+
+    Raises
+    ------
+    DataError
+        Naming ``where``, the first bad value and its sample.
+    """
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    if x.size == 0:
+        raise DataError(f"{where} holds no samples")
+    bad = ~np.isfinite(x) | (np.abs(x) > LARGEST)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise DataError(
+            f"{where} holds {x[k]:.6g} at sample {k} (values must be finite and at most {LARGEST:g} "
+            "in magnitude)"
+        )
+    return x
+
+
+def _check_size(path: Path) -> None:
+    try:
+        if not path.is_file():
+            raise DataError(f"{path}: missing")
+        size = path.stat().st_size
+    except OSError as exc:
+        raise DataError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    if size > MAX_FILE_BYTES:
+        raise DataError(
+            f"{path}: {size:,} bytes, above the {MAX_FILE_BYTES:,}-byte limit on a data file "
+            "(split it into several files)"
+        )
 
 
 def _table_columns(table: pa.Table, path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
@@ -39,33 +101,90 @@ def _table_columns(table: pa.Table, path: Path, wanted: dict[str, str]) -> dict[
         if column in table.column_names:
             try:
                 out[name] = table.column(column).to_numpy(zero_copy_only=False).astype(np.float64)
-            except (pa.ArrowException, ValueError) as exc:
-                raise DataError(f"{path}: column {column!r} is not numeric") from exc
+            except (pa.ArrowException, ValueError, TypeError) as exc:
+                raise DataError(f"{path}: column {quote(column)} is not numeric") from exc
     return out
 
 
-def _read_csv(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
-    import io
+def _is_comment(line: bytes) -> bool:
+    return line.lstrip().startswith(b"#")
 
+
+class _Uncommented(io.RawIOBase):
+    """A CSV file's bytes without a leading UTF-8 byte-order mark and without ``#`` comment lines.
+
+    Read block by block, so a file is never held twice in memory.
+    """
+
+    def __init__(self, handle):
+        self._handle = handle
+        self._tail = b""
+        self._out = b""
+        self._first = True
+        self._done = False
+
+    def readable(self) -> bool:
+        return True
+
+    def _fill(self) -> None:
+        while not self._out and not self._done:
+            block = self._handle.read(_BLOCK)
+            if self._first:
+                block, self._first = block.removeprefix(_BOM), False
+            if not block:
+                self._done = True
+                whole, self._tail = self._tail, b""
+            else:
+                block = self._tail + block
+                cut = block.rfind(b"\n") + 1
+                whole, self._tail = block[:cut], block[cut:]
+            if b"#" in whole:
+                whole = b"".join(line for line in whole.splitlines(keepends=True) if not _is_comment(line))
+            self._out = whole
+
+    def readinto(self, buffer) -> int:
+        self._fill()
+        n = min(len(buffer), len(self._out))
+        buffer[:n] = self._out[:n]
+        self._out = self._out[n:]
+        return n
+
+
+def _csv_header(path: Path) -> list[str]:
+    with open(path, "rb") as f:
+        first = io.BufferedReader(_Uncommented(f)).readline(1 << 16)
+    text = first.decode("utf-8", errors="replace").strip()
+    return next(csv.reader([text]), []) if text else []
+
+
+def _read_csv(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
     import pyarrow.csv as pacsv
 
-    # Loggers write a header of '#' comment lines: skipped, as are comment lines further down.
+    header = _csv_header(path)
+    include = sorted({c for c in wanted.values() if c in header})
+    if not include:
+        return {}
     with open(path, "rb") as f:
-        lines = [line for line in f if not line.lstrip().startswith(b"#")]
-    return _table_columns(pacsv.read_csv(io.BytesIO(b"".join(lines))), path, wanted)
+        table = pacsv.read_csv(
+            io.BufferedReader(_Uncommented(f), _BLOCK),
+            convert_options=pacsv.ConvertOptions(include_columns=include),
+        )
+    return _table_columns(table, path, wanted)
 
 
 def _read_parquet(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
     import pyarrow.parquet as pq
 
-    return _table_columns(pq.read_table(path), path, wanted)
+    names = pq.read_schema(path).names
+    include = sorted({c for c in wanted.values() if c in names})
+    return _table_columns(pq.read_table(path, columns=include), path, wanted) if include else {}
 
 
 def _read_mat(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
     import scipy.io
 
     try:
-        mat = scipy.io.loadmat(path)
+        mat = scipy.io.loadmat(path, variable_names=sorted(set(wanted.values())))
     except Exception as exc:  # noqa: BLE001 (a damaged file makes scipy's reader raise almost anything)
         raise DataError(f"{path}: not a readable MATLAB file ({str(exc).splitlines()[0][:80]})") from exc
     out = {}
@@ -95,8 +214,23 @@ def _read_mat(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
 READERS = {".csv": _read_csv, ".parquet": _read_parquet, ".pq": _read_parquet, ".mat": _read_mat}
 
 
+def _read(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
+    """The ``wanted`` columns of a data file that it holds, after the size check."""
+    _check_size(path)
+    reader = READERS.get(path.suffix.lower())
+    if reader is None:
+        raise DataError(
+            f"{path}: unknown data format {quote(path.suffix.lower())} (use {', '.join(READERS)})"
+        )
+    try:
+        return reader(path, wanted)
+    except DataError:
+        raise
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise DataError(f"{path}: cannot read ({str(exc).splitlines()[0][:160]})") from exc
+
+
 def _read_columns(path: Path, data: DataConfig) -> dict[str, np.ndarray]:
-    suffix = path.suffix.lower()
     wanted = {
         name: data.columns[name]
         for name in (*SIGNALS, "theta", "time", "run", "rate")
@@ -104,61 +238,91 @@ def _read_columns(path: Path, data: DataConfig) -> dict[str, np.ndarray]:
     }
     if data.time_default:
         wanted["time_alt"] = "time"  # default names: 't' or 'time'
-    reader = READERS.get(suffix)
-    if reader is None:
-        raise DataError(f"{path}: unknown data format {suffix!r} (use {', '.join(READERS)})")
-    try:
-        return reader(path, wanted)
-    except DataError:
-        raise
-    except (pa.ArrowException, OSError, ValueError) as exc:
-        raise DataError(f"{path}: cannot read ({str(exc).splitlines()[0]})") from exc
+    return _read(path, wanted)
+
+
+def run_blocks(ids: np.ndarray, where: str, column: str) -> dict[int, slice]:
+    """The rows of each run id, in the order of the ids: each run must be one contiguous block.
+
+    Raises
+    ------
+    DataError
+        If an id is not an integer, or a run's rows are split (the same id in two
+        places: two trials given one id must not be merged).
+
+    Examples
+    --------
+    >>> run_blocks(np.array([11.0, 11, 12, 12, 12]), "f", "run")
+    {11: slice(0, 2, None), 12: slice(2, 5, None)}
+    """
+    ids = np.ravel(ids)
+    if ids.size and not (
+        np.all(np.isfinite(ids)) and np.all(ids == np.round(ids)) and np.all(np.abs(ids) < 2**53)
+    ):
+        k = int(np.argmax(~np.isfinite(ids) | (ids != np.round(ids)) | ~(np.abs(ids) < 2**53)))
+        raise DataError(f"{where}: {quote(column)} holds {ids[k]:.6g} at row {k}; run ids must be integers")
+    starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]]) if ids.size else np.array([], dtype=int)
+    ends = np.r_[starts[1:], ids.size]
+    blocks: dict[int, slice] = {}
+    for a, b in zip(starts, ends, strict=True):
+        run = int(ids[a])
+        if run in blocks:
+            first = blocks[run]
+            raise DataError(
+                f"{where}: run {run} appears in two separate blocks of rows ({first.start}-{first.stop - 1} "
+                f"and {a}-{b - 1} of column {quote(column)}); give each trial its own run id"
+            )
+        blocks[run] = slice(int(a), int(b))
+    return dict(sorted(blocks.items()))
 
 
 def read_signal(path: str | Path, column: str, run: int | None = None, run_column: str = "run") -> np.ndarray:
     """One column (or .mat variable) of a data file as a float64 vector, e.g. a recorded forcing function.
 
     With ``run``, only the rows whose ``run_column`` equals it (CSV, Parquet) or that
-    column of a samples x runs matrix (.mat, counted from 1).
+    column of a samples x runs matrix (.mat, counted from 1); the file must hold
+    that run column (or matrix).
 
     Raises
     ------
     DataError
-        If the file is missing or unreadable, lacks the column, or the values are not finite.
+        If the file is missing, too large or unreadable, lacks the column or the
+        run column, or a value fails :func:`check_signal`.
     """
     path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: missing")
-    reader = READERS.get(path.suffix.lower())
-    if reader is None:
-        raise DataError(f"{path}: unknown data format {path.suffix.lower()!r} (use {', '.join(READERS)})")
     wanted = {"x": column} if run is None else {"x": column, "run": run_column}
-    try:
-        cols = reader(path, wanted)
-    except DataError:
-        raise
-    except (pa.ArrowException, OSError, ValueError) as exc:
-        raise DataError(f"{path}: cannot read ({str(exc).splitlines()[0]})") from exc
+    cols = _read(path, wanted)
     if "x" not in cols:
-        raise DataError(f"{path}: has no column {column!r}")
+        raise DataError(f"{path}: has no column {quote(column)}")
     x = cols["x"]
     if run is not None:
-        if x.ndim == 2:
+        if x.ndim == 2 and min(x.shape) > 1:
             if not 1 <= run <= x.shape[1]:
-                raise DataError(f"{path}: {column!r} has {x.shape[1]} runs, no run {run}")
+                raise DataError(f"{path}: {quote(column)} has {x.shape[1]} runs, no run {run}")
             x = x[:, run - 1]
         elif "run" in cols:
-            rows = cols["run"].ravel() == run
-            if not rows.any():
-                raise DataError(f"{path}: no rows with {run_column} = {run}")
-            x = x.ravel()[rows]
-    x = np.ascontiguousarray(x.ravel() if x.ndim == 1 or min(x.shape) == 1 else x[:, 0], dtype=np.float64)
-    if x.size == 0 or not np.all(np.isfinite(x)):
-        raise DataError(f"{path}: column {column!r} is empty or holds NaN or inf")
-    return x
+            blocks = run_blocks(cols["run"], str(path), run_column)
+            if run not in blocks:
+                raise DataError(f"{path}: no rows with {run_column} = {run} (runs {_id_list(blocks)})")
+            x = x.ravel()[blocks[run]]
+        else:
+            raise DataError(
+                f"{path}: run {run} asked for, but the file has no run column {quote(run_column)} "
+                "(name it with run_column, or drop run for a file of one run)"
+            )
+    x = x.ravel() if x.ndim == 1 or min(x.shape) == 1 else x[:, 0]
+    return check_signal(x, f"{path}: column {quote(column)}")
 
 
-def _split_runs(path: Path, cols: dict[str, np.ndarray], data: DataConfig) -> list[dict[str, np.ndarray]]:
+def _id_list(blocks: dict[int, slice]) -> str:
+    ids = list(blocks)
+    return ", ".join(map(str, ids)) if len(ids) <= 6 else f"{ids[0]}, {ids[1]}, ..., {ids[-1]}"
+
+
+def _split_runs(
+    path: Path, cols: dict[str, np.ndarray], data: DataConfig
+) -> dict[int, dict[str, np.ndarray]]:
+    """The file's runs by their ids: the run column's values, or 1, 2, ... for a matrix's columns."""
     lengths = {name: v.shape[0] for name, v in cols.items() if name != "rate" and v.ndim >= 1}
     if len(set(lengths.values())) > 1:
         described = ", ".join(f"{data.columns[n]} {n_}" for n, n_ in lengths.items())
@@ -170,19 +334,15 @@ def _split_runs(path: Path, cols: dict[str, np.ndarray], data: DataConfig) -> li
         if len(widths) > 1:
             raise DataError(f"{path}: signals hold different numbers of runs ({sorted(widths)})")
         n_runs = widths.pop()
-        return [
-            {n: (v[:, r] if v.ndim == 2 and v.shape[1] > 1 else v.ravel()) for n, v in cols.items()}
+        return {
+            r + 1: {n: (v[:, r] if v.ndim == 2 and v.shape[1] > 1 else v.ravel()) for n, v in cols.items()}
             for r in range(n_runs)
-        ]
+        }
     flat = {n: v.ravel() for n, v in cols.items()}
     if "run" not in flat:
-        return [flat]
-    runs = flat.pop("run")
-    out = []
-    for value in np.unique(runs):
-        rows = runs == value
-        out.append({n: v if n == "rate" else v[rows] for n, v in flat.items()})
-    return out
+        return {1: flat}
+    blocks = run_blocks(flat.pop("run"), str(path), data.columns["run"])
+    return {run: {n: v if n == "rate" else v[rows] for n, v in flat.items()} for run, rows in blocks.items()}
 
 
 #: Largest up or down factor of a resampling: ratios of rates beyond it are refused.
@@ -231,7 +391,7 @@ def resample(x: np.ndarray, up: int, down: int) -> np.ndarray:
 
 
 def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarray]]:
-    """Read and check a measured-data file; one record per run, keyed by run number (1, 2, ...).
+    """Read and check a measured-data file; one record per run, keyed by the file's run id.
 
     Each record holds ``t`` (s, from 0 after the lead-in), ``ft``, ``fd``, ``e``, ``u``
     (rad) at the analysis rate ``config.timing.output_rate``. Column names are the
@@ -249,8 +409,6 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
 
     path = Path(path)
     data = config.data if config.data is not None else default_data()
-    if not path.is_file():
-        raise DataError(f"{path}: missing")
     cols = _read_columns(path, data)
     if "time" not in cols and "time_alt" in cols:
         cols["time"] = cols.pop("time_alt")
@@ -278,18 +436,12 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
     need = max(max(s.validation.last, s.estimation.last) for _, s in config.identify.stages)
     skip = round(data.lead_in * rate)
     records = {}
-    for i, run in enumerate(_split_runs(path, cols, data), start=1):
-        where = f"{path}: run {i}"
+    for run_id, run in _split_runs(path, cols, data).items():
+        where = f"{path}: run {run_id}"
         for name in (*SIGNALS, "time"):
             if name in run:
-                bad = ~np.isfinite(run[name]) | (np.abs(run[name]) > _LARGEST)
-                if bad.any():
-                    k = int(np.argmax(bad))
-                    label = data.columns[name] if name != "e" or "e" in data.columns else "e"
-                    raise DataError(
-                        f"{where}: {label} holds {run[name][k]:.6g} at sample {k} "
-                        f"(values must be finite and at most {_LARGEST:g} in magnitude)"
-                    )
+                label = data.columns[name] if name != "e" or "e" in data.columns else "e"
+                run[name] = check_signal(run[name], f"{where}: {label}")
         if "time" in run:
             steps = np.diff(run["time"])
             if steps.size and not np.allclose(steps, steps[0], rtol=1e-6, atol=1e-9):
@@ -320,18 +472,24 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
             except DataError as exc:
                 raise DataError(f"{where}: {exc}") from None
             signals_ = {name: resample(x, up, down) for name, x in signals_.items()}
-        n = signals_["ft"].size - skip
-        if n < need:
+        total = signals_["ft"].size
+        if total - skip < need:
+            lead = f", {total - skip} after the {data.lead_in:g} s lead-in" if skip and total > skip else ""
+            if skip >= total:
+                lead = f", none after the {data.lead_in:g} s lead-in"
             raise DataError(
-                f"{where}: {n} samples at {rate:g} Hz"
-                + (f" after the {data.lead_in:g} s lead-in" if skip else "")
-                + f", the identification windows need {need}"
+                f"{where}: {total} samples at {rate:g} Hz{lead}, the identification windows need {need}"
             )
+        n = total - skip
         signals_ = {name: np.ascontiguousarray(x[skip:]) for name, x in signals_.items()}
-        for name in ("e", "u"):
-            if not np.any(signals_[name][:need]):
-                raise DataError(f"{where}: {data.columns[name]} is zero over the identification windows")
-        records[i] = {"t": np.arange(n) / rate, **signals_}
+        for name in SIGNALS:
+            window = signals_[name][:need]
+            if np.ptp(window) == 0:
+                raise DataError(
+                    f"{where}: {data.columns.get(name, name)} is constant "
+                    f"({window[0]:.6g}) over the identification windows"
+                )
+        records[run_id] = {"t": np.arange(n) / rate, **signals_}
     if not records:
         raise DataError(f"{path}: holds no samples")
     return records

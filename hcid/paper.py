@@ -25,18 +25,33 @@ DIRECT_BETTER_BELOW = {"hft": 8.0, "he": 7.0}
 
 #: The paper's plant Yc = Kc wb / (s (s + wb)), Kc = 2.75, wb = 2: (numerator, denominator) in s.
 PLANT = ((5.5,), (1.0, 2.0, 0.0))
+#: SPEC 1: w_nms, zeta_nms, w_n, zeta_n and var(n)/var(u) of the paper's loop.
+LOOP = (10.1, 0.35, 12.7, 0.26, 0.15)
+#: Table 2: the FB and FF models (rad/s, s).
+MODELS = {
+    "FB": {"Kpt": 0.0, "TI": 0.0, "tau_pt": 0.0, "Kpe": 0.75, "TL": 0.4, "tau_pe": 0.24},
+    "FF": {"Kpt": 0.8, "TI": 0.25, "tau_pt": 0.35, "Kpe": 0.75, "TL": 0.4, "tau_pe": 0.24},
+}
 
 
 def is_paper_experiment(config) -> bool:
-    """Whether a config simulates the paper's experiment: its plant, the disturbance at the
-    plant output, a multisine disturbance and a segments target (the claims of SPEC 6 and
-    Table 2's RMS(e) are compared only then)."""
+    """Whether a config simulates the paper's experiment with the paper's HC models: its plant,
+    the disturbance at the plant output, a multisine disturbance, a segments target, the
+    neuromuscular and remnant parameters of SPEC 1, and every model one of Table 2's (the
+    claims of SPEC 6 and Table 2's RMS(e) are compared only then)."""
     from hcid.config import Multisine, Segments
 
+    loop = config.loop
     return (
         config.simulates
-        and (config.loop.plant.num, config.loop.plant.den) == PLANT
-        and config.loop.disturbance_at == "output"
+        and (loop.plant.num, loop.plant.den) == PLANT
+        and (loop.w_nms, loop.zeta_nms, loop.w_n, loop.zeta_n, loop.remnant_ratio) == LOOP
+        and loop.disturbance_at == "output"
         and isinstance(config.disturbance, Multisine)
         and isinstance(config.target, Segments)
+        and all(_parameters(m) == MODELS.get(m.name) for m in config.models)
     )
+
+
+def _parameters(model) -> dict[str, float]:
+    return {k: getattr(model, k) for k in ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe")}

@@ -12,9 +12,7 @@ that is off its schema (one left by an older hcid, say) is recomputed.
 
 from __future__ import annotations
 
-import os
 import shutil
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -24,6 +22,7 @@ import pyarrow.parquet as pq
 
 from hcid import tables
 from hcid.errors import DataError
+from hcid.folders import atomic_write, register
 from hcid.simulate import Realization
 from hcid.tables import CHANNELS, Schema
 
@@ -47,115 +46,13 @@ __all__ = [
 PARTS = ".parts"
 #: Suffix of a part file (:func:`write_part_table`).
 PART_SUFFIX = ".arrow"
-#: The mark of a run directory: written first, it lists every file hcid wrote there (and only
-#: those are ever deleted by hcid).
-MANIFEST = "hcid-run.json"
-
-
-def _current_umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _current_umask()
-
-
-def _atomic(path: Path, write) -> None:
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    except OSError as exc:
-        raise DataError(f"{path}: cannot write ({exc.strerror or exc})") from exc
-    os.close(fd)
-    try:
-        write(tmp)
-        os.chmod(tmp, 0o666 & ~_UMASK)
-        os.replace(tmp, path)
-    except OSError as exc:  # a full disk, a quota: one line, the previous file intact
-        Path(tmp).unlink(missing_ok=True)
-        raise DataError(f"{path}: cannot write ({exc.strerror or exc}); the previous file is intact") from exc
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _register(path: Path) -> None:
-    """List ``path`` in its directory's manifest when the directory is a run directory."""
-    manifest = path.parent / MANIFEST
-    if path.name == MANIFEST or not manifest.is_file():
-        return
-    files = owned_files(path.parent)
-    if path.name not in files:
-        _write_manifest(path.parent, [*files, path.name])
-
-
-def _write_manifest(run_dir: Path, files: Sequence[str]) -> None:
-    import json
-
-    text = json.dumps({"hcid": "run directory", "version": 1, "files": sorted(set(files))}, indent=1)
-    _atomic(run_dir / MANIFEST, lambda tmp: Path(tmp).write_text(text + "\n"))
-
-
-def owned_files(run_dir: Path) -> list[str]:
-    """The files hcid wrote in ``run_dir`` (its manifest), or [] if it has none or it is damaged."""
-    import json
-
-    try:
-        data = json.loads((Path(run_dir) / MANIFEST).read_text())
-        files = data["files"]
-        return [f for f in files if isinstance(f, str) and f and "/" not in f and f not in (".", "..")]
-    except (OSError, ValueError, KeyError, TypeError):
-        return []
-
-
-def claim(run_dir: Path, known: Sequence[str]) -> None:
-    """Make ``run_dir`` an hcid run directory, or check that it is one.
-
-    A new or empty directory gets a manifest; a directory written by an hcid
-    without manifests (every file one of ``known``, with a ``config.yaml``) is
-    adopted; any other non-empty directory is refused.
-
-    Raises
-    ------
-    DataError
-        For a directory hcid does not own.
-    """
-    run_dir = Path(run_dir)
-    if (run_dir / MANIFEST).is_file():
-        return
-    try:
-        entries = sorted(p.name for p in run_dir.iterdir()) if run_dir.is_dir() else []
-    except OSError as exc:
-        raise DataError(f"{run_dir}: cannot read ({exc.strerror or exc})") from exc
-    if entries and not ("config.yaml" in entries and set(entries) <= {*known, PARTS, "report", ".hcid.lock"}):
-        raise DataError(
-            f"{run_dir}: not an hcid run directory (no {MANIFEST}, and it holds other files); "
-            "choose a new or empty --run"
-        )
-    try:
-        run_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise DataError(f"{run_dir}: cannot create ({exc.strerror or exc})") from exc
-    _write_manifest(run_dir, [e for e in entries if e in known])
-
-
-def remove_owned(run_dir: Path, names: Sequence[str] | None = None) -> None:
-    """Delete the files hcid wrote in ``run_dir`` (only those named, if ``names``), and its parts."""
-    owned = owned_files(run_dir)
-    keep = [f for f in owned if names is not None and f not in names]
-    for name in owned:
-        if name not in keep:
-            (Path(run_dir) / name).unlink(missing_ok=True)
-    _write_manifest(Path(run_dir), keep)
-    clear_parts(run_dir)
 
 
 def write_table(table: pa.Table, path: str | Path) -> None:
     """Write a Parquet table atomically (temporary file, then rename)."""
     path = Path(path)
-    _atomic(path, lambda tmp: pq.write_table(table, tmp))
-    _register(path)
+    atomic_write(path, lambda tmp: pq.write_table(table, tmp))
+    register(path)
 
 
 def write(schema: Schema, table: pa.Table, run_dir: str | Path) -> Path:
@@ -191,8 +88,8 @@ def write_text(text: str, path: str | Path) -> None:
             return
     except (OSError, UnicodeDecodeError):
         pass
-    _atomic(path, lambda tmp: Path(tmp).write_text(text))
-    _register(path)
+    atomic_write(path, lambda tmp: Path(tmp).write_text(text))
+    register(path)
 
 
 def read(
@@ -415,7 +312,7 @@ def write_part_table(table: pa.Table, path: Path) -> None:
         with pa.OSFile(tmp, "wb") as sink, pa.ipc.new_file(sink, table.schema) as writer:
             writer.write_table(table)
 
-    _atomic(path, write)
+    atomic_write(path, write)
 
 
 def read_part_table(path: Path) -> pa.Table:

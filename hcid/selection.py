@@ -21,7 +21,7 @@ from hcid.errors import IdentificationError
 
 __all__ = [
     "Bootstrap",
-    "Segments",
+    "SelectionPath",
     "breakpoints",
     "select_at",
     "select_brute_force",
@@ -39,7 +39,7 @@ def _order_key(orders: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Segments:
+class SelectionPath:
     """The selection of one realization as a function of W.
 
     ``index[i]`` (a frontier row) is selected for ``w_from[i] <= W < w_to[i]``;
@@ -64,7 +64,7 @@ def _ranked(d: np.ndarray, v: np.ndarray, orders: np.ndarray) -> np.ndarray:
     return finite[np.lexsort(keys)]
 
 
-def breakpoints(d: np.ndarray, v: np.ndarray, orders: np.ndarray) -> Segments:
+def breakpoints(d: np.ndarray, v: np.ndarray, orders: np.ndarray) -> SelectionPath:
     """Exact selection intervals in W from the lower convex hull of (d, log V).
 
     Parameters
@@ -78,7 +78,7 @@ def breakpoints(d: np.ndarray, v: np.ndarray, orders: np.ndarray) -> Segments:
 
     Returns
     -------
-    Segments
+    SelectionPath
     """
     d = np.asarray(d, dtype=np.int64)
     v = np.asarray(v, dtype=np.float64)
@@ -109,7 +109,7 @@ def breakpoints(d: np.ndarray, v: np.ndarray, orders: np.ndarray) -> Segments:
         current = nxt
     w_from_arr = np.asarray(w_from)
     w_to = np.append(w_from_arr[1:], np.inf)
-    return Segments(index=np.asarray(index, dtype=np.int64), w_from=w_from_arr, w_to=w_to)
+    return SelectionPath(index=np.asarray(index, dtype=np.int64), w_from=w_from_arr, w_to=w_to)
 
 
 def select_at(d: np.ndarray, v: np.ndarray, orders: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -129,7 +129,7 @@ def select_brute_force(d: np.ndarray, v: np.ndarray, orders: np.ndarray, w: floa
     return best
 
 
-def false_positive_threshold(segments: list[Segments], nb_ft: list[np.ndarray]) -> float:
+def false_positive_threshold(segments: list[SelectionPath], nb_ft: list[np.ndarray]) -> float:
     """W_FP: the largest W at which any realization selects a model with nb_ft > 0.
 
     Each realization is a false positive on the union of its intervals with
@@ -141,7 +141,7 @@ def false_positive_threshold(segments: list[Segments], nb_ft: list[np.ndarray]) 
     return max(extents, default=0.0)
 
 
-def false_positive_extent(segments: Segments, nb_ft: np.ndarray) -> float:
+def false_positive_extent(segments: SelectionPath, nb_ft: np.ndarray) -> float:
     """L: the largest W at which one realization selects nb_ft > 0 (SPEC 9); 0 if never.
 
     The right end of its last interval with nb_ft > 0 (selections hold on
@@ -150,7 +150,7 @@ def false_positive_extent(segments: Segments, nb_ft: np.ndarray) -> float:
 
     Examples
     --------
-    >>> seg = Segments(np.array([0, 1, 2]), np.array([0.0, 0.01, 0.2]), np.array([0.01, 0.2, np.inf]))
+    >>> seg = SelectionPath(np.array([0, 1, 2]), np.array([0.0, 0.01, 0.2]), np.array([0.01, 0.2, np.inf]))
     >>> false_positive_extent(seg, np.array([3, 1, 0]))
     0.2
     """
@@ -185,7 +185,9 @@ def threshold_exceedance(extents: np.ndarray, w: float, n: int) -> float:
     return float(1.0 - (1.0 - q) ** n)
 
 
-def _nb_ft_at_breakpoints(segments: list[Segments], nb_ft: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def _nb_ft_at_breakpoints(
+    segments: list[SelectionPath], nb_ft: list[np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
     """(W, nb_ft per realization x W) at the union of the realizations' breakpoints."""
     at = np.unique(np.concatenate([s.w_from for s in segments]))
     values = np.array([nb[s.at(at)] for s, nb in zip(segments, nb_ft, strict=True)], dtype=np.float64)
@@ -199,7 +201,9 @@ def _first_below(at: np.ndarray, means: np.ndarray, level: float) -> np.ndarray:
     return np.where(below.any(axis=-1), at[first], np.inf)
 
 
-def false_negative_threshold(segments: list[Segments], nb_ft: list[np.ndarray], level: float = 2.0) -> float:
+def false_negative_threshold(
+    segments: list[SelectionPath], nb_ft: list[np.ndarray], level: float = 2.0
+) -> float:
     """W_FN: the smallest W at which the mean selected nb_ft drops below ``level``.
 
     The mean is piecewise constant with jumps at the union of the realizations'
@@ -228,7 +232,7 @@ class Bootstrap:
 
 
 def false_negative_bootstrap(
-    segments: list[Segments],
+    segments: list[SelectionPath],
     nb_ft: list[np.ndarray],
     level: float = 2.0,
     *,

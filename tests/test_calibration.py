@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from hcid.calibration import calibrate, clopper_pearson
-from hcid.selection import Segments
+from hcid.selection import SelectionPath
 
 INF = np.inf
 
@@ -12,7 +12,7 @@ INF = np.inf
 def _segments(w_from, nb):
     """A realization selecting frontier rows 0, 1, ... on [w_from[i], w_from[i+1]), with those nb_ft."""
     w_from = np.asarray(w_from, dtype=float)
-    return Segments(np.arange(w_from.size), w_from, np.append(w_from[1:], INF)), np.asarray(nb)
+    return SelectionPath(np.arange(w_from.size), w_from, np.append(w_from[1:], INF)), np.asarray(nb)
 
 
 def _twins():

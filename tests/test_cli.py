@@ -130,3 +130,45 @@ def test_window_not_whole_samples_exit_2_nothing_written(tmp_path):
     assert "identify.direct.estimation: 5.13 s is not a whole number of samples" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
     assert not run.exists()
+
+
+# --------------------------------------------------------------------------- command-line misuse (issue 24)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["fit-hc", "c.yaml", "--w", "abc"], "hcid: error: Invalid value for '--w': "),
+        (["simulate", "c.yaml", "--jobs", "0"], "hcid: error: Invalid value for '--jobs': "),
+        (["run"], "hcid: error: Missing argument 'config'."),
+        (["identify", "c.yaml", "--backend", "loky", "--scheduler", "tcp://127.0.0.1:1"],
+         "hcid: error: --scheduler: only with --backend dask (got --backend loky)"),
+    ],
+)  # fmt: skip
+def test_misuse_is_one_line_exit_2(tmp_path, argv, message):
+    # The real command (its entry point hcid.cli:main), not CliRunner: before, click's usage box
+    # of 5-6 lines. python -m hcid is the same command.
+    import subprocess
+    import sys
+
+    (tmp_path / "c.yaml").write_text(CI_CONFIG.read_text())
+    for command in ([sys.executable, "-m", "hcid"],):
+        proc = subprocess.run([*command, *argv], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 2, proc.stderr
+        assert proc.stderr.startswith(message) and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert not (tmp_path / "runs").exists()
+
+
+def test_help_text_has_no_stray_spaces():
+    result = runner.invoke(app, ["run", "--help"], env={"COLUMNS": "200", "TERMINAL_WIDTH": "200"})
+    assert "Run directory (default: runs/<config name>)." in result.output and " ." not in result.output
+
+
+def test_commands_do_not_silence_warnings():
+    # Before, every command ignored every RuntimeWarning; a warning now reaches the user.
+    import warnings
+
+    from hcid.cli import _user_errors
+
+    with pytest.warns(RuntimeWarning, match="reaches the user"):
+        _user_errors(lambda: warnings.warn("reaches the user", RuntimeWarning, stacklevel=1))()

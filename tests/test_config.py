@@ -2,6 +2,7 @@
 
 import copy
 
+import numpy as np
 import pytest
 import yaml
 
@@ -166,12 +167,13 @@ def test_stability_check_agrees_with_simulation(paper_config):
 
     import numpy as np
 
+    from hcid.config import Plant
     from hcid.hcmodel import DiscreteLoop, closed_loop_poles
     from hcid.simulate import simulate_loop
 
     fb = paper_config.model("FB")
     for kc, grows in ((5.0, False), (8.0, True)):
-        loop = dataclasses.replace(paper_config.loop, Kc=kc)
+        loop = dataclasses.replace(paper_config.loop, plant=Plant.second_order(kc, 2.0))
         assert (np.max(np.abs(closed_loop_poles(fb, loop, 0.01))) >= 1) == grows
         n = 20000
         fd = np.zeros(n)
@@ -252,7 +254,11 @@ def test_plant_shorthands(paper_raw, plant, num, den):
 
 def test_paper_plant_is_the_default(paper_config):
     # No loop.plant: the paper's Kc wb / (s (s + wb)) with Kc = 2.75, wb = 2, bit for bit.
-    assert paper_config.loop.plant_spec is None
+    # Loop holds the plant itself: no Kc/wb fields that read 0.0 for another plant (issue 25).
+    import dataclasses
+
+    assert paper_config.loop.plant.kind == "second_order"
+    assert not {"Kc", "wb"} & {f.name for f in dataclasses.fields(paper_config.loop)}
     assert (paper_config.loop.plant.num, paper_config.loop.plant.den) == ((2.75 * 2.0,), (1.0, 2.0, 0.0))
 
 
@@ -382,3 +388,74 @@ def test_bad_windows_in_seconds(paper_raw, window, message):
     with pytest.raises(ConfigError) as info:
         parse_config(data, "paper")
     assert message in str(info.value) and "\n" not in str(info.value)
+
+
+# ---------------------------------------------------------------------- no silent wrong answers (issue 24)
+
+
+def _file_disturbance(raw, tmp_path, values, **spec):
+    (tmp_path / "fd.csv").write_text("fd\n" + "".join(f"{float(v)!r}\n" for v in values))
+    data = copy.deepcopy(raw)
+    data["signals"]["disturbance"] = {"kind": "file", "path": "fd.csv", "column": "fd", "rate": 25.0, **spec}
+    return data
+
+
+def test_a_forcing_files_run_needs_its_run_column(paper_raw, tmp_path):
+    # Before: run 2 of a file without a run column simulated with the whole column, exit 0.
+    data = _file_disturbance(paper_raw, tmp_path, np.sin(np.arange(2048) / 3.0), run=2)
+    with pytest.raises(ConfigError, match="run 2 asked for, but the file has no run column 'run'"):
+        parse_config(data, "x", tmp_path)
+
+
+@pytest.mark.parametrize("peak", [1e150, 1e101])
+def test_forcing_file_values_have_the_data_bound(paper_raw, tmp_path, peak):
+    # Before: accepted, then "every one of the 1300 candidates is unstable" at identify.
+    values = np.sin(np.arange(2048) / 3.0) * peak
+    with pytest.raises(
+        ConfigError, match=r"signals.disturbance: .*column 'fd' holds .* at sample \d+ \(values"
+    ):
+        parse_config(_file_disturbance(paper_raw, tmp_path, values), "x", tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("name", "edit", "how"),
+    [
+        ("disturbance", lambda s: s["disturbance"].update(amplitude=[0.0] * 20), "every amplitude is 0"),
+        ("target", lambda s: s["target"].update(gain_deg=0.0), "its gain or every step is 0"),
+    ],
+)
+def test_a_constant_forcing_function_is_refused(paper_raw, name, edit, how):
+    # Before: Kn = 0, var(n)/var(u) NaN, every seed identical, the remnant ratio ignored.
+    data = copy.deepcopy(paper_raw)
+    edit(data["signals"])
+    with pytest.raises(ConfigError, match=f"signals.{name}: is constant over the window \\({how}\\); "):
+        parse_config(data, "x")
+
+
+def test_a_file_disturbance_of_zeros_is_refused(paper_raw, tmp_path):
+    with pytest.raises(ConfigError, match=r"column 'fd' is constant \(0\)\); the remnant gain"):
+        parse_config(_file_disturbance(paper_raw, tmp_path, np.zeros(2048)), "x", tmp_path)
+
+
+def test_fit_hc_band_above_nyquist_is_refused(paper_raw):
+    # The analysis rate is 25 Hz: Nyquist pi x 25 = 78.54 rad/s.
+    data = copy.deepcopy(paper_raw)
+    data["fit_hc"] = {"band": [0.1, 80.0]}
+    with pytest.raises(
+        ConfigError, match=r"fit_hc.band: must end at or below the analysis Nyquist .*78.54 rad/s"
+    ):
+        parse_config(data, "x")
+    data["fit_hc"] = {"band": [0.1, 78.5]}
+    assert parse_config(data, "x").fit_hc.band == (0.1, 78.5)
+
+
+def test_improper_plant_message_quotes_at_most_80_characters(paper_raw):
+    # Before: 230 characters of the plant quoted; errors.QUOTE is the documented limit.
+    # Yc = 1 / (s^6 + ...): relative degree 6, so Ynms Kpt / Yc / (TI s + 1)^2 is improper.
+    plant = {"kind": "tf", "num": [1.0], "den": [1.0, 2.3456789, 3.456789, 4.567891, 5.678912, 6.789123, 0.0]}
+    with pytest.raises(ConfigError) as info:
+        parse_config(_with_plant(paper_raw, plant), "x")
+    text = str(info.value)
+    assert "is improper for the plant '(1) / (1 s^6 + 2.34568 s^5" in text
+    quoted = text.split("for the plant ")[1].split(" (numerator")[0]
+    assert len(quoted) == 80 and quoted.endswith("...")

@@ -214,3 +214,33 @@ def test_interrupted_fit_resumes_from_its_parts(fitted, tmp_path, monkeypatch):
     for name in (tables.HC_PARAMETERS.file, tables.RESIDUALS.file):
         assert (run / name).read_bytes() == (out[2][0] / name).read_bytes()
     assert not (run / ".parts" / "fit_hc").exists()
+
+
+def test_fit_hc_on_a_data_only_config_is_one_line(tmp_path):
+    # Before: AttributeError 'NoneType' object has no attribute 'plant', exit 1 (issue 24, 4).
+    # The fit inverts the plant (Inverse Feedforward Model), which a data-only config lacks.
+    from .conftest import CI_CONFIG, ROOT
+
+    raw = yaml.safe_load(CI_CONFIG.read_text())
+    columns = {
+        "run": "trial",
+        "time": "time_s",
+        "ft": "target",
+        "fd": "disturbance",
+        "e": "error",
+        "u": "stick",
+    }
+    doc = {"name": "lab", "identify": raw["identify"], "selection": raw["selection"],
+           "data": {"analysis_rate": 25.0, "window": 81.92, "columns": columns}}  # fmt: skip
+    config = tmp_path / "lab.yaml"
+    config.write_text(yaml.safe_dump(doc))
+    run = tmp_path / "run"
+    data = ROOT / "configs" / "example_data" / "subject_synthetic.csv"
+    for argv in (["identify", "--data", str(data), "--method", "direct", "--quiet"], ["sweep-w"]):
+        result = runner.invoke(app, [argv[0], str(config), "--run", str(run), *argv[1:]])
+        assert result.exit_code == 0, result.output
+    before = sorted(p.name for p in run.iterdir())
+    result = runner.invoke(app, ["fit-hc", str(config), "--run", str(run), "--quiet"])
+    assert result.exit_code == 2, result.output
+    assert result.stderr.startswith("hcid: error: loop: missing; `hcid fit-hc` needs the plant")
+    assert len(result.stderr.strip().splitlines()) == 1 and sorted(p.name for p in run.iterdir()) == before

@@ -1,6 +1,7 @@
 """Measured data: import checks, file formats, mapped names, and W calibration."""
 
 import copy
+import dataclasses
 
 import numpy as np
 import pyarrow as pa
@@ -300,8 +301,8 @@ def test_mat_empty_rate_refused(tmp_path, data_config, example_table):
     ("edit", "message"),
     [
         (lambda c: c.__setitem__("stick", np.where(np.arange(c["stick"].size) == 7, 1e308, c["stick"])),
-         "run 1: stick holds 1e\\+308 at sample 7 \\(values must be finite and at most 1e\\+150"),
-        (lambda c: c.__setitem__("stick", np.zeros(c["stick"].size)), "run 1: stick is zero over the"),
+         "run 1: stick holds 1e\\+308 at sample 7 \\(values must be finite and at most 1e\\+100"),
+        (lambda c: c.__setitem__("stick", np.zeros(c["stick"].size)), "stick is constant \\(0\\) over"),
     ],
 )  # fmt: skip
 def test_values_that_cannot_be_identified_are_refused(tmp_path, data_config, example_table, edit, message):
@@ -472,3 +473,162 @@ def test_lead_in_is_skipped_after_resampling(tmp_path, example_table):
         ConfigError, match=r"data.lead_in: must be whole samples at the analysis rate \(25 Hz\), got 0.01 s"
     ):
         parse_config(yaml.safe_load(_data_only_config(tmp_path, lead_in=0.01).read_text()), "lab")
+
+
+# ---------------------------------------------------------------------- no silent wrong answers (issue 24)
+
+
+def _trials_csv(tmp_path, example_table, ids, *, rate: bool):
+    """The example's three trials (repeated as needed) under the run ids ``ids``, one block each."""
+    trials = np.asarray(example_table.column("trial").to_numpy())
+    parts = []
+    for i, run_id in enumerate(ids):
+        block = example_table.filter(pa.array(trials == (i % 3) + 1))
+        block = block.set_column(0, "trial", pa.array(np.full(block.num_rows, run_id)))
+        if rate:
+            block = block.drop_columns(["time_s"]).append_column(
+                "rate", pa.array(np.full(block.num_rows, 25.0))
+            )
+        parts.append(block)
+    path = tmp_path / "trials.csv"
+    pacsv.write_csv(pa.concat_tables(parts), path)
+    return path
+
+
+def _rate_config(data_config):
+    columns = {k: v for k, v in COLUMNS.items() if k != "time"} | {"rate": "rate"}
+    return dataclasses.replace(data_config, data=dataclasses.replace(data_config.data, columns={
+        **data_config.data.columns, **columns}, time_default=False))  # fmt: skip
+
+
+@pytest.mark.parametrize("rate", [True, False], ids=["rate column", "time column"])
+def test_a_run_id_in_two_blocks_is_refused_not_merged(tmp_path, data_config, example_table, rate):
+    # Four trials, the third labelled 1 again: before, with a rate column, trial 3's rows were
+    # appended to trial 1 (one record of 4096 samples). A trial's rows are one block.
+    path = _trials_csv(tmp_path, example_table, [1, 2, 1, 4], rate=rate)
+    config = _rate_config(data_config) if rate else data_config
+    with pytest.raises(
+        DataError, match=r"run 1 appears in two separate blocks of rows \(0-2047 and 4096-6143"
+    ):
+        load_data(path, config)
+
+
+def test_the_files_run_ids_are_kept(tmp_path, data_config, example_table):
+    # A lab's trial numbers are data: runs 11..13 stay 11..13 (before: renumbered 1..3).
+    path = _trials_csv(tmp_path, example_table, [13, 11, 12], rate=True)
+    records = load_data(path, _rate_config(data_config))
+    assert list(records) == [11, 12, 13]
+    expected = load_data(EXAMPLE, data_config)
+    np.testing.assert_array_equal(records[13]["u"], expected[1]["u"])  # file order: 13 holds trial 1
+    from hcid.measured import records_table
+
+    assert sorted(set(records_table("s", records).column("seed").to_pylist())) == [11, 12, 13]
+
+
+def test_run_ids_must_be_integers(tmp_path, data_config, example_table):
+    table = example_table.set_column(0, "trial", pa.array(example_table.column("trial").to_numpy() + 0.5))
+    path = tmp_path / "d.csv"
+    pacsv.write_csv(table, path)
+    with pytest.raises(DataError, match="'trial' holds 1.5 at row 0; run ids must be integers"):
+        load_data(path, data_config)
+
+
+def test_byte_order_mark_before_comment_lines(tmp_path, data_config):
+    # A UTF-8 BOM then '#' lines: before, the first comment line was read as the header
+    # ("Expected 2 columns, got 6"); the records equal the plain file's.
+    path = tmp_path / "bom.csv"
+    path.write_bytes(b"\xef\xbb\xbf# logger v2, 25 Hz\n# subject 01\n" + EXAMPLE.read_bytes())
+    got, expected = load_data(path, data_config), load_data(EXAMPLE, data_config)
+    assert list(got) == [1, 2, 3]
+    for run in got:
+        np.testing.assert_array_equal(got[run]["e"], expected[run]["e"])
+
+
+def test_comment_lines_across_read_blocks(tmp_path, monkeypatch, data_config):
+    # The comment filter reads block by block: lines cut by a block edge and comment lines
+    # in the middle of the data give the same records as the plain file.
+    from hcid import measured
+
+    monkeypatch.setattr(measured, "_BLOCK", 97)
+    lines = EXAMPLE.read_bytes().splitlines(keepends=True)
+    path = tmp_path / "mid.csv"
+    path.write_bytes(b"# head\n" + b"".join(lines[:500]) + b"  # a note mid-file\n" + b"".join(lines[500:]))
+    got, expected = load_data(path, data_config), load_data(EXAMPLE, data_config)
+    for run in got:
+        np.testing.assert_array_equal(got[run]["u"], expected[run]["u"])
+
+
+def test_a_file_above_the_size_limit_is_refused_before_reading(tmp_path, monkeypatch, data_config):
+    # The limit is checked with stat(): a sparse file of 2 GiB is refused without reading a byte
+    # (before: read whole, 17-22 s and 4.5 GB). MAX_FILE_BYTES is lowered here to test the edge.
+    from hcid import measured
+
+    path = tmp_path / "big.csv"
+    with open(path, "wb") as f:
+        f.truncate(2 << 30)
+    with pytest.raises(DataError, match="2,147,483,648 bytes, above the 1,073,741,824-byte limit"):
+        load_data(path, data_config)
+    monkeypatch.setattr(measured, "MAX_FILE_BYTES", EXAMPLE.stat().st_size - 1)
+    with pytest.raises(DataError, match="-byte limit on a data file"):
+        load_data(EXAMPLE, data_config)
+    monkeypatch.setattr(measured, "MAX_FILE_BYTES", EXAMPLE.stat().st_size)
+    assert list(load_data(EXAMPLE, data_config)) == [1, 2, 3]
+
+
+def test_only_the_named_columns_are_read(tmp_path, monkeypatch, data_config, example_table):
+    # The CSV parser is asked for the mapped columns only (a logger's extra columns are skipped).
+    import pyarrow.csv as pacsv_module
+
+    asked = []
+    real = pacsv_module.read_csv
+
+    def spy(source, *args, convert_options=None, **kwargs):
+        asked.append(None if convert_options is None else list(convert_options.include_columns))
+        return real(source, *args, convert_options=convert_options, **kwargs)
+
+    monkeypatch.setattr(pacsv_module, "read_csv", spy)
+    table = example_table.append_column(
+        "notes", pa.array(["free text, with a comma"] * example_table.num_rows)
+    )
+    path = tmp_path / "notes.csv"
+    real_write = pacsv.write_csv
+    real_write(table, path)
+    assert list(load_data(path, data_config)) == [1, 2, 3]
+    assert asked == [sorted(COLUMNS.values())]
+
+
+def test_lead_in_longer_than_the_record(tmp_path, data_config):
+    # Before: "-1100 samples after the 200 s lead-in"; now the record's length and none left.
+    config = dataclasses.replace(data_config, data=dataclasses.replace(data_config.data, lead_in=200.0))
+    with pytest.raises(DataError, match="run 1: 2048 samples at 25 Hz, none after the 200 s lead-in, the"):
+        load_data(EXAMPLE, config)
+
+
+def test_read_signal_needs_the_run_column_for_a_run(tmp_path):
+    # Before: run 2 of a file without a run column silently gave the whole column (run 1's signal).
+    from hcid.measured import read_signal
+
+    path = tmp_path / "f.csv"
+    pacsv.write_csv(pa.table({"fd": np.sin(np.arange(100.0))}), path)
+    assert read_signal(path, "fd").size == 100
+    for run in (1, 2):
+        with pytest.raises(DataError, match=f"run {run} asked for, but the file has no run column 'run'"):
+            read_signal(path, "fd", run)
+    pacsv.write_csv(pa.table({"fd": np.arange(6.0), "run": [1, 1, 2, 2, 1, 1]}), path)
+    with pytest.raises(DataError, match="run 1 appears in two separate blocks"):
+        read_signal(path, "fd", 2)
+    pacsv.write_csv(pa.table({"fd": np.arange(6.0), "run": [1, 1, 2, 2, 3, 3]}), path)
+    np.testing.assert_array_equal(read_signal(path, "fd", 2), [2.0, 3.0])
+
+
+def test_every_signal_from_a_file_passes_the_same_check(tmp_path):
+    # One bound for data columns and forcing functions (measured.LARGEST).
+    from hcid.measured import LARGEST, check_signal, read_signal
+
+    path = tmp_path / "f.csv"
+    pacsv.write_csv(pa.table({"fd": [0.0, 2 * LARGEST, 1.0]}), path)
+    with pytest.raises(DataError, match=r"column 'fd' holds 2e\+100 at sample 1"):
+        read_signal(path, "fd")
+    np.testing.assert_array_equal(check_signal(np.array([LARGEST, -LARGEST]), "x"), [LARGEST, -LARGEST])
+    with pytest.raises(DataError, match="x holds nan at sample 0"):
+        check_signal(np.array([np.nan]), "x")

@@ -1,5 +1,6 @@
 """hcid report on configs/ci.yaml: built from the tables alone, valid figures, verdicts that follow."""
 
+import os
 import shutil
 import struct
 import subprocess
@@ -144,31 +145,45 @@ def test_report_of_non_run_dir_exit_2(tmp_path):
     assert "config.yaml: missing" in result.stderr
 
 
+#: Appended to a copy of report.html: after load, the page's title says how many images loaded.
+_IMAGE_PROBE = """<script>
+window.addEventListener("load", () => {
+  const imgs = Array.from(document.images);
+  const ok = imgs.filter((i) => i.complete && i.naturalWidth > 0).length;
+  document.title = `images ${ok} of ${imgs.length}`;
+});
+</script>"""
+
+
 def test_html_opens_in_headless_chromium(report, tmp_path):
+    # A real browser opens report.html and every figure loads (an <img> that failed to load
+    # has naturalWidth 0). CI installs Chromium (.ci/run) and sets HCID_REQUIRE_BROWSER, so
+    # there the test cannot skip.
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
+        if os.environ.get("HCID_REQUIRE_BROWSER"):
+            pytest.fail("Chromium is not installed, and HCID_REQUIRE_BROWSER is set (CI)")
         pytest.skip("Chromium is not installed")
+    probe = tmp_path / "probe.html"  # the figures are data: URIs, so the copy can live anywhere
+    probe.write_text(report.html.read_text().replace("</body>", _IMAGE_PROBE + "</body>"))
+    flags = [
+        "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+        "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-quic",
+        f"--user-data-dir={tmp_path / 'profile'}", "--virtual-time-budget=10000",
+    ]  # fmt: skip
+    proc = subprocess.run(
+        [chromium, *flags, "--dump-dom", probe.as_uri()], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 0, proc.stderr[-500:]
+    n_figures = report.html.read_text().count("<img")
+    assert n_figures == len(FIGURES)
+    assert f"<title>images {n_figures} of {n_figures}</title>" in proc.stdout, proc.stdout[:300]
     shot = tmp_path / "shot.png"
     proc = subprocess.run(
-        [
-            chromium,
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--disable-background-networking",
-            "--disable-component-update",
-            "--disable-sync",
-            "--no-first-run",
-            f"--user-data-dir={tmp_path / 'profile'}",
-            "--window-size=1200,3000",
-            f"--screenshot={shot}",
-            report.html.as_uri(),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert proc.returncode == 0, proc.stderr
+        [chromium, *flags, "--window-size=1200,3000", f"--screenshot={shot}", report.html.as_uri()],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-500:]
     _png_size(shot)
 
 
@@ -313,3 +328,34 @@ def test_w_fn_verdict_by_the_bootstrap_interval(ci_config):
     assert "P*(W_FN >= 0.26) = 0.1" in inside["FF mean nb_ft >= 2, indirect"].this_run
     outside = verdicts(table((0.22, 0.30, 0.4), (0.4, 0.6, 1.0)))["FF mean nb_ft >= 2, indirect"]
     assert outside.holds is False and outside.status_text == "does not hold"
+
+
+# --------------------------------------------------------------------------- report folders (issue 24)
+
+
+def test_report_out_follows_the_run_directory_rules(ci_run, tmp_path):
+    # Before: --out wrote into any folder, replacing a user's report.md; --out / wrote 11 files
+    # into /. Now: new, empty or hcid's own report folder only (hcid.folders).
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "report.md").write_text("my own notes\n")
+    for out, message in (
+        (mine, "not an hcid report (no hcid-run.json, and it holds other files)"),
+        (tmp_path.anchor, "refusing to use it as a report folder"),
+        (ci_run / "config.yaml", "not a directory"),
+    ):
+        result = runner.invoke(app, ["report", str(ci_run), "--out", str(out)])
+        assert result.exit_code == 2 and message in result.stderr, result.output
+        assert len(result.stderr.strip().splitlines()) == 1
+    assert (mine / "report.md").read_text() == "my own notes\n" and sorted(os.listdir(mine)) == ["report.md"]
+    assert runner.invoke(app, ["report", str(ci_run), "--out", str(ci_run)]).exit_code == 2  # a run directory
+
+
+def test_report_folder_is_reused_and_keeps_user_files(ci_run, tmp_path):
+    out = tmp_path / "rep"
+    assert runner.invoke(app, ["report", str(ci_run), "--out", str(out)]).exit_code == 0
+    (out / "notes.txt").write_text("mine")
+    (out / "stale.png").write_bytes(b"mine too")  # not listed in the manifest: not hcid's
+    assert runner.invoke(app, ["report", str(ci_run), "--out", str(out)]).exit_code == 0
+    assert (out / "notes.txt").read_text() == "mine" and (out / "stale.png").read_bytes() == b"mine too"
+    assert set(FIGURES) <= set(os.listdir(out))

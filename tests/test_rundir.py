@@ -14,7 +14,7 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from hcid import results
+from hcid import folders, results
 from hcid.cli import app
 from hcid.errors import DataError
 from hcid.pipeline import rundir
@@ -46,9 +46,9 @@ def _copy(small_run, tmp_path):
 
 def test_manifest_lists_what_hcid_wrote(small_run):
     _, run = small_run
-    owned = set(results.owned_files(run))
+    owned = set(folders.owned_files(run))
     assert {"config.yaml", "simulations.parquet", "frontier.parquet", "thresholds.parquet"} <= owned
-    assert ".hcid.lock" not in owned and results.MANIFEST not in owned
+    assert ".hcid.lock" not in owned and folders.MANIFEST not in owned
 
 
 def test_second_command_on_a_held_directory_is_refused(small_run, tmp_path):
@@ -77,7 +77,7 @@ def test_second_command_on_a_held_directory_is_refused(small_run, tmp_path):
 
 def test_lock_is_reentrant_in_one_process(tmp_path):
     with rundir.using(tmp_path / "r"), rundir.using(tmp_path / "r"):
-        assert (tmp_path / "r" / results.MANIFEST).is_file()
+        assert (tmp_path / "r" / folders.MANIFEST).is_file()
 
 
 def test_force_deletes_only_files_hcid_wrote(small_run, tmp_path):
@@ -207,3 +207,34 @@ def test_complete_run_writes_nothing(small_run, tmp_path):
 def test_lock_file_holds_the_pid(tmp_path):
     with rundir.using(tmp_path / "r"):
         assert f"pid {os.getpid()}" in (tmp_path / "r" / rundir.LOCK).read_text()
+
+
+def test_a_refused_command_leaves_the_lock_file_as_it_was(small_run, tmp_path):
+    # Before: a command refused after taking the lock (here: a config whose seeds differ)
+    # left its own pid in .hcid.lock. Content and modification time are now restored.
+    config, run = _copy(small_run, tmp_path)
+    lock = run / rundir.LOCK
+    lock.write_text("hcid pid 1 (earlier)")
+    os.utime(lock, ns=(10**18, 10**18))
+    other = tmp_path / "other.yaml"
+    raw = yaml.safe_load(config.read_text())
+    raw["seeds"] = [2]
+    other.write_text(yaml.safe_dump(raw))
+    result = runner.invoke(app, ["identify", str(other), "--run", str(run), "--quiet"])
+    assert result.exit_code == 2 and "seeds differs" in result.stderr
+    assert lock.read_text() == "hcid pid 1 (earlier)" and lock.stat().st_mtime_ns == 10**18
+    lock.unlink()
+    result = runner.invoke(app, ["identify", str(other), "--run", str(run), "--quiet"])
+    assert result.exit_code == 2 and not lock.exists()  # a lock file the refusal created is removed
+
+
+def test_hcid_never_replaces_a_file_it_did_not_write(tmp_path):
+    # In an hcid folder a file of hcid's name that its manifest does not list is the user's.
+    from hcid.folders import claim
+
+    folder = tmp_path / "out"
+    claim(folder, ["t.parquet"])
+    (folder / "t.parquet").write_bytes(b"mine")
+    with pytest.raises(DataError, match="t.parquet: not written by hcid; refusing to replace it"):
+        results.write_table(pa.table({"x": [1]}), folder / "t.parquet")
+    assert (folder / "t.parquet").read_bytes() == b"mine"

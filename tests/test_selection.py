@@ -60,8 +60,8 @@ def test_aic_bic_penalties():
 
 def test_false_positive_threshold_is_last_positive_interval_end():
     # Two realizations: nb_ft > 0 selected below W = 0.02 and below W = 0.05.
-    seg_a = selection.Segments(np.array([0, 1]), np.array([0.0, 0.02]), np.array([0.02, np.inf]))
-    seg_b = selection.Segments(
+    seg_a = selection.SelectionPath(np.array([0, 1]), np.array([0.0, 0.02]), np.array([0.02, np.inf]))
+    seg_b = selection.SelectionPath(
         np.array([0, 1, 2]), np.array([0.0, 0.01, 0.05]), np.array([0.01, 0.05, np.inf])
     )
     nb = np.array([3, 2, 0])
@@ -71,8 +71,8 @@ def test_false_positive_threshold_is_last_positive_interval_end():
 
 def test_false_negative_threshold_is_first_mean_below_two():
     # Means of nb_ft: (4+3)/2 below 0.1, (1+3)/2 = 2 from 0.1, (1+0)/2 from 0.3.
-    seg_a = selection.Segments(np.array([0, 1]), np.array([0.0, 0.1]), np.array([0.1, np.inf]))
-    seg_b = selection.Segments(np.array([0, 1]), np.array([0.0, 0.3]), np.array([0.3, np.inf]))
+    seg_a = selection.SelectionPath(np.array([0, 1]), np.array([0.0, 0.1]), np.array([0.1, np.inf]))
+    seg_b = selection.SelectionPath(np.array([0, 1]), np.array([0.0, 0.3]), np.array([0.3, np.inf]))
     nb_a, nb_b = np.array([4, 1]), np.array([3, 0])
     assert selection.false_negative_threshold([seg_a, seg_b], [nb_a, nb_b]) == 0.3
 
@@ -83,7 +83,9 @@ def test_false_negative_threshold_is_first_mean_below_two():
 def _realization(w_from, nb):
     """One realization selecting rows 0, 1, ... on [w_from[i], w_from[i+1]), with those nb_ft."""
     w_from = np.asarray(w_from, dtype=float)
-    return selection.Segments(np.arange(w_from.size), w_from, np.append(w_from[1:], np.inf)), np.asarray(nb)
+    return selection.SelectionPath(np.arange(w_from.size), w_from, np.append(w_from[1:], np.inf)), np.asarray(
+        nb
+    )
 
 
 def test_false_positive_extent_is_the_end_of_the_last_positive_interval():

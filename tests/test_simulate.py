@@ -141,7 +141,7 @@ def test_noise_free_e_and_u_equal_closed_loop_transfers(paper_config, plant_spec
 
     loop = paper_config.loop
     if plant_spec is not None:
-        loop = dataclasses.replace(loop, plant_spec=Plant(*plant_spec, "test"), disturbance_at=point)
+        loop = dataclasses.replace(loop, plant=Plant(*plant_spec, "test"), disturbance_at=point)
     model = paper_config.model(model_name)
     k_ft, k_fd = [2, 5, 13, 29], [3, 7, 17, 37]
     rec, dloop = _periodic_loop_response(loop, model, k_ft, k_fd)
@@ -181,7 +181,7 @@ def test_input_disturbance_remnant_gain_gives_the_ratio(paper_config):
     from hcid.config import Plant
 
     loop = dataclasses.replace(
-        paper_config.loop, plant_spec=Plant("integrator", (1.0,), (1.0, 0.0), "1/s"), disturbance_at="input"
+        paper_config.loop, plant=Plant("integrator", (1.0,), (1.0, 0.0), "1/s"), disturbance_at="input"
     )
     config = dataclasses.replace(
         paper_config, loop=loop, timing=dataclasses.replace(paper_config.timing, periods=8)
@@ -214,7 +214,7 @@ def test_compiled_loop_is_bit_identical_to_the_lfilter_blocks(
 
     loop = paper_config.loop
     if plant_spec is not None:
-        loop = dataclasses.replace(loop, plant_spec=Plant(*plant_spec, "test"), disturbance_at=point)
+        loop = dataclasses.replace(loop, plant=Plant(*plant_spec, "test"), disturbance_at=point)
     dloop = DiscreteLoop.build(paper_config.model(model_name), loop, 0.01)
     assert all(simulate._replicable(*path) for path in (dloop.feedback, dloop.plant))
     t = np.arange(3000) / 100.0

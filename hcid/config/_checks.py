@@ -9,16 +9,8 @@ import math
 import operator
 from typing import Any
 
-from hcid.errors import ConfigError
-
-#: Longest quote of a value in an error message (a message stays one readable line).
-QUOTE = 80
-
-
-def fmt(value: Any) -> str:
-    """A value as an error message quotes it: repr for strings, at most :data:`QUOTE` characters."""
-    text = repr(value) if isinstance(value, str) else str(value)
-    return text if len(text) <= QUOTE else text[: QUOTE - 3] + "..."
+from hcid.errors import QUOTE, ConfigError
+from hcid.errors import quote as fmt
 
 
 class Section:

@@ -16,6 +16,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from hcid.config._checks import Section, fmt, int_range, integer, number_list
@@ -182,25 +183,21 @@ def _loop_section(top: Section) -> Loop:
                 "Kc wb / (s (s + wb))) or as loop.plant, not both"
             )
         plant = _plant(s)
-        Kc, wb = (plant.num[0] / plant.den[1], plant.den[1]) if plant.kind == "second_order" else (0.0, 0.0)
     else:
-        plant = None
         Kc = s.number("Kc", 0.0, 1e3, open_lo=True)
-        wb = s.number("wb", 0.0, 1e3, open_lo=True)
+        plant = Plant.second_order(Kc, s.number("wb", 0.0, 1e3, open_lo=True))
     point = s.get("disturbance_at", "output")
     if point not in DISTURBANCE_POINTS:
         raise ConfigError(
             f"loop.disturbance_at: must be one of {', '.join(DISTURBANCE_POINTS)}, got {fmt(point)}"
         )
     loop = Loop(
-        Kc=Kc,
-        wb=wb,
+        plant=plant,
         w_nms=s.number("w_nms", 0.0, 1e3, open_lo=True),
         zeta_nms=s.number("zeta_nms", 0.0, 10.0, open_lo=True),
         w_n=s.number("w_n", 0.0, 1e3, open_lo=True),
         zeta_n=s.number("zeta_n", 0.0, 10.0, open_lo=True),
         remnant_ratio=s.number("remnant_ratio", 0.0, 0.9),
-        plant_spec=plant,
         disturbance_at=point,
     )
     s.done()
@@ -340,6 +337,29 @@ def _timing_section(top: Section) -> Timing:
     return timing
 
 
+#: Why each forcing function must not be zero (or constant) over the window.
+_NEEDED_FOR = {
+    "disturbance": "the remnant gain (loop.remnant_ratio) is set in the disturbance-only task and the "
+    "error path is identified from the disturbance",
+    "target": "the target path (feedforward) is identified from the target",
+}
+
+
+def _constant_forcing(spec: Forcing, timing: Timing) -> str | None:
+    """How ``spec`` is constant over the window (a multisine's amplitudes all 0, ...), or None."""
+    if isinstance(spec, Multisine):
+        return "every amplitude is 0" if not any(spec.amplitude) else None
+    if isinstance(spec, Segments):
+        return (
+            "its gain or every step is 0"
+            if spec.gain == 0 or not any(s.step for s in spec.segments)
+            else None
+        )
+    first = round(spec.start * spec.rate)
+    window = spec.values[first : first + round(timing.window * spec.rate)]
+    return f"column {fmt(spec.column)} is constant ({window[0]:.6g})" if np.ptp(window) == 0 else None
+
+
 def _check_forcing(name: str, spec: Forcing, timing: Timing) -> None:
     key = f"signals.{name}"
     if isinstance(spec, Segments):
@@ -368,6 +388,9 @@ def _check_against_timing(
 ) -> None:
     for name, spec in zip(("disturbance", "target"), signals, strict=True):
         _check_forcing(name, spec, timing)
+        how = _constant_forcing(spec, timing)
+        if how is not None:
+            raise ConfigError(f"signals.{name}: is constant over the window ({how}); {_NEEDED_FOR[name]}")
     for m in models:
         for key, tau in (("tau_pe", m.tau_pe), ("tau_pt", m.tau_pt)):
             if abs(tau * timing.sim_rate - round(tau * timing.sim_rate)) > 1e-6:
@@ -666,11 +689,18 @@ def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataC
     )
 
 
-def _fit_hc_section(top: Section, band: tuple[float, float]):
+def _fit_hc_section(top: Section, band: tuple[float, float], timing: Timing):
     # The settings live with the fit (hcid.hcfit.settings), parsed here once like every section.
     from hcid.hcfit.settings import parse_fit_settings
 
-    return parse_fit_settings(top.get("fit_hc", None), "fit_hc", default_band=band)
+    settings = parse_fit_settings(top.get("fit_hc", None), "fit_hc", default_band=band)
+    nyquist = math.pi * timing.output_rate
+    if settings.band is not None and settings.band[1] > nyquist * (1 + 1e-9):
+        raise ConfigError(
+            f"fit_hc.band: must end at or below the analysis Nyquist frequency (pi x "
+            f"{timing.output_rate:g} Hz = {nyquist:.4g} rad/s), got {list(settings.band)}"
+        )
+    return settings
 
 
 # --------------------------------------------------------------------------- entry points
@@ -804,7 +834,7 @@ def parse_config(data: Any, name: str, base: Path | None = None) -> Config:
     identify = _identify_section(top, timing)
     selection, selection_raw = _selection_section(top)
     data_cfg = _data_section(top, [m.name for m in models], timing)
-    fit_hc = _fit_hc_section(top, Config.band_of(disturbance, timing))
+    fit_hc = _fit_hc_section(top, Config.band_of(disturbance, timing), timing)
     top.done()
     _check_study_size(identify, seeds, models)
     if simulates:

@@ -86,26 +86,18 @@ class Plant:
 class Loop:
     """Plant, neuromuscular and remnant-filter parameters (rad/s, unitless).
 
-    ``Kc`` and ``wb`` are the paper's plant ``Kc wb / (s (s + wb))``, used when
-    ``plant_spec`` is None (the default); a config's ``loop.plant`` sets
-    ``plant_spec`` instead. ``disturbance_at`` is ``output`` (the paper:
-    ``theta = Yc u + fd``) or ``input`` (``theta = Yc (u + fd)``).
+    ``plant`` is the controlled element (a config's ``loop.plant``, or the paper's
+    ``Kc wb / (s (s + wb))`` from ``loop.Kc`` and ``loop.wb``). ``disturbance_at`` is
+    ``output`` (the paper: ``theta = Yc u + fd``) or ``input`` (``theta = Yc (u + fd)``).
     """
 
-    Kc: float
-    wb: float
+    plant: Plant
     w_nms: float
     zeta_nms: float
     w_n: float
     zeta_n: float
     remnant_ratio: float
-    plant_spec: Plant | None = None
     disturbance_at: str = "output"
-
-    @property
-    def plant(self) -> Plant:
-        """The configured plant, or the paper's from ``Kc`` and ``wb``."""
-        return self.plant_spec if self.plant_spec is not None else Plant.second_order(self.Kc, self.wb)
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,7 @@ import pyarrow.compute  # noqa: F401  (pa.compute)
 
 from hcid import criteria, methods, results, selection, tables
 from hcid.config import Config
-from hcid.errors import DataError, HcidError
+from hcid.errors import ConfigError, DataError, HcidError
 from hcid.hcfit import FEEDBACK_PARAMETERS, UNITS, parse_fit_settings
 from hcid.pipeline.parallel import parallel_map
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
@@ -313,7 +313,15 @@ def fit_hc_study(
     DataError
         If the run has no frontier, or a record or stage choice the frontier
         needs is missing.
+    ConfigError
+        For a data-only config: the parametric model needs the experiment's plant.
     """
+    if config.loop is None:
+        raise ConfigError(
+            "loop: missing; `hcid fit-hc` needs the plant of the experiment (the fit's feedforward "
+            "model inverts it), which a data-only config does not give: add models, loop, signals "
+            "and seeds as in configs/integrator_example.yaml"
+        )
     check_run_dir(config, run_dir, "select")
     start = time.perf_counter()
     settings = config.fit_hc if config.fit_hc is not None else parse_fit_settings(None)

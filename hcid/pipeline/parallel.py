@@ -32,10 +32,12 @@ __all__ = ["BACKENDS", "check_backend", "check_scheduler", "parallel_map"]
 BACKENDS = ("loky", "dask")
 
 
-def check_backend(backend: str) -> None:
-    """One-line error for an unknown ``--backend``, before any work starts."""
+def check_backend(backend: str, scheduler: str | None = None) -> None:
+    """One-line error for an unknown ``--backend``, or a scheduler given to a backend without one."""
     if backend not in BACKENDS:
         raise HcidError(f"--backend: must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    if scheduler is not None and backend != "dask":
+        raise HcidError(f"--scheduler: only with --backend dask (got --backend {backend}); drop one of them")
 
 
 def parallel_map(
@@ -213,7 +215,7 @@ def _forked_worker_start(parent: int) -> None:
 
 def check_scheduler(backend: str, scheduler: str | None, timeout: float = 60.0) -> None:
     """Refuse, before any work, a dask scheduler that cannot be reached or has no worker."""
-    check_backend(backend)
+    check_backend(backend, scheduler)
     if backend == "dask" and scheduler is not None:
         with contextlib.ExitStack() as stack:
             _client(scheduler, 1, timeout, stack)

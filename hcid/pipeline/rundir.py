@@ -3,7 +3,7 @@
 - :func:`using` holds a run directory for a command: it refuses paths that are
   not a plain directory of their own (``/``, the working directory or one of its
   parents), marks the directory as hcid's with a manifest written first
-  (:func:`hcid.results.claim`), and takes an ``fcntl`` lock that the operating
+  (:func:`hcid.folders.claim`), and takes an ``fcntl`` lock that the operating
   system releases when the process ends, so a ``kill -9`` never leaves a stale
   lock; a second command on the directory is refused in one line naming the
   process that holds it.
@@ -24,9 +24,9 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from hcid import results, tables
+from hcid import folders, results, tables
 from hcid.config import Config
-from hcid.errors import ConfigError, DataError
+from hcid.errors import ConfigError, DataError, HcidError
 
 __all__ = [
     "IDENTIFICATION_SECTIONS",
@@ -63,25 +63,9 @@ def known_files() -> list[str]:
         tables.CALIBRATION, tables.RUN_LOG, tables.HC_PARAMETERS, tables.RESIDUALS,
         tables.RATES, tables.HANDOFF,
     ]  # fmt: skip
-    files = [s.file for s in schemas] + ["config.yaml", results.MANIFEST, LOCK]
+    files = [s.file for s in schemas] + ["config.yaml", folders.MANIFEST, LOCK]
     files += [tables.stage_choice(s.name, s.inputs).file for m in METHODS.values() for s in m.choice_stages]
     return files
-
-
-def _check_path(run_dir: Path) -> Path:
-    try:
-        resolved = run_dir.resolve()
-        cwd = Path.cwd().resolve()
-    except (OSError, RuntimeError) as exc:
-        raise DataError(f"{run_dir}: not a usable run directory ({exc})") from exc
-    if resolved == resolved.parent or resolved == cwd or resolved in cwd.parents:
-        raise DataError(
-            f"{run_dir}: refusing to use it as a run directory (it is / , the working directory or one "
-            "of its parents); choose a directory of its own, e.g. runs/<name>"
-        )
-    if run_dir.exists() and not run_dir.is_dir():
-        raise DataError(f"{run_dir}: not a directory; choose another --run")
-    return resolved
 
 
 def holds_run_dir(*, create: bool = True):
@@ -110,7 +94,7 @@ def using(run_dir: Path, *, create: bool = True) -> Iterator[Path]:
         If the path is not a directory of its own, hcid does not own it, or
         another process holds it.
     """
-    resolved = _check_path(run_dir)
+    resolved = folders.check_output_path(run_dir, "run directory")
     if not create and not run_dir.is_dir():
         raise DataError(f"{run_dir}: missing; run `hcid run CONFIG` (or simulate / identify) first")
     held = _HELD.get(resolved)
@@ -122,9 +106,12 @@ def using(run_dir: Path, *, create: bool = True) -> Iterator[Path]:
         finally:
             held[1] -= 1
         return
-    results.claim(run_dir, known_files())
+    known = known_files()
+    folders.claim(run_dir, known, adopt=lambda entries: _written_by_hcid(entries, known))
+    lock_path = run_dir / LOCK
+    lock_before = lock_path.stat() if lock_path.is_file() else None
     try:
-        handle = open(run_dir / LOCK, "a+")  # noqa: SIM115 (held until the command ends)
+        handle = open(lock_path, "a+")  # noqa: SIM115 (held until the command ends)
     except OSError as exc:
         if not os.access(run_dir, os.W_OK):  # read-only: nobody can write it, reading is safe
             yield run_dir
@@ -140,12 +127,18 @@ def using(run_dir: Path, *, create: bool = True) -> Iterator[Path]:
             f"{run_dir}: in use by {holder}; wait for it to finish or choose another --run"
         ) from None
     handle.seek(0)
+    holder_before = handle.read()
+    handle.seek(0)
     handle.truncate()
     handle.write(f"hcid pid {os.getpid()} ({' '.join(os.path.basename(a) for a in sys.argv[:2])})")
     handle.flush()
     _HELD[resolved] = [handle, 1]
     try:
         yield run_dir
+    except HcidError:
+        # A refused command leaves the directory as it found it, its lock file included.
+        _restore_lock(handle, lock_path, holder_before, lock_before)
+        raise
     finally:
         del _HELD[resolved]
         handle.close()  # releases the lock
@@ -153,11 +146,30 @@ def using(run_dir: Path, *, create: bool = True) -> Iterator[Path]:
             _remove_if_unused(run_dir)
 
 
+def _restore_lock(handle, path: Path, text: str, before: os.stat_result | None) -> None:
+    try:
+        if before is None:
+            path.unlink(missing_ok=True)
+            return
+        handle.seek(0)
+        handle.truncate()
+        handle.write(text)
+        handle.flush()
+        os.utime(path, ns=(before.st_atime_ns, before.st_mtime_ns))
+    except OSError:
+        pass
+
+
+def _written_by_hcid(entries: list[str], known: list[str]) -> bool:
+    """A run directory of an hcid without manifests: a config.yaml and only hcid's files."""
+    return "config.yaml" in entries and set(entries) <= {*known, results.PARTS, "report", LOCK}
+
+
 def _remove_if_unused(run_dir: Path) -> None:
     """A directory this command created and then wrote nothing into (a refusal) is removed."""
     try:
-        if {p.name for p in run_dir.iterdir()} <= {results.MANIFEST, LOCK}:
-            for name in (results.MANIFEST, LOCK):
+        if {p.name for p in run_dir.iterdir()} <= {folders.MANIFEST, LOCK}:
+            for name in (folders.MANIFEST, LOCK):
                 (run_dir / name).unlink(missing_ok=True)
             run_dir.rmdir()
     except OSError:
@@ -238,10 +250,11 @@ def check_run_dir(config: Config, run_dir: Path, stage: str, *, force: bool = Fa
             f"{run_dir}: made with another config ({key} differs); use `{redo}` to redo it "
             "or --run for another directory"
         )
-    owned = results.owned_files(run_dir)
-    results.remove_owned(
+    owned = folders.owned_files(run_dir)
+    folders.remove_owned(
         run_dir, [f for f in owned if f.endswith(".parquet") and (stale is None or f in stale)]
     )
+    results.clear_parts(run_dir)
 
 
 def record_config(config: Config, run_dir: Path) -> None:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hcid import results
+from hcid import folders, results
 from hcid.errors import DataError
 from hcid.report.document import Doc, to_html, to_markdown
 from hcid.report.run import RunTables, read_run
@@ -83,15 +83,28 @@ def render(data: ReportData) -> Doc:
     return doc
 
 
-def write_report(data: ReportData, out_dir: Path) -> Report:
-    """Draw the figures and write ``report.md``, ``report.html`` and the PNGs into ``out_dir``."""
+def _old_report(entries: list[str]) -> bool:
+    """A report folder written by an hcid without manifests: only its Markdown, HTML and figures."""
+    return all(e in ("report.md", "report.html") or e.endswith(".png") for e in entries)
+
+
+def write_report(data: ReportData, out_dir: Path, *, adopt_old: bool = False) -> Report:
+    """Draw the figures and write ``report.md``, ``report.html`` and the PNGs into ``out_dir``.
+
+    ``out_dir`` follows the rules of every folder hcid writes (:mod:`hcid.folders`):
+    new, empty or an hcid report folder; only hcid's own files are replaced, and
+    figures of an earlier report that this one does not draw are removed.
+    ``adopt_old`` takes over a report folder written before folders had manifests.
+    """
     from hcid.report import figures
 
     doc = render(data)
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise DataError(f"{out_dir}: cannot write the report ({exc.strerror or exc})") from exc
+    folders.check_output_path(out_dir, "report folder")
+    names = [*doc.drawings, "report.md", "report.html"]
+    folders.claim(out_dir, names, folders.REPORT, adopt=_old_report if adopt_old else None)
+    for name in names:
+        if (out_dir / name).exists() and name not in folders.owned_files(out_dir):
+            raise DataError(f"{out_dir / name}: not written by hcid; refusing to replace it")
     written = []
     for name, draw in doc.drawings.items():
         figures.save(draw(), out_dir / name)
@@ -99,6 +112,9 @@ def write_report(data: ReportData, out_dir: Path) -> Report:
     md_path, html_path = out_dir / "report.md", out_dir / "report.html"
     results.write_text(to_markdown(doc), md_path)
     results.write_text(to_html(doc, out_dir, data.run.config.name), html_path)
+    stale = [f for f in folders.owned_files(out_dir) if f not in names]
+    if stale:
+        folders.remove_owned(out_dir, stale)
     return Report(md_path, html_path, tuple(written), data.missing, data.verdicts)
 
 
@@ -109,4 +125,4 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
     run_dir = Path(run_dir)
     out = Path(out_dir) if out_dir is not None else run_dir / "report"
     with using(run_dir, create=False):
-        return write_report(compute_report(run_dir), out)
+        return write_report(compute_report(run_dir), out, adopt_old=out_dir is None)

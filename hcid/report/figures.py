@@ -7,10 +7,13 @@ no global backend or figure registry is touched.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 from matplotlib import colormaps
 from matplotlib.figure import Figure
 
+from hcid import folders
 from hcid.methods import METHODS
 from hcid.report.compute import Curves, Responses
 
@@ -46,7 +49,10 @@ def methods_in(keys) -> list[str]:
 
 
 def save(fig, path) -> None:
-    fig.savefig(path, dpi=DPI, bbox_inches="tight")
+    """Write ``fig`` as a PNG atomically, as one of its folder's hcid files (:mod:`hcid.folders`)."""
+    path = Path(path)
+    folders.atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=DPI, bbox_inches="tight", format="png"))
+    folders.register(path)
 
 
 def _figure(axes, rows: int, cols: int, *, figsize, sharex: bool = False):

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from hcid import criteria, paper, results, tables
+from hcid import criteria, folders, paper, results, tables
 from hcid.config import Config, load_config
 from hcid.errors import DataError, HcidError
 from hcid.report.document import Doc, to_html, to_markdown
@@ -222,7 +222,9 @@ def write_variants(out_dir: Path, configs: list[Config], runs_root: Path = Path(
 
     variants = [compute_variant(c, runs_root / c.name) for c in configs]
     doc = render(variants)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    names = [*doc.drawings, "report.md", "report.html", "variants.parquet"]
+    folders.check_output_path(out_dir, "report folder")
+    folders.claim(out_dir, names, folders.REPORT, adopt=lambda entries: set(entries) <= set(names))
     for name, draw in doc.drawings.items():
         figures.save(draw(), out_dir / name)
     results.write_text(to_markdown(doc), out_dir / "report.md")

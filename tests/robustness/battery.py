@@ -19,6 +19,7 @@ import argparse
 import copy
 import hashlib
 import os
+import re
 import resource
 import shutil
 import subprocess
@@ -820,8 +821,253 @@ def _raw(tmp: Path, data: bytes, suffix: str) -> Path:
     return path
 
 
+# --------------------------------------------------------------------------- issue 24: silent wrong answers
+
+
+def _example_runs() -> dict[int, dict[str, np.ndarray]]:
+    """The example CSV's trials as arrays, by trial."""
+    import pyarrow.csv as pacsv
+
+    table = pacsv.read_csv(EXAMPLE_CSV).to_pydict()
+    trials = np.asarray(table["trial"])
+    return {
+        int(k): {c: np.asarray(v, dtype=float)[trials == k] for c, v in table.items()}
+        for k in np.unique(trials)
+    }
+
+
+def _runs_csv(tmp: Path, ids: list[int], *, rate: bool) -> Path:
+    """The example's trials written with the given run ids, with a rate column or the time column."""
+    runs = list(_example_runs().values())
+    cols: dict[str, list] = {}
+    for run_id, run in zip(ids, (runs * 2)[: len(ids)], strict=True):
+        n = run["time_s"].size
+        block = {"trial": np.full(n, run_id)}
+        block.update({"rate": np.full(n, 25.0)} if rate else {"time_s": run["time_s"]})
+        block.update({c: run[c] for c in ("target", "disturbance", "error", "stick")})
+        for c, v in block.items():
+            cols.setdefault(c, []).append(v)
+    path = tmp / "runs.csv"
+    pa.csv.write_csv(pa.table({c: np.concatenate(v) for c, v in cols.items()}), path)
+    return path
+
+
+def _rate_data_config(tmp: Path) -> Path:
+    data = copy.deepcopy(DATA_CONFIG)
+    data["data"]["columns"] = {"rate": "rate", "ft": "target", "fd": "disturbance", "e": "error", "u": "stick",
+                               "run": "trial"}  # fmt: skip
+    return _write_config(tmp, data, "d.yaml")
+
+
+def _identify_file(make, config=_data_config) -> Callable[[Path], list[str]]:
+    def setup(tmp: Path) -> list[str]:
+        path = make(tmp)
+        return ["identify", str(config(tmp)), "--run", str(tmp / "run"), "--data", str(path), "--quiet",
+                "--jobs", "1", "--method", "direct"]  # fmt: skip
+
+    return setup
+
+
+def _seeds_are(expected: set[int]):
+    def check(tmp: Path, proc) -> str | None:
+        seeds = set(pq.read_table(tmp / "run" / "frontier.parquet").column("seed").to_pylist())
+        return None if seeds == expected else f"run ids {sorted(seeds)}, expected {sorted(expected)}"
+
+    return check
+
+
+def _forcing_file(tmp: Path, values: np.ndarray, **spec) -> dict:
+    """BASE with a disturbance of kind file: column fd of dist.csv at the analysis rate."""
+    path = tmp / "dist.csv"
+    pa.csv.write_csv(pa.table({"fd": values}), path)
+    data = copy.deepcopy(BASE)
+    data["signals"]["disturbance"] = {"kind": "file", "path": str(path), "column": "fd", "rate": 25.0, **spec}
+    return data
+
+
+def _multisine_values(n: int = 2048) -> np.ndarray:
+    ms = BASE["signals"]["disturbance"]
+    t = np.arange(n) / 25.0
+    wm = 2 * np.pi / ms["base_period"]
+    return sum(
+        a * np.sin(k * wm * t + p) for k, a, p in zip(ms["k"], ms["amplitude"], ms["phase"], strict=True)
+    )
+
+
+def _simulate_with(make) -> Callable[[Path], list[str]]:
+    def setup(tmp: Path) -> list[str]:
+        return _simulate(make(tmp))(tmp)
+
+    return setup
+
+
+def _sparse_csv(tmp: Path, size: int, header: bytes = b"") -> Path:
+    path = tmp / "big.csv"
+    with open(path, "wb") as f:
+        f.write(header)
+        f.truncate(size)
+    return path
+
+
+def _user_report_kept(tmp: Path, proc) -> str | None:
+    mine = tmp / "run" / "report.md"
+    return None if mine.read_text() == "my own notes\n" else "the user's report.md was changed"
+
+
+def _report_into(prepare) -> Callable[[Path], list[str]]:
+    def setup(tmp: Path) -> list[str]:
+        _ready_run(tmp)
+        shutil.move(tmp / "run", tmp / "study")
+        out = prepare(tmp)
+        return ["report", str(tmp / "study"), "--out", str(out)]
+
+    return setup
+
+
+def _lock_untouched(tmp: Path, proc) -> str | None:
+    lock = tmp / "run" / ".hcid.lock"
+    if not lock.is_file() or lock.read_text() != "hcid pid 1 (earlier)" or lock.stat().st_mtime_ns != 10**18:
+        return "the refused command rewrote .hcid.lock"
+    return None
+
+
+def _refused_keeps_lock(tmp: Path) -> list[str]:
+    _ready_run(tmp)
+    lock = tmp / "run" / ".hcid.lock"
+    lock.write_text("hcid pid 1 (earlier)")
+    os.utime(lock, ns=(10**18, 10**18))
+    other = _write_config(tmp, _mutated(("seeds",), [2]), "other.yaml")
+    return ["identify", str(other), "--run", str(tmp / "run"), "--quiet"]
+
+
+def _bom_csv(tmp: Path) -> Path:
+    text = EXAMPLE_CSV.read_bytes()
+    path = tmp / "bom.csv"
+    path.write_bytes(b"\xef\xbb\xbf# logger v2\n# subject 01\n" + text)
+    return path
+
+
+def _lead_in_config(tmp: Path) -> Path:
+    data = copy.deepcopy(DATA_CONFIG)
+    data["data"]["lead_in"] = 200.0
+    return _write_config(tmp, data, "d.yaml")
+
+
+def _improper_plant(tmp: Path) -> list[str]:
+    data = copy.deepcopy(BASE)
+    del data["loop"]["Kc"], data["loop"]["wb"]
+    data["loop"]["plant"] = {
+        "kind": "tf",
+        "num": [1.0],
+        "den": [1.0, 2.3456789, 3.456789, 4.567891, 5.678912, 6.789123, 0.0],
+    }
+    return _simulate(data)(tmp)
+
+
+def _short_quote(tmp: Path, proc) -> str | None:
+    line = proc.stderr.strip()
+    return None if "is improper" not in line or len(line) < 400 else f"message of {len(line)} characters"
+
+
+def silent_answer_cases() -> list[Case]:
+    data_only = {"name": "donly", "data": {"analysis_rate": 25.0, "window": 81.92,
+                 "columns": {"run": "trial", "time": "time_s", "ft": "target", "fd": "disturbance", "e": "error",
+                             "u": "stick"}}}  # fmt: skip
+
+    def fit_hc_data_only(tmp: Path) -> list[str]:
+        config = _write_config(tmp, data_only, "d.yaml")
+        subprocess.run([*HCID, "identify", str(config), "--run", str(tmp / "run"), "--data", str(EXAMPLE_CSV),
+                        "--quiet", "--jobs", "1", "--method", "direct"], check=True, capture_output=True)  # fmt: skip
+        subprocess.run(
+            [*HCID, "sweep-w", str(config), "--run", str(tmp / "run")], check=True, capture_output=True
+        )
+        return ["fit-hc", str(config), "--run", str(tmp / "run"), "--quiet", "--jobs", "1"]
+
+    zero_fd = copy.deepcopy(BASE)
+    zero_fd["signals"]["disturbance"]["amplitude"] = [0.0] * len(zero_fd["signals"]["disturbance"]["k"])
+    nyquist = copy.deepcopy(BASE)
+    nyquist["fit_hc"] = {"band": [0.1, 100.0]}
+    return [
+        # 1. a forcing file's run asked for, the run column absent
+        Case("forcing file run 2 without its run column",
+             _simulate_with(lambda t: _forcing_file(t, _multisine_values(), run=2)), "refused"),
+        Case("forcing file run 1 without its run column",
+             _simulate_with(lambda t: _forcing_file(t, _multisine_values(), run=1)), "refused"),
+        # 2. a repeated run id: never merged
+        Case("data run id in two blocks, rate column", _identify_file(lambda t: _runs_csv(t, [1, 2, 1], rate=True),
+             _rate_data_config), "refused"),
+        Case("data run id in two blocks, time column", _identify_file(lambda t: _runs_csv(t, [1, 2, 1], rate=False)),
+             "refused"),
+        Case("data run ids 11..13 kept", _identify_file(lambda t: _runs_csv(t, [11, 12, 13], rate=True),
+             _rate_data_config), "accepted", ("frontier.parquet",), _seeds_are({11, 12, 13})),
+        # 3. report output folders follow the run directory's rules
+        Case("report --out a folder with a user's report.md",
+             _report_into(_user_folder), "refused", check=_user_report_kept),
+        Case("report --out /", _report_into(lambda t: Path("/")), "refused"),
+        Case("report --out the working directory", _report_into(lambda t: t), "refused"),
+        Case("report --out a file", _report_into(_user_file), "refused"),
+        Case("report --out a new folder", _report_into(lambda t: t / "run"), "accepted", ("report.html",)),
+        # 4. fit-hc on a data-only config
+        Case("fit-hc on a data-only config", fit_hc_data_only, "refused"),
+        # 5. big files refused before reading
+        Case("data 2 GB sparse csv", _identify_file(lambda t: _sparse_csv(t, 2 << 30)), "refused"),
+        Case("data 2 GB csv with a header",
+             _identify_file(lambda t: _sparse_csv(t, 2 << 30, b"trial,time_s,target,disturbance,error,stick\n")),
+             "refused"),
+        Case("forcing file of 2 GB",
+             _simulate_with(lambda t: (_sparse_csv(t, 2 << 30), _big_forcing(t))[1]), "refused"),
+        # 6. a byte-order mark before '#' comment lines
+        Case("data csv with BOM and # comments", _identify_file(_bom_csv), "accepted", ("frontier.parquet",),
+             _seeds_are({1, 2, 3})),
+        # 7. forcing-file values beyond the data bound
+        Case("forcing file value 1e150", _simulate_with(lambda t: _forcing_file(t, _scaled(1e150))), "refused"),
+        Case("forcing file value 1e200", _simulate_with(lambda t: _forcing_file(t, _scaled(1e200))), "refused"),
+        # 8. an all-zero disturbance
+        Case("multisine disturbance all amplitudes 0", _simulate(zero_fd), "refused"),
+        Case("forcing file disturbance all zeros", _simulate_with(lambda t: _forcing_file(t, np.zeros(2048))),
+             "refused"),
+        Case("data fd column all zeros", _csv_case(_with("disturbance", lambda x: np.zeros_like(x))), "refused"),
+        # smaller ones
+        Case("cli --w abc", lambda t: ["fit-hc", str(_ready_run(t)), "--run", str(t / "run"), "--w", "abc"],
+             "refused"),
+        Case("cli --jobs 0", lambda t: ["simulate", str(_write_config(t, BASE)), "--run", str(t / "run"),
+             "--jobs", "0"], "refused"),
+        Case("cli --scheduler with --backend loky",
+             lambda t: ["identify", str(_write_config(t, BASE)), "--run", str(t / "run"), "--backend", "loky",
+                        "--scheduler", "tcp://127.0.0.1:1"], "refused"),
+        Case("improper plant message quoted short", _improper_plant, "refused", check=_short_quote),
+        Case("fit_hc.band above Nyquist", _simulate(nyquist), "refused"),
+        Case("data lead-in longer than the record", _identify_file(lambda t: EXAMPLE_CSV, _lead_in_config),
+             "refused", check=lambda t, p: p.stderr if re.search(r" -\d+ samples", p.stderr) else None),
+        Case("refused command leaves .hcid.lock", _refused_keeps_lock, "refused", check=_lock_untouched),
+    ]  # fmt: skip
+
+
+def _user_folder(tmp: Path) -> Path:
+    (tmp / "run").mkdir()
+    (tmp / "run" / "report.md").write_text("my own notes\n")
+    return tmp / "run"
+
+
+def _user_file(tmp: Path) -> Path:
+    (tmp / "run").mkdir()
+    (tmp / "run" / "f.txt").write_text("x")
+    return tmp / "run" / "f.txt"
+
+
+def _scaled(peak: float) -> np.ndarray:
+    x = _multisine_values()
+    return x / np.max(np.abs(x)) * peak
+
+
+def _big_forcing(tmp: Path) -> dict:
+    data = _forcing_file(tmp, _multisine_values())
+    data["signals"]["disturbance"]["path"] = str(tmp / "big.csv")
+    return data
+
+
 def all_cases() -> list[Case]:
-    return config_cases() + rundir_cases() + data_cases()
+    return config_cases() + rundir_cases() + data_cases() + silent_answer_cases()
 
 
 def main() -> int:
