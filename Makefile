@@ -2,22 +2,46 @@ PY ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+# The exact versions, with their sha256 hashes, that the install step installs (docs/installing.md).
+LOCK := requirements.lock
+# `make lock`: pip-compile in a throwaway venv, the tools pinned too. By default it resolves the
+# newest versions pyproject.toml allows; `make lock LOCK_UPGRADE=` keeps the current pins (only what
+# pyproject.toml added or dropped moves) and `make lock LOCK_UPGRADE='-P numpy'` moves one package.
+LOCK_TOOLS ?= pip==26.3 pip-tools==7.6.2
+LOCK_UPGRADE ?= --upgrade
 
-.PHONY: run test test-all lint bench robustness clean indirect-variants
+.PHONY: run test test-all lint bench robustness clean indirect-variants lock
 
 VARIANTS := $(sort $(wildcard configs/indirect_variants/*.yaml))
 
-$(STAMP): pyproject.toml
+# Installs exactly the lock (pip, setuptools and wheel included), then hcid itself with that
+# setuptools; pip check fails if the lock misses a dependency of pyproject.toml.
+$(STAMP): pyproject.toml $(LOCK)
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,dask]'
+	$(BIN)/python -m pip install --quiet --require-hashes --no-deps -r $(LOCK)
+	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
+	$(BIN)/python -m pip check
 	touch $(STAMP)
+
+# The lock's inputs: pyproject.toml with the dev and dask extras, plus pip and the build-system
+# requirements (read from pyproject.toml). Then `make test`: the golden digests and numbers.
+lock:
+	set -e; tmp=$$(mktemp -d); trap 'rm -rf "$$tmp"' EXIT; \
+	$(PY) -m venv "$$tmp"; \
+	"$$tmp/bin/python" -m pip install --quiet $(LOCK_TOOLS); \
+	build=$$("$$tmp/bin/python" -c "import tomllib; \
+		print(*tomllib.load(open('pyproject.toml', 'rb'))['build-system']['requires'], sep='\n')"); \
+	printf 'pip\n%s\n' "$$build" | \
+	CUSTOM_COMPILE_COMMAND='make lock' "$$tmp/bin/pip-compile" --quiet $(LOCK_UPGRADE) \
+		--generate-hashes --allow-unsafe --extra dev --extra dask --strip-extras \
+		--no-emit-index-url --no-emit-find-links --output-file $(LOCK) pyproject.toml -
+	@echo "$(LOCK) written: now make test (golden digests and numbers), then commit it."
 
 run: $(STAMP)
 	$(BIN)/hcid run configs/paper.yaml
 	$(BIN)/hcid report runs/paper
 
-# The indirect method's stage-1 variants (README "The indirect method's W_FP"): FB only, indirect
+# The indirect method's stage-1 variants (docs/methodology.md (stage-1 variants)): FB only, indirect
 # only, 50 realizations each (about 6 minutes on 2 idle cores), then their comparison report.
 indirect-variants: $(STAMP)
 	for c in $(VARIANTS); do \

@@ -4,11 +4,14 @@ Mirrors the ``paper_record`` fixture of ``tests/conftest.py`` (kept here, not
 in ``hcid``, because only benchmarks need it).
 """
 
+import sys
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+# The slow twins the benchmarks compare with live with the tests (tests/naive.py).
+sys.path.insert(0, str(ROOT / "tests"))
 PAPER_CONFIG = ROOT / "configs" / "paper.yaml"
 
 
@@ -17,8 +20,8 @@ def paper_record(model: str = "FF", seed: int = 1) -> dict[str, np.ndarray]:
 
     ``ft_s(k) = ft(k + 25)``, zeros after the record (SPEC section 3).
     """
-    from hcid.config import load_config
     from hcid.methods import shift_forward
+    from hcid.resolve import load_config
     from hcid.simulate import remnant_gain, simulate_realization
 
     config = load_config(PAPER_CONFIG)

@@ -22,32 +22,14 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from _paper_record import PAPER_CONFIG  # noqa: E402
 
+import hcid  # noqa: E402
 from hcid import methods  # noqa: E402
-from hcid.config import load_config  # noqa: E402
 from hcid.criteria import w_bic  # noqa: E402
-from hcid.selected import SelectedModel, analyse_selected  # noqa: E402
-from hcid.selection import select_at  # noqa: E402
+from hcid.resolve import load_config  # noqa: E402
+from hcid.selected import analyse_selected  # noqa: E402
 from hcid.simulate import remnant_gain, simulate_realization  # noqa: E402
 
 SEEDS = (1, 2, 3)
-
-
-def _selected(fit, w: float) -> SelectedModel:
-    orders = np.column_stack([fit.na, fit.nb1, fit.nb2, fit.nk1, fit.nk2])
-    row = int(select_at(fit.d, fit.v, orders, np.array([w]))[0])
-    return SelectedModel(
-        w=w,
-        na=int(fit.na[row]),
-        nb_ft=int(fit.nb1[row]),
-        nb_e=int(fit.nb2[row]),
-        nk_ft=int(fit.nk1[row]),
-        nk_e=int(fit.nk2[row]),
-        v=float(fit.v[row]),
-        vaf_validation=float(fit.vaf_validation[row]),
-        a=fit.a[row],
-        b_ft=fit.b1[row],
-        b_e=fit.b2[row],
-    )
 
 
 def main() -> None:
@@ -65,9 +47,10 @@ def main() -> None:
         for name, method in methods.METHODS.items():
             w = w_bic(method.nf(config.identify))
             seconds, structures = [], []
-            for record in records.values():
-                result = methods.identify(record, config.identify, name, rate=rate)
-                sel = _selected(result.fit, w)
+            for seed, record in records.items():
+                t = np.arange(record["u"].size) / rate
+                result = hcid.identify(hcid.Record(seed, rate, t, **record), name, config.identify)
+                sel = result.select(w)
                 start = time.perf_counter()
                 analyse_selected(sel, record, config, method, result.choices)
                 seconds.append(time.perf_counter() - start)

@@ -28,10 +28,10 @@ from hcid import hcfit  # noqa: E402
 from hcid.arx import Grid, fit_grid  # noqa: E402
 from hcid.arx.engine import simulate  # noqa: E402
 from hcid.arx.response import path_response  # noqa: E402
-from hcid.config import load_config  # noqa: E402
 from hcid.criteria import w_bic  # noqa: E402
 from hcid.hcmodel import plant, true_response  # noqa: E402
 from hcid.residuals import analyse_residuals  # noqa: E402
+from hcid.resolve import load_config  # noqa: E402
 from hcid.selection import select_at  # noqa: E402
 from hcid.simulate import simulate_realization  # noqa: E402
 

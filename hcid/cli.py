@@ -70,14 +70,30 @@ def _user_errors(func):
     return wrapper
 
 
-def _load(config: Path, run: Path | None, backend: str = "loky", scheduler: str | None = None):
-    """The parsed config and its run directory; a bad --backend or --scheduler is refused before any work."""
-    from hcid.config import load_config
+def _load(
+    config: Path,
+    run: Path | None,
+    backend: str = "loky",
+    scheduler: str | None = None,
+    method_names: tuple[str, ...] | None = None,
+    *,
+    reopen: bool = False,
+):
+    """The config resolved for ``method_names`` (None: every method) and its run directory.
+
+    ``reopen``: a command that reads a run's results resolves the methods the run
+    recorded (a method registered since changes nothing). A bad --backend or
+    --scheduler is refused before any work.
+    """
     from hcid.pipeline import check_backend
+    from hcid.resolve import describe_file, methods_of_run, resolve_config
 
     check_backend(backend, scheduler)
-    cfg = load_config(config)
-    return cfg, (run if run is not None else Path("runs") / cfg.name)
+    described = describe_file(config)
+    run_dir = run if run is not None else Path("runs") / described.name
+    if reopen and method_names is None:
+        method_names = methods_of_run(run_dir)
+    return resolve_config(described, method_names), run_dir
 
 
 def _methods(method: str) -> tuple[str, ...]:
@@ -131,7 +147,7 @@ def identify(
     """Identify every model x seed of CONFIG (or every run of --data); writes RUN/frontier.parquet."""
     from hcid.pipeline import identify_study
 
-    cfg, run_dir = _load(config, run, backend, scheduler)
+    cfg, run_dir = _load(config, run, backend, scheduler, _methods(method))
     result = identify_study(
         cfg,
         run_dir,
@@ -153,7 +169,7 @@ def sweep_w(config: ConfigArg, run: RunOpt = None):
     """Select models over the W grid; writes selection, breakpoints and thresholds tables."""
     from hcid.pipeline import sweep_study
 
-    cfg, run_dir = _load(config, run)
+    cfg, run_dir = _load(config, run, reopen=True)
     result = sweep_study(cfg, run_dir)
     _print_thresholds(result, _is_paper(cfg))
     typer.echo(f"wrote {run_dir / 'thresholds.parquet'}")
@@ -251,7 +267,7 @@ def fit_hc(
     writes RUN/hc_parameters.parquet and RUN/residuals.parquet."""
     from hcid.pipeline import fit_hc_study
 
-    cfg, run_dir = _load(config, run, backend, scheduler)
+    cfg, run_dir = _load(config, run, backend, scheduler, reopen=True)
     result = fit_hc_study(
         cfg,
         run_dir,

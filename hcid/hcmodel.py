@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from hcid.config import HCModel, Loop
+from hcid.config import HCModel, Loop, Plant
 from hcid.errors import ConfigError, quote
 
 #: Discretisation of the deterministic paths (Hft, He, Yc). Tustin keeps the
@@ -27,13 +27,19 @@ __all__ = [
     "feedforward_path",
     "plant",
     "remnant_filter",
+    "transfer_function",
     "true_response",
 ]
 
 
 def plant(loop: Loop) -> control.TransferFunction:
     """The configured plant ``Yc`` (the paper's ``Kc wb / (s (s + wb))`` by default), theta per u."""
-    return control.tf(list(loop.plant.num), list(loop.plant.den))
+    return transfer_function(loop.plant)
+
+
+def transfer_function(yc: Plant) -> control.TransferFunction:
+    """A plant as a python-control transfer function, theta per u."""
+    return control.tf(list(yc.num), list(yc.den))
 
 
 def _nms(loop: Loop) -> control.TransferFunction:

@@ -34,6 +34,7 @@ import numpy as np
 import pyarrow as pa
 
 from hcid.config import Config, DataConfig
+from hcid.config.parse import default_data
 from hcid.errors import DataError, quote
 from hcid.tables import MEASURED, SIGNALS
 
@@ -391,24 +392,56 @@ def resample(x: np.ndarray, up: int, down: int) -> np.ndarray:
 
 
 def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarray]]:
-    """Read and check a measured-data file; one record per run, keyed by the file's run id.
+    """Read and check a measured-data file for a study; one record per run, keyed by the file's run id.
 
-    Each record holds ``t`` (s, from 0 after the lead-in), ``ft``, ``fd``, ``e``, ``u``
-    (rad) at the analysis rate ``config.timing.output_rate``. Column names are the
-    config's ``data.columns`` (by default ``t`` or ``time``, ``ft``, ``fd``, ``e``,
-    ``u``, ``run``); without an ``e`` column, ``e = ft - theta`` from the system
-    output. A run at another rate is resampled once to the analysis rate
-    (:func:`resample`, zero phase); then ``data.lead_in`` s are skipped.
+    :func:`read_runs` with the config's ``data`` section, its analysis rate
+    ``config.timing.output_rate`` and the samples its identification windows need.
 
     Raises
     ------
     DataError
         One line naming the file and the problem.
     """
-    from hcid.config.parse import default_data
-
-    path = Path(path)
     data = config.data if config.data is not None else default_data()
+    need = max(max(s.validation.last, s.estimation.last) for _, s in config.identify.stages)
+    return read_runs(path, data, config.timing.output_rate, need)[0]
+
+
+def read_runs(
+    path: str | Path, data: DataConfig, rate: float | None = None, need: int = 1
+) -> tuple[dict[int, dict[str, np.ndarray]], float]:
+    """Read and check a measured-data file; one record per run, keyed by the file's run id.
+
+    Parameters
+    ----------
+    path : str or Path
+        A CSV, Parquet or MATLAB file (:data:`READERS`).
+    data : DataConfig
+        Column names (by default ``t`` or ``time``, ``ft``, ``fd``, ``e``, ``u``,
+        ``run``; without an ``e`` column, ``e = ft - theta`` from the system output)
+        and the lead-in (s) skipped at the start of every run.
+    rate : float, optional
+        Analysis rate (Hz). A run at a higher rate is resampled once to it
+        (:func:`resample`, zero phase) before the lead-in is skipped. Default: the
+        first run's own rate.
+    need : int
+        Samples each run must hold after the lead-in (the identification windows);
+        no signal may be constant over them (over the whole run when ``need`` is 1).
+
+    Returns
+    -------
+    records : dict of int to dict of ndarray
+        Per run: ``t`` (s, from 0 after the lead-in), ``ft``, ``fd``, ``e``, ``u`` (rad).
+    rate : float
+        The analysis rate (Hz): ``rate``, or the first run's own.
+
+    Raises
+    ------
+    DataError
+        One line naming the file and the problem.
+    """
+    path = Path(path)
+    given = rate is not None
     cols = _read_columns(path, data)
     if "time" not in cols and "time_alt" in cols:
         cols["time"] = cols.pop("time_alt")
@@ -432,9 +465,6 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
         raise DataError(
             f"{path}: needs a time column '{data.columns['time']}' or a rate '{data.columns['rate']}'"
         )
-    rate = config.timing.output_rate
-    need = max(max(s.validation.last, s.estimation.last) for _, s in config.identify.stages)
-    skip = round(data.lead_in * rate)
     records = {}
     for run_id, run in _split_runs(path, cols, data).items():
         where = f"{path}: run {run_id}"
@@ -461,11 +491,14 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
                 )
             found = float(rates[0])
         signals_ = {name: run[name] for name in SIGNALS}
+        if rate is None:
+            rate = found
         if not np.isclose(found, rate, rtol=1e-6):
             if found < rate:
+                which = "the config's analysis rate (timing.output_rate)" if given else "the first run's rate"
                 raise DataError(
-                    f"{where}: sample rate {found:.6g} Hz, below the config's analysis rate "
-                    f"(timing.output_rate) {rate:g} Hz; set that to the data's rate or lower"
+                    f"{where}: sample rate {found:.6g} Hz, below {which} {rate:g} Hz; "
+                    "set that to the data's rate or lower"
                 )
             try:
                 up, down = resampling_factors(found, rate)
@@ -473,6 +506,7 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
                 raise DataError(f"{where}: {exc}") from None
             signals_ = {name: resample(x, up, down) for name, x in signals_.items()}
         total = signals_["ft"].size
+        skip = round(data.lead_in * rate)
         if total - skip < need:
             lead = f", {total - skip} after the {data.lead_in:g} s lead-in" if skip and total > skip else ""
             if skip >= total:
@@ -483,7 +517,7 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
         n = total - skip
         signals_ = {name: np.ascontiguousarray(x[skip:]) for name, x in signals_.items()}
         for name in SIGNALS:
-            window = signals_[name][:need]
+            window = signals_[name][: need if need > 1 else n]
             if np.ptp(window) == 0:
                 raise DataError(
                     f"{where}: {data.columns.get(name, name)} is constant "
@@ -492,7 +526,7 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
         records[run_id] = {"t": np.arange(n) / rate, **signals_}
     if not records:
         raise DataError(f"{path}: holds no samples")
-    return records
+    return records, float(rate)
 
 
 def records_table(name: str, records: dict[int, dict[str, np.ndarray]]) -> pa.Table:

@@ -4,6 +4,8 @@ The figures are printed beside this tool's, never tuned to. The fixed numbers
 are those of the paper's own analysis that are not properties of a config.
 """
 
+from hcid.config import Multisine, Segments
+
 #: Table 2: RMS(e) in deg per model.
 RMS_E_DEG = {"FB": 2.43, "FF": 1.22}
 #: Section 4: realizations per model, the n of the paper's W_FP (an extreme over n realizations).
@@ -39,8 +41,6 @@ def is_paper_experiment(config) -> bool:
     the disturbance at the plant output, a multisine disturbance, a segments target, the
     neuromuscular and remnant parameters of SPEC 1, and every model one of Table 2's (the
     claims of SPEC 6 and Table 2's RMS(e) are compared only then)."""
-    from hcid.config import Multisine, Segments
-
     loop = config.loop
     return (
         config.simulates

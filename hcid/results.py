@@ -23,6 +23,7 @@ import pyarrow.parquet as pq
 from hcid import tables
 from hcid.errors import DataError
 from hcid.folders import atomic_write, register
+from hcid.methods import METHODS
 from hcid.simulate import Realization
 from hcid.tables import CHANNELS, Schema
 
@@ -214,8 +215,6 @@ def check_against_config(table: pa.Table, config, path: str | Path) -> None:
     DataError
         One line naming the file and the first contradiction.
     """
-    from hcid.methods import METHODS
-
     names = table.column_names
     simulated = {m.name for m in config.models}
     allowed = simulated | ({config.data.name} if config.data is not None else set())

@@ -26,17 +26,21 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+import control
 import numpy as np
+import pyarrow as pa
 
 from hcid import hcfit
 from hcid.arx.engine import simulate
 from hcid.arx.response import path_response
-from hcid.config import Config
+from hcid.config import Config, StageConfig, Window
 from hcid.hcmodel import plant
-from hcid.methods import Method, StageChoice
+from hcid.methods import Method, StageChoice, shift_forward
 from hcid.residuals import ResidualAnalysis, analyse_residuals
+from hcid.tables import ORDER_COLUMNS
 
 __all__ = [
+    "fit_selected",
     "RESIDUAL_CONFIDENCE",
     "RESIDUAL_MAX_LAG",
     "SelectedAnalysis",
@@ -53,9 +57,34 @@ RESIDUAL_CONFIDENCE = 0.99
 
 @dataclass(frozen=True)
 class SelectedModel:
-    """A frontier row selected at ``w``: orders, delays (samples), V and coefficients.
+    """The ARX model a method selected at ``w`` (SPEC 3): ``A u = B_ft ft_s + B_e e``.
 
-    ``a = [1, a1, ..]``; ``b_ft``, ``b_e`` empty for a dropped input (SPEC 3).
+    Attributes
+    ----------
+    w : float
+        The penalty W it was selected at (``MSC = log V + W d``).
+    na, nb_ft, nb_e : int
+        Orders; ``nb_ft = 0`` means no feedforward path, ``nb_e = 0`` no feedback path.
+    nk_ft, nk_e : int
+        Delays (samples at ``rate``) of the shifted target ``ft_s`` and of e
+        (``nk_ft`` counts from ``ft_s``: the delay from ft is ``nk_ft`` minus the shift).
+    v : float
+        Mean squared simulation error over the validation rows (rad^2).
+    vaf_validation : float
+        Variance accounted for (percent) over the validation rows.
+    a : ndarray, shape (na + 1,)
+        ``[1, a1, ..., a_na]``.
+    b_ft, b_e : ndarray, shape (nb_ft,), (nb_e,)
+        ``[b_0, ...]``; empty for a dropped input.
+    method : str
+        The method that selected it (:data:`hcid.methods.METHODS`).
+    rate : float
+        Sample rate (Hz) of the record it was identified on.
+    target_shift : float
+        Time (s) ft was shifted forward before the fit (SPEC 3: 1 s);
+        :meth:`frequency_response` undoes it.
+    estimation, validation : Window
+        The final stage's windows (1-based inclusive samples of the record).
     """
 
     w: float
@@ -69,10 +98,78 @@ class SelectedModel:
     a: np.ndarray
     b_ft: np.ndarray
     b_e: np.ndarray
+    method: str
+    rate: float
+    target_shift: float
+    estimation: Window
+    validation: Window
 
     @property
     def orders(self) -> tuple[int, int, int, int, int]:
+        """``(na, nb_ft, nb_e, nk_ft, nk_e)``."""
         return (self.na, self.nb_ft, self.nb_e, self.nk_ft, self.nk_e)
+
+    @property
+    def has_feedforward(self) -> bool:
+        return self.nb_ft > 0
+
+    @classmethod
+    def from_frontier(
+        cls, frontier: pa.Table, row: int, w: float, *, rate: float, target_shift: float, stage: StageConfig
+    ) -> SelectedModel:
+        """Row ``row`` of a frontier table (``frontier.parquet``'s columns) as the model selected at ``w``."""
+        get = {c: frontier.column(c)[row].as_py() for c in (*ORDER_COLUMNS, "v", "vaf_validation", "method")}
+        coefficients = {
+            c: np.asarray(frontier.column(c)[row].as_py(), dtype=np.float64) for c in ("a", "b_ft", "b_e")
+        }
+        return cls(
+            w=float(w),
+            **{c: int(get[c]) for c in ORDER_COLUMNS},
+            v=float(get["v"]),
+            vaf_validation=float(get["vaf_validation"]),
+            **coefficients,
+            method=get["method"],
+            rate=float(rate),
+            target_shift=float(target_shift),
+            estimation=stage.estimation,
+            validation=stage.validation,
+        )
+
+    def frequency_response(self, omega: np.ndarray) -> dict[str, np.ndarray]:
+        """Complex frequency response of both paths at ``omega`` (rad/s), the target shift undone.
+
+        Returns
+        -------
+        dict
+            ``{"ft": Hft, "e": He}``, each complex of the shape of ``omega``: u per ft
+            (SPEC 5: ``exp(jw shift) z^-nk_ft B_ft / A``) and u per e; zeros for a dropped path.
+        """
+        dt = 1.0 / self.rate
+        return {
+            "ft": path_response(self.a, self.b_ft, self.nk_ft, omega, dt, advance=self.target_shift),
+            "e": path_response(self.a, self.b_e, self.nk_e, omega, dt),
+        }
+
+    def simulate(self, ft: np.ndarray, e: np.ndarray) -> np.ndarray:
+        """u simulated from rest from the unshifted target ``ft`` and the error ``e`` (rad).
+
+        ``ft`` is shifted forward by the target shift (its last samples repeat the
+        last value); the result has the length of ``ft``.
+        """
+        ft = np.ascontiguousarray(ft, dtype=np.float64)
+        e = np.ascontiguousarray(e, dtype=np.float64)
+        ft_s = shift_forward(ft, round(self.target_shift * self.rate))
+        return simulate(self.a, self.b_ft, self.b_e, self.nk_ft, self.nk_e, ft_s, e)
+
+    def to_arrow(self) -> pa.Table:
+        """One row: W, orders, V, VAF, coefficients (list columns), method, rate and target shift."""
+        row = {
+            "w": self.w, **dict(zip(ORDER_COLUMNS, self.orders, strict=True)), "v": self.v,
+            "vaf_validation": self.vaf_validation, "a": self.a.tolist(), "b_ft": self.b_ft.tolist(),
+            "b_e": self.b_e.tolist(), "method": self.method, "rate": self.rate,
+            "target_shift": self.target_shift,
+        }  # fmt: skip
+        return pa.Table.from_pylist([row])
 
 
 @dataclass(frozen=True)
@@ -105,6 +202,42 @@ def true_parameters(config: Config, model_name: str) -> dict[str, float]:
     }
 
 
+def fit_selected(
+    selected: SelectedModel,
+    record: Mapping[str, np.ndarray],
+    yc: control.TransferFunction,
+    settings: hcfit.FitSettings,
+) -> hcfit.HCFit | None:
+    """Fit the parametric HC model (SPEC 8) to a selected model and its record.
+
+    The ``frequency`` target fits both paths of ``selected`` (target shift undone)
+    on the log grid of ``settings.band``; the ``time`` target fits the record's u
+    from its unshifted ft and e over ``selected``'s estimation window. The
+    feedforward parameters are fitted exactly when ``selected.nb_ft > 0``.
+
+    Returns
+    -------
+    HCFit or None
+        None for a frequency fit of a model without feedback path (``nb_e = 0``).
+    """
+    tracking = hcfit.TrackingRecord(
+        record["ft"],
+        record["e"],
+        record["u"],
+        selected.rate,
+        selected.estimation.rows(),
+        selected.validation.rows(),
+    )
+    if settings.target != "time" and selected.nb_e == 0:
+        return None
+    omega = hcfit.band_grid(settings.band, settings.points)
+    paths = selected.frequency_response(omega)
+    hft = paths["ft"] if selected.has_feedforward else None
+    return hcfit.fit_hc(
+        settings, yc, selected.has_feedforward, record=tracking, omega=omega, he=paths["e"], hft=hft
+    )
+
+
 def analyse_selected(
     selected: SelectedModel,
     record: Mapping[str, np.ndarray],
@@ -133,28 +266,9 @@ def analyse_selected(
     -------
     SelectedAnalysis
     """
-    settings = config.fit_hc
     rate = config.timing.output_rate
-    dt = 1.0 / rate
-    stage = config.identify.stage(method.final_stage.name)
-    estimation, validation = stage.estimation.rows(), stage.validation.rows()
-    yc = plant(config.loop)
-    feedforward = selected.nb_ft > 0
-    tracking = hcfit.TrackingRecord(record["ft"], record["e"], record["u"], rate, estimation, validation)
-
-    fit = None
-    if settings.target == "time" or selected.nb_e > 0:
-        omega = hcfit.band_grid(settings.band, settings.points)
-        he = path_response(selected.a, selected.b_e, selected.nk_e, omega, dt)
-        hft = (
-            path_response(
-                selected.a, selected.b_ft, selected.nk_ft, omega, dt, advance=config.identify.target_shift
-            )
-            if feedforward
-            else None
-        )
-        fit = hcfit.fit_hc(settings, yc, feedforward, record=tracking, omega=omega, he=he, hft=hft)
-
+    validation = config.identify.stage(method.final_stage.name).validation.rows()
+    fit = fit_selected(selected, record, plant(config.loop), config.fit_hc)
     shift = config.identify.shift_samples(rate)
     i1, i2, o = method.final_signals(record, config.identify, shift, choices)
     o_hat = simulate(selected.a, selected.b_ft, selected.b_e, selected.nk_ft, selected.nk_e, i1, i2)

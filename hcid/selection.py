@@ -24,7 +24,6 @@ __all__ = [
     "SelectionPath",
     "breakpoints",
     "select_at",
-    "select_brute_force",
     "false_negative_bootstrap",
     "false_negative_threshold",
     "false_positive_extent",
@@ -115,18 +114,6 @@ def breakpoints(d: np.ndarray, v: np.ndarray, orders: np.ndarray) -> SelectionPa
 def select_at(d: np.ndarray, v: np.ndarray, orders: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Frontier row selected at each W, via :func:`breakpoints`."""
     return breakpoints(d, v, orders).at(w)
-
-
-def select_brute_force(d: np.ndarray, v: np.ndarray, orders: np.ndarray, w: float) -> int:
-    """Slow twin of :func:`select_at`: argmin of log V + W d with the tie rule, row by row."""
-    best, best_key = -1, None
-    for i in range(len(d)):
-        if not np.isfinite(v[i]) or v[i] <= 0:
-            continue
-        key = (np.log(v[i]) + w * d[i], d[i], tuple(int(x) for x in orders[i]))
-        if best_key is None or key < best_key:
-            best, best_key = i, key
-    return best
 
 
 def false_positive_threshold(segments: list[SelectionPath], nb_ft: list[np.ndarray]) -> float:

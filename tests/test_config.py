@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import yaml
 
-from hcid.config import load_config, parse_config
 from hcid.errors import ConfigError
+from hcid.resolve import load_config, parse_config
 
 from .conftest import PAPER_CONFIG
 

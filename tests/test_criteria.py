@@ -7,8 +7,8 @@ from typer.testing import CliRunner
 
 from hcid import criteria
 from hcid.cli import app
-from hcid.config import parse_config
 from hcid.errors import ConfigError
+from hcid.resolve import parse_config
 
 
 def test_spec_values_at_nf_960():

@@ -14,9 +14,9 @@ import yaml
 from typer.testing import CliRunner
 
 from hcid.cli import app
-from hcid.config import parse_config
 from hcid.errors import ConfigError, DataError
 from hcid.measured import load_data
+from hcid.resolve import parse_config
 
 from .conftest import CI_CONFIG, ROOT
 

@@ -10,9 +10,9 @@ import yaml
 from scipy import signal as sps
 
 from hcid import methods, selection
-from hcid.config import parse_config
 from hcid.errors import IdentificationError
 from hcid.methods import Method, StageSpec, identify, registered, shift_forward
+from hcid.resolve import parse_config
 
 from .conftest import CI_CONFIG
 
@@ -227,7 +227,7 @@ def test_stage1_zero_initial_fixed_matches_the_reference_on_every_sample(record,
     # rows: zero_initial fits and validates on all 2048 samples with zero regressors before the
     # record; model: fixed fits only fixed_orders. Source of truth: the plain lstsq + lfilter
     # twin (hcid.arx.reference) on the same rows, with e made noisy so the fit is not exact.
-    from hcid.arx.reference import fit_reference
+    from .naive import fit_reference
 
     rng = np.random.default_rng(11)
     noisy = dict(record, e=record["e"] + 0.05 * rng.standard_normal(record["e"].size))
@@ -286,3 +286,44 @@ def test_a_stage1_variant_on_the_ci_config_flows_to_its_tables_and_report(ci_raw
         "rows zero_initial, model fixed, fixed_orders (4, 2, 2, 6, 6)" in facts["indirect: stage stage1 grid"]
     )
     assert data.sections["handoff"] is not None
+
+
+def test_a_new_method_touches_no_existing_run_or_unrelated_config(ci_raw, tmp_path):
+    # Issue 25: the stages are resolved for the methods a command uses. A run made before a
+    # method is registered re-opens unchanged (sweep-w, fit-hc's reading, report), and a
+    # method whose defaults do not fit a config stops only the commands that use it.
+    import dataclasses
+
+    import yaml
+    from typer.testing import CliRunner
+
+    from hcid.cli import app
+    from hcid.errors import ConfigError
+
+    config = tmp_path / "ci.yaml"
+    raw = dict(ci_raw, seeds=[1])
+    config.write_text(yaml.safe_dump(raw))
+    run = tmp_path / "run"
+    runner = CliRunner()
+    made = runner.invoke(app, ["identify", str(config), "--run", str(run), "--method", "direct", "--quiet"])
+    assert made.exit_code == 0, made.output
+    assert runner.invoke(app, ["sweep-w", str(config), "--run", str(run)]).exit_code == 0
+    recorded = (run / "config.yaml").read_text()
+    tables_before = {p.name: p.read_bytes() for p in run.glob("*.parquet")}
+    # The toy's validation window ends beyond this config's 2048 samples: it cannot be resolved here.
+    spec = TOY.stages[0]
+    bad = dataclasses.replace(TOY, stages=(dataclasses.replace(spec, defaults={**spec.defaults,
+                              "validation": [1089, 4096]}),))  # fmt: skip
+    with registered(bad):
+        assert parse_config(raw, "ci", method_names=("direct",)).identify.stage("direct")
+        with pytest.raises(ConfigError, match="identify.toy.validation"):
+            parse_config(raw, "ci")  # every method, the toy included
+        for argv in (["sweep-w", str(config), "--run", str(run)], ["report", str(run)]):
+            result = runner.invoke(app, argv)
+            assert result.exit_code == 0, result.output
+        result = runner.invoke(
+            app, ["identify", str(config), "--run", str(run), "--method", "direct", "--quiet"]
+        )
+        assert result.exit_code == 0 and "identified 0 realization-methods, reused 2" in result.output
+    assert (run / "config.yaml").read_text() == recorded
+    assert {p.name: p.read_bytes() for p in run.glob("*.parquet")} == tables_before

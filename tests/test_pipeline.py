@@ -13,10 +13,11 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from hcid import pipeline, selection, tables
+from hcid import pipeline, tables
 from hcid.cli import app
 from hcid.pipeline import studies
 
+from . import naive
 from .conftest import CI_CONFIG, interrupt_after
 
 runner = CliRunner()
@@ -78,7 +79,7 @@ def test_selection_table_is_brute_force_argmin(ci_runs, ci_config):
         d = t.column("d").to_numpy()
         v = t.column("v").to_numpy()
         orders = np.column_stack([t.column(c).to_numpy() for c in cols])
-        i = selection.select_brute_force(d, v, orders, row["w"])
+        i = naive.select_brute_force(d, v, orders, row["w"])
         assert tuple(orders[i]) == tuple(row[c] for c in cols)
 
 
@@ -97,7 +98,7 @@ def test_thresholds_match_fine_grid(ci_runs):
             d, v = t.column("d").to_numpy(), t.column("v").to_numpy()
             orders = np.column_stack([t.column(c).to_numpy() for c in cols])
             nb.setdefault(model, []).append(
-                np.array([orders[selection.select_brute_force(d, v, orders, x), 1] for x in w])
+                np.array([orders[naive.select_brute_force(d, v, orders, x), 1] for x in w])
             )
         fp = np.flatnonzero(np.any(np.array(nb["FB"]) > 0, axis=0))
         w_fp = thresholds[(method, "FB")]["w_fp"]

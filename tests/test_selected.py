@@ -7,6 +7,7 @@ import pytest
 
 from hcid import methods
 from hcid.arx.engine import simulate
+from hcid.config import Window
 from hcid.residuals import RESIDUAL
 from hcid.selected import SelectedModel, analyse_selected, true_parameters
 
@@ -26,6 +27,11 @@ def _selected(a, b_ft, b_e, nk_ft, nk_e, w=0.01):
         a=np.asarray(a, float),
         b_ft=np.asarray(b_ft, float),
         b_e=np.asarray(b_e, float),
+        method="direct",
+        rate=25.0,
+        target_shift=1.0,
+        estimation=Window(129, 1088),
+        validation=Window(1089, 2048),
     )
 
 

@@ -120,7 +120,7 @@ def test_file_signal_repeats_its_window_at_the_simulation_rate(tmp_path):
         "# a comment line from the logger\nt,target\n"
         + "".join(f"{a:.17g},{b:.17g}\n" for a, b in zip(t50, signals.multisine(t50, ms), strict=True))
     )
-    spec = FileSignal(str(path), "target", 50.0, 2.0, read_signal(path, "target"))
+    spec = FileSignal(str(path), "target", 50.0, 2.0, values=read_signal(path, "target"))
     timing = Timing(sim_rate=100.0, output_rate=25.0, run_in=3.0, window=20.0, periods=2)
     got = signals.forcing(timing, spec)
     np.testing.assert_allclose(got, signals.multisine(signals.simulation_time(timing), ms), atol=1e-12)
@@ -133,8 +133,7 @@ def test_forcing_functions_from_the_example_data_file():
     # them): calibrate-w can simulate with the measured file's own forcing functions.
     import dataclasses
 
-    from hcid.config import load_config, parse_config
-    from hcid.config.parse import read_yaml
+    from hcid.resolve import load_config, parse_config, read_yaml
 
     from .conftest import ROOT
 

@@ -15,7 +15,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 
-from hcid.config import load_config
+from hcid.resolve import load_config
 from hcid.simulate import remnant_gain, simulate_realization
 
 HERE = Path(__file__).resolve().parent

@@ -13,7 +13,8 @@ the error. Run from the project root:
 import dataclasses
 from pathlib import Path
 
-from hcid.config import HCModel, load_config
+from hcid.config import HCModel
+from hcid.resolve import load_config
 from hcid.simulate import remnant_gain, simulate_realization
 
 HERE = Path(__file__).resolve().parent

@@ -253,21 +253,11 @@ def fit_grid(
         ``GridFit.candidates``.
     fused : bool or None, default None
         Let the search's simulations round each multiply-add once (fused
-        multiply-add) instead of twice: 0.76 to 0.78x the time of the paper's
-        direct grid. None: fused if the CPU numba compiles for has FMA units
-        (without, ``llvm.fma`` is a slow library call). The search's V
-        (pruning, each triple's best, the candidates table) then move by
-        rounding (on a paper record by at most 9.3e-12 relative on the
-        direct grid, 6.9e-10 on stage 1). The results do not: the frontier's
-        V is recomputed from its rows' unfused outputs (with their VAF), and
-        a triple is searched again unfused if its two smallest V are within
-        1e-6 relative of each other, if a stable candidate's output
-        overflowed, or if its frontier row's unfused V is not finite or more
-        than 2.5e-7 from the search's. So the frontier and the unstable
-        counts are the unfused search's bit for bit, unless fused rounding
-        moved some other candidate's V by more than 5e-7 relative while
-        moving the best's by less than 2.5e-7 (none seen). Without the JIT
-        and for na > 12 the simulations are unfused whatever ``fused`` says.
+        multiply-add). None: fused if the CPU numba compiles for has FMA units.
+        The frontier does not depend on it: its V and VAF are recomputed from
+        its rows' unfused outputs, and a triple whose search is in doubt (a
+        near tie, an overflow, a recomputed V off the search's) is searched
+        again unfused (docs/engine.md).
 
     Returns
     -------
@@ -278,43 +268,23 @@ def fit_grid(
     hcid.errors.DataError
         If a signal is not 1-D, finite, and as long as ``i1``.
     hcid.errors.IdentificationError
-        If a window is not a slice ``start:stop`` with ``0 <= start < stop
-        <= n``, the
-        estimation window has fewer rows than the largest candidate has
+        If a window is not a slice ``start:stop`` with ``0 <= start < stop <= n``,
+        the estimation window has fewer rows than the largest candidate has
         coefficients, or ``threads < 1``.
 
     Notes
     -----
-    Numerics. One Householder QR of the matrix of every lagged column any
-    candidate uses (numpy), then for each delay pair a QR of the selected
-    columns of that R, then for each ``(nb1, nb2)`` one more QR in which
-    the output lags come last, so that every ``na`` is a prefix solved by
-    back substitution (the QRs of one nb1 share the steps of their first
-    columns, each column stepped as its own QR would). Each step is
-    backward stable column by column, so a candidate's coefficients carry
-    a relative error of about
-    ``cond(Phi_S) * eps`` (``Phi_S`` its own regression matrix on the
-    estimation rows, eps = 2.2e-16), like ``numpy.linalg.lstsq``. V
-    inherits that error, amplified when A has roots near the unit circle.
-    Measured against ``lstsq`` + ``lfilter`` on 10,000 random candidates of
-    each paper grid on a paper record: V agrees to 3e-10 relative on the
-    direct grid (cond up to 1.2e6) and to 3e-9 below cond 1e7, 7e-8 up to
-    the 2.8e9 of stage-1 candidates with nb1 near 25; the same candidates
-    are unstable. Normal equations would square the condition number.
-
-    The best of an order triple is the smallest V of the search, ties to
-    the smaller nk1, then nk2. The frontier's coefficients are the ones the grid loop
-    computed; its V and VAF come from their outputs, the values
-    :func:`simulate` gives bit for bit (unfused; the tests compare them).
-
-    Speed: the simulations dominate. The stable candidates of each order
-    triple are simulated 16 at a time, one SIMD lane each, with fused
-    multiply-adds or the arithmetic of the one-at-a-time kernel (:mod:`hcid.arx._lanes`), those
-    with the smallest prediction error first; without ``keep_candidates``
-    a candidate stops once its partial V exceeds the best V of its triple
-    so far, which cannot change the frontier (V only grows).
-    ``benchmarks/arx_engine.py`` times the paper grids against the old
-    one-at-a-time kernel and the reference loop.
+    Least squares through shared Householder QRs (one of every lagged column,
+    one per delay pair, one per ``(nb1, nb2)`` with the output lags last, so
+    every ``na`` is a prefix): backward stable, a candidate's coefficients
+    carry a relative error of about ``cond(Phi_S) * eps`` like
+    :func:`numpy.linalg.lstsq`. The best of an order triple is the smallest V,
+    ties to the smaller nk1, then nk2; its coefficients, V and VAF are what
+    :func:`simulate` gives bit for bit. Stable candidates are simulated 16 at a
+    time in SIMD lanes, and a candidate stops once its partial V exceeds its
+    triple's best so far (V only grows), which cannot change the frontier.
+    The design, its accuracy against ``lstsq`` + ``lfilter`` and its speed:
+    docs/engine.md and docs/benchmarks.md.
     """
     fit, _ = _fit_grid(
         i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_candidates, legacy=False, fused=fused

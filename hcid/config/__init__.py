@@ -3,14 +3,16 @@
 A config names the HC models, the loop and remnant parameters, the forcing
 functions, the timing, the realization seeds, the identification stages of
 the registered methods, the selection settings and optionally how to read
-measured data. :func:`load_config` reads and checks everything; the numerical
-core only ever sees the dataclasses of :mod:`hcid.config.types`.
+measured data. :func:`describe_config` checks every value and reads nothing;
+:func:`hcid.resolve.load_config` reads the file, and what it names, and
+resolves what needs other layers. The numerical core only ever sees the
+dataclasses of :mod:`hcid.config.types`.
 
 Every error names the dotted key, what is allowed and what was received, e.g.
 ``identify.direct.na: must be an integer range [lo, hi] with 1 <= lo <= hi <= 30, got [0, 3]``.
 """
 
-from hcid.config.parse import load_config, parse_config
+from hcid.config.parse import describe_config
 from hcid.config.types import (
     Config,
     DataConfig,
@@ -47,6 +49,5 @@ __all__ = [
     "StageConfig",
     "Timing",
     "Window",
-    "load_config",
-    "parse_config",
+    "describe_config",
 ]

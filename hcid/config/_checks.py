@@ -12,6 +12,18 @@ from typing import Any
 from hcid.errors import QUOTE, ConfigError
 from hcid.errors import quote as fmt
 
+#: Bounds on what a config may ask for, each checked at parse time with a one-line error:
+#: the file, its nesting, seeds, candidates per grid and per study, samples per simulation.
+LIMITS = {
+    "file_bytes": 1 << 20,
+    "nesting": 40,
+    "seeds": 10_000,
+    "grid_candidates": 10_000_000,
+    "study_candidates": 2_000_000_000,
+    "simulation_samples": 10_000_000,
+    "name_chars": 100,
+}
+
 
 class Section:
     """A mapping under a dotted path; every key taken is checked, leftovers are errors."""

@@ -1,58 +1,38 @@
-"""Parse a YAML study config into :class:`~hcid.config.types.Config`, one section at a time.
+"""Describe a YAML study config as a :class:`~hcid.config.types.Config`, one section at a time.
 
 Each ``_section`` function checks one top-level section and returns its
-dataclass; :func:`parse_config` runs them in order and checks what spans
+dataclass; :func:`describe_config` runs them in order and checks what spans
 sections (timing against the target, delays against the simulation rate).
-The ``identify`` section holds one subsection per stage of the registered
-methods (:func:`hcid.methods.stage_specs`); the ``selection`` section names
-the criteria of :mod:`hcid.criteria`.
+The forcing functions and timing are parsed in :mod:`hcid.config.forcing`, the
+``identify`` section in :mod:`hcid.config.stages`. Nothing is read from disk:
+:mod:`hcid.resolve` reads what a config names and builds the methods' stages.
 """
 
 from __future__ import annotations
 
-import dataclasses
+import copy
 import math
 import re
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-import yaml
-
-from hcid.config._checks import Section, fmt, int_range, integer, number_list
+from hcid.config._checks import LIMITS, Section, fmt, integer, number_list
+from hcid.config.fit import FitSettings, parse_fit_settings
+from hcid.config.forcing import check_against_timing, signals_section, timing_section
+from hcid.config.stages import identify_section
 from hcid.config.types import (
     Config,
     DataConfig,
     FileSignal,
-    Forcing,
-    Grid,
     HCModel,
-    IdentifyConfig,
     Loop,
-    Multisine,
     Plant,
-    Segment,
-    Segments,
     SelectionConfig,
-    StageConfig,
     Timing,
-    Window,
 )
 from hcid.errors import ConfigError
 
-__all__ = ["DISTURBANCE_POINTS", "LIMITS", "PLANTS", "load_config", "parse_config"]
-
-#: Bounds on what a config may ask for, each checked at parse time with a one-line error:
-#: the file, its nesting, seeds, candidates per grid and per study, samples per simulation.
-LIMITS = {
-    "file_bytes": 1 << 20,
-    "nesting": 40,
-    "seeds": 10_000,
-    "grid_candidates": 10_000_000,
-    "study_candidates": 2_000_000_000,
-    "simulation_samples": 10_000_000,
-    "name_chars": 100,
-}
+__all__ = ["DISTURBANCE_POINTS", "LIMITS", "PLANTS", "default_data", "describe_config"]
 
 _ABSENT = object()  # a key left out (None is a value: refused where a mapping is needed)
 _DATA_COLUMNS = {
@@ -103,27 +83,15 @@ def _models_section(top: Section) -> tuple[HCModel, ...]:
 
 
 def _integrator(s: Section) -> Plant:
-    K = s.number("K", 0.0, 1e4, open_lo=True)
-    return Plant("integrator", (K,), (1.0, 0.0), f"{K:g}/s")
+    return Plant.integrator(s.number("K", 0.0, 1e4, open_lo=True))
 
 
 def _double_integrator(s: Section) -> Plant:
-    K = s.number("K", 0.0, 1e4, open_lo=True)
-    return Plant("double_integrator", (K,), (1.0, 0.0, 0.0), f"{K:g}/s^2")
+    return Plant.double_integrator(s.number("K", 0.0, 1e4, open_lo=True))
 
 
 def _second_order(s: Section) -> Plant:
     return Plant.second_order(s.number("K", 0.0, 1e4, open_lo=True), s.number("wb", 0.0, 1e4, open_lo=True))
-
-
-def _poly_text(coefs: tuple[float, ...]) -> str:
-    n = len(coefs) - 1
-    terms = [
-        f"{c:g}" + ("" if i == n else " s" if i == n - 1 else f" s^{n - i}")
-        for i, c in enumerate(coefs)
-        if c != 0
-    ]
-    return " + ".join(terms).replace("+ -", "- ")
 
 
 def _transfer_function(s: Section) -> Plant:
@@ -143,7 +111,7 @@ def _transfer_function(s: Section) -> Plant:
             f"loop.plant: must be proper (degree of num <= degree of den), got degrees "
             f"{len(num) - 1} and {len(den) - 1}"
         )
-    return Plant("tf", num, den, f"({_poly_text(num)}) / ({_poly_text(den)})")
+    return Plant.tf(num, den)
 
 
 #: Plant shorthands of ``loop.plant.kind``, each a builder from its section (SPEC 7);
@@ -204,202 +172,6 @@ def _loop_section(top: Section) -> Loop:
     return loop
 
 
-# --------------------------------------------------------------------------- signals and timing
-
-
-def _multisine(s: Section) -> Multisine:
-    k = s.get("k")
-    if not isinstance(k, list) or not k:
-        raise ConfigError(f"{s.key('k')}: must be a non-empty list of integers, got {fmt(k)}")
-    k_int = tuple(integer(v, f"{s.key('k')}[{i}]", 1, 100_000) for i, v in enumerate(k))
-    return Multisine(
-        base_period=s.number("base_period", 0.0, 1e5, open_lo=True),
-        time_offset=s.number("time_offset", -1e5, 1e5, 0.0),
-        k=k_int,
-        amplitude=number_list(s, "amplitude", len(k_int)),
-        phase=number_list(s, "phase", len(k_int)),
-    )
-
-
-def _segment(path: str, i: int, seg: Any) -> Segment:
-    key = f"{path}.segments[{i}]"
-    ok = (
-        isinstance(seg, list)
-        and len(seg) == 3
-        and seg[0] in ("c", "p", "r")
-        and all(isinstance(v, int | float) and not isinstance(v, bool) for v in seg[1:])
-        and all(math.isfinite(v) for v in seg[1:])
-        and seg[1] > 0
-    )
-    if not ok:
-        raise ConfigError(f"{key}: must be [c|p|r, seconds > 0, step], got {fmt(seg)}")
-    if seg[0] == "c" and seg[2] != 0:
-        raise ConfigError(f"{key}: a hold segment 'c' must have step 0, got {seg[2]}")
-    return Segment(seg[0], float(seg[1]), float(seg[2]))
-
-
-def _segments(s: Section) -> Segments:
-    gain_deg = s.number("gain_deg", 0.0, 180.0)
-    raw = s.get("segments")
-    if not isinstance(raw, list) or not raw:
-        raise ConfigError(
-            f"{s.key('segments')}: must be a non-empty list of [kind, seconds, step], got {fmt(raw)}"
-        )
-    return Segments(
-        gain=math.radians(gain_deg), segments=tuple(_segment(s.path, i, x) for i, x in enumerate(raw))
-    )
-
-
-def _file_signal(s: Section, base: Path | None) -> FileSignal:
-    # A forcing function recorded in a data file: read here, at the entry point, with the
-    # data readers (hcid.measured.READERS), so that the numerical core never opens a file.
-    from hcid.errors import DataError
-    from hcid.measured import read_signal
-
-    raw_path = s.get("path")
-    column = s.get("column")
-    for key, value in (("path", raw_path), ("column", column)):
-        if not isinstance(value, str) or not value:
-            raise ConfigError(f"{s.key(key)}: must be a non-empty string, got {fmt(value)}")
-    rate = s.number("rate", 0.1, 1e5)
-    start = s.number("start", 0.0, 1e5, 0.0)
-    run = s.get("run", None)
-    if run is not None:
-        run = integer(run, s.key("run"), 0, 2**31 - 1)
-    run_column = s.get("run_column", "run")
-    if not isinstance(run_column, str) or not run_column:
-        raise ConfigError(f"{s.key('run_column')}: must be a non-empty string, got {fmt(run_column)}")
-    path = Path(raw_path)
-    if not path.is_absolute() and base is not None:
-        path = (base / path).resolve()
-        # The resolved config (a run's config.yaml, read back by `hcid report` from the run
-        # directory) names the file by its absolute path.
-        s.data["path"] = str(path)
-    try:
-        values = read_signal(path, column, run, run_column)
-    except DataError as exc:
-        raise ConfigError(f"{s.path}: {exc}") from None
-    return FileSignal(path=str(raw_path), column=column, rate=rate, start=start, values=values)
-
-
-#: Kinds of forcing function (``signals.<target|disturbance>.kind``), each a parser of its
-#: section. The target defaults to ``segments``, the disturbance to ``multisine``.
-FORCING_KINDS = {"multisine": _multisine, "segments": _segments, "file": _file_signal}
-
-
-def _forcing(sig: Section, name: str, default_kind: str, base: Path | None) -> Forcing:
-    s = sig.section(name)
-    kind = s.get("kind", default_kind)
-    if kind not in FORCING_KINDS:
-        raise ConfigError(
-            f"{s.key('kind')}: unknown forcing function {fmt(kind)} (allowed: {', '.join(FORCING_KINDS)})"
-        )
-    spec = _file_signal(s, base) if kind == "file" else FORCING_KINDS[kind](s)
-    s.done()
-    return spec
-
-
-def _signals_section(top: Section, base: Path | None) -> tuple[Forcing, Forcing]:
-    sig = top.section("signals")
-    disturbance = _forcing(sig, "disturbance", "multisine", base)
-    target = _forcing(sig, "target", "segments", base)
-    sig.done()
-    return disturbance, target
-
-
-def _timing_section(top: Section) -> Timing:
-    s = top.section("timing")
-    timing = Timing(
-        sim_rate=s.number("sim_rate", 1.0, 10_000.0),
-        output_rate=s.number("output_rate", 0.1, 10_000.0),
-        run_in=s.number("run_in", 0.0, 1e4),
-        window=s.number("window", 0.0, 1e4, open_lo=True),
-        periods=s.integer("periods", 1, 100),
-    )
-    s.done()
-    ratio = timing.sim_rate / timing.output_rate
-    if abs(ratio - round(ratio)) > 1e-9:
-        raise ConfigError(
-            f"timing.output_rate: must divide timing.sim_rate ({timing.sim_rate:g} Hz) "
-            f"into a whole factor, got {timing.output_rate:g}"
-        )
-    for key, secs in (("run_in", timing.run_in), ("window", timing.window)):
-        if abs(secs * timing.sim_rate - round(secs * timing.sim_rate)) > 1e-6:
-            raise ConfigError(f"timing.{key}: must be whole samples at sim_rate, got {secs:g} s")
-    samples = timing.period_samples * timing.periods
-    if samples > LIMITS["simulation_samples"]:
-        raise ConfigError(
-            f"timing: a simulation of {samples:,} samples (sim_rate x (run_in + window) x periods), "
-            f"at most {LIMITS['simulation_samples']:,} are allowed"
-        )
-    if timing.window_samples % timing.decimation:
-        raise ConfigError(f"timing.window: must be whole samples at output_rate, got {timing.window:g} s")
-    return timing
-
-
-#: Why each forcing function must not be zero (or constant) over the window.
-_NEEDED_FOR = {
-    "disturbance": "the remnant gain (loop.remnant_ratio) is set in the disturbance-only task and the "
-    "error path is identified from the disturbance",
-    "target": "the target path (feedforward) is identified from the target",
-}
-
-
-def _constant_forcing(spec: Forcing, timing: Timing) -> str | None:
-    """How ``spec`` is constant over the window (a multisine's amplitudes all 0, ...), or None."""
-    if isinstance(spec, Multisine):
-        return "every amplitude is 0" if not any(spec.amplitude) else None
-    if isinstance(spec, Segments):
-        return (
-            "its gain or every step is 0"
-            if spec.gain == 0 or not any(s.step for s in spec.segments)
-            else None
-        )
-    first = round(spec.start * spec.rate)
-    window = spec.values[first : first + round(timing.window * spec.rate)]
-    return f"column {fmt(spec.column)} is constant ({window[0]:.6g})" if np.ptp(window) == 0 else None
-
-
-def _check_forcing(name: str, spec: Forcing, timing: Timing) -> None:
-    key = f"signals.{name}"
-    if isinstance(spec, Segments):
-        total = sum(s.duration for s in spec.segments)
-        if total > timing.window + 1e-9:
-            raise ConfigError(
-                f"{key}.segments: must last at most timing.window ({timing.window:g} s), got {total:g} s"
-            )
-    elif isinstance(spec, FileSignal):
-        for what, secs in (("start", spec.start), ("timing.window", timing.window)):
-            if abs(secs * spec.rate - round(secs * spec.rate)) > 1e-6:
-                raise ConfigError(
-                    f"{key}.{what if what == 'start' else 'rate'}: {what} ({secs:g} s) must be whole "
-                    f"samples at the file's rate {spec.rate:g} Hz"
-                )
-        need = round((spec.start + timing.window) * spec.rate)
-        if spec.values.size < need:
-            raise ConfigError(
-                f"{key}: column {spec.column!r} of {spec.path} holds {spec.values.size} samples, the window "
-                f"from {spec.start:g} s to {spec.start + timing.window:g} s needs {need}"
-            )
-
-
-def _check_against_timing(
-    timing: Timing, signals: tuple[Forcing, Forcing], models: tuple[HCModel, ...]
-) -> None:
-    for name, spec in zip(("disturbance", "target"), signals, strict=True):
-        _check_forcing(name, spec, timing)
-        how = _constant_forcing(spec, timing)
-        if how is not None:
-            raise ConfigError(f"signals.{name}: is constant over the window ({how}); {_NEEDED_FOR[name]}")
-    for m in models:
-        for key, tau in (("tau_pe", m.tau_pe), ("tau_pt", m.tau_pt)):
-            if abs(tau * timing.sim_rate - round(tau * timing.sim_rate)) > 1e-6:
-                raise ConfigError(
-                    f"models.{m.name}.{key}: must be whole samples at timing.sim_rate "
-                    f"({timing.sim_rate:g} Hz), got {tau:g} s"
-                )
-
-
 def _seeds_section(top: Section) -> tuple[int, ...]:
     value = top.get("seeds")
     if isinstance(value, dict):
@@ -420,177 +192,21 @@ def _seeds_section(top: Section) -> tuple[int, ...]:
     return seeds
 
 
-# --------------------------------------------------------------------------- identification
-
-
-def _seconds_window(key: str, value: Any, rate: float, n_record: int) -> list[int]:
-    """``[start, end]`` in s (end exclusive: the window holds ``(end - start) rate`` samples) as samples."""
-    ok = (
-        isinstance(value, list)
-        and len(value) == 2
-        and all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value)
-        and 0 <= value[0] < value[1]
-    )
-    if not ok:
-        raise ConfigError(
-            f"{key}: must be 'auto' or [start, end] in s with 0 <= start < end "
-            f"(identify.windows_in is seconds), got {fmt(value)}"
-        )
-    samples = []
-    for v in value:
-        k = v * rate
-        if abs(k - round(k)) > 1e-6:
-            raise ConfigError(
-                f"{key}: {v:g} s is not a whole number of samples at the analysis rate {rate:g} Hz "
-                f"(1 sample = {1 / rate:g} s), got {fmt(value)}"
-            )
-        samples.append(round(k))
-    first, last = samples[0] + 1, samples[1]
-    if last > n_record:
-        raise ConfigError(
-            f"{key}: must end within the record ({n_record / rate:g} s, {n_record} samples), got {fmt(value)}"
-        )
-    return [first, last]
-
-
-def _window(section: Section, name: str, n_record: int, auto_first: int, rate: float, unit: str) -> Window:
-    value = section.get(name)
-    key = section.key(name)
-    if value == "auto":
-        return Window(auto_first + 1, n_record)
-    if unit == "seconds":
-        value = _seconds_window(key, value, rate, n_record)
-    ok = (
-        isinstance(value, list)
-        and len(value) == 2
-        and all(isinstance(v, int) and not isinstance(v, bool) for v in value)
-        and 1 <= value[0] <= value[1] <= n_record
-    )
-    if not ok:
-        raise ConfigError(
-            f"{key}: must be 'auto' or a sample range [first, last] with "
-            f"1 <= first <= last <= {n_record} (1-based, inclusive), got {fmt(value)}"
-        )
-    return Window(int(value[0]), int(value[1]))
-
-
-def _stage(data: Any, path: str, defaults: dict, timing: Timing, unit: str, given: set) -> StageConfig:
-    n_record, rate = timing.record_samples, timing.output_rate
-    merged = dict(defaults)
-    if data is not _ABSENT:
-        if not isinstance(data, dict):
-            raise ConfigError(
-                f"{path}: must be a mapping (leave the key out for the defaults), got {fmt(data)}"
-            )
-        merged.update(data)
-    s = Section(merged, path)
-    grid = Grid(
-        na=int_range(s, "na", 1, 30),
-        nb1=int_range(s, "nb1", 0, 60),
-        nb2=int_range(s, "nb2", 0, 60),
-        nk1=int_range(s, "nk1", 0, 200),
-        nk2=int_range(s, "nk2", 0, 200),
-    )
-    max_lag = grid.max_lag
-    # A method's default window (its StageSpec) is in samples; one the config gives is in `unit`.
-    est_unit = unit if "estimation" in given else "samples"
-    val_unit = unit if "validation" in given else "samples"
-    estimation = _window(s, "estimation", n_record, max_lag, rate, est_unit)
-    validation = _window(s, "validation", n_record, max_lag, rate, val_unit)
-    s.done()
-    if estimation.first - 1 < max_lag:
-        raise ConfigError(
-            f"{path}.estimation: must start after the grid's largest lag ({max_lag} samples), "
-            f"i.e. first >= {max_lag + 1}, got {[estimation.first, estimation.last]}"
-        )
-    n_params = grid.na[1] + grid.nb1[1] + grid.nb2[1] + 2
-    for key, window in (("estimation", estimation), ("validation", validation)):
-        if window.length < 2 * n_params:
-            raise ConfigError(
-                f"{path}.{key}: must hold at least {2 * n_params} samples for this grid, got {window.length}"
-            )
-    if grid.n_candidates > LIMITS["grid_candidates"]:
-        raise ConfigError(
-            f"{path}: the grid has {grid.n_candidates:,} candidates, at most "
-            f"{LIMITS['grid_candidates']:,} are allowed"
-        )
-    return StageConfig(grid=grid, estimation=estimation, validation=validation)
-
-
-def _stage_options(data: Any, path: str, options: dict) -> tuple[Any, tuple[tuple[str, Any], ...]]:
-    """Split a stage section's method-declared option keys off its grid and windows and check them.
-
-    Returns the rest of the section and the options whose value differs from
-    the default (so a config that states a default resolves like one that omits it).
-    """
-    if not options or not isinstance(data, dict):
-        return data, ()
-    rest = {k: v for k, v in data.items() if k not in options}
-    parsed = ((k, o.parse(data[k], f"{path}.{k}")) for k, o in options.items() if k in data)
-    return rest, tuple((k, v) for k, v in parsed if v != options[k].default)
-
-
-def _stage_raw(stage: StageConfig) -> dict:
-    g = stage.grid
-    options = {k: list(v) if isinstance(v, tuple) else v for k, v in stage.options}
-    return {
-        "na": list(g.na),
-        "nb1": list(g.nb1),
-        "nb2": list(g.nb2),
-        "nk1": list(g.nk1),
-        "nk2": list(g.nk2),
-        "estimation": [stage.estimation.first, stage.estimation.last],
-        "validation": [stage.validation.first, stage.validation.last],
-        **options,
-    }
-
-
-def _identify_section(top: Section, timing: Timing) -> IdentifyConfig:
-    # The stages are those the registered methods declare: the one place the config
-    # layer looks at the method registry (hcid.methods), to know which sections exist.
-    from hcid.methods import stage_specs
-
-    s = top.section("identify", {})
-    target_shift = s.number("target_shift", 0.0, 10.0, 1.0)
-    if abs(target_shift * timing.output_rate - round(target_shift * timing.output_rate)) > 1e-9:
-        raise ConfigError(
-            f"identify.target_shift: must be whole samples at timing.output_rate "
-            f"({timing.output_rate:g} Hz), got {target_shift:g} s"
-        )
-    unit = s.get("windows_in", "samples")
-    if unit not in ("samples", "seconds"):
-        raise ConfigError(f"identify.windows_in: must be 'samples' or 'seconds', got {fmt(unit)}")
-    stages = []
-    for name, spec in stage_specs().items():
-        defaults = dict(spec.defaults)
-        given = set()
-        if spec.defaults_from is not None:
-            inherited = s.data.get(spec.defaults_from)
-            if isinstance(inherited, dict):
-                defaults.update(inherited)
-                given |= set(inherited)
-        data, options = _stage_options(s.get(name, _ABSENT), f"identify.{name}", spec.options)
-        if isinstance(data, dict):
-            given |= set(data)
-        stage = _stage(data, f"identify.{name}", defaults, timing, unit, given)
-        stages.append((name, dataclasses.replace(stage, options=options)))
-    s.done()
-    return IdentifyConfig(target_shift=target_shift, stages=tuple(stages))
-
-
 # --------------------------------------------------------------------------- selection and data
 
 
-def _criteria(s: Section) -> tuple[tuple[str, tuple[tuple[str, float], ...]], ...]:
-    from hcid import criteria
+#: The criteria marked when a config names none (:data:`hcid.criteria.DEFAULT`, resolved there).
+DEFAULT_CRITERIA = ("aic", "bic", "mbic")
 
-    raw = s.get("criteria", {name: {} for name in criteria.DEFAULT})
+
+def _criteria(s: Section) -> tuple[tuple[str, tuple[tuple[str, float], ...]], ...]:
+    """The criteria as given: names and constants (checked against the registry on resolution)."""
+    raw = s.get("criteria", {name: {} for name in DEFAULT_CRITERIA})
     if isinstance(raw, list):
         raw = {name: {} for name in raw}
     if not isinstance(raw, dict) or not raw:
         raise ConfigError(
-            f"selection.criteria: must be a non-empty mapping of criterion name to constants "
-            f"(allowed names: {', '.join(criteria.CRITERIA)}), got {fmt(raw)}"
+            f"selection.criteria: must be a non-empty mapping of criterion name to constants, got {fmt(raw)}"
         )
     out = []
     for name, constants in raw.items():
@@ -602,8 +218,7 @@ def _criteria(s: Section) -> tuple[tuple[str, tuple[tuple[str, float], ...]], ..
             raise ConfigError(
                 f"selection.criteria.{name}: must be a mapping of constants, got {fmt(constants)}"
             )
-        built = criteria.build(str(name), constants)
-        out.append((built.name, built.constants))
+        out.append((str(name), tuple((str(k), float(v)) for k, v in constants.items())))
     return tuple(out)
 
 
@@ -689,10 +304,7 @@ def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataC
     )
 
 
-def _fit_hc_section(top: Section, band: tuple[float, float], timing: Timing):
-    # The settings live with the fit (hcid.hcfit.settings), parsed here once like every section.
-    from hcid.hcfit.settings import parse_fit_settings
-
+def _fit_hc_section(top: Section, band: tuple[float, float], timing: Timing) -> FitSettings:
     settings = parse_fit_settings(top.get("fit_hc", None), "fit_hc", default_band=band)
     nyquist = math.pi * timing.output_rate
     if settings.band is not None and settings.band[1] > nyquist * (1 + 1e-9):
@@ -724,94 +336,22 @@ def _study_name(value: Any) -> str:
     return value
 
 
-def _check_study_size(identify: IdentifyConfig, seeds: tuple[int, ...], models: tuple[HCModel, ...]) -> None:
-    per_record = sum(stage.grid.n_candidates for _, stage in identify.stages)
-    total = per_record * len(seeds) * len(models)
-    if total > LIMITS["study_candidates"]:
-        raise ConfigError(
-            f"identify: the study fits {total:,} candidates ({per_record:,} per record x "
-            f"{len(seeds) * len(models):,} records), at most {LIMITS['study_candidates']:,} are allowed"
-        )
+def describe_config(data: Any, name: str, base: Path | None = None) -> Config:
+    """Check a parsed YAML document and describe it as a :class:`Config`, reading nothing.
 
-
-class _Loader(yaml.SafeLoader):
-    """yaml.SafeLoader without aliases (no expansion bombs), duplicate keys or deep nesting."""
-
-    def __init__(self, stream):
-        super().__init__(stream)
-        self._depth = 0
-
-    def compose_node(self, parent, index):
-        if self.check_event(yaml.AliasEvent):
-            mark = self.peek_event().start_mark
-            raise ConfigError(f"line {mark.line + 1}: YAML aliases (*name) are not allowed in a config")
-        self._depth += 1
-        if self._depth > LIMITS["nesting"]:
-            mark = self.peek_event().start_mark
-            raise ConfigError(f"line {mark.line + 1}: nested deeper than {LIMITS['nesting']} levels")
-        try:
-            return super().compose_node(parent, index)
-        finally:
-            self._depth -= 1
-
-    def construct_mapping(self, node, deep=False):
-        seen = set()
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=True)
-            if isinstance(key, list | dict):
-                raise ConfigError(f"line {key_node.start_mark.line + 1}: a mapping key must be a plain value")
-            if key in seen:
-                raise ConfigError(f"line {key_node.start_mark.line + 1}: duplicate key {fmt(key)}")
-            seen.add(key)
-        return super().construct_mapping(node, deep=deep)
-
-
-def read_yaml(path: Path, what: str = "config") -> Any:
-    """Read a YAML file with :class:`_Loader`: at most ``LIMITS['file_bytes']``, UTF-8.
-
-    Raises
-    ------
-    ConfigError
-        One line naming the file and the problem.
-    """
-    try:
-        with open(path, "rb") as f:
-            raw = f.read(LIMITS["file_bytes"] + 1)
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read {what} ({exc.strerror or exc})") from exc
-    if len(raw) > LIMITS["file_bytes"]:
-        raise ConfigError(f"{path}: larger than {LIMITS['file_bytes']:,} bytes; not a {what}")
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ConfigError(
-            f"{path}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start})"
-        ) from exc
-    if "\0" in text:
-        raise ConfigError(f"{path}: holds a NUL character; not a {what}")
-    try:
-        return yaml.load(text, Loader=_Loader)  # noqa: S506 (a SafeLoader subclass)
-    except ConfigError as exc:
-        raise ConfigError(f"{path}: {exc}") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(f"{path}: not valid YAML{where}") from exc
-    except (ValueError, RecursionError) as exc:  # e.g. an integer of more than 4300 digits
-        raise ConfigError(f"{path}: not a usable {what} ({fmt(str(exc).splitlines()[0])})") from exc
-
-
-def parse_config(data: Any, name: str, base: Path | None = None) -> Config:
-    """Check a parsed YAML document and build the :class:`Config`.
+    What needs other layers is left for :func:`hcid.resolve.resolve_config`: the
+    columns of forcing files (``FileSignal.values`` is None), the stages of the
+    methods (``identify.stages`` is empty; each section is kept as given), the
+    criteria's registry and the closed loops' stability.
 
     Parameters
     ----------
     data : object
-        The result of ``yaml.safe_load``.
+        The result of ``yaml.safe_load``; not modified.
     name : str
         Study name used when the document has no ``name`` key (the file stem).
     base : Path, optional
-        Folder that relative file paths in the config are read from (the config's own).
+        Folder that relative file paths in the config are relative to (the config's own).
 
     Raises
     ------
@@ -824,33 +364,26 @@ def parse_config(data: Any, name: str, base: Path | None = None) -> Config:
     if simulates:
         models = _models_section(top)
         loop = _loop_section(top)
-        disturbance, target = _signals_section(top, base)
-        timing = _timing_section(top)
-        _check_against_timing(timing, (disturbance, target), models)
+        disturbance, target = signals_section(top, base)
+        timing = timing_section(top)
+        check_against_timing(timing, (disturbance, target), models)
         seeds = _seeds_section(top)
     else:
         models, loop, disturbance, target, seeds = (), None, None, None, ()
-        timing = _timing_section(top) if "timing" in top.data else _data_timing(top)
-    identify = _identify_section(top, timing)
+        timing = timing_section(top) if "timing" in top.data else _data_timing(top)
+    identify = identify_section(top, timing)
     selection, selection_raw = _selection_section(top)
     data_cfg = _data_section(top, [m.name for m in models], timing)
     fit_hc = _fit_hc_section(top, Config.band_of(disturbance, timing), timing)
     top.done()
-    _check_study_size(identify, seeds, models)
-    if simulates:
-        # The closed loops' stability needs the discretised paths (hcid.hcmodel): checked
-        # here so that an unstable hypothesis is refused before anything is simulated.
-        from hcid.hcmodel import check_closed_loops
-
-        check_closed_loops(models, loop, timing.sim_dt)
-
-    raw = dict(data)
+    raw = copy.deepcopy(data)
     raw["name"] = study_name
-    raw["identify"] = {
-        "target_shift": identify.target_shift,
-        **{stage_name: _stage_raw(stage) for stage_name, stage in identify.stages},
-    }
     raw["selection"] = selection_raw
+    for key, spec in (("disturbance", disturbance), ("target", target)):
+        if isinstance(spec, FileSignal):
+            # The run's config.yaml (read back by `hcid report` from the run directory)
+            # names the file by its absolute path.
+            raw["signals"][key]["path"] = str(Path(spec.path).resolve())
     return Config(
         name=study_name,
         models=models,
@@ -865,15 +398,3 @@ def parse_config(data: Any, name: str, base: Path | None = None) -> Config:
         fit_hc=fit_hc,
         raw=raw,
     )
-
-
-def load_config(path: str | Path) -> Config:
-    """Read and check a YAML study config.
-
-    Raises
-    ------
-    ConfigError
-        If the file is missing, is not YAML, or any key is wrong (naming it).
-    """
-    path = Path(path)
-    return parse_config(read_yaml(path), path.stem, path.parent)

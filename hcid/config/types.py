@@ -8,6 +8,7 @@ output rate (``[129, 1088]``); :meth:`Window.rows` gives the Python slice
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -15,6 +16,7 @@ import numpy as np
 import yaml
 
 from hcid.config._checks import GRID_LOWEST, checked_grid_range
+from hcid.config.fit import FitSettings
 from hcid.errors import ConfigError
 
 __all__ = [
@@ -80,6 +82,40 @@ class Plant:
     def second_order(cls, K: float, wb: float) -> Plant:
         """The paper's plant ``K wb / (s (s + wb))``."""
         return cls("second_order", (K * wb,), (1.0, wb, 0.0), f"{K:g}*{wb:g}/(s (s + {wb:g}))")
+
+    @classmethod
+    def integrator(cls, K: float) -> Plant:
+        """``K / s``."""
+        return cls("integrator", (K,), (1.0, 0.0), f"{K:g}/s")
+
+    @classmethod
+    def double_integrator(cls, K: float) -> Plant:
+        """``K / s^2``."""
+        return cls("double_integrator", (K,), (1.0, 0.0, 0.0), f"{K:g}/s^2")
+
+    @classmethod
+    def tf(cls, num: Sequence[float], den: Sequence[float]) -> Plant:
+        """Any transfer function ``num(s) / den(s)`` (coefficients highest power first).
+
+        Examples
+        --------
+        >>> Plant.tf([0, 2.0], [1.0, 3.0, 0.0]).text
+        '(2) / (1 s^2 + 3 s)'
+        """
+        num = tuple(float(c) for c in num)
+        num = num[next((i for i, c in enumerate(num) if c != 0), len(num)) :]
+        den = tuple(float(c) for c in den)
+        return cls("tf", num, den, f"({_poly_text(num)}) / ({_poly_text(den)})")
+
+
+def _poly_text(coefs: tuple[float, ...]) -> str:
+    n = len(coefs) - 1
+    terms = [
+        f"{c:g}" + ("" if i == n else " s" if i == n - 1 else f" s^{n - i}")
+        for i, c in enumerate(coefs)
+        if c != 0
+    ]
+    return " + ".join(terms).replace("+ -", "- ")
 
 
 @dataclass(frozen=True)
@@ -148,15 +184,19 @@ class Segments:
 class FileSignal:
     """A forcing function read from a column of a data file (CSV, Parquet or .mat).
 
-    ``values`` (rad) are the column's samples at ``rate`` Hz; the measurement
-    window starts ``start`` s into them and is taken as one period of the signal.
+    ``values`` (rad) are the column's samples at ``rate`` Hz (of run ``run`` when
+    given, told apart by ``run_column``), None until the file is read
+    (:func:`hcid.resolve.resolve_config`); the measurement window starts ``start``
+    s into them and is taken as one period of the signal.
     """
 
     path: str
     column: str
     rate: float
     start: float
-    values: np.ndarray = field(repr=False, compare=False, hash=False)
+    run: int | None = None
+    run_column: str = "run"
+    values: np.ndarray | None = field(default=None, repr=False, compare=False, hash=False)
 
 
 #: A forcing function (target or disturbance): one of the kinds of ``signals.<name>.kind``.
@@ -294,20 +334,27 @@ class StageConfig:
 
 @dataclass(frozen=True)
 class IdentifyConfig:
-    """Identification settings (SPEC section 3): the target shift and every stage by name.
+    """Identification settings (SPEC section 3): the target shift and the stages by name.
 
-    The stage names are those the registered methods declare
-    (:mod:`hcid.methods`): ``direct``, ``stage1`` and ``stage2`` for the paper's two.
+    ``sections`` are the config's stage sections as given and ``windows_in`` the
+    unit of their windows; ``stages`` are the built stages of the methods a
+    command uses (:func:`hcid.config.stages.build_stages`, through
+    :func:`hcid.resolve.resolve_config`): ``direct``, ``stage1`` and ``stage2`` for
+    the paper's two methods. A stage not built is not in ``stages``.
     """
 
     target_shift: float
     stages: tuple[tuple[str, StageConfig], ...]
+    sections: tuple[tuple[str, Any], ...] = field(default=(), compare=False, hash=False)
+    windows_in: str = field(default="samples", compare=False)
 
     def stage(self, name: str) -> StageConfig:
         for key, stage in self.stages:
             if key == name:
                 return stage
-        raise ConfigError(f"identify.{name}: no such stage, have {[k for k, _ in self.stages]}")
+        raise ConfigError(
+            f"identify.{name}: not resolved for this command, have {[k for k, _ in self.stages]}"
+        )
 
     def shift_samples(self, rate: float) -> int:
         return round(self.target_shift * rate)
@@ -365,9 +412,8 @@ class Config:
     identify: IdentifyConfig
     selection: SelectionConfig
     data: DataConfig | None = None
-    #: The parametric HC fit's settings (:class:`hcid.hcfit.FitSettings`, config
-    #: section ``fit_hc``; typed loosely because the analyses sit above the config).
-    fit_hc: Any = None
+    #: The parametric HC fit's settings (config section ``fit_hc``).
+    fit_hc: FitSettings | None = None
     raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False, hash=False)
 
     @property

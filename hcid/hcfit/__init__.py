@@ -29,9 +29,7 @@ the starting ranges) and then a bounded local stage
 result wins. Equal inputs and settings give identical results.
 """
 
-from hcid.hcfit.fit import BOUND_TOLERANCE, HCFit, fit_frequency, fit_hc, fit_time
-from hcid.hcfit.model import TrackingRecord, hc_response, simulate_hc
-from hcid.hcfit.settings import (
+from hcid.config.fit import (
     DEFAULT_BOUNDS,
     FEEDBACK_PARAMETERS,
     FEEDFORWARD_PARAMETERS,
@@ -43,6 +41,8 @@ from hcid.hcfit.settings import (
     band_grid,
     parse_fit_settings,
 )
+from hcid.hcfit.fit import BOUND_TOLERANCE, HCFit, fit_frequency, fit_hc, fit_time
+from hcid.hcfit.model import TrackingRecord, hc_response, simulate_hc
 
 __all__ = [
     "BOUND_TOLERANCE",

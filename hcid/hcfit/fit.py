@@ -10,9 +10,9 @@ import control
 import numpy as np
 from scipy import optimize
 
+from hcid.config.fit import UNITS, FitSettings
 from hcid.errors import DataError, IdentificationError
 from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials, _responses, _Simulator, simulate_hc
-from hcid.hcfit.settings import UNITS, FitSettings
 
 __all__ = ["BOUND_TOLERANCE", "HCFit", "fit_frequency", "fit_hc", "fit_time"]
 

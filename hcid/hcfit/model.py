@@ -23,8 +23,8 @@ from scipy import signal as sps
 
 from hcid.arx.engine import _rows
 from hcid.config._checks import integer
+from hcid.config.fit import FEEDBACK_PARAMETERS, PARAMETERS
 from hcid.errors import ConfigError, DataError
-from hcid.hcfit.settings import FEEDBACK_PARAMETERS, PARAMETERS
 
 __all__ = ["TrackingRecord", "hc_response", "simulate_hc"]
 

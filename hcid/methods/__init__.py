@@ -30,6 +30,7 @@ __all__ = [
     "identify",
     "registered",
     "shift_forward",
+    "resolved",
     "stage_specs",
 ]
 
@@ -43,6 +44,12 @@ def get(name: str) -> Method:
         return METHODS[name]
     except KeyError:
         raise IdentificationError(f"method: must be one of {', '.join(METHODS)}, got {name!r}") from None
+
+
+def resolved(settings: IdentifyConfig) -> dict[str, Method]:
+    """The registered methods whose every stage ``settings`` holds (those a config was resolved for)."""
+    built = {name for name, _ in settings.stages}
+    return {n: m for n, m in METHODS.items() if all(spec.name in built for spec in m.stages)}
 
 
 def stage_specs() -> dict[str, StageSpec]:

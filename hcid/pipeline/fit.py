@@ -149,31 +149,23 @@ def _choices(run_dir: Path) -> dict[str, dict[tuple[str, int], methods.StageChoi
     return out
 
 
-def _selected(t: pa.Table, ws: list[float]) -> list[SelectedModel]:
+def _selected(t: pa.Table, ws: list[float], config, method: str) -> list[SelectedModel]:
     d = t.column("d").to_numpy()
     v = t.column("v").to_numpy()
     orders = np.column_stack([t.column(c).to_numpy() for c in tables.ORDER_COLUMNS])
     rows = selection.select_at(d, v, orders, np.asarray(ws))
-    out = []
-    for w, row in zip(ws, rows, strict=True):
-        row = int(row)
-        na, nb_ft, nb_e, nk_ft, nk_e = (int(x) for x in orders[row])
-        out.append(
-            SelectedModel(
-                w=float(w),
-                na=na,
-                nb_ft=nb_ft,
-                nb_e=nb_e,
-                nk_ft=nk_ft,
-                nk_e=nk_e,
-                v=float(v[row]),
-                vaf_validation=float(t.column("vaf_validation")[row].as_py()),
-                a=np.asarray(t.column("a")[row].as_py(), dtype=np.float64),
-                b_ft=np.asarray(t.column("b_ft")[row].as_py(), dtype=np.float64),
-                b_e=np.asarray(t.column("b_e")[row].as_py(), dtype=np.float64),
-            )
+    stage = config.identify.stage(methods.get(method).final_stage.name)
+    return [
+        SelectedModel.from_frontier(
+            t,
+            int(row),
+            w,
+            rate=config.timing.output_rate,
+            target_shift=config.identify.target_shift,
+            stage=stage,
         )
-    return out
+        for w, row in zip(ws, rows, strict=True)
+    ]
 
 
 # --------------------------------------------------------------------------- one task
@@ -357,7 +349,9 @@ def fit_hc_study(
         # Methods not asked for keep their valid rows (below) and get no new ones.
         pairs = w_of.get(method_name, [])
         todo = []
-        for sel, (_, source) in zip(_selected(t, [w for w, _ in pairs]) if pairs else [], pairs, strict=True):
+        for sel, (_, source) in zip(
+            _selected(t, [w for w, _ in pairs], config, method_name) if pairs else [], pairs, strict=True
+        ):
             group = existing.get((*key, sel.w))
             if group is not None and _valid(group, sel, source):
                 kept[(*key, sel.w)] = group
@@ -366,7 +360,7 @@ def fit_hc_study(
         # Rows at other W of this record and method stay while their selection still holds.
         requested = {w for w, _ in pairs}
         others = sorted(k[3] for k in existing if k[:3] == key and k[3] not in requested)
-        for sel in _selected(t, others) if others else []:
+        for sel in _selected(t, others, config, method_name) if others else []:
             if _valid(existing[(*key, sel.w)], sel, None):
                 kept[(*key, sel.w)] = existing[(*key, sel.w)]
         if not todo:

@@ -24,9 +24,13 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from hcid import folders, results, tables
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError, HcidError
+from hcid.methods import METHODS
+from hcid.resolve import read_yaml
 
 __all__ = [
     "IDENTIFICATION_SECTIONS",
@@ -55,8 +59,6 @@ os.register_at_fork(after_in_child=_forget_held)
 
 def known_files() -> list[str]:
     """Every file name hcid writes in a run directory."""
-    from hcid.methods import METHODS
-
     schemas = [
         tables.SIMULATIONS, tables.SIMULATION_SUMMARY, tables.MEASURED, tables.FRONTIER,
         tables.IDENTIFY_LOG, tables.SELECTION, tables.BREAKPOINTS, tables.thresholds(),
@@ -211,10 +213,6 @@ def check_run_dir(config: Config, run_dir: Path, stage: str, *, force: bool = Fa
     (e.g. the W grid for a sweep) is fine; the stage's caller records the new
     config when it writes.
     """
-    import yaml
-
-    from hcid.config.parse import read_yaml
-
     if run_dir.exists() and not run_dir.is_dir():
         raise DataError(f"{run_dir}: not a directory; choose another --run")
     path = run_dir / "config.yaml"
@@ -226,7 +224,8 @@ def check_run_dir(config: Config, run_dir: Path, stage: str, *, force: bool = Fa
             raise ConfigError(f"{path}: not a mapping")
     except ConfigError as exc:
         raise DataError(f"{exc}; remove the run directory or use another --run") from exc
-    current = yaml.safe_load(config.to_yaml())
+    current = _common_stages(yaml.safe_load(config.to_yaml()), previous)
+    previous = _common_stages(previous, current)
     if stage == "simulate":
         sections, stale, redo = SIMULATION_SECTIONS, None, "hcid simulate --force"
     elif stage == "identify":
@@ -257,6 +256,38 @@ def check_run_dir(config: Config, run_dir: Path, stage: str, *, force: bool = Fa
     results.clear_parts(run_dir)
 
 
+def _common_stages(data: Any, other: Any) -> Any:
+    """``data`` with only the identify stages ``other`` also holds.
+
+    A stage of a method a command did not resolve (or that a run was made
+    without, say a method registered since) is no difference between two configs.
+    """
+    if not isinstance(data, dict) or not isinstance(data.get("identify"), dict):
+        return data
+    theirs = other.get("identify") if isinstance(other, dict) else None
+    theirs = theirs if isinstance(theirs, dict) else {}
+    section = {k: v for k, v in data["identify"].items() if k == "target_shift" or k in theirs}
+    return {**data, "identify": section}
+
+
 def record_config(config: Config, run_dir: Path) -> None:
-    """Write the resolved config as the run's ``config.yaml`` (atomically)."""
-    results.write_text(config.to_yaml(), run_dir / "config.yaml")
+    """Write the resolved config as the run's ``config.yaml`` (atomically).
+
+    Stages recorded earlier and not resolved by this command stay recorded: the
+    record holds the stages of every method run in the directory.
+    """
+    text = config.to_yaml()
+    path = run_dir / "config.yaml"
+    if path.is_file():
+        try:
+            previous = read_yaml(path, "run config")
+        except ConfigError:
+            previous = None
+        earlier = previous.get("identify") if isinstance(previous, dict) else None
+        if isinstance(earlier, dict):
+            current = yaml.safe_load(text)
+            kept = {k: v for k, v in earlier.items() if k not in current["identify"]}
+            if kept:
+                current["identify"] = {**current["identify"], **kept}
+                text = yaml.safe_dump(current, sort_keys=False)
+    results.write_text(text, path)

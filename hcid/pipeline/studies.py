@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from hcid import calibration, criteria, methods, paper, results, selection, tables
+from hcid import calibration, criteria, measured, methods, paper, results, selection, tables
+from hcid.calibration import calibrate
 from hcid.config import Config, IdentifyConfig
 from hcid.errors import ConfigError, DataError, IdentificationError
 from hcid.pipeline.parallel import check_scheduler, parallel_map
@@ -248,8 +249,6 @@ def _load_records(config: Config, run_dir: Path) -> dict[tuple[str, int], dict[s
 
 def _import_data(config: Config, run_dir: Path, path: Path) -> dict[int, dict[str, np.ndarray]]:
     """Read and check a measured-data file and keep a copy in ``run_dir/measured.parquet``."""
-    from hcid import measured
-
     records = measured.load_data(path, config)
     check_run_dir(config, run_dir, "identify")
     record_config(config, run_dir)
@@ -601,8 +600,6 @@ def calibrate_study(
     Writes ``calibration.parquet`` (one row per method and W of the grid, with the
     safe interval and recommended W repeated on every row).
     """
-    from hcid.calibration import calibrate
-
     config.require_simulation("calibrate-w")
     fb = next((m for m in config.models if not m.has_feedforward), None)
     ff = next((m for m in config.models if m.has_feedforward), None)

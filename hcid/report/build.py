@@ -14,6 +14,8 @@ from typing import Any
 
 from hcid import folders, results
 from hcid.errors import DataError
+from hcid.pipeline.rundir import using
+from hcid.report import figures
 from hcid.report.document import Doc, to_html, to_markdown
 from hcid.report.run import RunTables, read_run
 from hcid.report.sections import SECTIONS
@@ -96,8 +98,6 @@ def write_report(data: ReportData, out_dir: Path, *, adopt_old: bool = False) ->
     figures of an earlier report that this one does not draw are removed.
     ``adopt_old`` takes over a report folder written before folders had manifests.
     """
-    from hcid.report import figures
-
     doc = render(data)
     folders.check_output_path(out_dir, "report folder")
     names = [*doc.drawings, "report.md", "report.html"]
@@ -120,8 +120,6 @@ def write_report(data: ReportData, out_dir: Path, *, adopt_old: bool = False) ->
 
 def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Report:
     """Write the report of ``run_dir`` into ``out_dir`` (default: ``run_dir/report``)."""
-    from hcid.pipeline.rundir import using
-
     run_dir = Path(run_dir)
     out = Path(out_dir) if out_dir is not None else run_dir / "report"
     with using(run_dir, create=False):

@@ -8,9 +8,9 @@ from pathlib import Path
 import pyarrow as pa
 
 from hcid import criteria, methods, results, tables
-from hcid.config import Config, parse_config
-from hcid.config.parse import read_yaml
+from hcid.config import Config
 from hcid.errors import ConfigError, DataError
+from hcid.resolve import parse_config, read_yaml, recorded_methods
 
 __all__ = ["RunTables", "marks_for_plot", "read_run"]
 
@@ -60,7 +60,9 @@ class RunTables:
 
     def nf(self) -> dict[str, int]:
         """Nf of every registered method: the estimation rows of the stage that defines it."""
-        return {name: m.nf(self.config.identify) for name, m in methods.METHODS.items()}
+        return {
+            name: m.nf(self.config.identify) for name, m in methods.resolved(self.config.identify).items()
+        }
 
     def criterion_marks(self) -> dict[str, dict[str, float]]:
         """Per configured criterion label, its W per method (each method's own Nf)."""
@@ -92,7 +94,8 @@ def _load_config(run_dir: Path) -> Config:
     if not path.is_file():
         raise DataError(f"{path}: missing; is {run_dir} a run directory (made by `hcid simulate`)?")
     try:
-        return parse_config(read_yaml(path, "run config"), run_dir.name)
+        data = read_yaml(path, "run config")
+        return parse_config(data, run_dir.name, method_names=recorded_methods(data))
     except ConfigError as exc:
         raise DataError(f"{path}: {exc}" if not str(exc).startswith(str(path)) else str(exc)) from exc
 

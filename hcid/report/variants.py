@@ -18,12 +18,14 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import criteria, folders, paper, results, tables
-from hcid.config import Config, load_config
+from hcid.config import Config
 from hcid.errors import DataError, HcidError
+from hcid.report import figures
 from hcid.report.document import Doc, to_html, to_markdown
 from hcid.report.sections.handoff import stage_options, summarize
 from hcid.report.sections.rates import rate_with_band
 from hcid.report.verdicts import sampling_verdict
+from hcid.resolve import load_config
 
 __all__ = ["Variant", "compute_variant", "main", "write_variants"]
 
@@ -205,8 +207,6 @@ def render(variants: list[Variant]) -> Doc:
 
 
 def _plot(variants: list[Variant]):
-    from hcid.report import figures
-
     curves = {
         v.name: {c: np.asarray(v.rates.column(c).to_numpy()) for c in ("w", "rate", "low", "high")}
         for v in variants
@@ -218,8 +218,6 @@ def _plot(variants: list[Variant]):
 
 def write_variants(out_dir: Path, configs: list[Config], runs_root: Path = Path("runs")) -> list[Variant]:
     """Compute every variant from ``runs_root/<config name>`` and write the comparison into ``out_dir``."""
-    from hcid.report import figures
-
     variants = [compute_variant(c, runs_root / c.name) for c in configs]
     doc = render(variants)
     names = [*doc.drawings, "report.md", "report.html", "variants.parquet"]

@@ -7,7 +7,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcid import paper
+from hcid.config import FileSignal, Multisine, Segments
+from hcid.report import figures
 from hcid.report.document import Doc
+from hcid.signals import forcing
 
 TITLE = "Experiment"
 
@@ -21,8 +24,6 @@ class ExperimentData:
 
 
 def _describe(spec) -> str:
-    from hcid.config import FileSignal, Multisine, Segments
-
     if isinstance(spec, Multisine):
         w = 2 * np.pi / spec.base_period * np.asarray(spec.k, dtype=float)
         rms = np.degrees(np.sqrt(np.sum(np.asarray(spec.amplitude) ** 2) / 2))
@@ -45,8 +46,6 @@ def _describe(spec) -> str:
 
 def _spectrum(config, spec) -> tuple[np.ndarray, np.ndarray]:
     """Amplitudes of one measurement window's DFT lines (rad) up to the analysis Nyquist frequency."""
-    from hcid.signals import forcing
-
     timing = config.timing
     x = forcing(timing, spec)[-timing.window_samples :]
     lines = np.abs(np.fft.rfft(x)) * 2 / x.size
@@ -94,8 +93,6 @@ def compute(run, done) -> ExperimentData:
 
 
 def render(data: ExperimentData, doc: Doc) -> None:
-    from hcid.report import figures
-
     doc.text(f"## {TITLE}")
     if data.is_paper:
         doc.text("The paper's experiment (SPEC sections 1 and 2).")

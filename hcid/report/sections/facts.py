@@ -38,7 +38,7 @@ def compute(run, done) -> list[list[str]]:
         facts.append(["seeds", f"{len(config.seeds)} ({config.seeds[0]}..{config.seeds[-1]})"])
     else:
         facts.append(["config kind", "measured data only (no simulation sections)"])
-    for method in methods.METHODS.values():
+    for method in methods.resolved(config.identify).values():
         for spec in method.stages:
             g = config.identify.stage(spec.name).grid
             i1, i2, _ = spec.inputs

@@ -31,7 +31,7 @@ def effective_options(spec, stage) -> str:
 def stage_options(config) -> list[str]:
     """``method stage: key value, ...`` for every stage configured away from its defaults."""
     out = []
-    for method in methods.METHODS.values():
+    for method in methods.resolved(config.identify).values():
         for spec in method.stages:
             stage = config.identify.stage(spec.name)
             if stage.options:

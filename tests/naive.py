@@ -160,3 +160,15 @@ def fit_reference(
         b1=tuple(b1_rows),
         b2=tuple(b2_rows),
     )
+
+
+def select_brute_force(d: np.ndarray, v: np.ndarray, orders: np.ndarray, w: float) -> int:
+    """Slow twin of :func:`select_at`: argmin of log V + W d with the tie rule, row by row."""
+    best, best_key = -1, None
+    for i in range(len(d)):
+        if not np.isfinite(v[i]) or v[i] <= 0:
+            continue
+        key = (np.log(v[i]) + w * d[i], d[i], tuple(int(x) for x in orders[i]))
+        if best_key is None or key < best_key:
+            best, best_key = i, key
+    return best

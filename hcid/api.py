@@ -1,0 +1,324 @@
+"""The public API: read records, describe the experiment, identify, select at W, fit the HC model.
+
+Everything a notebook needs, with no YAML and no run directory::
+
+    import numpy as np
+    import hcid
+
+    records = hcid.read_records("trials.csv", columns={"ft": "target", "e": "error"})
+    result = hcid.identify(records[1], method="direct")      # every candidate of the grid
+    model = result.select(result.w_bic)                       # the model MSC selects at W
+    paths = model.frequency_response(np.logspace(-1, 1.5))   # {"ft": Hft, "e": He}
+    fit = hcid.fit_hc(model, records[1], hcid.Experiment(hcid.Plant.integrator(1.5)))
+
+The command-line tool runs the same functions over many records (:mod:`hcid.pipeline`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from hcid import criteria, hcfit, methods, results, selection, tables
+from hcid.config import Config, DataConfig, Forcing, IdentifyConfig, Plant, Timing
+from hcid.config.parse import default_data
+from hcid.errors import ConfigError, IdentificationError
+from hcid.hcmodel import transfer_function
+from hcid.measured import read_runs
+from hcid.resolve import resolve_identify
+from hcid.selected import SelectedModel, fit_selected
+from hcid.selection import SelectionPath
+
+__all__ = [
+    "Experiment",
+    "IdentificationResult",
+    "Record",
+    "fit_hc",
+    "identification_settings",
+    "identify",
+    "read_records",
+]
+
+
+@dataclass(frozen=True)
+class Record:
+    """One run of a tracking task at its analysis rate.
+
+    Attributes
+    ----------
+    run : int
+        The run's id, as its file gives it.
+    rate : float
+        Sample rate (Hz).
+    t : ndarray, shape (N,)
+        Time (s), 0 at the first sample kept (after any lead-in).
+    ft, fd, e, u : ndarray, shape (N,)
+        Target, disturbance, error ``ft - theta`` and the human's output (rad).
+    """
+
+    run: int
+    rate: float
+    t: np.ndarray = field(repr=False)
+    ft: np.ndarray = field(repr=False)
+    fd: np.ndarray = field(repr=False)
+    e: np.ndarray = field(repr=False)
+    u: np.ndarray = field(repr=False)
+
+    @property
+    def signals(self) -> dict[str, np.ndarray]:
+        """``{"ft", "fd", "e", "u"}``: the record as the methods read it."""
+        return {name: getattr(self, name) for name in tables.SIGNALS}
+
+    def to_arrow(self) -> pa.Table:
+        """One row per sample: run, k, t, ft, fd, e, u."""
+        n = self.ft.size
+        columns = {
+            "run": np.full(n, self.run, dtype=np.int64),
+            "k": np.arange(n, dtype=np.int64),
+            "t": self.t,
+        }
+        return pa.table({**columns, **self.signals})
+
+
+def read_records(
+    path: str | Path,
+    *,
+    columns: Mapping[str, str] | None = None,
+    rate: float | None = None,
+    lead_in: float = 0.0,
+) -> dict[int, Record]:
+    """Read a measured-data file (CSV, Parquet or MATLAB ``.mat``) into records, by run id.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file; at most 1 GiB. Several runs are told apart by a run column.
+    columns : mapping, optional
+        The file's names of ``ft``, ``fd``, ``e``, ``u``, ``theta`` (system output, for
+        ``e = ft - theta``), ``time``, ``run`` and ``rate``; unnamed ones keep their
+        default names (``t`` or ``time``, ``ft``, ``fd``, ``e``, ``u``, ``run``).
+    rate : float, optional
+        Analysis rate (Hz): a run recorded faster is resampled to it once (zero
+        phase). Default: the file's own rate.
+    lead_in : float
+        Seconds skipped at the start of every run (after resampling).
+
+    Returns
+    -------
+    dict of int to Record
+
+    Raises
+    ------
+    DataError
+        One line naming the file and what is wrong.
+    """
+    data = default_data()
+    given = dict(columns or {})
+    unknown = sorted(set(given) - set(data.columns))
+    if unknown:
+        raise ConfigError(f"columns: unknown signal {unknown[0]!r} (allowed: {', '.join(data.columns)})")
+    if not (isinstance(lead_in, int | float) and 0 <= lead_in < 1e4):
+        raise ConfigError(f"lead_in: must be a number of seconds in [0, 10000), got {lead_in!r}")
+    data = DataConfig(
+        name="data",
+        columns={**data.columns, **given},
+        w_report=data.w_report,
+        lead_in=float(lead_in),
+        time_default="time" not in given,
+    )
+    runs, found = read_runs(path, data, rate)
+    return {run: Record(run=run, rate=found, **r) for run, r in runs.items()}
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """The tracking task a record comes from (SPEC 7).
+
+    Attributes
+    ----------
+    plant : Plant
+        The controlled element ``Yc`` (``Plant.second_order(2.75, 2.0)`` for the paper,
+        ``Plant.integrator(K)``, ``Plant.double_integrator(K)``, ``Plant.tf(num, den)``).
+    disturbance_at : str
+        ``output`` (``theta = Yc u + fd``, the paper) or ``input`` (``theta = Yc (u + fd)``).
+    target, disturbance : Forcing, optional
+        The forcing functions, where known (a multisine disturbance sets the
+        frequency band of the parametric fit).
+    """
+
+    plant: Plant
+    disturbance_at: str = "output"
+    target: Forcing | None = None
+    disturbance: Forcing | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.plant, Plant):
+            raise ConfigError(f"plant: must be a hcid.Plant, got {type(self.plant).__name__}")
+        if self.disturbance_at not in ("output", "input"):
+            raise ConfigError(f"disturbance_at: must be 'output' or 'input', got {self.disturbance_at!r}")
+
+    @classmethod
+    def from_config(cls, config: Config) -> Experiment:
+        """The experiment a study config simulates."""
+        config.require_simulation("Experiment.from_config")
+        return cls(config.loop.plant, config.loop.disturbance_at, config.target, config.disturbance)
+
+
+def identification_settings(
+    rate: float, n_samples: int, identify: Mapping[str, Any] | None = None
+) -> IdentifyConfig:
+    """The stages (grids, windows) and target shift for records of ``n_samples`` at ``rate`` Hz.
+
+    ``identify`` is a config's ``identify`` section as a mapping (its keys and
+    defaults: SPEC 3, ``docs/configuration.md``); None gives every default.
+    """
+    return resolve_identify(None if identify is None else dict(identify), rate, n_samples)
+
+
+@dataclass(frozen=True)
+class IdentificationResult:
+    """Every order triple's best candidate of one record and method (the frontier), and what selects it.
+
+    Attributes
+    ----------
+    method : str
+        The method (``direct``, ``indirect``, ...: :data:`hcid.methods.METHODS`).
+    rate : float
+        The record's sample rate (Hz).
+    settings : IdentifyConfig
+        The stages and target shift used.
+    frontier : pyarrow.Table
+        One row per order triple (``frontier.parquet``'s columns without model and
+        seed): na, nb_ft, nb_e, nk_ft, nk_e, d, v, VAFs, unstable counts, coefficients.
+    choices : tuple of StageChoice
+        The earlier stages' chosen models (the indirect method's stage 1).
+    seconds : float
+        Wall time of the identification (s).
+    """
+
+    method: str
+    rate: float
+    settings: IdentifyConfig
+    frontier: pa.Table = field(repr=False)
+    choices: tuple[methods.StageChoice, ...] = field(repr=False)
+    seconds: float = 0.0
+
+    @property
+    def nf(self) -> int:
+        """Estimation rows of the final stage: the N of the criteria's W."""
+        return methods.get(self.method).nf(self.settings)
+
+    @property
+    def w_aic(self) -> float:
+        """W of Akaike's criterion at this Nf (SPEC 4)."""
+        return criteria.w_aic(self.nf)
+
+    @property
+    def w_bic(self) -> float:
+        """W of the Bayesian criterion at this Nf (SPEC 4)."""
+        return criteria.w_bic(self.nf)
+
+    def _orders(self) -> np.ndarray:
+        return np.column_stack([self.frontier.column(c).to_numpy() for c in tables.ORDER_COLUMNS])
+
+    def selection_path(self) -> SelectionPath:
+        """The exact selection over W: ``frontier`` row ``index[i]`` for ``w_from[i] <= W < w_to[i]``."""
+        d, v = self.frontier.column("d").to_numpy(), self.frontier.column("v").to_numpy()
+        return selection.breakpoints(d, v, self._orders())
+
+    def select(self, w: float) -> SelectedModel:
+        """The model ``MSC = log V + W d`` selects at ``w`` (ties: SPEC 4's rule).
+
+        Raises
+        ------
+        IdentificationError
+            If ``w`` is not a finite number >= 0, or every candidate is unstable.
+        """
+        if not (isinstance(w, int | float) and np.isfinite(w) and w >= 0):
+            raise IdentificationError(f"w: must be a finite number >= 0, got {w!r}")
+        row = int(self.selection_path().at(np.array([float(w)]))[0])
+        stage = self.settings.stage(methods.get(self.method).final_stage.name)
+        return SelectedModel.from_frontier(
+            self.frontier, row, w, rate=self.rate, target_shift=self.settings.target_shift, stage=stage
+        )
+
+    def to_arrow(self) -> pa.Table:
+        """The frontier (the :attr:`frontier` table)."""
+        return self.frontier
+
+
+def identify(
+    record: Record,
+    method: str = "direct",
+    settings: IdentifyConfig | None = None,
+    *,
+    threads: int = 1,
+) -> IdentificationResult:
+    """Identify one record by one method over its grid of orders and delays (SPEC 3).
+
+    Parameters
+    ----------
+    record : Record
+        From :func:`read_records` (or built from arrays at their rate).
+    method : str
+        A registered method: ``direct`` or ``indirect``.
+    settings : IdentifyConfig, optional
+        Default: :func:`identification_settings` for the record's rate and length
+        (SPEC 3's grids and windows).
+    threads : int
+        Threads of the ARX engine.
+    """
+    if not isinstance(record, Record):
+        raise IdentificationError(f"record: must be a hcid.Record, got {type(record).__name__}")
+    if settings is None:
+        settings = identification_settings(record.rate, record.ft.size)
+    found = methods.identify(record.signals, settings, method, rate=record.rate, threads=threads)
+    parts = results.frontier_part("record", record.run, found, methods.get(method).choice_stages)
+    frontier = parts["frontier"].drop_columns(["model", "seed"])
+    return IdentificationResult(method, record.rate, settings, frontier, found.choices, found.seconds)
+
+
+def fit_hc(
+    model: SelectedModel,
+    record: Record,
+    experiment: Experiment,
+    *,
+    target: str = "time",
+    settings: hcfit.FitSettings | None = None,
+) -> hcfit.HCFit | None:
+    """Fit the parametric HC model (SPEC 8) to a selected model and its record.
+
+    Parameters
+    ----------
+    model : SelectedModel
+        From :meth:`IdentificationResult.select`; its ``nb_ft > 0`` decides whether
+        the feedforward parameters are fitted.
+    record : Record
+        The record the model was identified on.
+    experiment : Experiment
+        The plant (the feedforward path inverts it).
+    target : str
+        ``time`` (u simulated from the measured ft and e) or ``frequency`` (the
+        ARX model's paths); ignored when ``settings`` is given.
+    settings : FitSettings, optional
+        Bounds, starts and seed (:func:`hcid.hcfit.parse_fit_settings`); the
+        band defaults to the disturbance's (a multisine's) or the record's.
+
+    Returns
+    -------
+    HCFit or None
+        None for a frequency fit of a model without feedback path.
+    """
+    timing = Timing(record.rate, record.rate, 0.0, record.ft.size / record.rate, 1)
+    band = Config.band_of(experiment.disturbance, timing)
+    if settings is None:
+        settings = hcfit.parse_fit_settings({"target": target}, "fit_hc", default_band=band)
+    elif settings.band is None:
+        settings = dataclasses.replace(settings, band=band)
+    return fit_selected(model, record.signals, transfer_function(experiment.plant), settings)

@@ -1,0 +1,244 @@
+"""Resolve a described config: read what it names, check what needs other layers.
+
+:func:`hcid.config.parse.describe_config` turns YAML into dataclasses and checks
+values; this step, above the data readers and the method registry, completes a
+:class:`~hcid.config.Config` for a command:
+
+- forcing functions of kind ``file`` are read (:func:`hcid.measured.read_signal`,
+  the checks every signal from a file passes) and checked against the window;
+- the stages of the methods the command uses, and only those, are built
+  (:func:`hcid.config.stages.build_stages` with each method's stage specs): a
+  method added to the registry changes no other config or run directory;
+- the selection criteria are looked up in :mod:`hcid.criteria`;
+- a simulating config's closed loops must be stable (:func:`hcid.hcmodel.check_closed_loops`)
+  and its study not too large.
+
+:func:`load_config` reads a YAML file (:func:`read_yaml`: bounded, no aliases) and does both.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from hcid import criteria, methods
+from hcid.config import Config, FileSignal, HCModel, IdentifyConfig
+from hcid.config._checks import LIMITS
+from hcid.config.forcing import check_forcing_values
+from hcid.config.parse import describe_config
+from hcid.config.stages import build_stages, parse_identify, stage_raw
+from hcid.errors import ConfigError, DataError, quote
+from hcid.hcmodel import check_closed_loops
+from hcid.measured import read_signal
+
+__all__ = [
+    "describe_file",
+    "load_config",
+    "methods_of_run",
+    "parse_config",
+    "read_yaml",
+    "recorded_methods",
+    "resolve_config",
+    "resolve_identify",
+]
+
+
+def _stage_specs(method_names: Sequence[str] | None) -> dict[str, Any]:
+    chosen = methods.METHODS if method_names is None else {n: methods.get(n) for n in method_names}
+    return {spec.name: spec for m in chosen.values() for spec in m.stages}
+
+
+def _check_stage_names(identify: IdentifyConfig) -> None:
+    known = methods.stage_specs()
+    for name, _ in identify.sections:
+        if name not in known:
+            allowed = ", ".join(sorted(["target_shift", "windows_in", *known]))
+            raise ConfigError(f"identify.{name}: unknown key (allowed: {allowed})")
+
+
+def _read_forcing(name: str, spec: Any, timing) -> Any:
+    if not isinstance(spec, FileSignal):
+        return spec
+    try:
+        values = read_signal(spec.path, spec.column, spec.run, spec.run_column)
+    except DataError as exc:
+        raise ConfigError(f"signals.{name}: {exc}") from None
+    spec = dataclasses.replace(spec, values=values)
+    check_forcing_values(name, spec, timing)
+    return spec
+
+
+def _selection(config: Config) -> tuple[Any, dict]:
+    chosen = []
+    for name, constants in config.selection.criteria:
+        built = criteria.build(name, dict(constants))
+        chosen.append((built.name, built.constants))
+    raw = {**config.raw["selection"], "criteria": {n: dict(c) for n, c in chosen}}
+    return dataclasses.replace(config.selection, criteria=tuple(chosen)), raw
+
+
+def resolve_config(config: Config, method_names: Sequence[str] | None = None) -> Config:
+    """Complete a described config for a command that uses ``method_names`` (None: every registered one).
+
+    Raises
+    ------
+    ConfigError
+        Naming the key: an unreadable or unusable forcing file, a stage section of
+        no registered method, a stage that does not fit the record, an unknown
+        criterion, an unstable closed loop or a study too large.
+    """
+    _check_stage_names(config.identify)
+    disturbance = _read_forcing("disturbance", config.disturbance, config.timing)
+    target = _read_forcing("target", config.target, config.timing)
+    identify = build_stages(config.identify, _stage_specs(method_names), config.timing)
+    selection, selection_raw = _selection(config)
+    _check_study_size(identify, config.seeds, config.models)
+    if config.simulates:
+        check_closed_loops(config.models, config.loop, config.timing.sim_dt)
+    # The resolved config (a run's config.yaml) holds the stages built, windows in samples.
+    raw = dict(config.raw)
+    raw["identify"] = {
+        "target_shift": identify.target_shift,
+        **{name: stage_raw(stage) for name, stage in identify.stages},
+    }
+    raw["selection"] = selection_raw
+    return dataclasses.replace(
+        config, disturbance=disturbance, target=target, identify=identify, selection=selection, raw=raw
+    )
+
+
+def resolve_identify(
+    data: Any, rate: float, n_samples: int, method_names: Sequence[str] | None = None
+) -> IdentifyConfig:
+    """An ``identify`` section alone (None: the defaults), resolved for ``n_samples`` at ``rate`` Hz."""
+    identify, timing = parse_identify(data, rate, n_samples)
+    _check_stage_names(identify)
+    return build_stages(identify, _stage_specs(method_names), timing)
+
+
+def recorded_methods(data: Any) -> tuple[str, ...]:
+    """The registered methods whose every stage a resolved config's ``identify`` section holds.
+
+    A run's ``config.yaml`` records the stages of the methods run in it, so these
+    are the methods a run directory's tables can hold.
+    """
+    section = data.get("identify") if isinstance(data, dict) else None
+    if not isinstance(section, dict):
+        return ()
+    return tuple(n for n, m in methods.METHODS.items() if all(st.name in section for st in m.stages))
+
+
+def methods_of_run(run_dir: Path) -> tuple[str, ...] | None:
+    """The methods a run directory's ``config.yaml`` records (:func:`recorded_methods`), None without one."""
+    path = Path(run_dir) / "config.yaml"
+    if not path.is_file():
+        return None
+    try:
+        return recorded_methods(read_yaml(path, "run config"))
+    except ConfigError:
+        return None
+
+
+def parse_config(
+    data: Any, name: str, base: Path | None = None, method_names: Sequence[str] | None = None
+) -> Config:
+    """:func:`~hcid.config.parse.describe_config` then :func:`resolve_config`."""
+    return resolve_config(describe_config(data, name, base), method_names)
+
+
+def describe_file(path: str | Path) -> Config:
+    """Read a YAML study config and describe it (:func:`~hcid.config.parse.describe_config`), unresolved."""
+    path = Path(path)
+    return describe_config(read_yaml(path), path.stem, path.parent)
+
+
+def load_config(path: str | Path, method_names: Sequence[str] | None = None) -> Config:
+    """Read, check and resolve a YAML study config for the methods ``method_names`` (None: all).
+
+    Raises
+    ------
+    ConfigError
+        If the file is missing, is not YAML, or any key is wrong (naming it).
+    """
+    return resolve_config(describe_file(path), method_names)
+
+
+def _check_study_size(identify: IdentifyConfig, seeds: tuple[int, ...], models: tuple[HCModel, ...]) -> None:
+    per_record = sum(stage.grid.n_candidates for _, stage in identify.stages)
+    total = per_record * len(seeds) * len(models)
+    if total > LIMITS["study_candidates"]:
+        raise ConfigError(
+            f"identify: the study fits {total:,} candidates ({per_record:,} per record x "
+            f"{len(seeds) * len(models):,} records), at most {LIMITS['study_candidates']:,} are allowed"
+        )
+
+
+class _Loader(yaml.SafeLoader):
+    """yaml.SafeLoader without aliases (no expansion bombs), duplicate keys or deep nesting."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._depth = 0
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            mark = self.peek_event().start_mark
+            raise ConfigError(f"line {mark.line + 1}: YAML aliases (*name) are not allowed in a config")
+        self._depth += 1
+        if self._depth > LIMITS["nesting"]:
+            mark = self.peek_event().start_mark
+            raise ConfigError(f"line {mark.line + 1}: nested deeper than {LIMITS['nesting']} levels")
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            if isinstance(key, list | dict):
+                raise ConfigError(f"line {key_node.start_mark.line + 1}: a mapping key must be a plain value")
+            if key in seen:
+                raise ConfigError(f"line {key_node.start_mark.line + 1}: duplicate key {quote(key)}")
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def read_yaml(path: Path, what: str = "config") -> Any:
+    """Read a YAML file with :class:`_Loader`: at most ``LIMITS['file_bytes']``, UTF-8.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the file and the problem.
+    """
+    try:
+        with open(path, "rb") as f:
+            raw = f.read(LIMITS["file_bytes"] + 1)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read {what} ({exc.strerror or exc})") from exc
+    if len(raw) > LIMITS["file_bytes"]:
+        raise ConfigError(f"{path}: larger than {LIMITS['file_bytes']:,} bytes; not a {what}")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"{path}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start})"
+        ) from exc
+    if "\0" in text:
+        raise ConfigError(f"{path}: holds a NUL character; not a {what}")
+    try:
+        return yaml.load(text, Loader=_Loader)  # noqa: S506 (a SafeLoader subclass)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError(f"{path}: not valid YAML{where}") from exc
+    except (ValueError, RecursionError) as exc:  # e.g. an integer of more than 4300 digits
+        raise ConfigError(f"{path}: not a usable {what} ({quote(str(exc).splitlines()[0])})") from exc

@@ -1,0 +1,151 @@
+"""The package's imports point one way, in the layer order of ../shared/STYLE.md (item 1).
+
+Read from the source with ``ast``: every ``import hcid...`` and ``from hcid... import``,
+at module level or inside a function (a function-level import still couples the
+layers), must point to the same or a lower layer, and the module graph has no cycle.
+"""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "hcid"
+
+#: Layers, lowest first (STYLE 1): a module may import from its own layer and the ones before.
+#: ``errors`` and ``tables`` (the column names and schemas every layer shares) import nothing of hcid.
+LAYERS = (
+    ("vocabulary", ("hcid.errors", "hcid.tables")),
+    ("config", ("hcid.config", "hcid.paper")),
+    ("signals", ("hcid.signals",)),
+    ("hcmodel", ("hcid.hcmodel",)),
+    ("simulate", ("hcid.simulate",)),
+    ("arx", ("hcid.arx",)),
+    ("methods", ("hcid.methods",)),
+    ("selection", ("hcid.criteria", "hcid.selection")),
+    ("analyses", ("hcid.hcfit", "hcid.residuals", "hcid.selected", "hcid.calibration")),
+    ("results", ("hcid.results", "hcid.measured", "hcid.folders")),
+    ("api", ("hcid.resolve", "hcid.api")),
+    ("pipeline", ("hcid.pipeline",)),
+    ("report", ("hcid.report",)),
+    ("cli", ("hcid.cli", "hcid.__main__")),
+)
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def layer_of(module: str) -> int:
+    for i, (_, prefixes) in enumerate(LAYERS):
+        if any(module == p or module.startswith(p + ".") for p in prefixes):
+            return i
+    raise AssertionError(f"{module}: in no layer; add it to tests/test_layers.py LAYERS")
+
+
+def imports(path: Path, modules: set[str]) -> list[tuple[str, int]]:
+    """The hcid modules ``path`` imports, with the line of each import."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found += [(a.name, node.lineno) for a in node.names if a.name.startswith("hcid.")]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and (node.module or "").startswith("hcid"):
+            for alias in node.names:
+                full = f"{node.module}.{alias.name}"
+                found.append((full if full in modules else node.module, node.lineno))
+    return found
+
+
+def graph(root: Path = PACKAGE) -> dict[str, list[tuple[str, int]]]:
+    files = {module_name(p): p for p in root.rglob("*.py")}
+    names = set(files)
+    return {m: [(t, line) for t, line in imports(p, names) if t != "hcid"] for m, p in files.items()}
+
+
+def upward_imports(edges: dict[str, list[tuple[str, int]]]) -> list[str]:
+    out = []
+    for module, targets in edges.items():
+        if module == "hcid":  # the package's lazy exports name modules by string only
+            continue
+        for target, line in targets:
+            if layer_of(target) > layer_of(module):
+                out.append(
+                    f"{module}:{line} imports {target} "
+                    f"({LAYERS[layer_of(module)][0]} -> {LAYERS[layer_of(target)][0]})"
+                )
+    return out
+
+
+def cycles(edges: dict[str, list[tuple[str, int]]]) -> list[list[str]]:
+    """Every cycle's modules (strongly connected components of more than one module, or a self-import)."""
+    index, low, stack, on, found, counter = {}, {}, [], set(), [], [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w, _ in edges.get(v, []):
+            w = w if w in edges else w.rsplit(".", 1)[0]
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1 or any(t == v for t, _ in edges.get(v, [])):
+                found.append(sorted(component))
+
+    for v in sorted(edges):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def _package_imports(edges):
+    # A package's __init__ re-exports its own modules: those edges are not cycles.
+    return {m: [(t, line) for t, line in ts if not t.startswith(m + ".")] for m, ts in edges.items()}
+
+
+def test_every_import_points_down_the_layers():
+    assert upward_imports(graph()) == []
+
+
+def test_no_import_cycle():
+    assert cycles(_package_imports(graph())) == []
+
+
+def test_the_checks_catch_a_cycle_and_an_upward_import(tmp_path):
+    # A hand-made package: config importing the pipeline is upward, and the two form a cycle.
+    root = tmp_path / "hcid"
+    (root / "config").mkdir(parents=True)
+    (root / "pipeline").mkdir()
+    (root / "__init__.py").write_text("")
+    (root / "config" / "__init__.py").write_text("def f():\n    from hcid.pipeline import run\n")
+    (root / "pipeline" / "__init__.py").write_text("from hcid.config import f\n")
+    global PACKAGE
+    saved, PACKAGE = PACKAGE, root
+    try:
+        edges = graph(root)
+        assert upward_imports(edges) == ["hcid.config:2 imports hcid.pipeline (config -> pipeline)"]
+        assert cycles(_package_imports(edges)) == [["hcid.config", "hcid.pipeline"]]
+    finally:
+        PACKAGE = saved
+
+
+@pytest.mark.parametrize(
+    "module", ["hcid.config.parse", "hcid.config.types", "hcid.signals", "hcid.arx.engine"]
+)
+def test_the_core_reads_no_files(module):
+    # STYLE 2: no file I/O below results: the config layer describes, hcid.resolve reads.
+    path = PACKAGE / (module.replace("hcid.", "").replace(".", "/") + ".py")
+    text = path.read_text()
+    assert "open(" not in text and "read_signal" not in text and "read_text" not in text
