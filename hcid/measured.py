@@ -442,7 +442,25 @@ def read_runs(
     """
     path = Path(path)
     given = rate is not None
-    cols = _read_columns(path, data)
+    cols = _named_signals(path, _read_columns(path, data), data)
+    records = {}
+    for run_id, run in _split_runs(path, cols, data).items():
+        where = f"{path}: run {run_id}"
+        for name in (*SIGNALS, "time"):
+            if name in run:
+                run[name] = check_signal(run[name], f"{where}: {data.columns[name]}")
+        found = _run_rate(where, run, data, rate)
+        if rate is None:
+            rate = found
+        signals_ = _at_rate(where, {name: run[name] for name in SIGNALS}, found, rate, given)
+        records[run_id] = _after_lead_in(where, signals_, rate, data, need)
+    if not records:
+        raise DataError(f"{path}: holds no samples")
+    return records, float(rate)
+
+
+def _named_signals(path: Path, cols: dict[str, np.ndarray], data: DataConfig) -> dict[str, np.ndarray]:
+    """The file's columns under hcid's names, ``e = ft - theta`` derived; every signal and a time or rate."""
     if "time" not in cols and "time_alt" in cols:
         cols["time"] = cols.pop("time_alt")
     cols.pop("time_alt", None)
@@ -465,68 +483,70 @@ def read_runs(
         raise DataError(
             f"{path}: needs a time column '{data.columns['time']}' or a rate '{data.columns['rate']}'"
         )
-    records = {}
-    for run_id, run in _split_runs(path, cols, data).items():
-        where = f"{path}: run {run_id}"
-        for name in (*SIGNALS, "time"):
-            if name in run:
-                label = data.columns[name] if name != "e" or "e" in data.columns else "e"
-                run[name] = check_signal(run[name], f"{where}: {label}")
-        if "time" in run:
-            steps = np.diff(run["time"])
-            if steps.size and not np.allclose(steps, steps[0], rtol=1e-6, atol=1e-9):
-                k = int(np.argmax(np.abs(steps - steps[0]) > 1e-6 * abs(steps[0]) + 1e-9))
-                raise DataError(
-                    f"{where}: time is not uniformly sampled (step {steps[k]:.6g} s at sample "
-                    f"{k + 1}, first step {steps[0]:.6g} s)"
-                )
-            if steps.size and steps[0] <= 0:
-                raise DataError(f"{where}: time does not increase (step {steps[0]:.6g} s)")
-            found = steps.size / (run["time"][-1] - run["time"][0]) if steps.size else rate
-        else:
-            rates = np.ravel(run["rate"])
-            if rates.size == 0 or not np.isfinite(rates[0]) or rates[0] <= 0:
-                raise DataError(
-                    f"{where}: the rate {data.columns['rate']!r} is empty or not a positive number"
-                )
-            found = float(rates[0])
-        signals_ = {name: run[name] for name in SIGNALS}
-        if rate is None:
-            rate = found
-        if not np.isclose(found, rate, rtol=1e-6):
-            if found < rate:
-                which = "the config's analysis rate (timing.output_rate)" if given else "the first run's rate"
-                raise DataError(
-                    f"{where}: sample rate {found:.6g} Hz, below {which} {rate:g} Hz; "
-                    "set that to the data's rate or lower"
-                )
-            try:
-                up, down = resampling_factors(found, rate)
-            except DataError as exc:
-                raise DataError(f"{where}: {exc}") from None
-            signals_ = {name: resample(x, up, down) for name, x in signals_.items()}
-        total = signals_["ft"].size
-        skip = round(data.lead_in * rate)
-        if total - skip < need:
-            lead = f", {total - skip} after the {data.lead_in:g} s lead-in" if skip and total > skip else ""
-            if skip >= total:
-                lead = f", none after the {data.lead_in:g} s lead-in"
+    return cols
+
+
+def _run_rate(where: str, run: dict[str, np.ndarray], data: DataConfig, default: float | None) -> float:
+    """A run's sample rate (Hz): from its uniformly sampled time column, else its rate column."""
+    if "time" in run:
+        steps = np.diff(run["time"])
+        if steps.size and not np.allclose(steps, steps[0], rtol=1e-6, atol=1e-9):
+            k = int(np.argmax(np.abs(steps - steps[0]) > 1e-6 * abs(steps[0]) + 1e-9))
             raise DataError(
-                f"{where}: {total} samples at {rate:g} Hz{lead}, the identification windows need {need}"
+                f"{where}: time is not uniformly sampled (step {steps[k]:.6g} s at sample "
+                f"{k + 1}, first step {steps[0]:.6g} s)"
             )
-        n = total - skip
-        signals_ = {name: np.ascontiguousarray(x[skip:]) for name, x in signals_.items()}
-        for name in SIGNALS:
-            window = signals_[name][: need if need > 1 else n]
-            if np.ptp(window) == 0:
-                raise DataError(
-                    f"{where}: {data.columns.get(name, name)} is constant "
-                    f"({window[0]:.6g}) over the identification windows"
-                )
-        records[run_id] = {"t": np.arange(n) / rate, **signals_}
-    if not records:
-        raise DataError(f"{path}: holds no samples")
-    return records, float(rate)
+        if steps.size and steps[0] <= 0:
+            raise DataError(f"{where}: time does not increase (step {steps[0]:.6g} s)")
+        return steps.size / (run["time"][-1] - run["time"][0]) if steps.size else default
+    rates = np.ravel(run["rate"])
+    if rates.size == 0 or not np.isfinite(rates[0]) or rates[0] <= 0:
+        raise DataError(f"{where}: the rate {data.columns['rate']!r} is empty or not a positive number")
+    return float(rates[0])
+
+
+def _at_rate(
+    where: str, signals_: dict[str, np.ndarray], found: float, rate: float, given: bool
+) -> dict[str, np.ndarray]:
+    """The signals resampled from ``found`` to ``rate`` Hz (unchanged when they agree to 1e-6)."""
+    if np.isclose(found, rate, rtol=1e-6):
+        return signals_
+    if found < rate:
+        which = "the config's analysis rate (timing.output_rate)" if given else "the first run's rate"
+        raise DataError(
+            f"{where}: sample rate {found:.6g} Hz, below {which} {rate:g} Hz; "
+            "set that to the data's rate or lower"
+        )
+    try:
+        up, down = resampling_factors(found, rate)
+    except DataError as exc:
+        raise DataError(f"{where}: {exc}") from None
+    return {name: resample(x, up, down) for name, x in signals_.items()}
+
+
+def _after_lead_in(
+    where: str, signals_: dict[str, np.ndarray], rate: float, data: DataConfig, need: int
+) -> dict[str, np.ndarray]:
+    """The record after the lead-in, long enough and with no signal constant over ``need`` samples."""
+    total = signals_["ft"].size
+    skip = round(data.lead_in * rate)
+    if total - skip < need:
+        lead = f", {total - skip} after the {data.lead_in:g} s lead-in" if skip and total > skip else ""
+        if skip >= total:
+            lead = f", none after the {data.lead_in:g} s lead-in"
+        raise DataError(
+            f"{where}: {total} samples at {rate:g} Hz{lead}, the identification windows need {need}"
+        )
+    n = total - skip
+    signals_ = {name: np.ascontiguousarray(x[skip:]) for name, x in signals_.items()}
+    for name in SIGNALS:
+        window = signals_[name][: need if need > 1 else n]
+        if np.ptp(window) == 0:
+            raise DataError(
+                f"{where}: {data.columns.get(name, name)} is constant ({window[0]:.6g}) over the "
+                "identification windows"
+            )
+    return {"t": np.arange(n) / rate, **signals_}
 
 
 def records_table(name: str, records: dict[int, dict[str, np.ndarray]]) -> pa.Table:

@@ -18,12 +18,11 @@ per lane: it sums each lane's taps over 16 samples and transposes the
 sums into lanes. It reads the inputs as :func:`tap_vectors` (every run
 of eight values stored apart, eight times the record), so that each
 vector load is one aligned cache line rather than two for seven taps in
-eight: the step is bound by its loads (stage 1: 0.90x the time). An
+eight: the step is bound by its loads. An
 *affine group* (:func:`lane_inputs_affine`) is eight candidates of one
 triple with consecutive nk1 at one nk2: its input 1 is one vector load
 from the reversed record and its input 2 one broadcast,
-with the tap coefficients held in registers, and no transpose (1.1 to
-1.4x a whole batch). Most candidates of the direct grid (nk1 1..50) form
+with the tap coefficients held in registers, and no transpose. Most candidates of the direct grid (nk1 1..50) form
 such groups; stage 1 (nk1 1..5), the groups with many unstable candidates
 and the rest take the general step (:func:`_simulate_run`).
 
@@ -34,8 +33,7 @@ the same order: ``fmul`` and ``fadd`` / ``fsub`` without fast-math flags,
 which LLVM may neither reassociate nor fuse), so a lane's V is
 bit-identical to it; the tests compare them. Fused, each multiply-add
 (an input tap, an output lag, a squared error) is one ``llvm.fma``,
-rounded once: the same order, fewer operations and roundings (0.8x the
-time of a direct grid). ``llvm.fma`` is exact by definition, so the values
+rounded once: the same order, fewer operations and roundings. ``llvm.fma`` is exact by definition, so the values
 are the same on every machine (one without FMA units computes it in
 software, slowly); the tests compare them with an exact-rational twin.
 The engine uses fused V for its search only and recomputes the frontier's V
@@ -70,8 +68,8 @@ from numba import njit, prange, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-# Doubles per vector and vectors per step (8 x 2 measured 10% faster than
-# 4 x 4 on an AVX-512 machine: benchmarks/arx_engine.py).
+# Doubles per vector and vectors per step: two vectors side by side keep two multiply-add
+# chains in flight (the choice and its measurement: docs/engine.md, docs/benchmarks.md).
 _WIDTH = 8
 _GROUPS = 2
 LANES = _WIDTH * _GROUPS
@@ -83,11 +81,9 @@ SAMPLES = _HALVES * _WIDTH
 # coefficients stay in registers.
 _AFFINE_SAMPLES = 4
 _TAP_BLOCK = 8
-# Fewest waiting candidates (of _WIDTH) for an affine group: a batch of
-# affine lanes runs 1.1 to 1.4x as fast as general lanes (measured on
-# single batches, nb 1..7), so eight affine lanes cost about six general
-# ones, and a group with fewer waiting candidates is left to the general
-# lanes.
+# Fewest waiting candidates (of _WIDTH) for an affine group: eight affine lanes
+# cost about as much as six general ones (docs/benchmarks.md), so a group with
+# fewer waiting candidates is left to the general lanes.
 _AFFINE_MIN = 6
 # Largest na with a vector recursion (each na is its own unrolled loop).
 MAX_NA = 12

@@ -300,9 +300,28 @@ def _fused(fused) -> bool:
     return bool(fused)
 
 
+def _checked(i1, i2, o, grid, estimation_rows, validation_rows):
+    """The signals as float64 vectors of one length and the windows as ``(start, stop)``, checked."""
+    if not isinstance(grid, Grid):
+        raise IdentificationError(f"grid: must be a hcid.arx.Grid, got {type(grid).__name__}")
+    i1 = _signal("i1", i1)
+    n = i1.size
+    i2 = _signal("i2", i2, n)
+    o = _signal("o", o, n)
+    est_start, est_stop = _rows("estimation_rows", estimation_rows, n)
+    validation = _rows("validation_rows", validation_rows, n)
+    most = grid.na[1] + grid.nb1[1] + grid.nb2[1]
+    if est_stop - est_start < most:
+        raise IdentificationError(
+            f"estimation_rows: must hold at least {most} rows (the largest candidate's "
+            f"coefficients), got {est_stop - est_start}"
+        )
+    return i1, i2, o, (est_start, est_stop), validation
+
+
 def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_candidates, *, legacy, fused):
     """:func:`fit_grid`, also returning the simulation counts; ``legacy``
-    runs the old kernel (one candidate at a time, no pruning, unfused
+    runs the one-candidate-at-a-time kernel (no pruning, unfused
     whatever ``fused``), the twin the tests and the benchmark compare with.
 
     Returns
@@ -312,20 +331,10 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
         Per order triple: candidates simulated in full, pruned, and
         candidate-samples simulated (all zero for ``legacy``).
     """
-    if not isinstance(grid, Grid):
-        raise IdentificationError(f"grid: must be a hcid.arx.Grid, got {type(grid).__name__}")
-    i1 = _signal("i1", i1)
-    n = i1.size
-    i2 = _signal("i2", i2, n)
-    o = _signal("o", o, n)
-    est_start, est_stop = _rows("estimation_rows", estimation_rows, n)
-    val_start, val_stop = _rows("validation_rows", validation_rows, n)
+    i1, i2, o, (est_start, est_stop), (val_start, val_stop) = _checked(
+        i1, i2, o, grid, estimation_rows, validation_rows
+    )
     most = grid.na[1] + grid.nb1[1] + grid.nb2[1]
-    if est_stop - est_start < most:
-        raise IdentificationError(
-            f"estimation_rows: must hold at least {most} rows (the largest candidate's "
-            f"coefficients), got {est_stop - est_start}"
-        )
     threads = _threads(threads)
     fused = _fused(fused)
 
@@ -410,6 +419,19 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
             v, vaf_est, vaf_val = _frontier_outputs(
                 first, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows
             )
+    blocks = (block_na, block_nb1, block_nb2, start)
+    candidate_orders = (cand_na, cand_nb1, cand_nb2, cand_nk1, cand_nk2)
+    fit = _grid_fit(
+        grid, blocks, candidate_orders, first, v_all, theta_all, (v, vaf_est, vaf_val), keep_candidates
+    )
+    return fit, counts
+
+
+def _grid_fit(grid, blocks, candidate_orders, first, v_all, theta_all, scores, keep_candidates) -> GridFit:
+    """The :class:`GridFit` of the searched grid: each triple's best candidate (``first``) and its scores."""
+    block_na, block_nb1, block_nb2, start = blocks
+    cand_na, cand_nb1, cand_nb2, cand_nk1, cand_nk2 = candidate_orders
+    v, vaf_est, vaf_val = scores
     unstable = ~np.isfinite(v_all)
     fitted = np.isfinite(v_all[first])
     nk1 = np.where(fitted, cand_nk1[first], -1)
@@ -452,10 +474,10 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
         a=tuple(a_rows),
         b1=tuple(b1_rows),
         b2=tuple(b2_rows),
-        n_candidates=n_cand,
+        n_candidates=int(v_all.size),
         n_unstable_total=int(np.count_nonzero(unstable)),
         candidates=table,
-    ), counts
+    )
 
 
 def _frontier_outputs(first, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows):

@@ -1,7 +1,8 @@
 """Batch runs of a study on local worker processes or a dask cluster, resumable, writing the run's tables.
 
-- :mod:`hcid.pipeline.studies`: the stages (simulate, identify, sweep W,
-  calibrate W) and :func:`run_study`, which chains them.
+- :mod:`hcid.pipeline.studies`: the stages simulate, identify and calibrate W,
+  and :func:`run_study`, which chains them with the sweep.
+- :mod:`hcid.pipeline.sweep`: ``sweep-w``, the selection over the W grid and its thresholds.
 - :mod:`hcid.pipeline.fit`: ``fit-hc``, the parametric HC fit and residual
   analysis of every selected model.
 - :mod:`hcid.pipeline.parallel`: the worker pool and progress bar.
@@ -16,13 +17,12 @@ from hcid.pipeline.studies import (
     IdentifyRun,
     SimulationRun,
     StudyRun,
-    SweepRun,
     calibrate_study,
     identify_study,
     run_study,
     simulate_study,
-    sweep_study,
 )
+from hcid.pipeline.sweep import SweepRun, sweep_study
 
 __all__ = [
     "BACKENDS",

@@ -279,6 +279,68 @@ def _valid(group: tuple[pa.Table, pa.Table], sel: SelectedModel, source: str | N
 # --------------------------------------------------------------------------- the stage
 
 
+def _plan(config, run_dir: Path, by_key: dict, w_of: dict, names: list[str], existing: dict, digest: str):
+    """``(tasks, kept, reused)``: the fits to run, the valid rows kept, the record-methods reused."""
+    tasks, kept, reused = [], {}, 0
+    records = _records(run_dir)
+    choices = _choices(run_dir)
+    for key, t in by_key.items():
+        model, seed, method_name = key
+        # Methods not asked for keep their valid rows (below) and get no new ones.
+        pairs = w_of.get(method_name, [])
+        todo = []
+        for sel, (_, source) in zip(
+            _selected(t, [w for w, _ in pairs], config, method_name) if pairs else [], pairs, strict=True
+        ):
+            group = existing.get((*key, sel.w))
+            if group is not None and _valid(group, sel, source):
+                kept[(*key, sel.w)] = group
+            else:
+                todo.append((sel, source))
+        # Rows at other W of this record and method stay while their selection still holds.
+        requested = {w for w, _ in pairs}
+        others = sorted(k[3] for k in existing if k[:3] == key and k[3] not in requested)
+        for sel in _selected(t, others, config, method_name) if others else []:
+            if _valid(existing[(*key, sel.w)], sel, None):
+                kept[(*key, sel.w)] = existing[(*key, sel.w)]
+        if not todo:
+            reused += method_name in names
+            continue
+        record = records.get((model, seed))
+        if record is None:
+            raise DataError(f"{run_dir}: no record of {model}, seed {seed} (simulations or measured data)")
+        stage_choices = _stage_choices(run_dir, choices, method_name, model, seed)
+        truths = true_parameters(config, model) if model in {m.name for m in config.models} else {}
+        tasks.append(
+            (
+                config,
+                key,
+                record,
+                [s for s, _ in todo],
+                [src for _, src in todo],
+                stage_choices,
+                truths,
+                digest,
+            )
+        )
+
+    return tasks, kept, reused
+
+
+def _stage_choices(run_dir: Path, choices: dict, method_name: str, model: str, seed: int) -> tuple:
+    """The earlier stages' stored choices a method's final stage needs on one record."""
+    out = []
+    for stage in methods.get(method_name).choice_stages:
+        found = choices.get(stage.name, {}).get((model, seed))
+        if found is None:
+            raise DataError(
+                f"{run_dir / (stage.name + '.parquet')}: no {stage.name} choice of {model}, seed {seed}; "
+                "rerun `hcid identify`"
+            )
+        out.append(found)
+    return tuple(out)
+
+
 @holds_run_dir(create=False)
 def fit_hc_study(
     config: Config,
@@ -328,8 +390,6 @@ def fit_hc_study(
     for m in names:
         methods.get(m)
     w_of = requested_w(config, run_dir, names, w_values)
-    records = _records(run_dir)
-    choices = _choices(run_dir)
     digest = _settings_digest(config)
 
     existing = {}
@@ -343,55 +403,7 @@ def fit_hc_study(
     else:
         shutil.rmtree(run_dir / PARTS, ignore_errors=True)
 
-    tasks, kept, reused = [], {}, 0
-    for key, t in by_key.items():
-        model, seed, method_name = key
-        # Methods not asked for keep their valid rows (below) and get no new ones.
-        pairs = w_of.get(method_name, [])
-        todo = []
-        for sel, (_, source) in zip(
-            _selected(t, [w for w, _ in pairs], config, method_name) if pairs else [], pairs, strict=True
-        ):
-            group = existing.get((*key, sel.w))
-            if group is not None and _valid(group, sel, source):
-                kept[(*key, sel.w)] = group
-            else:
-                todo.append((sel, source))
-        # Rows at other W of this record and method stay while their selection still holds.
-        requested = {w for w, _ in pairs}
-        others = sorted(k[3] for k in existing if k[:3] == key and k[3] not in requested)
-        for sel in _selected(t, others, config, method_name) if others else []:
-            if _valid(existing[(*key, sel.w)], sel, None):
-                kept[(*key, sel.w)] = existing[(*key, sel.w)]
-        if not todo:
-            reused += method_name in names
-            continue
-        record = records.get((model, seed))
-        if record is None:
-            raise DataError(f"{run_dir}: no record of {model}, seed {seed} (simulations or measured data)")
-        stage_choices = []
-        for stage in methods.get(method_name).choice_stages:
-            found = choices.get(stage.name, {}).get((model, seed))
-            if found is None:
-                raise DataError(
-                    f"{run_dir / (stage.name + '.parquet')}: no {stage.name} choice of {model}, seed {seed}; "
-                    "rerun `hcid identify`"
-                )
-            stage_choices.append(found)
-        truths = true_parameters(config, model) if model in {m.name for m in config.models} else {}
-        tasks.append(
-            (
-                config,
-                key,
-                record,
-                [s for s, _ in todo],
-                [src for _, src in todo],
-                tuple(stage_choices),
-                truths,
-                digest,
-            )
-        )
-
+    tasks, kept, reused = _plan(config, run_dir, by_key, w_of, names, existing, digest)
     parts_dir = run_dir / PARTS / digest
     for key, params, res in parallel_map(
         _fit_task,

@@ -95,11 +95,20 @@ def compute_verdicts(
     w047: Responses | None,
 ) -> list[Verdict]:
     """Decide every row of SPEC section 6 by a stated rule. Missing inputs give ``holds=None``."""
-    out: list[Verdict] = []
     fb = _find_model(config, False)
     ff = _find_model(config, True)
-    methods = _PAPER_METHODS
+    th = {(r["method"], r["model"]): r for r in thresholds.to_pylist()} if thresholds is not None else {}
+    return [
+        *_rms_verdicts(summary, fb, ff),
+        *_vaf_verdicts(curves, fb, ff, _PAPER_METHODS),
+        *_w_fp_verdicts(th, fb, _PAPER_METHODS),
+        *_w_fn_verdicts(th, ff, _PAPER_METHODS),
+        *_response_verdicts(config, fb, ff, bic, w047),
+    ]
 
+
+def _rms_verdicts(summary: pa.Table | None, fb, ff) -> list[Verdict]:
+    out: list[Verdict] = []
     # RMS(e)
     paper_rms = paper.RMS_E_DEG
     if summary is not None:
@@ -127,7 +136,11 @@ def compute_verdicts(
                 "needs the simulation",
             )
         )
+    return out
 
+
+def _vaf_verdicts(curves: Curves | None, fb, ff, methods) -> list[Verdict]:
+    out: list[Verdict] = []
     have_curves = (
         curves is not None
         and fb is not None
@@ -184,8 +197,11 @@ def compute_verdicts(
                 "needs sweep-w on both models and methods",
             )
         )
+    return out
 
-    th = {(r["method"], r["model"]): r for r in thresholds.to_pylist()} if thresholds is not None else {}
+
+def _w_fp_verdicts(th: dict, fb, methods) -> list[Verdict]:
+    out: list[Verdict] = []
     paper_fp = paper.W_FP
     if fb is not None and all((me, fb.name) in th for me in methods):
         w_fp = {me: th[(me, fb.name)]["w_fp"] for me in methods}
@@ -241,6 +257,11 @@ def compute_verdicts(
                 "needs sweep-w on FB",
             )
         )
+    return out
+
+
+def _w_fn_verdicts(th: dict, ff, methods) -> list[Verdict]:
+    out: list[Verdict] = []
     if ff is not None and all((me, ff.name) in th for me in methods):
         rows = {me: th[(me, ff.name)] for me in methods}
         if all(rows[me].get("w_fn_low") is not None for me in methods):
@@ -274,8 +295,6 @@ def compute_verdicts(
         out.append(
             Verdict("FF mean nb_ft >= 2", f"up to W = {paper.W_FN:g}", "-", None, "needs sweep-w on FF")
         )
-
-    out.extend(_response_verdicts(config, fb, ff, bic, w047))
     return out
 
 
@@ -367,7 +386,14 @@ def _response_verdicts(config, fb, ff, bic: Responses | None, w047: Responses | 
         )
     )
 
-    # FF at W = 0.47 (paper Fig. 9)
+    out += _w047_verdicts(ff, w047, he_true, methods)
+    out += _error_verdicts(ff, bic, hft_true, he_true, methods, low_end)
+    return out
+
+
+def _w047_verdicts(ff, w047: Responses | None, he_true: np.ndarray, methods) -> list[Verdict]:
+    """Fig. 9: at W = 0.47 the FF models lose their feedforward; the feedback is a leaky integrator."""
+    out: list[Verdict] = []
     if w047 is not None and all((ff.name, me) in w047.he for me in methods):
         no_ff = {me: float(np.mean(w047.nb_ft[(ff.name, me)] == 0)) for me in methods}
         lo, mid = np.argmin(np.abs(w047.omega - 0.1)), np.argmin(np.abs(w047.omega - 1.0))
@@ -397,8 +423,13 @@ def _response_verdicts(config, fb, ff, bic: Responses | None, w047: Responses | 
                 "median |He(0.1 rad/s)| / |He(1 rad/s)| >= 2 (a gain gives ~1)",
             )
         )
+    return out
 
-    # Errors at W_BIC: direct below indirect at low frequency
+
+def _error_verdicts(ff, bic: Responses, hft_true, he_true, methods, low_end: float) -> list[Verdict]:
+    """Fig. 10: at W_BIC the direct method's errors are below the indirect one's at low frequency."""
+    out: list[Verdict] = []
+    omega = bic.omega
     for path, h_true, attr in (("feedforward", hft_true, "hft"), ("feedback", he_true, "he")):
         hi = paper.DIRECT_BETTER_BELOW[attr]
         sel = _band(omega, low_end, hi)
