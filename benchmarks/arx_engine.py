@@ -25,7 +25,8 @@ from _paper_record import paper_record  # noqa: E402
 from naive import fit_reference  # noqa: E402 (the tests' slow twin)
 
 from hcid.arx import Grid, candidates  # noqa: E402
-from hcid.arx.engine import _fit_grid, best, simulate  # noqa: E402
+from hcid.arx.engine import _fit_grid, best  # noqa: E402
+from hcid.arx.simulation import simulate  # noqa: E402
 
 # SPEC section 3.
 DIRECT_GRID = Grid(na=(1, 7), nb1=(0, 7), nb2=(0, 7), nk1=(1, 50), nk2=(1, 10))

@@ -26,8 +26,8 @@ from _paper_record import PAPER_CONFIG, paper_record  # noqa: E402
 
 from hcid import hcfit  # noqa: E402
 from hcid.arx import Grid, fit_grid  # noqa: E402
-from hcid.arx.engine import simulate  # noqa: E402
 from hcid.arx.response import path_response  # noqa: E402
+from hcid.arx.simulation import simulate  # noqa: E402
 from hcid.criteria import w_bic  # noqa: E402
 from hcid.hcmodel import plant, true_response  # noqa: E402
 from hcid.residuals import analyse_residuals  # noqa: E402

@@ -24,7 +24,8 @@ from _paper_record import paper_record  # noqa: E402
 from naive import fit_reference  # noqa: E402 (the tests' slow twin)
 
 from hcid.arx import Grid  # noqa: E402
-from hcid.arx.engine import _fit_grid, simulate  # noqa: E402
+from hcid.arx.engine import _fit_grid  # noqa: E402
+from hcid.arx.simulation import simulate  # noqa: E402
 
 GRID = Grid(na=(1, 7), nb1=(0, 7), nb2=(0, 7), nk1=(1, 50), nk2=(1, 10))  # SPEC 3, direct
 ESTIMATION, VALIDATION = slice(128, 1088), slice(1088, 2048)

@@ -36,7 +36,7 @@ import numpy as np
 from scipy import signal as sps
 from scipy import stats
 
-from hcid.arx.engine import _rows
+from hcid.arx.simulation import checked_rows
 from hcid.errors import DataError, IdentificationError
 
 __all__ = ["Correlation", "ResidualAnalysis", "analyse_residuals"]
@@ -225,7 +225,7 @@ def analyse_residuals(
     eps = np.asarray(eps, dtype=np.float64)
     if eps.ndim != 1:
         raise DataError(f"eps: must be a 1-D array, got shape {eps.shape}")
-    start, stop = _rows("rows", rows, eps.size)
+    start, stop = checked_rows("rows", rows, eps.size)
     n = stop - start
     if isinstance(max_lag, bool) or not isinstance(max_lag, int) or not 1 <= max_lag < n:
         raise IdentificationError(

@@ -31,8 +31,8 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import hcfit
-from hcid.arx.engine import simulate
 from hcid.arx.response import path_response
+from hcid.arx.simulation import simulate
 from hcid.config import Config, StageConfig, Window
 from hcid.hcmodel import plant
 from hcid.methods import Method, StageChoice, shift_forward

@@ -8,8 +8,8 @@ import pytest
 
 import hcid
 from hcid import methods, selection
-from hcid.arx.engine import simulate
 from hcid.arx.response import path_response
+from hcid.arx.simulation import simulate
 from hcid.methods import shift_forward
 
 from .conftest import CI_CONFIG, ROOT

@@ -13,10 +13,11 @@ import pyarrow as pa
 import pytest
 from scipy.signal import lfilter
 
-from hcid.arx import _kernels, _lanes, engine
+from hcid.arx import _blocks, _kernels, _lanes, engine
 from hcid.arx import grid as engine_grid
-from hcid.arx.engine import GridFit, _fit_grid, best, fit_grid, simulate
+from hcid.arx.engine import GridFit, _fit_grid, best, fit_grid
 from hcid.arx.grid import Grid, candidates, n_parameters
+from hcid.arx.simulation import padded, simulate
 from hcid.errors import DataError, IdentificationError
 
 from .naive import fit_reference
@@ -1043,7 +1044,7 @@ def test_frontier_errors_on_vector_lanes_equal_the_plain_kernel():
         _kernels.squared_errors(
             theta, na, nb1, nb2, nk1, nk2, i1p, i2p, pad, o, 100, 500, plain_est, plain_val
         )
-        _lanes.squared_errors_wide(
+        _blocks.squared_errors_wide(
             theta, na, nb1, nb2, nk1, nk2, _lanes.tap_vectors(i1p), _lanes.tap_vectors(i2p), pad, o, 100, 500,
             wide_est, wide_val, done,
         )  # fmt: skip
@@ -1055,7 +1056,7 @@ def test_frontier_errors_on_vector_lanes_equal_the_plain_kernel():
     # checks: tap vectors of inputs without all TAIL values are refused.
     short = _lanes.tap_vectors(i1p[:-1])
     with pytest.raises(ValueError, match="TAIL"):
-        _lanes.squared_errors_wide(
+        _blocks.squared_errors_wide(
             theta, na, nb1, nb2, nk1, nk2, short, _lanes.tap_vectors(i2p), pad, o, 100, 500,
             wide_est, wide_val, done,
         )  # fmt: skip
@@ -1212,7 +1213,7 @@ def test_block_best_is_the_stable_lexsort_order():
     start = np.r_[0, np.cumsum(size)[:-1]]
     v = rng.choice([0.5, 1.0, 2.0, np.inf, np.nan], int(size.sum()), p=[0.2, 0.2, 0.2, 0.2, 0.2])
     block = np.repeat(np.arange(size.size), size)
-    np.testing.assert_array_equal(_kernels.block_best(v, start, size), np.lexsort((v, block))[start])
+    np.testing.assert_array_equal(_blocks.block_best(v, start, size), np.lexsort((v, block))[start])
 
 
 def _select_qr_one_column_at_a_time(src, n_src, cols, n_cols):
@@ -1344,7 +1345,7 @@ def test_fits_equal_one_select_qr_per_group(paper_record, grid):
     # (the prediction-error sum) must be the same bits.
     i1, i2, o = _direct(paper_record)
     pad = engine_grid.max_lag(grid)
-    i1p, i2p = engine._padded(i1, pad), engine._padded(i2, pad)
+    i1p, i2p = padded(i1, pad), padded(i2, pad)
     rt = engine._record_factor(i1p, i2p, o, grid, pad, 128, 1088)
     bounds = np.array([grid.na, grid.nb1, grid.nb2, grid.nk1, grid.nk2], dtype=np.int64)
     block_na, block_nb1, block_nb2, start, size = engine_grid.order_blocks(grid)
@@ -1516,21 +1517,21 @@ def test_a_frontier_row_off_the_search_or_an_overflow_is_searched_again(paper_re
     unfused = fit_grid(*signals, grid, *DIRECT_ROWS, keep_candidates=True, fused=False)
     start, size = _blocks_of(grid)
     best0 = start[0] + int(np.argmin(unfused.candidates["v"].to_numpy()[: size[0]]))
-    blocks = _lanes.simulate_blocks
+    blocks = _blocks.simulate_blocks
 
     def overflow_once(*args):
         blocks(*args)
         if args[15] and args[1][0] == start[0]:  # the fused pass over every triple
             args[16][best0] = np.inf
 
-    monkeypatch.setattr(_lanes, "simulate_blocks", overflow_once)
+    monkeypatch.setattr(_blocks, "simulate_blocks", overflow_once)
     _assert_same_frontier(fit_grid(*signals, grid, *DIRECT_ROWS, fused=True), unfused)
-    monkeypatch.setattr(_lanes, "simulate_blocks", blocks)
+    monkeypatch.setattr(_blocks, "simulate_blocks", blocks)
     v_fused = (
         fit_grid(*signals, grid, *DIRECT_ROWS, keep_candidates=True, fused=True).candidates["v"].to_numpy()
     )
     v_unfused = unfused.candidates["v"].to_numpy()
-    best = _kernels.block_best(v_unfused, start, size)
+    best = _blocks.block_best(v_unfused, start, size)
     off = np.isfinite(v_unfused[best]) & (v_fused[best] != v_unfused[best])  # rows the margin 0 rejects
     assert off.any() and (~off).any()
     monkeypatch.setattr(engine, "_TIE_RTOL", 0.0)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hcid import methods
-from hcid.arx.engine import simulate
+from hcid.arx.simulation import simulate
 from hcid.config import Window
 from hcid.residuals import RESIDUAL
 from hcid.selected import SelectedModel, analyse_selected, true_parameters

@@ -4,8 +4,9 @@
 :mod:`hcid.arx.reference` is the slow, obvious twin the tests compare with.
 """
 
-from hcid.arx.engine import GridFit, best, fit_grid, simulate
+from hcid.arx.engine import GridFit, best, fit_grid
 from hcid.arx.grid import Grid, candidates, max_lag, n_candidates, n_parameters
+from hcid.arx.simulation import simulate
 
 __all__ = [
     "Grid",

@@ -21,62 +21,13 @@ nb1, nb2, nk1, nk2 in that order.
 
 import numba
 import numpy as np
-from llvmlite import ir
-from numba import njit, prange, types
-from numba.core import cgutils
-from numba.extending import intrinsic
+from numba import njit, prange
+
+from hcid.arx import _cache  # noqa: F401 (first: the kernels' cache locator, hcid.arx._cache)
+from hcid.arx._lane_ir import _prefetch_rows
 
 # Samples simulated between two finiteness checks.
 _BLOCK = 256
-
-
-def _prefetch_check(arr, index):
-    """_prefetch_write without the JIT (an intrinsic runs compiled only): no hint, but the
-    index is checked, so that the callers' index arithmetic is tested as plain Python."""
-    if not 0 <= index < arr.size:
-        raise IndexError(f"prefetch: flat index {index} outside an array of {arr.size}")
-
-
-@intrinsic
-def _prefetch_hint(typingctx, arr, index):
-    """Hint that element ``index`` (flat, of a C-contiguous array) is about to be written.
-
-    A hint only (``llvm.prefetch``, which never faults): no value changes.
-    """
-    sig = types.void(arr, index)
-
-    def codegen(context, builder, signature, args):
-        data = context.make_array(signature.args[0])(context, builder, args[0]).data
-        i8p = ir.IntType(8).as_pointer()
-        i32 = ir.IntType(32)
-        fnty = ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32])
-        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.prefetch.p0")
-        address = builder.bitcast(builder.gep(data, [args[1]]), i8p)
-        # rw = 1 (write), locality = 3 (keep in every cache level), data cache.
-        builder.call(fn, [address, ir.Constant(i32, 1), ir.Constant(i32, 3), ir.Constant(i32, 1)])
-        return context.get_dummy_value()
-
-    return sig, codegen
-
-
-_prefetch_write = _prefetch_check if numba.config.DISABLE_JIT else _prefetch_hint
-
-
-@njit(cache=True)
-def _prefetch_rows(offset, c1, c2, within, v_out, theta_out, score_out):
-    """Prefetch the output rows of group (c1, c2) of the unit (every na).
-
-    A unit's rows lie one per order triple, far apart: without the hint
-    each store waits for its cache line (the direct grid's fits: 1.2x with it).
-    """
-    width = theta_out.shape[1]
-    for c in range(offset.shape[0]):
-        row = offset[c, c1, c2] + within
-        _prefetch_write(v_out, row)
-        _prefetch_write(score_out, row)
-        for j in range(0, width, 8):
-            _prefetch_write(theta_out, row * width + j)
-        _prefetch_write(theta_out, row * width + width - 1)
 
 
 @njit(cache=True)
@@ -607,23 +558,6 @@ def fit_units_parallel(
                 units[u, 0], units[u, 1], rt, bounds, i1p, i2p, pad, o,
                 val_start, val_stop, offset, v_out, theta_out, score_out, simulate,
             )  # fmt: skip
-
-
-@njit(cache=True)
-def block_best(v_all, start, size):
-    """Each block's smallest V: the first of equal ones in candidate order, NaN last.
-
-    The order ``np.lexsort((v_all, block))`` gives (stable, NaN sorted
-    last), in one pass instead of a sort of every candidate.
-    """
-    first = np.empty(start.shape[0], dtype=np.int64)
-    for b in range(start.shape[0]):
-        best = start[b]
-        for c in range(start[b] + 1, start[b] + size[b]):
-            if v_all[c] < v_all[best] or (np.isnan(v_all[best]) and not np.isnan(v_all[c])):
-                best = c
-        first[b] = best
-    return first
 
 
 def has_fma() -> bool:

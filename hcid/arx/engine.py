@@ -16,9 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from hcid.arx import _kernels, _lanes
+from hcid.arx import _blocks, _kernels, _lanes
 from hcid.arx.grid import Grid, candidates, max_lag, n_parameters, order_blocks
-from hcid.errors import DataError, IdentificationError
+from hcid.arx.simulation import checked_rows, checked_signal, padded, simulate
+from hcid.errors import IdentificationError
 
 __all__ = ["GridFit", "best", "fit_grid", "simulate"]
 
@@ -132,36 +133,6 @@ def _list_array(arrays: tuple[np.ndarray, ...]) -> pa.Array:
     return pa.ListArray.from_arrays(pa.array(offsets), pa.array(values, type=pa.float64()))
 
 
-def _signal(name: str, value, n: int | None = None) -> np.ndarray:
-    x = np.ascontiguousarray(value, dtype=np.float64)
-    if x.ndim != 1:
-        raise DataError(f"{name}: must be a 1-D array, got shape {x.shape}")
-    if n is not None and x.size != n:
-        raise DataError(f"{name}: must have the length of i1 ({n}), got {x.size}")
-    if not np.all(np.isfinite(x)):
-        raise DataError(f"{name}: must be finite, got {np.count_nonzero(~np.isfinite(x))} NaN/inf")
-    return x
-
-
-def _rows(name: str, rows: slice, n: int) -> tuple[int, int]:
-    message = f"{name}: must be a slice start:stop with 0 <= start < stop <= {n}, got {rows!r}"
-    if not isinstance(rows, slice) or rows.step not in (None, 1):
-        raise IdentificationError(message)
-    try:
-        start = 0 if rows.start is None else operator.index(rows.start)
-        stop = n if rows.stop is None else operator.index(rows.stop)
-    except TypeError as exc:
-        raise IdentificationError(message) from exc
-    if not 0 <= start < stop <= n:
-        raise IdentificationError(message)
-    return start, stop
-
-
-def _padded(x: np.ndarray, pad: int) -> np.ndarray:
-    # TAIL zeros after the record: the vector input step reads whole steps of SAMPLES.
-    return np.concatenate((np.zeros(pad), x, np.zeros(_lanes.TAIL)))
-
-
 def _tap_vectors(xp: np.ndarray) -> np.ndarray:
     """The padded input as the vector steps read it (:func:`hcid.arx._lanes.tap_vectors`); empty
     without the JIT, whose plain path reads the input itself."""
@@ -178,7 +149,7 @@ def _record_factor(i1p, i2p, o, grid: Grid, pad: int, start: int, stop: int) -> 
     if grid.nb2[1] > 0:
         lags = np.arange(grid.nk2[0], grid.nk2[1] + grid.nb2[1])
         columns.append(i2p[pad + k[:, None] - lags])
-    op = _padded(o, pad)
+    op = padded(o, pad)
     columns.append(-op[pad + k[:, None] - np.arange(1, grid.na[1] + 1)])
     columns.append(o[start:stop, None])
     # R of [Phi, o]: its last column holds c = Q^T o, so Q is never formed.
@@ -304,12 +275,12 @@ def _checked(i1, i2, o, grid, estimation_rows, validation_rows):
     """The signals as float64 vectors of one length and the windows as ``(start, stop)``, checked."""
     if not isinstance(grid, Grid):
         raise IdentificationError(f"grid: must be a hcid.arx.Grid, got {type(grid).__name__}")
-    i1 = _signal("i1", i1)
+    i1 = checked_signal("i1", i1)
     n = i1.size
-    i2 = _signal("i2", i2, n)
-    o = _signal("o", o, n)
-    est_start, est_stop = _rows("estimation_rows", estimation_rows, n)
-    validation = _rows("validation_rows", validation_rows, n)
+    i2 = checked_signal("i2", i2, n)
+    o = checked_signal("o", o, n)
+    est_start, est_stop = checked_rows("estimation_rows", estimation_rows, n)
+    validation = checked_rows("validation_rows", validation_rows, n)
     most = grid.na[1] + grid.nb1[1] + grid.nb2[1]
     if est_stop - est_start < most:
         raise IdentificationError(
@@ -339,8 +310,8 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
     fused = _fused(fused)
 
     pad = max_lag(grid)
-    i1p = _padded(i1, pad)
-    i2p = _padded(i2, pad)
+    i1p = padded(i1, pad)
+    i2p = padded(i2, pad)
     tv1, tv2 = _tap_vectors(i1p), _tap_vectors(i2p)
     rt = _record_factor(i1p, i2p, o, grid, pad, est_start, est_stop)
     units = _units(grid)
@@ -373,9 +344,9 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
                         tv1, tv2, pad, o, val_start, val_stop, not keep_candidates, fuse, v_all)  # fmt: skip
                 done = np.zeros((blocks.size, 3), dtype=np.int64)
                 if threads == 1:
-                    _lanes.simulate_blocks(*args, done)
+                    _blocks.simulate_blocks(*args, done)
                 else:
-                    _kernels.run_parallel(_lanes.simulate_blocks_parallel, (*args, done), threads)
+                    _kernels.run_parallel(_blocks.simulate_blocks_parallel, (*args, done), threads)
                 counts[blocks, :2] = done[:, :2]  # each candidate once: its last simulation
                 counts[blocks, 2] += done[:, 2]  # the work: every simulation
 
@@ -402,7 +373,7 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
     cand_na, cand_nb1, cand_nb2, cand_nk1, cand_nk2 = candidates(grid)
     layout = (block_na, block_nb1, block_nb2, cand_nk1, cand_nk2)
     windows = ((est_start, est_stop), (val_start, val_stop))
-    first = _kernels.block_best(v_all, start, size)
+    first = _blocks.block_best(v_all, start, size)
     v, vaf_est, vaf_val = _frontier_outputs(
         first, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows
     )
@@ -415,7 +386,7 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
         off = fused_blocks & np.isfinite(search) & moved
         if off.any():
             search_again_unfused(off)
-            first = _kernels.block_best(v_all, start, size)
+            first = _blocks.block_best(v_all, start, size)
             v, vaf_est, vaf_val = _frontier_outputs(
                 first, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows
             )
@@ -527,7 +498,7 @@ _TIE_RTOL = 1e-6
 def _near_ties(v_all: np.ndarray, start: np.ndarray, size: np.ndarray) -> np.ndarray:
     """Per block: whether its smallest V has another within ``_TIE_RTOL`` relative (a pruned
     candidate's V is a lower bound of its own, so this misses none)."""
-    first = _kernels.block_best(v_all, start, size)
+    first = _blocks.block_best(v_all, start, size)
     best = v_all[first]
     rest = v_all.copy()
     rest[first] = np.inf
@@ -550,7 +521,7 @@ def _squared_errors(models, i1p, i2p, tv1, tv2, pad, o, est, val, same):
     plain = np.ones(n_rows, dtype=bool)
     if _lanes._WIDE:
         done = np.zeros(n_rows, dtype=bool)
-        _lanes.squared_errors_wide(*models, tv1, tv2, pad, o, est[0], val[0], err_est, err_val, done)
+        _blocks.squared_errors_wide(*models, tv1, tv2, pad, o, est[0], val[0], err_est, err_val, done)
         plain = ~done
     if plain.any():  # no JIT, na above MAX_NA, or an output not finite (simulate()'s NaN rule)
         some = (np.ascontiguousarray(x[plain]) for x in models)
@@ -582,81 +553,6 @@ def _vaf(squared_errors: np.ndarray, o: np.ndarray) -> np.ndarray:
     """
     with np.errstate(divide="ignore", invalid="ignore"):  # o = 0 on the rows: NaN
         return (1.0 - np.sum(squared_errors, axis=-1) / np.sum(o**2)) * 100.0
-
-
-def simulate(a, b1, b2, nk1: int, nk2: int, i1, i2) -> np.ndarray:
-    """Simulate an ARX model over a whole record from zero initial conditions.
-
-    ``o_hat = (B1/A) i1(k - nk1) + (B2/A) i2(k - nk2)``, inputs before the
-    record 0. Runs the kernel :func:`fit_grid` uses, so a frontier row's
-    output is the one its V was computed from, bit for bit.
-
-    Parameters
-    ----------
-    a : array_like of float, shape (na + 1,)
-        ``[1, a1, ..., a_na]``; the leading coefficient must be exactly 1.
-    b1, b2 : array_like of float, shape (nb1,), (nb2,)
-        B coefficients; empty drops the input.
-    nk1, nk2 : int
-        Input delays in samples, >= 0 (ignored for a dropped input).
-    i1, i2 : array_like of float, shape (n,)
-        Inputs.
-
-    Returns
-    -------
-    numpy.ndarray of float64, shape (n,)
-        The simulated output. If it stops being finite (an unstable model),
-        the samples after the first 256-sample block holding a non-finite
-        value are NaN.
-
-    Raises
-    ------
-    hcid.errors.IdentificationError
-        If ``a`` is empty or ``a[0] != 1``, or a delay is negative.
-    hcid.errors.DataError
-        If a signal is not 1-D and finite, or the inputs differ in length.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from hcid.arx import simulate
-    >>> simulate([1.0, -0.5], [1.0], [], 1, 0, np.ones(4), np.zeros(4))
-    array([0.  , 1.  , 1.5 , 1.75])
-    """
-    a = _signal("a", a)
-    b1 = _signal("b1", b1)
-    b2 = _signal("b2", b2)
-    if a.size == 0 or a[0] != 1.0:
-        raise IdentificationError(f"a: must start with the coefficient 1, got {a[:1]}")
-    nk1, nk2 = operator.index(nk1), operator.index(nk2)
-    if nk1 < 0 or nk2 < 0:
-        raise IdentificationError(f"nk1, nk2: must be >= 0, got {nk1}, {nk2}")
-    i1 = _signal("i1", i1)
-    i2 = _signal("i2", i2, i1.size)
-    return _simulate(a, b1, b2, nk1, nk2, i1, i2)
-
-
-def _simulate(a, b1, b2, nk1: int, nk2: int, i1: np.ndarray, i2: np.ndarray) -> np.ndarray:
-    n = i1.size
-    na = a.size - 1
-    pad = max(nk1 + b1.size, nk2 + b2.size, 1)
-    x = np.empty(n)
-    ypad = max(na, 1)
-    yp = np.zeros(ypad + n)
-    a_k = np.concatenate((a, [0.0])) if na == 0 else a
-    with np.errstate(over="ignore", invalid="ignore"):
-        done = _kernels.simulate_into(
-            a_k, na, _nonempty(b1), b1.size, nk1, _nonempty(b2), b2.size, nk2,
-            _padded(i1, pad), _padded(i2, pad), pad, x, yp, ypad,
-        )  # fmt: skip
-    o_hat = yp[ypad:].copy()
-    o_hat[done:] = np.nan
-    return o_hat
-
-
-def _nonempty(b: np.ndarray) -> np.ndarray:
-    # numba wants a typed, non-empty buffer even for a dropped input.
-    return b if b.size else np.zeros(1)
 
 
 def best(fit: GridFit) -> int:

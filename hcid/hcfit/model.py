@@ -21,7 +21,7 @@ import control
 import numpy as np
 from scipy import signal as sps
 
-from hcid.arx.engine import _rows
+from hcid.arx.simulation import checked_rows
 from hcid.config._checks import integer
 from hcid.config.fit import FEEDBACK_PARAMETERS, PARAMETERS
 from hcid.errors import ConfigError, DataError
@@ -62,7 +62,7 @@ class TrackingRecord:
             raise DataError(f"rate: must be a positive number of Hz, got {self.rate!r}")
         object.__setattr__(self, "rate", float(self.rate))
         for name in ("estimation", "validation"):
-            start, stop = _rows(name, getattr(self, name), ft.size)
+            start, stop = checked_rows(name, getattr(self, name), ft.size)
             object.__setattr__(self, name, slice(start, stop))
 
 

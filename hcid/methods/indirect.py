@@ -26,7 +26,8 @@ import dataclasses
 import time
 from typing import Any
 
-from hcid.arx.engine import fit_grid, simulate
+from hcid.arx.engine import fit_grid
+from hcid.arx.simulation import simulate
 from hcid.config.types import Grid
 from hcid.errors import ConfigError
 from hcid.methods.base import (
