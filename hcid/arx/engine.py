@@ -290,6 +290,17 @@ def _checked(i1, i2, o, grid, estimation_rows, validation_rows):
     return i1, i2, o, (est_start, est_stop), validation
 
 
+def _outputs(grid: Grid, start: np.ndarray, size: np.ndarray):
+    """The kernels' outputs, preallocated: each (na, nb1, nb2)'s first candidate row, then per
+    candidate V, coefficients and prediction-error score, and per triple the simulation counts."""
+    shape = tuple(hi - lo + 1 for lo, hi in (grid.na, grid.nb1, grid.nb2))
+    offset = np.ascontiguousarray(start.reshape(shape))
+    n_cand = int(size.sum())
+    most = grid.na[1] + grid.nb1[1] + grid.nb2[1]
+    counts = np.zeros((start.size, 3), dtype=np.int64)
+    return offset, np.empty(n_cand), np.zeros((n_cand, most)), np.zeros(n_cand), counts
+
+
 def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_candidates, *, legacy, fused):
     """:func:`fit_grid`, also returning the simulation counts; ``legacy``
     runs the one-candidate-at-a-time kernel (no pruning, unfused
@@ -305,25 +316,16 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
     i1, i2, o, (est_start, est_stop), (val_start, val_stop) = _checked(
         i1, i2, o, grid, estimation_rows, validation_rows
     )
-    most = grid.na[1] + grid.nb1[1] + grid.nb2[1]
     threads = _threads(threads)
     fused = _fused(fused)
-
     pad = max_lag(grid)
-    i1p = padded(i1, pad)
-    i2p = padded(i2, pad)
+    i1p, i2p = padded(i1, pad), padded(i2, pad)
     tv1, tv2 = _tap_vectors(i1p), _tap_vectors(i2p)
     rt = _record_factor(i1p, i2p, o, grid, pad, est_start, est_stop)
     units = _units(grid)
     bounds = np.array([grid.na, grid.nb1, grid.nb2, grid.nk1, grid.nk2], dtype=np.int64)
     block_na, block_nb1, block_nb2, start, size = order_blocks(grid)
-    shape = tuple(hi - lo + 1 for lo, hi in (grid.na, grid.nb1, grid.nb2))
-    offset = np.ascontiguousarray(start.reshape(shape))
-    n_cand = int(size.sum())
-    v_all = np.empty(n_cand)
-    theta_all = np.zeros((n_cand, most))
-    score = np.zeros(n_cand)
-    counts = np.zeros((start.size, 3), dtype=np.int64)
+    offset, v_all, theta_all, score, counts = _outputs(grid, start, size)
 
     args = (units, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset, v_all, theta_all, score, legacy)
     # errstate: unstable simulations overflow by design; only matters when
