@@ -14,6 +14,7 @@ import control
 import numpy as np
 
 from hcid.config import HCModel, Loop, Plant
+from hcid.config.types import MAX_INVERTIBLE_DEGREE
 from hcid.errors import ConfigError, quote
 
 #: Discretisation of the deterministic paths (Hft, He, Yc). Tustin keeps the
@@ -64,13 +65,11 @@ def feedforward_path(model: HCModel, loop: Loop) -> control.TransferFunction:
     inverse_plant = control.tf(list(yc.den), list(yc.num))
     lag = control.tf([1.0], [model.TI**2, 2 * model.TI, 1.0])
     path = control.minreal(model.Kpt * _nms(loop) * inverse_plant * lag, verbose=False)
-    num = np.trim_zeros(np.atleast_1d(np.asarray(path.num[0][0], dtype=np.float64)), "f")
-    den = np.atleast_1d(np.asarray(path.den[0][0], dtype=np.float64))
-    if num.size > den.size:
+    if yc.relative_degree > MAX_INVERTIBLE_DEGREE:
         raise ConfigError(
             f"models.{model.name}: the feedforward path Ynms Kpt / Yc / (TI s + 1)^2 is improper "
-            f"for the plant {quote(yc.text)} (numerator degree {num.size - 1} > denominator degree "
-            f"{den.size - 1}); no proper Inverse Feedforward Model exists for it"
+            f"for the plant {quote(yc.text)} (relative degree {yc.relative_degree} > "
+            f"{MAX_INVERTIBLE_DEGREE}); no proper Inverse Feedforward Model exists for it"
         )
     return path
 

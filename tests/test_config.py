@@ -457,5 +457,5 @@ def test_improper_plant_message_quotes_at_most_80_characters(paper_raw):
         parse_config(_with_plant(paper_raw, plant), "x")
     text = str(info.value)
     assert "is improper for the plant '(1) / (1 s^6 + 2.34568 s^5" in text
-    quoted = text.split("for the plant ")[1].split(" (numerator")[0]
+    quoted = text.split("for the plant ")[1].split(" (relative degree")[0]
     assert len(quoted) == 80 and quoted.endswith("...")

@@ -17,6 +17,11 @@ rows of the outputs.
 
 ``bounds`` is an int64 array of shape (5, 2): the inclusive ranges of na,
 nb1, nb2, nk1, nk2 in that order.
+
+:func:`_fit_unit` is one kernel of about 125 lines: the QR steps of one delay
+pair, the back substitutions of every na and the stability tests share the
+pair's factor in registers and cache; split into calls, numba would pass the
+factor's slices through memory on every step.
 """
 
 import numba

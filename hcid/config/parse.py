@@ -106,12 +106,13 @@ def _transfer_function(s: Section) -> Plant:
         raise ConfigError("loop.plant.num: must not be all zero")
     if den[0] == 0:
         raise ConfigError(f"loop.plant.den: the leading coefficient must not be 0, got {list(den)}")
-    if len(num) > len(den):
+    plant = Plant.tf(num, den)
+    if plant.relative_degree < 0:
         raise ConfigError(
             f"loop.plant: must be proper (degree of num <= degree of den), got degrees "
-            f"{len(num) - 1} and {len(den) - 1}"
+            f"{len(plant.num) - 1} and {len(plant.den) - 1}"
         )
-    return Plant.tf(num, den)
+    return plant
 
 
 #: Plant shorthands of ``loop.plant.kind``, each a builder from its section (SPEC 7);

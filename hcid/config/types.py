@@ -83,6 +83,17 @@ class Plant:
         """The paper's plant ``K wb / (s (s + wb))``."""
         return cls("second_order", (K * wb,), (1.0, wb, 0.0), f"{K:g}*{wb:g}/(s (s + {wb:g}))")
 
+    @property
+    def relative_degree(self) -> int:
+        """Degree of ``den`` minus degree of ``num`` (leading zeros ignored): >= 0 for a proper plant.
+
+        Examples
+        --------
+        >>> Plant.integrator(1.0).relative_degree, Plant.tf([1.0, 0.0, 0.0], [1.0, 1.0]).relative_degree
+        (1, -1)
+        """
+        return relative_degree(self.num, self.den)
+
     @classmethod
     def integrator(cls, K: float) -> Plant:
         """``K / s``."""
@@ -106,6 +117,21 @@ class Plant:
         num = num[next((i for i, c in enumerate(num) if c != 0), len(num)) :]
         den = tuple(float(c) for c in den)
         return cls("tf", num, den, f"({_poly_text(num)}) / ({_poly_text(den)})")
+
+
+#: The largest relative degree of a plant with an Inverse Feedforward Model (SPEC 7):
+#: ``Ynms Kpt / Yc / (TI s + 1)^2`` is proper exactly up to it.
+MAX_INVERTIBLE_DEGREE = 4
+
+
+def relative_degree(num: Sequence[float], den: Sequence[float]) -> int:
+    """Degree of ``den`` minus degree of ``num`` (polynomials in s, highest power first, leading 0s ignored)."""
+
+    def degree(coefs: Sequence[float]) -> int:
+        first = next((i for i, c in enumerate(coefs) if c != 0), len(coefs))
+        return len(coefs) - first - 1
+
+    return degree(den) - degree(num)
 
 
 def _poly_text(coefs: tuple[float, ...]) -> str:

@@ -24,6 +24,7 @@ from scipy import signal as sps
 from hcid.arx.simulation import checked_rows
 from hcid.config._checks import integer
 from hcid.config.fit import FEEDBACK_PARAMETERS, PARAMETERS
+from hcid.config.types import MAX_INVERTIBLE_DEGREE, relative_degree
 from hcid.errors import ConfigError, DataError
 
 __all__ = ["TrackingRecord", "hc_response", "simulate_hc"]
@@ -90,10 +91,9 @@ def _plant_polynomials(plant: control.TransferFunction) -> tuple[np.ndarray, np.
     den = np.trim_zeros(np.atleast_1d(np.asarray(plant.den[0][0], dtype=np.float64)), "f")
     if num.size == 0:
         raise ConfigError("plant: must not be zero")
-    if num.size > den.size:
+    if relative_degree(num, den) < 0:
         raise ConfigError("plant: must be proper")
-    # Ynms / Yc / (TI s + 1)^2 has relative degree 4 - (deg den - deg num).
-    if den.size - num.size > 4:
+    if relative_degree(num, den) > MAX_INVERTIBLE_DEGREE:
         raise ConfigError(
             "plant: Ynms/Yc/(TI s+1)^2 is improper for this plant (relative degree above 4): "
             "no inverse feedforward model"
