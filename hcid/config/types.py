@@ -125,7 +125,7 @@ MAX_INVERTIBLE_DEGREE = 4
 
 
 def relative_degree(num: Sequence[float], den: Sequence[float]) -> int:
-    """Degree of ``den`` minus degree of ``num`` (polynomials in s, highest power first, leading 0s ignored)."""
+    """Degree of ``den`` minus degree of ``num`` (in s, highest power first; leading zeros ignored)."""
 
     def degree(coefs: Sequence[float]) -> int:
         first = next((i for i, c in enumerate(coefs) if c != 0), len(coefs))
