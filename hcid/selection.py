@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pyarrow as pa
 
 from hcid.errors import IdentificationError
 
@@ -52,6 +53,10 @@ class SelectionPath:
     def at(self, w: np.ndarray) -> np.ndarray:
         """Frontier row selected at each W (W >= 0)."""
         return self.index[np.searchsorted(self.w_from, np.asarray(w, dtype=np.float64), side="right") - 1]
+
+    def to_arrow(self) -> pa.Table:
+        """One row per interval: the frontier row (``index``) selected for ``w_from <= W < w_to``."""
+        return pa.table({"index": self.index, "w_from": self.w_from, "w_to": self.w_to})
 
 
 def _ranked(d: np.ndarray, v: np.ndarray, orders: np.ndarray) -> np.ndarray:

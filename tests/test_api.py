@@ -77,6 +77,7 @@ def test_identification_equals_the_engine_and_selection(record, direct):
         np.testing.assert_array_equal(model.a, found.fit.a[row])
     path = direct.selection_path()
     assert path.w_from[0] == 0.0 and np.isinf(path.w_to[-1])
+    assert path.to_arrow().column("index").to_pylist() == path.index.tolist()
 
 
 def test_selected_model_response_and_simulation(record, direct):
@@ -131,6 +132,7 @@ def test_fit_hc_through_the_api_equals_the_pipelines(record, direct):
     got = hcid.fit_hc(model, record, hcid.Experiment(plant), settings=settings)
     want = fit_selected(model, record.signals, transfer_function(plant), settings)
     assert got.estimates == want.estimates and got.names[-3:] == ("Kpt", "TI", "tau_pt")
+    assert got.to_arrow().column("parameter").to_pylist() == list(got.names)
 
 
 @pytest.mark.parametrize(

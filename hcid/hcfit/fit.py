@@ -8,6 +8,7 @@ from typing import Any
 
 import control
 import numpy as np
+import pyarrow as pa
 from scipy import optimize
 
 from hcid.config.fit import UNITS, FitSettings
@@ -84,6 +85,10 @@ class HCFit:
             }
             for name, value, hit in zip(self.names, self.estimates, self.at_bound, strict=True)
         ]
+
+    def to_arrow(self) -> pa.Table:
+        """:meth:`rows` as a table, one row per parameter."""
+        return pa.Table.from_pylist(self.rows())
 
 
 # --------------------------------------------------------------------------- problems
