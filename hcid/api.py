@@ -17,6 +17,7 @@ The command-line tool runs the same functions over many records (:mod:`hcid.pipe
 from __future__ import annotations
 
 import dataclasses
+import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,9 +29,9 @@ import pyarrow as pa
 from hcid import criteria, hcfit, methods, results, selection, tables
 from hcid.config import Config, DataConfig, Forcing, IdentifyConfig, Plant, Timing
 from hcid.config.parse import default_data
-from hcid.errors import ConfigError, IdentificationError
+from hcid.errors import ConfigError, DataError, IdentificationError
 from hcid.hcmodel import transfer_function
-from hcid.measured import read_runs
+from hcid.measured import check_signal, read_runs
 from hcid.resolve import resolve_identify
 from hcid.selected import SelectedModel, fit_selected
 from hcid.selection import SelectionPath
@@ -69,6 +70,20 @@ class Record:
     fd: np.ndarray = field(repr=False)
     e: np.ndarray = field(repr=False)
     u: np.ndarray = field(repr=False)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.rate, bool) or not isinstance(self.rate, numbers.Real) or not 0 < self.rate < 1e6:
+            raise DataError(f"rate: must be a positive number of Hz, got {self.rate!r}")
+        n = None
+        for name in ("t", "ft", "fd", "e", "u"):
+            x = check_signal(getattr(self, name), f"record {name}")
+            if x.ndim != 1 or (n is not None and x.size != n):
+                raise DataError(
+                    f"record {name}: must be 1-D with the length of ft ({n}), got shape {x.shape}"
+                )
+            n = x.size if name == "ft" else n
+            object.__setattr__(self, name, x)
+        object.__setattr__(self, "rate", float(self.rate))
 
     @property
     def signals(self) -> dict[str, np.ndarray]:
@@ -125,6 +140,10 @@ def read_records(
         raise ConfigError(f"columns: unknown signal {unknown[0]!r} (allowed: {', '.join(data.columns)})")
     if not (isinstance(lead_in, int | float) and 0 <= lead_in < 1e4):
         raise ConfigError(f"lead_in: must be a number of seconds in [0, 10000), got {lead_in!r}")
+    if rate is not None and (
+        isinstance(rate, bool) or not isinstance(rate, numbers.Real) or not 0 < rate < 1e6
+    ):
+        raise ConfigError(f"rate: must be a positive number of Hz, got {rate!r}")
     data = DataConfig(
         name="data",
         columns={**data.columns, **given},
@@ -240,7 +259,7 @@ class IdentificationResult:
         IdentificationError
             If ``w`` is not a finite number >= 0, or every candidate is unstable.
         """
-        if not (isinstance(w, int | float) and np.isfinite(w) and w >= 0):
+        if isinstance(w, bool) or not isinstance(w, numbers.Real) or not (np.isfinite(w) and w >= 0):
             raise IdentificationError(f"w: must be a finite number >= 0, got {w!r}")
         row = int(self.selection_path().at(np.array([float(w)]))[0])
         stage = self.settings.stage(methods.get(self.method).final_stage.name)

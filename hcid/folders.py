@@ -83,6 +83,8 @@ def _manifest_kind(folder: Path) -> str | None:
 def atomic_write(path: Path, write: Callable[[str], object]) -> None:
     """Write ``path`` through ``write(temporary_path)`` and a rename; refuse a file hcid did not write.
 
+    In an hcid folder the file is listed in the mark before it is renamed into place.
+
     Raises
     ------
     DataError
@@ -101,6 +103,7 @@ def atomic_write(path: Path, write: Callable[[str], object]) -> None:
     try:
         write(tmp)
         os.chmod(tmp, 0o666 & ~_UMASK)
+        register(path)  # listed before it appears: a kill in between leaves no file hcid disowns
         os.replace(tmp, path)
     except OSError as exc:  # a full disk, a quota: one line, the previous file intact
         Path(tmp).unlink(missing_ok=True)
@@ -156,8 +159,9 @@ def claim(
     folder = Path(folder)
     if (folder / MANIFEST).is_file():
         found = _manifest_kind(folder)
-        if found not in (None, kind):
-            raise DataError(f"{folder}: an hcid {found}, not a {kind}; choose another folder")
+        if found != kind:
+            what = f"an hcid {found}" if found in (RUN_DIRECTORY, REPORT) else f"its {MANIFEST} is not hcid's"
+            raise DataError(f"{folder}: {what}, not an hcid {kind}; choose another folder")
         return
     try:
         entries = sorted(p.name for p in folder.iterdir()) if folder.is_dir() else []

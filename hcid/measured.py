@@ -152,10 +152,15 @@ class _Uncommented(io.RawIOBase):
 
 
 def _csv_header(path: Path) -> list[str]:
+    """The first non-blank line after the comments, as column names (any line ending)."""
     with open(path, "rb") as f:
-        first = io.BufferedReader(_Uncommented(f)).readline(1 << 16)
-    text = first.decode("utf-8", errors="replace").strip()
-    return next(csv.reader([text]), []) if text else []
+        head = io.BufferedReader(_Uncommented(f)).read(1 << 16)
+    lines = head.decode("utf-8", errors="replace").splitlines()
+    text = next((line.strip() for line in lines if line.strip()), "")
+    try:
+        return next(csv.reader([text]), []) if text else []
+    except csv.Error as exc:
+        raise DataError(f"{path}: cannot read its header line ({exc})") from exc
 
 
 def _read_csv(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
@@ -282,7 +287,7 @@ def read_signal(path: str | Path, column: str, run: int | None = None, run_colum
 
     With ``run``, only the rows whose ``run_column`` equals it (CSV, Parquet) or that
     column of a samples x runs matrix (.mat, counted from 1); the file must hold
-    that run column (or matrix).
+    that run column (or matrix). Without ``run``, a file of several runs is refused.
 
     Raises
     ------
@@ -291,12 +296,22 @@ def read_signal(path: str | Path, column: str, run: int | None = None, run_colum
         run column, or a value fails :func:`check_signal`.
     """
     path = Path(path)
-    wanted = {"x": column} if run is None else {"x": column, "run": run_column}
-    cols = _read(path, wanted)
+    cols = _read(path, {"x": column, "run": run_column})
     if "x" not in cols:
         raise DataError(f"{path}: has no column {quote(column)}")
     x = cols["x"]
-    if run is not None:
+    if run is None:
+        # A file of several runs is never read as one signal (its runs end to end).
+        runs = x.shape[1] if x.ndim == 2 and min(x.shape) > 1 else None
+        if runs is None and "run" in cols:
+            blocks = run_blocks(cols["run"], str(path), run_column)
+            runs = len(blocks) if len(blocks) > 1 else None
+        if runs is not None:
+            raise DataError(
+                f"{path}: {quote(column)} holds {runs} runs (column {quote(run_column)} or a samples x "
+                "runs matrix); name the one to use with run"
+            )
+    else:
         if x.ndim == 2 and min(x.shape) > 1:
             if not 1 <= run <= x.shape[1]:
                 raise DataError(f"{path}: {quote(column)} has {x.shape[1]} runs, no run {run}")

@@ -152,3 +152,19 @@ def test_fit_hc_through_the_api_equals_the_pipelines(record, direct):
 def test_bad_input_is_one_hcid_error(record, direct, call, message):
     with pytest.raises(hcid.HcidError, match=message):
         call(record, direct)
+
+
+def test_records_and_selections_are_checked(record, direct):
+    # Review: a hand-built Record, read_records' rate and select's w are checked at the boundary.
+    with pytest.raises(hcid.DataError, match="record u holds nan at sample 3"):
+        u = record.u.copy()
+        u[3] = np.nan
+        hcid.Record(1, 25.0, record.t, record.ft, record.fd, record.e, u)
+    with pytest.raises(hcid.DataError, match="record e: must be 1-D with the length of ft"):
+        hcid.Record(1, 25.0, record.t, record.ft, record.fd, record.e[:10], record.u)
+    for rate in (0, float("nan"), True):
+        with pytest.raises(hcid.HcidError, match="rate: must be a positive number"):
+            hcid.read_records(EXAMPLE, columns=COLUMNS, rate=rate)
+    assert direct.select(np.float32(direct.w_bic)).orders == direct.select(direct.w_bic).orders
+    with pytest.raises(hcid.IdentificationError, match="w: must be a finite number"):
+        direct.select(True)

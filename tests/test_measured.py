@@ -632,3 +632,47 @@ def test_every_signal_from_a_file_passes_the_same_check(tmp_path):
     np.testing.assert_array_equal(check_signal(np.array([LARGEST, -LARGEST]), "x"), [LARGEST, -LARGEST])
     with pytest.raises(DataError, match="x holds nan at sample 0"):
         check_signal(np.array([np.nan]), "x")
+
+
+@pytest.mark.parametrize("layout", ["cr line endings", "blank line after the comments"])
+def test_csv_line_layouts(tmp_path, data_config, layout):
+    # Review: a CSV with CR-only line endings was a csv.Error traceback; a blank line between
+    # the comments and the header made the header look empty ("missing columns").
+    text = EXAMPLE.read_text()
+    path = tmp_path / "f.csv"
+    path.write_text(text.replace("\n", "\r") if layout == "cr line endings" else "# logger\n\n" + text)
+    got, expected = load_data(path, data_config), load_data(EXAMPLE, data_config)
+    for run in expected:
+        np.testing.assert_array_equal(got[run]["u"], expected[run]["u"])
+
+
+def test_a_forcing_file_of_several_runs_needs_its_run(tmp_path):
+    # Review: without run:, a file of several trials was read as one signal, the trials end to end.
+    from hcid.measured import read_signal
+
+    path = tmp_path / "f.csv"
+    pacsv.write_csv(pa.table({"fd": np.arange(6.0), "run": [1, 1, 2, 2, 3, 3]}), path)
+    with pytest.raises(DataError, match="'fd' holds 3 runs .*name the one to use with run"):
+        read_signal(path, "fd")
+    mat = tmp_path / "f.mat"
+    scipy.io.savemat(mat, {"fd": np.ones((10, 2)) * [[1.0, 2.0]]})
+    with pytest.raises(DataError, match="'fd' holds 2 runs"):
+        read_signal(mat, "fd")
+    pacsv.write_csv(pa.table({"fd": np.arange(6.0), "run": [4] * 6}), path)
+    np.testing.assert_array_equal(read_signal(path, "fd"), np.arange(6.0))  # one run: the file's
+
+
+def test_identify_data_force_redoes_a_changed_identify(tmp_path, data_config_path):
+    # Review: --force was not passed to the data import's run-directory check.
+    raw = yaml.safe_load(data_config_path.read_text())
+    run = tmp_path / "run"
+    argv = ["identify", None, "--data", str(EXAMPLE), "--run", str(run), "--method", "direct", "--quiet"]
+    first = tmp_path / "a.yaml"
+    first.write_text(yaml.safe_dump(raw))
+    assert runner.invoke(app, [argv[0], str(first), *argv[2:]]).exit_code == 0
+    raw["identify"]["direct"]["nk1"] = [21, 30]
+    second = tmp_path / "b.yaml"
+    second.write_text(yaml.safe_dump(raw))
+    refused = runner.invoke(app, [argv[0], str(second), *argv[2:]])
+    assert refused.exit_code == 2 and "identify.direct.nk1 differs" in refused.stderr
+    assert runner.invoke(app, [argv[0], str(second), *argv[2:], "--force"]).exit_code == 0

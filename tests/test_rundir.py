@@ -238,3 +238,49 @@ def test_hcid_never_replaces_a_file_it_did_not_write(tmp_path):
     with pytest.raises(DataError, match="t.parquet: not written by hcid; refusing to replace it"):
         results.write_table(pa.table({"x": [1]}), folder / "t.parquet")
     assert (folder / "t.parquet").read_bytes() == b"mine"
+
+
+def test_a_folder_with_only_a_users_config_is_not_adopted(tmp_path):
+    # Review of issue 24: a folder holding only config.yaml is the user's (their config beside
+    # it), not an old hcid run directory: using it as --run is refused and the file kept.
+    folder = tmp_path / "study"
+    folder.mkdir()
+    (folder / "config.yaml").write_text("# my own notes\nname: mine\n")
+    with pytest.raises(DataError, match="not an hcid run directory"), rundir.using(folder):
+        pass
+    assert (folder / "config.yaml").read_text() == "# my own notes\nname: mine\n"
+
+
+def test_a_foreign_mark_is_not_hcids(tmp_path):
+    from hcid.folders import claim
+
+    folder = tmp_path / "other"
+    folder.mkdir()
+    (folder / "hcid-run.json").write_text('{"name": "my other tool"}')
+    with pytest.raises(DataError, match="its hcid-run.json is not hcid's"):
+        claim(folder, [])
+    assert (folder / "hcid-run.json").read_text() == '{"name": "my other tool"}'
+
+
+def test_a_file_is_listed_before_it_appears(tmp_path, monkeypatch):
+    # A kill between the rename and the listing would leave a file hcid then refuses to
+    # replace; it is listed first, so an interrupted write leaves at most a listed absent file.
+    from hcid import folders
+
+    folder = tmp_path / "out"
+    folders.claim(folder, [])
+
+    real = folders.os.replace
+
+    def killed(src, dst):
+        if str(dst).endswith("t.parquet"):  # the kill comes as the table is renamed into place
+            raise KeyboardInterrupt
+        real(src, dst)
+
+    monkeypatch.setattr(folders.os, "replace", killed)
+    with pytest.raises(KeyboardInterrupt):
+        results.write_table(pa.table({"x": [1]}), folder / "t.parquet")
+    monkeypatch.undo()
+    assert "t.parquet" in folders.owned_files(folder) and not (folder / "t.parquet").exists()
+    results.write_table(pa.table({"x": [2]}), folder / "t.parquet")
+    assert pq.read_table(folder / "t.parquet").column("x").to_pylist() == [2]

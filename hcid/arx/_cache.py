@@ -59,10 +59,19 @@ class _InTree(_AllKernelFiles, caching.InTreeCacheLocator):
     """``hcid/arx/__pycache__`` otherwise."""
 
 
+class _UserWide(_AllKernelFiles, caching.UserWideCacheLocator):
+    """The user's cache folder when ``hcid/arx/__pycache__`` is not writable (an installed package)."""
+
+
 def install() -> None:
-    """Put the kernel locators first in numba's list (once; other functions are unaffected)."""
+    """Put the kernel locators first in numba's list (once; other functions are unaffected).
+
+    Every place numba could cache a kernel (a set cache folder, the package's
+    ``__pycache__``, the user's cache folder) has a locator here, so no kernel is
+    cached with numba's own one-file stamp.
+    """
     classes = caching.CacheImpl._locator_classes
-    for locator in (_InTree, _UserProvided):
+    for locator in (_UserWide, _InTree, _UserProvided):
         if locator not in classes:
             classes.insert(0, locator)
 

@@ -163,8 +163,13 @@ def _restore_lock(handle, path: Path, text: str, before: os.stat_result | None) 
 
 
 def _written_by_hcid(entries: list[str], known: list[str]) -> bool:
-    """A run directory of an hcid without manifests: a config.yaml and only hcid's files."""
-    return "config.yaml" in entries and set(entries) <= {*known, results.PARTS, "report", LOCK}
+    """A run directory of an hcid without manifests: a config.yaml, a table, and only hcid's files.
+
+    A folder with a config.yaml and nothing of hcid's is a user's (their config beside it)."""
+    tables_ = [e for e in entries if e.endswith(".parquet")]
+    return (
+        "config.yaml" in entries and bool(tables_) and set(entries) <= {*known, results.PARTS, "report", LOCK}
+    )
 
 
 def _remove_if_unused(run_dir: Path) -> None:

@@ -246,10 +246,10 @@ def _load_records(config: Config, run_dir: Path) -> dict[tuple[str, int], dict[s
     return recs
 
 
-def _import_data(config: Config, run_dir: Path, path: Path) -> dict[int, dict[str, np.ndarray]]:
+def _import_data(config: Config, run_dir: Path, path: Path, force: bool) -> dict[int, dict[str, np.ndarray]]:
     """Read and check a measured-data file and keep a copy in ``run_dir/measured.parquet``."""
     records = measured.load_data(path, config)
-    check_run_dir(config, run_dir, "identify")
+    check_run_dir(config, run_dir, "identify", force=force)
     record_config(config, run_dir)
     results.write(tables.MEASURED, measured.records_table(config.data.name, records), run_dir)
     return records
@@ -322,7 +322,7 @@ def identify_study(
     check_scheduler(backend, scheduler, worker_timeout)  # refused before anything is read or written
     simulation = None
     if data_path is not None:
-        data = _import_data(config, run_dir, data_path)
+        data = _import_data(config, run_dir, data_path, force)
         records = {(config.data.name, run): rec for run, rec in data.items()}
         keys = list(records)
         noise_free = {}

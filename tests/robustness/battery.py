@@ -1040,6 +1040,9 @@ def silent_answer_cases() -> list[Case]:
         Case("data lead-in longer than the record", _identify_file(lambda t: EXAMPLE_CSV, _lead_in_config),
              "refused", check=lambda t, p: p.stderr if re.search(r" -\d+ samples", p.stderr) else None),
         Case("refused command leaves .hcid.lock", _refused_keeps_lock, "refused", check=_lock_untouched),
+        # review of the change
+        Case("--run a folder holding only the user's config.yaml", _users_config_folder, "refused"),
+        Case("forcing file of several trials without run", _simulate_with(_two_trials), "refused"),
     ]  # fmt: skip
 
 
@@ -1053,6 +1056,21 @@ def _user_file(tmp: Path) -> Path:
     (tmp / "run").mkdir()
     (tmp / "run" / "f.txt").write_text("x")
     return tmp / "run" / "f.txt"
+
+
+def _users_config_folder(tmp: Path) -> list[str]:
+    (tmp / "run").mkdir()
+    (tmp / "run" / "config.yaml").write_text("# my own config, with my comments\n" + yaml.safe_dump(BASE))
+    return ["simulate", str(tmp / "run" / "config.yaml"), "--run", str(tmp / "run"), "--quiet", "--jobs", "1"]
+
+
+def _two_trials(tmp: Path) -> dict:
+    values = _multisine_values()
+    path = tmp / "trials.csv"
+    pa.csv.write_csv(pa.table({"fd": np.concatenate([values, values]), "run": [1] * 2048 + [2] * 2048}), path)
+    data = _forcing_file(tmp, values)
+    data["signals"]["disturbance"]["path"] = str(path)
+    return data
 
 
 def _scaled(peak: float) -> np.ndarray:
