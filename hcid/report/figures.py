@@ -64,6 +64,20 @@ def _figure(axes, rows: int, cols: int, *, figsize, sharex: bool = False):
     return axes.flat[0].figure, axes
 
 
+def finish_bode(ax_mag, ax_ph, band, title: str) -> None:
+    """Band edges, grid, labels and legend of one path's magnitude and phase axes."""
+    for ax in (ax_mag, ax_ph):
+        for w in band:
+            ax.axvline(w, color="0.5", ls="--", lw=0.8)
+        ax.grid(True, which="both", alpha=0.3)
+    ax_mag.set_title(title)
+    ax_mag.set_ylabel("magnitude (-)")
+    ax_ph.set_ylabel("phase (deg)")
+    ax_ph.set_xlabel("frequency (rad/s)")
+    if ax_mag.get_legend_handles_labels()[0]:
+        ax_mag.legend(fontsize=8, loc="best")
+
+
 def _key_label(model: str, method: str) -> str:
     return f"{model} {method}"
 
@@ -168,16 +182,7 @@ def plot_bode(
         for label, ref in (references or {}).get(path, []):
             ax_mag.loglog(omega, np.abs(ref), "k--", lw=1.5, label=label)
             ax_ph.semilogx(omega, np.degrees(np.unwrap(np.angle(ref))), "k--", lw=1.5)
-        for ax in (ax_mag, ax_ph):
-            for w in responses.band:
-                ax.axvline(w, color="0.5", ls="--", lw=0.8)
-            ax.grid(True, which="both", alpha=0.3)
-        ax_mag.set_title(names[path])
-        ax_mag.set_ylabel("magnitude (-)")
-        ax_ph.set_ylabel("phase (deg)")
-        ax_ph.set_xlabel("frequency (rad/s)")
-        if ax_mag.get_legend_handles_labels()[0]:
-            ax_mag.legend(fontsize=8, loc="best")
+        finish_bode(ax_mag, ax_ph, responses.band, names[path])
     fig.suptitle(title, parse_math=False)  # user strings are not mathtext
     fig.tight_layout()
     return fig

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from hcid.hcfit import PARAMETERS, UNITS
-from hcid.report.figures import _figure, method_color
+from hcid.report.figures import _figure, finish_bode, method_color
 
 __all__ = ["plot_parameter_strips", "plot_parametric_bode", "plot_residual_correlations"]
 
@@ -76,16 +76,7 @@ def plot_parametric_bode(omega, band, curves: list[tuple[str, str, dict, dict]],
                 ax_mag.loglog(omega, np.abs(h), label=None if label in labelled else label, **style)
                 ax_ph.semilogx(omega, np.degrees(np.unwrap(np.angle(h))), **style)
                 labelled.add(label)
-        for ax in (ax_mag, ax_ph):
-            for w in band:
-                ax.axvline(w, color="0.5", ls="--", lw=0.8)
-            ax.grid(True, which="both", alpha=0.3)
-        ax_mag.set_title(names[path])
-        ax_mag.set_ylabel("magnitude (-)")
-        ax_ph.set_ylabel("phase (deg)")
-        ax_ph.set_xlabel("frequency (rad/s)")
-        if ax_mag.get_legend_handles_labels()[0]:
-            ax_mag.legend(fontsize=8)
+        finish_bode(ax_mag, ax_ph, band, names[path])
     fig.suptitle(title)
     fig.tight_layout()
     return fig
