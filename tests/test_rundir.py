@@ -284,3 +284,19 @@ def test_a_file_is_listed_before_it_appears(tmp_path, monkeypatch):
     assert "t.parquet" in folders.owned_files(folder) and not (folder / "t.parquet").exists()
     results.write_table(pa.table({"x": [2]}), folder / "t.parquet")
     assert pq.read_table(folder / "t.parquet").column("x").to_pylist() == [2]
+
+
+def test_the_record_keeps_earlier_stages_only_beside_their_results(small_run, tmp_path):
+    # config.yaml holds the stages of the methods whose results the directory holds: after a
+    # --force removed the tables, a command resolved for one method records that method only.
+    from hcid.resolve import load_config
+
+    config, run = _copy(small_run, tmp_path)
+    direct_only = load_config(config, ("direct",))
+    rundir.record_config(direct_only, run)  # frontier.parquet there: the indirect stages stay
+    recorded = yaml.safe_load((run / "config.yaml").read_text())["identify"]
+    assert {"direct", "stage1", "stage2"} <= set(recorded)
+    (run / "frontier.parquet").unlink()
+    rundir.record_config(direct_only, run)
+    recorded = yaml.safe_load((run / "config.yaml").read_text())["identify"]
+    assert set(recorded) == {"target_shift", "direct"}

@@ -278,12 +278,13 @@ def _common_stages(data: Any, other: Any) -> Any:
 def record_config(config: Config, run_dir: Path) -> None:
     """Write the resolved config as the run's ``config.yaml`` (atomically).
 
-    Stages recorded earlier and not resolved by this command stay recorded: the
-    record holds the stages of every method run in the directory.
+    Stages recorded earlier and not resolved by this command stay recorded while
+    the directory holds identification results (``frontier.parquet``): the record
+    holds the stages of every method whose results are there.
     """
     text = config.to_yaml()
     path = run_dir / "config.yaml"
-    if path.is_file():
+    if path.is_file() and (run_dir / tables.FRONTIER.file).is_file():
         try:
             previous = read_yaml(path, "run config")
         except ConfigError:
