@@ -23,7 +23,7 @@ LAYERS = (
     ("arx", ("hcid.arx",)),
     ("methods", ("hcid.methods",)),
     ("selection", ("hcid.criteria", "hcid.selection")),
-    ("analyses", ("hcid.hcfit", "hcid.residuals", "hcid.selected", "hcid.calibration")),
+    ("analyses", ("hcid.hcfit", "hcid.residuals", "hcid.selected", "hcid.calibration", "hcid.descriptors")),
     ("results", ("hcid.results", "hcid.measured", "hcid.folders")),
     ("api", ("hcid.resolve", "hcid.api")),
     ("pipeline", ("hcid.pipeline",)),
