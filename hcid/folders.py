@@ -25,10 +25,10 @@ from hcid.errors import DataError
 __all__ = [
     "MANIFEST",
     "atomic_write",
+    "check_replaceable",
     "check_output_path",
     "claim",
     "owned_files",
-    "register",
     "remove_owned",
 ]
 
@@ -80,6 +80,19 @@ def _manifest_kind(folder: Path) -> str | None:
         return None
 
 
+def check_replaceable(path: Path) -> None:
+    """Refuse ``path`` if it exists in an hcid folder without being one of hcid's files.
+
+    Raises
+    ------
+    DataError
+        Naming the file.
+    """
+    foreign = path.name != MANIFEST and path.exists() and (path.parent / MANIFEST).is_file()
+    if foreign and path.name not in owned_files(path.parent):
+        raise DataError(f"{path}: not written by hcid; refusing to replace it")
+
+
 def atomic_write(path: Path, write: Callable[[str], object]) -> None:
     """Write ``path`` through ``write(temporary_path)`` and a rename; refuse a file hcid did not write.
 
@@ -91,9 +104,7 @@ def atomic_write(path: Path, write: Callable[[str], object]) -> None:
         If ``path`` exists in an hcid folder without being one of its files, or the
         write fails (the previous file is then intact).
     """
-    foreign = path.name != MANIFEST and path.exists() and (path.parent / MANIFEST).is_file()
-    if foreign and path.name not in owned_files(path.parent):
-        raise DataError(f"{path}: not written by hcid; refusing to replace it")
+    check_replaceable(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -103,7 +114,7 @@ def atomic_write(path: Path, write: Callable[[str], object]) -> None:
     try:
         write(tmp)
         os.chmod(tmp, 0o666 & ~_UMASK)
-        register(path)  # listed before it appears: a kill in between leaves no file hcid disowns
+        _register(path)  # listed before it appears: a kill in between leaves no file hcid disowns
         os.replace(tmp, path)
     except OSError as exc:  # a full disk, a quota: one line, the previous file intact
         Path(tmp).unlink(missing_ok=True)
@@ -113,7 +124,7 @@ def atomic_write(path: Path, write: Callable[[str], object]) -> None:
         raise
 
 
-def register(path: Path) -> None:
+def _register(path: Path) -> None:
     """List ``path`` in its folder's manifest when the folder is an hcid folder."""
     folder = path.parent
     if path.name == MANIFEST or not (folder / MANIFEST).is_file():

@@ -22,7 +22,7 @@ import pyarrow.parquet as pq
 
 from hcid import tables
 from hcid.errors import DataError
-from hcid.folders import atomic_write, register
+from hcid.folders import atomic_write
 from hcid.methods import METHODS
 from hcid.simulate import Realization
 from hcid.tables import CHANNELS, Schema
@@ -53,7 +53,6 @@ def write_table(table: pa.Table, path: str | Path) -> None:
     """Write a Parquet table atomically (temporary file, then rename)."""
     path = Path(path)
     atomic_write(path, lambda tmp: pq.write_table(table, tmp))
-    register(path)
 
 
 def write(schema: Schema, table: pa.Table, run_dir: str | Path) -> Path:
@@ -90,7 +89,6 @@ def write_text(text: str, path: str | Path) -> None:
     except (OSError, UnicodeDecodeError):
         pass
     atomic_write(path, lambda tmp: Path(tmp).write_text(text))
-    register(path)
 
 
 def read(

@@ -32,8 +32,8 @@ LAYERS = (
 )
 
 
-def module_name(path: Path) -> str:
-    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+def module_name(path: Path, root: Path = PACKAGE) -> str:
+    parts = path.relative_to(root.parent).with_suffix("").parts
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
@@ -58,7 +58,7 @@ def imports(path: Path, modules: set[str]) -> list[tuple[str, int]]:
 
 
 def graph(root: Path = PACKAGE) -> dict[str, list[tuple[str, int]]]:
-    files = {module_name(p): p for p in root.rglob("*.py")}
+    files = {module_name(p, root): p for p in root.rglob("*.py")}
     names = set(files)
     return {m: [(t, line) for t, line in imports(p, names) if t != "hcid"] for m, p in files.items()}
 
@@ -131,14 +131,9 @@ def test_the_checks_catch_a_cycle_and_an_upward_import(tmp_path):
     (root / "__init__.py").write_text("")
     (root / "config" / "__init__.py").write_text("def f():\n    from hcid.pipeline import run\n")
     (root / "pipeline" / "__init__.py").write_text("from hcid.config import f\n")
-    global PACKAGE
-    saved, PACKAGE = PACKAGE, root
-    try:
-        edges = graph(root)
-        assert upward_imports(edges) == ["hcid.config:2 imports hcid.pipeline (config -> pipeline)"]
-        assert cycles(_package_imports(edges)) == [["hcid.config", "hcid.pipeline"]]
-    finally:
-        PACKAGE = saved
+    edges = graph(root)
+    assert upward_imports(edges) == ["hcid.config:2 imports hcid.pipeline (config -> pipeline)"]
+    assert cycles(_package_imports(edges)) == [["hcid.config", "hcid.pipeline"]]
 
 
 @pytest.mark.parametrize(

@@ -13,7 +13,6 @@ from pathlib import Path
 from typing import Any
 
 from hcid import folders, results
-from hcid.errors import DataError
 from hcid.pipeline.rundir import using
 from hcid.report import figures
 from hcid.report.document import Doc, to_html, to_markdown
@@ -102,9 +101,8 @@ def write_report(data: ReportData, out_dir: Path, *, adopt_old: bool = False) ->
     folders.check_output_path(out_dir, "report folder")
     names = [*doc.drawings, "report.md", "report.html"]
     folders.claim(out_dir, names, folders.REPORT, adopt=_old_report if adopt_old else None)
-    for name in names:
-        if (out_dir / name).exists() and name not in folders.owned_files(out_dir):
-            raise DataError(f"{out_dir / name}: not written by hcid; refusing to replace it")
+    for name in names:  # before drawing anything: a refusal leaves no half-written report
+        folders.check_replaceable(out_dir / name)
     written = []
     for name, draw in doc.drawings.items():
         figures.save(draw(), out_dir / name)

@@ -52,7 +52,6 @@ def save(fig, path) -> None:
     """Write ``fig`` as a PNG atomically, as one of its folder's hcid files (:mod:`hcid.folders`)."""
     path = Path(path)
     folders.atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=DPI, bbox_inches="tight", format="png"))
-    folders.register(path)
 
 
 def _figure(axes, rows: int, cols: int, *, figsize, sharex: bool = False):
