@@ -321,10 +321,13 @@ def fit_hc(
     record : Record
         The record the model was identified on.
     experiment : Experiment
-        The plant (the feedforward path inverts it).
+        The plant (the feedforward path inverts it) and where the disturbance
+        enters (the closed-loop target's loop).
     target : str
-        ``time`` (u simulated from the measured ft and e) or ``frequency`` (the
-        ARX model's paths); ignored when ``settings`` is given.
+        ``time`` (the default: u simulated from the measured ft and e),
+        ``closed_loop`` (the model in closed loop with the plant, driven by the
+        measured ft and fd) or ``frequency`` (the ARX model's paths); ignored
+        when ``settings`` is given.
     settings : FitSettings, optional
         Bounds, starts and seed (:func:`hcid.hcfit.parse_fit_settings`); the
         band defaults to the disturbance's (a multisine's) or the record's.
@@ -340,4 +343,6 @@ def fit_hc(
         settings = hcfit.parse_fit_settings({"target": target}, "fit_hc", default_band=band)
     elif settings.band is None:
         settings = dataclasses.replace(settings, band=band)
-    return fit_selected(model, record.signals, transfer_function(experiment.plant), settings)
+    return fit_selected(
+        model, record.signals, transfer_function(experiment.plant), settings, experiment.disturbance_at
+    )

@@ -257,14 +257,23 @@ def fit_hc(
         ),
     ] = None,
     method: MethodOpt = "all",
+    target: Annotated[
+        str | None,
+        typer.Option(
+            "--target",
+            help="Estimator: time, closed_loop or frequency (default: the config's fit_hc.target, "
+            "else time).",
+        ),
+    ] = None,
     jobs: JobsOpt = 2,
     backend: BackendOpt = "loky",
     scheduler: SchedulerOpt = None,
     force: ForceOpt = False,
     quiet: QuietOpt = False,
 ):
-    """Fit the parametric HC model to every selected model and analyse its residuals;
-    writes RUN/hc_parameters.parquet and RUN/residuals.parquet."""
+    """Fit the parametric HC model to every selected model, describe its loop and remnant and
+    analyse its residuals; writes RUN/hc_parameters.parquet, hc_loop.parquet,
+    remnant_spectrum.parquet and residuals.parquet."""
     from hcid.pipeline import fit_hc_study
 
     cfg, run_dir = _load(config, run, backend, scheduler, reopen=True)
@@ -273,6 +282,7 @@ def fit_hc(
         run_dir,
         _methods(method),
         w,
+        target=target,
         jobs=jobs,
         force=force,
         backend=backend,
@@ -399,24 +409,64 @@ def _print_hc_fit(result) -> None:
 
     from hcid import tables
 
+    def num(x: float) -> str:
+        return "-" if x is None or not np.isfinite(x) else f"{x:.4g}"
+
     for method, pairs in result.w_of.items():
         typer.echo(f"{method:<9} W = " + ", ".join(f"{w:.4g} ({source})" for w, source in pairs))
     rows = result.parameters.to_pylist()
-    header = f"{'model':<10}{'method':<10}{'W':>9} {'parameter':<10}{'median':>10}{'true':>9}"
-    typer.echo(header + f"{'n':>5}{'at bound':>9}")
+    if rows:
+        typer.echo(f"target {rows[0]['target']}, standard errors {rows[0]['covariance'] or '-'}")
+    # One record: its estimate with se and 95% interval; several: medians, the spread across
+    # records beside the median se, and how many 95% intervals hold the true value.
+    header = f"{'model':<10}{'method':<10}{'W':>9} {'parameter':<10}{'estimate':>10} {'se':>9}"
+    header += f" {'sd':>9} {'95% interval':>21} {'true':>9}{'n':>5}{'covers':>7}{'bound':>6}"
+    typer.echo(header)
     groups: dict[tuple, list[dict]] = {}
     for row in rows:
         groups.setdefault((row["model"], row["method"], row["w"], row["parameter"]), []).append(row)
     for (model, method, w, name), group in groups.items():
-        values = np.array([r["estimate"] for r in group], dtype=float)
+        column = {
+            c: np.array([r[c] for r in group], dtype=float) for c in ("estimate", "se", "ci_low", "ci_high")
+        }
+        est, se = column["estimate"], column["se"]
         true = group[0]["true_value"]
-        true_text = "-" if true is None or not np.isfinite(true) else f"{true:.4g}"
-        median = f"{np.nanmedian(values):.4g}" if np.isfinite(values).any() else "-"
+        one = len(group) == 1
+        median = num(est[0]) if one else num(np.nanmedian(est)) if np.isfinite(est).any() else "-"
+        se_text = num(se[0]) if one else num(np.nanmedian(se)) if np.isfinite(se).any() else "-"
+        sd = "-" if one or np.isfinite(est).sum() < 2 else num(np.nanstd(est, ddof=1))
+        interval = f"[{num(column['ci_low'][0])}, {num(column['ci_high'][0])}]" if one else "-"
+        covers = "-"
+        if true is not None and np.isfinite(true):
+            held = (column["ci_low"] <= true) & (true <= column["ci_high"])
+            covers = f"{int(held.sum())}/{len(group)}"
         hits = sum(bool(r["at_bound"]) for r in group)
         typer.echo(
-            f"{model:<10}{method:<10}{w:>9.4g} {name:<10}{median:>10}{true_text:>9}{len(group):>5}{hits:>9}"
+            f"{model:<10}{method:<10}{w:>9.4g} {name:<10}{median:>10} {se_text:>9} {sd:>9} {interval:>21}"
+            f" {num(true):>9}{len(group):>5}{covers:>7}{hits:>6}"
         )
+    loop = result.loop.to_pylist()
+    if loop:
+        typer.echo(
+            f"{'model':<10}{'method':<10}{'W':>9} {'source':<8}{'wc rad/s':>9} {'PM deg':>7}"
+            f" {'true wc':>8} {'true PM':>7} {'remnant':>7} {'w_n':>6} {'zeta_n':>6}  (medians)"
+        )
+        by: dict[tuple, list[dict]] = {}
+        for row in loop:
+            by.setdefault((row["model"], row["method"], row["w"], row["source"]), []).append(row)
+        for (model, method, w, source), group in by.items():
+
+            def med(c, group=group):
+                x = np.array([r[c] for r in group], dtype=float)
+                return num(np.nanmedian(x)) if np.isfinite(x).any() else "-"
+
+            typer.echo(
+                f"{model:<10}{method:<10}{w:>9.4g} {source:<8}{med('crossover'):>9} {med('phase_margin'):>7}"
+                f" {med('true_crossover'):>8} {med('true_phase_margin'):>7} {med('share_remnant'):>7}"
+                f" {med('remnant_w_n'):>6} {med('remnant_zeta_n'):>6}"
+            )
+    written = ", ".join(str(result.run_dir / t.file) for t in (tables.HC_PARAMETERS, tables.HC_LOOP))
     typer.echo(
         f"fitted {result.computed} record-methods, reused {result.reused}, in {result.seconds:.1f} s; "
-        f"wrote {result.run_dir / tables.HC_PARAMETERS.file} and {result.run_dir / tables.RESIDUALS.file}"
+        f"wrote {written} (and residuals, remnant spectra)"
     )

@@ -1,10 +1,17 @@
-"""The loop's descriptors: gain-crossover frequency and phase margin of an open loop (analyses layer).
+"""The loop's descriptors (analyses layer, SPEC 8): crossover and phase margin, the variance
+split of u, and the remnant's level and spectrum.
 
 The manual-control literature describes a tracking loop by the crossover
 frequency ``wc`` of its open loop ``L = Hpe Yc`` (where ``|L(j wc)| = 1``) and its
 phase margin ``PM = 180 + arg L(j wc)`` (deg), the phase continuous from low
 frequency. Delays are welcome: ``L`` is any callable frequency response, so
 ``exp(-j w tau)`` costs nothing, which python-control's ``margin`` cannot take.
+
+The remnant of a record is what a model of the person leaves of u:
+``n = u - Hft ft - He e``. Its level is ``var(n)/var(u)``; its spectrum is
+fitted with the remnant filter of SPEC 1, ``Yn = Kn wn^3 / ((s^2 + 2 zn wn s + wn^2)
+(s + wn))`` driven by white noise of unit variance at a stated rate (the
+simulation's), so that a simulation can be given the remnant a person showed.
 """
 
 from __future__ import annotations
@@ -18,7 +25,10 @@ from scipy import optimize
 
 from hcid.errors import IdentificationError
 
-__all__ = ["LoopMargins", "loop_margins"]
+__all__ = ["LoopMargins", "RemnantFit", "fit_remnant", "loop_margins", "remnant_spectrum", "variance_shares"]
+
+#: Welch segments of the remnant spectrum (s): 0.1 Hz resolution.
+SEGMENT_SECONDS = 10.24
 
 
 @dataclass(frozen=True)
@@ -93,7 +103,8 @@ def loop_margins(
     response = np.asarray(open_loop(w), dtype=complex)
     if response.shape != w.shape or not np.all(np.isfinite(response)):
         raise IdentificationError("open_loop: must give a finite complex response of the shape of w")
-    log_mag = np.log(np.abs(response))
+    with np.errstate(divide="ignore"):  # a zero response (no feedback path) never crosses
+        log_mag = np.log(np.abs(response))
     phase = np.unwrap(np.angle(response))
     crossings = np.flatnonzero(np.sign(log_mag[:-1]) * np.sign(log_mag[1:]) < 0)
     crossings = np.union1d(crossings, np.flatnonzero(log_mag == 0.0))
@@ -116,3 +127,129 @@ def loop_margins(
         return LoopMargins(float("nan"), float("nan"), 0)
     wc, pm = min(found, key=lambda item: abs(item[1]))
     return LoopMargins(float(wc), float(pm), len(found))
+
+
+# --------------------------------------------------------------------------- the variance split
+
+
+def variance_shares(u: np.ndarray, parts: dict[str, np.ndarray]) -> dict[str, float]:
+    """``var(part)/var(u)`` for each part, and ``remnant``: ``var(u - sum parts)/var(u)``.
+
+    The shares need not sum to 1: the parts are correlated through the loop.
+
+    Examples
+    --------
+    >>> u = np.array([1.0, -1.0, 2.0, -2.0])
+    >>> variance_shares(u, {"e": 0.5 * u})
+    {'e': 0.25, 'remnant': 0.25}
+    """
+    var_u = float(np.var(u))
+    out = {name: float(np.var(x)) / var_u for name, x in parts.items()}
+    out["remnant"] = float(np.var(u - sum(parts.values()))) / var_u
+    return out
+
+
+# --------------------------------------------------------------------------- the remnant
+
+
+@dataclass(frozen=True)
+class RemnantFit:
+    """The remnant filter fitted to a remnant's spectrum (SPEC 1's ``Yn``).
+
+    Attributes
+    ----------
+    kn : float
+        Gain for white noise of unit variance at ``kn_rate`` (Hz), as SPEC 1's
+        simulation draws it.
+    w_n : float
+        Break frequency (rad/s).
+    zeta_n : float
+        Damping (-).
+    kn_rate : float
+        The rate ``kn`` refers to (Hz).
+    omega : ndarray
+        Frequencies of the spectrum (rad/s).
+    psd : ndarray
+        Welch estimate, one-sided (rad^2/Hz).
+    psd_fit : ndarray
+        The fitted filter's one-sided density at ``omega`` (rad^2/Hz).
+    """
+
+    kn: float
+    w_n: float
+    zeta_n: float
+    kn_rate: float
+    omega: np.ndarray
+    psd: np.ndarray
+    psd_fit: np.ndarray
+
+
+def remnant_spectrum(n: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
+    """One-sided Welch density of ``n`` (rad^2/Hz) at frequencies (rad/s), DC left out.
+
+    Hann segments of :data:`SEGMENT_SECONDS` (or the whole series if shorter),
+    half overlapping.
+    """
+    from scipy import signal as sps
+
+    n = np.asarray(n, dtype=np.float64)
+    nperseg = min(n.size, round(SEGMENT_SECONDS * rate))
+    f, p = sps.welch(n, fs=rate, window="hann", nperseg=nperseg, detrend="constant")
+    return 2.0 * np.pi * f[1:], p[1:]
+
+
+def _unit_density(omega: np.ndarray, w_n: float, zeta_n: float, kn_rate: float) -> np.ndarray:
+    s = 1j * omega
+    yn = w_n**3 / ((s**2 + 2.0 * zeta_n * w_n * s + w_n**2) * (s + w_n))
+    return 2.0 * np.abs(yn) ** 2 / kn_rate
+
+
+def fit_remnant(
+    n: np.ndarray, rate: float, kn_rate: float, band: tuple[float, float] | None = None
+) -> RemnantFit:
+    """Fit SPEC 1's remnant filter to the spectrum of ``n`` by Whittle's likelihood.
+
+    The model density is ``2 Kn^2 |Yn1(j w)|^2 / kn_rate`` (white noise of unit
+    variance at ``kn_rate`` through ``Yn``, one-sided); ``Kn`` is profiled out
+    (its optimum is ``mean(psd / shape)``), ``w_n`` and ``zeta_n`` minimise
+    ``sum log P + psd/P`` over the band (default: the lowest bin to 80% of
+    Nyquist): unbiased for a Welch estimate, where a least-squares fit on log
+    densities is not.
+
+    Parameters
+    ----------
+    n : ndarray
+        The remnant (rad) at ``rate`` (Hz).
+    kn_rate : float
+        The rate (Hz) of the unit-variance white noise ``kn`` refers to.
+    band : tuple of float, optional
+        Frequencies fitted (rad/s).
+    """
+    omega, psd = remnant_spectrum(n, rate)
+    lo, hi = band if band is not None else (omega[0], 0.8 * np.pi * rate)
+    keep = (omega >= lo) & (omega <= hi) & (psd > 0)
+    w, p = omega[keep], psd[keep]
+    if w.size < 4:
+        raise IdentificationError(f"remnant: {w.size} spectral lines in the band, need 4")
+
+    def profiled(x):
+        shape = _unit_density(w, np.exp(x[0]), np.exp(x[1]), kn_rate)
+        kn2 = float(np.mean(p / shape))
+        return float(np.sum(np.log(kn2 * shape))), kn2
+
+    best = None
+    for w0 in (5.0, 12.0, 25.0):
+        for z0 in (0.2, 0.7):
+            res = optimize.minimize(
+                lambda x: profiled(x)[0],
+                np.log([w0, z0]),
+                method="L-BFGS-B",
+                bounds=[(np.log(0.5), np.log(np.pi * rate)), (np.log(0.02), np.log(5.0))],
+            )
+            if best is None or res.fun < best.fun:
+                best = res
+    w_n, zeta_n = (float(v) for v in np.exp(best.x))
+    kn = float(np.sqrt(profiled(best.x)[1]))
+    return RemnantFit(
+        kn, w_n, zeta_n, float(kn_rate), omega, psd, kn**2 * _unit_density(omega, w_n, zeta_n, kn_rate)
+    )

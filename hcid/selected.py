@@ -34,18 +34,23 @@ from hcid import hcfit
 from hcid.arx.response import path_response
 from hcid.arx.simulation import simulate
 from hcid.config import Config, StageConfig, Window
-from hcid.hcmodel import plant
+from hcid.descriptors import RemnantFit, fit_remnant, loop_margins, variance_shares
+from hcid.errors import IdentificationError
+from hcid.hcmodel import plant, true_response
 from hcid.methods import Method, StageChoice, shift_forward
 from hcid.residuals import ResidualAnalysis, analyse_residuals
 from hcid.tables import ORDER_COLUMNS
 
 __all__ = [
     "fit_selected",
+    "LoopDescription",
     "RESIDUAL_CONFIDENCE",
     "RESIDUAL_MAX_LAG",
     "SelectedAnalysis",
     "SelectedModel",
     "analyse_selected",
+    "describe_loop",
+    "true_loop",
     "true_parameters",
 ]
 
@@ -180,6 +185,36 @@ class SelectedAnalysis:
     model: SelectedModel
     fit: hcfit.HCFit | None
     residuals: ResidualAnalysis
+    loop: tuple[LoopDescription, ...] = ()
+
+
+@dataclass(frozen=True)
+class LoopDescription:
+    """The loop a model of the person implies on one record (SPEC 8's descriptors).
+
+    Attributes
+    ----------
+    source : str
+        ``arx`` (the selected ARX model's paths) or ``fitted`` (the parametric fit's).
+    crossover : float
+        Gain-crossover frequency of ``He Yc`` (rad/s); NaN without a crossing.
+    phase_margin : float
+        ``180 + arg(He Yc)`` at the crossover (deg).
+    n_crossovers : int
+        Crossings of ``|He Yc| = 1`` found (the one of smallest margin is reported).
+    shares : dict of str to float
+        ``ft``, ``e`` and ``remnant``: the variance of u through each path, and of
+        what the paths leave (``n = u - u_ft - u_e``), over ``var(u)``.
+    remnant : RemnantFit or None
+        SPEC 1's remnant filter fitted to the spectrum of ``n``.
+    """
+
+    source: str
+    crossover: float
+    phase_margin: float
+    n_crossovers: int
+    shares: dict[str, float]
+    remnant: RemnantFit | None
 
 
 def true_parameters(config: Config, model_name: str) -> dict[str, float]:
@@ -202,18 +237,102 @@ def true_parameters(config: Config, model_name: str) -> dict[str, float]:
     }
 
 
+def true_loop(config: Config, model_name: str) -> tuple[float, float]:
+    """Crossover (rad/s) and phase margin (deg) of a simulated model's true loop ``He Yc`` (SPEC 1)."""
+    model = config.model(model_name)
+    yc = plant(config.loop)
+    margins = loop_margins(lambda w: true_response(model, config.loop, w)[1] * yc(1j * w))
+    return margins.crossover, margins.phase_margin
+
+
+def _span(selected: SelectedModel) -> slice:
+    """The rows of the loop's descriptors: the final stage's estimation start to its windows' end."""
+    est, val = selected.estimation.rows(), selected.validation.rows()
+    return slice(min(est.start, val.start), max(est.stop, val.stop))
+
+
+def _describe(source, he_of_w, band, u, parts, rows, rate, kn_rate, yc) -> LoopDescription:
+    margins = loop_margins(lambda w: he_of_w(w) * yc(1j * w), band)
+    shares = variance_shares(u[rows], {k: x[rows] for k, x in parts.items()})
+    n = u[rows] - sum(x[rows] for x in parts.values())
+    try:
+        remnant = fit_remnant(n, rate, kn_rate) if np.ptp(n) > 0 else None
+    except IdentificationError:  # too few spectral lines in the band
+        remnant = None
+    return LoopDescription(
+        source, margins.crossover, margins.phase_margin, margins.n_crossovers, shares, remnant
+    )
+
+
+def describe_loop(
+    selected: SelectedModel,
+    fit: hcfit.HCFit | None,
+    record: Mapping[str, np.ndarray],
+    yc: control.TransferFunction,
+    kn_rate: float,
+) -> tuple[LoopDescription, ...]:
+    """The loop's descriptors from the selected ARX model and, when fitted, the parametric model.
+
+    Over the rows from the final stage's estimation start to its windows' end:
+    u split into the target path's part, the error path's part (each simulated
+    from rest from the measured ft and e) and the rest, the remnant, whose
+    spectrum is fitted with SPEC 1's filter (``kn`` for unit white noise at
+    ``kn_rate`` Hz). Crossover and phase margin of ``He Yc``: the ARX model's up to
+    its Nyquist frequency, the parametric model's (with its continuous delay)
+    up to 1000 rad/s.
+    """
+    rate = selected.rate
+    rows = _span(selected)
+    ft, e, u = (np.asarray(record[k], dtype=np.float64) for k in ("ft", "e", "u"))
+    zeros = np.zeros_like(ft)
+    arx = _describe(
+        "arx",
+        lambda w: selected.frequency_response(w)["e"],
+        (1e-2, 0.999 * np.pi * rate),
+        u,
+        {"ft": selected.simulate(ft, zeros), "e": selected.simulate(zeros, e)},
+        rows,
+        rate,
+        kn_rate,
+        yc,
+    )
+    if fit is None:
+        return (arx,)
+    tracking = hcfit.TrackingRecord(ft, e, u, rate, rows, rows)
+    values = fit.values
+    feedback = {k: values[k] for k in hcfit.FEEDBACK_PARAMETERS}
+    u_e = hcfit.simulate_hc(feedback, yc, tracking)
+    parts = {"ft": hcfit.simulate_hc(values, yc, tracking) - u_e, "e": u_e}
+    fitted = _describe(
+        "fitted",
+        lambda w: hcfit.hc_response(values, yc, w)[1],
+        (1e-2, 1e3),
+        u,
+        parts,
+        rows,
+        rate,
+        kn_rate,
+        yc,
+    )
+    return arx, fitted
+
+
 def fit_selected(
     selected: SelectedModel,
     record: Mapping[str, np.ndarray],
     yc: control.TransferFunction,
     settings: hcfit.FitSettings,
+    disturbance_at: str = "output",
 ) -> hcfit.HCFit | None:
     """Fit the parametric HC model (SPEC 8) to a selected model and its record.
 
     The ``frequency`` target fits both paths of ``selected`` (target shift undone)
     on the log grid of ``settings.band``; the ``time`` target fits the record's u
-    from its unshifted ft and e over ``selected``'s estimation window. The
-    feedforward parameters are fitted exactly when ``selected.nb_ft > 0``.
+    from its unshifted ft and e over ``selected``'s estimation window; the
+    ``closed_loop`` target fits u of the model in closed loop with ``yc``
+    (disturbance at the plant's ``disturbance_at``), driven by the record's ft and
+    fd, over the same window. The feedforward parameters are fitted exactly
+    when ``selected.nb_ft > 0``.
 
     Returns
     -------
@@ -227,14 +346,22 @@ def fit_selected(
         selected.rate,
         selected.estimation.rows(),
         selected.validation.rows(),
+        fd=record["fd"],
     )
-    if settings.target != "time" and selected.nb_e == 0:
+    if settings.target == "frequency" and selected.nb_e == 0:
         return None
     omega = hcfit.band_grid(settings.band, settings.points)
     paths = selected.frequency_response(omega)
     hft = paths["ft"] if selected.has_feedforward else None
     return hcfit.fit_hc(
-        settings, yc, selected.has_feedforward, record=tracking, omega=omega, he=paths["e"], hft=hft
+        settings,
+        yc,
+        selected.has_feedforward,
+        record=tracking,
+        omega=omega,
+        he=paths["e"],
+        hft=hft,
+        disturbance_at=disturbance_at,
     )
 
 
@@ -268,7 +395,7 @@ def analyse_selected(
     """
     rate = config.timing.output_rate
     validation = config.identify.stage(method.final_stage.name).validation.rows()
-    fit = fit_selected(selected, record, plant(config.loop), config.fit_hc)
+    fit = fit_selected(selected, record, plant(config.loop), config.fit_hc, config.loop.disturbance_at)
     shift = config.identify.shift_samples(rate)
     i1, i2, o = method.final_signals(record, config.identify, shift, choices)
     o_hat = simulate(selected.a, selected.b_ft, selected.b_e, selected.nk_ft, selected.nk_e, i1, i2)
@@ -283,4 +410,5 @@ def analyse_selected(
         rate=rate,
         confidence=RESIDUAL_CONFIDENCE,
     )
-    return SelectedAnalysis(model=selected, fit=fit, residuals=residuals)
+    loop = describe_loop(selected, fit, record, plant(config.loop), config.timing.sim_rate)
+    return SelectedAnalysis(model=selected, fit=fit, residuals=residuals, loop=loop)

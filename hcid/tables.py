@@ -30,6 +30,10 @@ file                            one row per                                    w
 ``calibration.parquet``         method and W of the grid                       ``hcid calibrate-w``
 ``hc_parameters.parquet``       record, method, W and HC parameter             ``hcid fit-hc``
 ``residuals.parquet``           record, method, W, residual series and lag     ``hcid fit-hc``
+``hc_loop.parquet``             record, method, W and source (ARX or fitted    ``hcid fit-hc``
+                                model): crossover, phase margin, variance
+                                split of u, the remnant's fitted filter
+``remnant_spectrum.parquet``    record, method, W, source and frequency        ``hcid fit-hc``
 ``run_log.parquet``             stage run (wall seconds)                       every computing stage
 ==============================  =============================================  ==========================
 """
@@ -46,11 +50,13 @@ __all__ = [
     "CALIBRATION",
     "FRONTIER",
     "HANDOFF",
+    "HC_LOOP",
     "HC_PARAMETERS",
     "IDENTIFY_LOG",
     "MEASURED",
     "ORDER_COLUMNS",
     "RATES",
+    "REMNANT_SPECTRUM",
     "RESIDUALS",
     "RUN_LOG",
     "SELECTED_COLUMNS",
@@ -293,16 +299,44 @@ _ANALYSIS_KEY = ("model", "seed", "method", "w")
 #: ``w_source`` says where W came from (W_BIC, calibrated, --w); ``settings`` is a
 #: digest of the fit settings the row was made with; ``status`` is ``fitted`` or why
 #: not; ``true_value`` is the simulated model's (NaN for measured data or an
-#: undefined parameter); ``at_bound`` flags an estimate on its bound; ``cost`` and
-#: ``vaf_validation`` (%, the parametric model on the validation rows) repeat per row.
+#: undefined parameter); ``at_bound`` flags an estimate on its bound; ``se`` is its
+#: standard error and ``ci_low``, ``ci_high`` the 95% interval ``estimate +- 1.96 se``
+#: (NaN on a bound), computed as ``covariance`` says (sandwich or gauss_newton); ``cost``
+#: and ``vaf_validation`` (%, the parametric model on the validation rows) repeat per row.
 HC_PARAMETERS = _schema(
     "hc_parameters.parquet",
     [("model", _STR), ("seed", _INT), ("method", _STR), ("w", _F64), ("w_source", _STR)]
     + _SELECTED_MODEL_FIELDS
     + [("target", _STR), ("settings", _STR), ("status", _STR), ("parameter", _STR), ("unit", _STR)]
-    + [("estimate", _F64), ("true_value", _F64), ("lower", _F64), ("upper", _F64), ("at_bound", _BOOL)]
+    + [("estimate", _F64), ("se", _F64), ("ci_low", _F64), ("ci_high", _F64), ("covariance", _STR)]
+    + [("true_value", _F64), ("lower", _F64), ("upper", _F64), ("at_bound", _BOOL)]
     + [("cost", _F64), ("vaf_validation", _F64), ("starts", _INT)],
     (*_ANALYSIS_KEY, "parameter"),
+)
+#: ``hc_loop.parquet`` (``hcid fit-hc``): one row per record, method, W and ``source``
+#: (``arx``: the selected ARX model; ``fitted``: the parametric fit): crossover
+#: (rad/s) and phase margin (deg) of ``He Yc``, the shares of var(u) through the
+#: target path, the error path and the remnant (``share_remnant``, the remnant
+#: ratio), and SPEC 1's remnant filter fitted to the remnant's spectrum
+#: (``remnant_kn`` for unit white noise at ``kn_rate`` Hz). ``true_*`` are the
+#: simulated model's loop (NaN for measured data).
+HC_LOOP = _schema(
+    "hc_loop.parquet",
+    [("model", _STR), ("seed", _INT), ("method", _STR), ("w", _F64), ("w_source", _STR)]
+    + _SELECTED_MODEL_FIELDS
+    + [("source", _STR), ("crossover", _F64), ("phase_margin", _F64), ("n_crossovers", _INT)]
+    + [("true_crossover", _F64), ("true_phase_margin", _F64)]
+    + [("share_ft", _F64), ("share_e", _F64), ("share_remnant", _F64)]
+    + [("remnant_kn", _F64), ("remnant_w_n", _F64), ("remnant_zeta_n", _F64), ("kn_rate", _F64)],
+    (*_ANALYSIS_KEY, "source"),
+)
+#: ``remnant_spectrum.parquet`` (``hcid fit-hc``): the remnant's Welch density (one-sided,
+#: rad^2/Hz) and the fitted filter's, per record, method, W, source and frequency (rad/s).
+REMNANT_SPECTRUM = _schema(
+    "remnant_spectrum.parquet",
+    [("model", _STR), ("seed", _INT), ("method", _STR), ("w", _F64), ("source", _STR)]
+    + [("omega", _F64), ("psd", _F64), ("psd_fit", _F64)],
+    (*_ANALYSIS_KEY, "source", "omega"),
 )
 #: ``residuals.parquet`` (``hcid fit-hc``): one row per record, method, W, series and lag:
 #: the selected model's simulation-residual autocorrelation (``signal`` eps) and its

@@ -82,6 +82,51 @@ def test_tables_hold_one_row_per_record_method_w_and_parameter(fitted):
     assert "fitted 8 record-methods, reused 0" in output
 
 
+def test_estimates_carry_standard_errors_and_the_loop_is_described(fitted):
+    # Sources: the 95% interval is estimate +- 1.96 se (hc_parameters' definition); the true
+    # loop's crossover and phase margin are SPEC 1's FB/FF feedback loop with the paper's plant,
+    # 1.9277 rad/s and 49.29 deg (tests/test_descriptors.py checks them against control.margin).
+    _, out = fitted
+    run, output = out[1]
+    params = pq.read_table(run / tables.HC_PARAMETERS.file).to_pylist()
+    assert {r["target"] for r in params} == {"time"}  # the default (docs/parametric-fit.md)
+    assert {r["covariance"] for r in params} == {"sandwich"}
+    free = [r for r in params if not r["at_bound"]]
+    assert free and all(r["se"] > 0 for r in free)
+    for r in free:
+        assert r["ci_low"] == pytest.approx(r["estimate"] - 1.959963984540054 * r["se"], rel=1e-12)
+        assert r["ci_high"] == pytest.approx(r["estimate"] + 1.959963984540054 * r["se"], rel=1e-12)
+    loop = pq.read_table(run / tables.HC_LOOP.file)
+    assert tables.HC_LOOP.problem(loop) is None
+    rows = loop.to_pylist()
+    assert len(rows) == 8 * 2  # an arx and a fitted row per record, method and W
+    assert {r["source"] for r in rows} == {"arx", "fitted"}
+    for r in rows:
+        assert r["true_crossover"] == pytest.approx(1.9277, abs=1e-4)
+        assert r["true_phase_margin"] == pytest.approx(49.29, abs=0.01)
+        # A fitted or selected model of this loop crosses over within 20% of it.
+        assert r["crossover"] == pytest.approx(r["true_crossover"], rel=0.2)
+        assert 0 < r["share_remnant"] < 0.1  # var(n)/var(u): 0.027 in this task (0.157 disturbance-only)
+        assert r["kn_rate"] == 100.0
+    spectrum = pq.read_table(run / tables.REMNANT_SPECTRUM.file)
+    assert tables.REMNANT_SPECTRUM.problem(spectrum) is None
+    assert spectrum.num_rows > 0
+    assert "wc rad/s" in output and "95% interval" in output
+
+
+def test_a_bad_target_is_one_line_and_writes_nothing(fitted, tmp_path):
+    config, out = fitted
+    run = tmp_path / "run"
+    shutil.copytree(out[1][0], run)
+    before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    result = runner.invoke(app, ["fit-hc", str(config), "--run", str(run), "--target", "ml", "--quiet"])
+    assert result.exit_code == 2
+    assert result.stderr.strip().splitlines() == [
+        "hcid: error: --target: must be one of time, closed_loop, frequency, got 'ml'"
+    ]
+    assert {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()} == before
+
+
 @pytest.mark.parametrize("name", [tables.HC_PARAMETERS.file, tables.RESIDUALS.file])
 def test_tables_identical_for_jobs_1_and_2(fitted, name):
     _, out = fitted
@@ -151,7 +196,7 @@ def test_a_fit_on_a_bound_is_flagged_in_the_table(fitted, tmp_path):
         ({"bounds": {"TL": [2, 1]}}, "fit_hc.bounds.TL: lower 2 above upper 1"),
         ({"bounds": {"w_nms": [0, 10]}}, "fit_hc.bounds.w_nms: lower must be > 0 rad/s, got 0"),
         ({"start_ranges": {"Kpe": [0.001, 1]}}, "fit_hc.start_ranges.Kpe: [0.001, 1] outside the bounds"),
-        ({"target": "both"}, "fit_hc.target: must be one of frequency, time"),
+        ({"target": "both"}, "fit_hc.target: must be one of time, closed_loop, frequency"),
     ],
 )
 def test_bad_bounds_give_one_line_and_exit_2(ci_raw, tmp_path, fit_hc, message):

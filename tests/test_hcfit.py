@@ -229,14 +229,15 @@ def test_same_inputs_and_seed_give_identical_results(paper_config, loop_plant, n
 def test_fit_hc_dispatches_on_the_target(paper_config, loop_plant, noise_free):
     omega = hcfit.band_grid(BAND)
     _, he = true_response(paper_config.model("FB"), paper_config.loop, omega)
-    settings = hcfit.FitSettings()
+    settings = hcfit.FitSettings(target="frequency")
     assert hcfit.fit_hc(settings, loop_plant, False, omega=omega, he=he) == hcfit.fit_frequency(
         omega, he, None, loop_plant, settings
     )
     with pytest.raises(IdentificationError, match="hft exactly when feedforward"):
         hcfit.fit_hc(settings, loop_plant, True, omega=omega, he=he)
-    with pytest.raises(IdentificationError, match="record"):
-        hcfit.fit_hc(dataclasses.replace(settings, target="time"), loop_plant, False)
+    for target in ("time", "closed_loop"):
+        with pytest.raises(IdentificationError, match="record"):
+            hcfit.fit_hc(dataclasses.replace(settings, target=target), loop_plant, False)
 
 
 def test_bad_inputs_are_refused(loop_plant):
@@ -302,7 +303,10 @@ def test_parse_defaults_and_values():
         ({"bounds": {"w_nms": [0, 10]}}, "fit_hc.bounds.w_nms: lower must be > 0 rad/s, got 0"),
         ({"bounds": {"tau_pe": [-0.1, 1]}}, "fit_hc.bounds.tau_pe: lower must be >= 0 s, got -0.1"),
         ({"bounds": {"TL": "wide"}}, "fit_hc.bounds.TL: must be two finite numbers"),
-        ({"target": "both"}, "fit_hc.target: must be one of frequency, time, got 'both'"),
+        ({"target": "both"}, "fit_hc.target: must be one of time, closed_loop, frequency, got 'both'"),
+        ({"covariance": "hac"}, "fit_hc.covariance: must be one of sandwich, gauss_newton, got 'hac'"),
+        ({"lag": -1}, r"fit_hc.lag: must be a number of seconds in \[0, 60\], got -1"),
+        ({"lag": "2 s"}, r"fit_hc.lag: must be a number of seconds in \[0, 60\], got '2 s'"),
         ({"starts": -1}, r"fit_hc.starts: must be an integer in \[0, 100\], got -1"),
         ({"band": [20, 1]}, "fit_hc.band: must be"),
     ],

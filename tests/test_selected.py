@@ -70,7 +70,10 @@ def test_no_feedback_path_is_not_fitted_by_the_frequency_target(fast_config, pap
     # He = 0 cannot be fitted by a relative error (SPEC 8 divides by |H_arx|): fit is None,
     # while the residuals are still analysed.
     sel = _selected([1.0, -0.5], [0.05], [], 25, 0)
-    result = analyse_selected(sel, paper_record, fast_config, methods.get("direct"))
+    config = dataclasses.replace(
+        fast_config, fit_hc=dataclasses.replace(fast_config.fit_hc, target="frequency")
+    )
+    result = analyse_selected(sel, paper_record, config, methods.get("direct"))
     assert result.fit is None
     assert result.residuals.n == 960
 

@@ -19,6 +19,7 @@ __all__ = [
     "FEEDBACK_PARAMETERS",
     "FEEDFORWARD_PARAMETERS",
     "PARAMETERS",
+    "COVARIANCES",
     "TARGETS",
     "UNITS",
     "FitSettings",
@@ -40,7 +41,9 @@ UNITS = {
     "TI": "s",
     "tau_pt": "s",
 }
-TARGETS = ("frequency", "time")
+TARGETS = ("time", "closed_loop", "frequency")
+#: How the estimates' standard errors are computed (:mod:`hcid.hcfit.uncertainty`).
+COVARIANCES = ("sandwich", "gauss_newton")
 
 # Physical limits that no bound may cross: a negative feedback delay is not
 # causal, and w_nms, zeta_nms and TI must be positive for the paths to be
@@ -127,7 +130,8 @@ class FitSettings:
     Attributes
     ----------
     target : str
-        ``frequency`` (default) or ``time`` (:data:`TARGETS`).
+        ``time`` (the default: lowest RMSE, docs/parametric-fit.md), ``closed_loop``
+        or ``frequency`` (:data:`TARGETS`).
     starts : int
         Random local starts besides the global-stage result (>= 0).
     seed : int
@@ -145,11 +149,18 @@ class FitSettings:
     popsize, maxiter : int
         ``scipy.optimize.differential_evolution`` population multiplier and
         generations of the global stage.
+    covariance : str
+        Standard errors of the time-domain targets: ``sandwich`` (default, a
+        Bartlett lag window of ``lag`` seconds: right for coloured residuals)
+        or ``gauss_newton`` (right for white ones only). The frequency target's
+        are always Gauss-Newton.
+    lag : float
+        The sandwich's lag window (s).
     bounds : tuple of ParameterBounds
         One per parameter of :data:`PARAMETERS`, in that order.
     """
 
-    target: str = "frequency"
+    target: str = "time"
     starts: int = 4
     seed: int = 0
     band: tuple[float, float] | None = None
@@ -158,6 +169,8 @@ class FitSettings:
     popsize: int = 8
     maxiter: int = 30
     bounds: tuple[ParameterBounds, ...] = field(default=DEFAULT_BOUNDS)
+    covariance: str = "sandwich"
+    lag: float = 2.0
 
     def __post_init__(self) -> None:
         if self.target not in TARGETS:
@@ -168,6 +181,11 @@ class FitSettings:
         integer(self.oversample, "oversample", 1, 64)
         integer(self.popsize, "popsize", 2, 200)
         integer(self.maxiter, "maxiter", 1, 10_000)
+        if self.covariance not in COVARIANCES:
+            raise ConfigError(
+                f"covariance: must be one of {', '.join(COVARIANCES)}, got {fmt(self.covariance)}"
+            )
+        _lag_check(self.lag, "lag")
         if self.band is not None:
             lo, hi = self.band
             if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi):
@@ -179,6 +197,12 @@ class FitSettings:
     def bound(self, name: str) -> ParameterBounds:
         """The bounds of parameter ``name``."""
         return self.bounds[PARAMETERS.index(name)]
+
+
+def _lag_check(value, key: str) -> None:
+    ok = isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+    if not ok or not 0 <= value <= 60:
+        raise ConfigError(f"{key}: must be a number of seconds in [0, 60], got {fmt(value)}")
 
 
 def _pair(section: Section, name: str, default: tuple[float, float] | None) -> tuple[float, float] | None:
@@ -204,7 +228,7 @@ def parse_fit_settings(
     ----------
     data : dict or None
         E.g. ``{target: frequency, starts: 4, seed: 0, band: [0.23, 17.33],
-        points: 50, oversample: 4, popsize: 8, maxiter: 30,
+        points: 50, oversample: 4, popsize: 8, maxiter: 30, covariance: sandwich, lag: 2.0,
         bounds: {Kpe: [0.01, 50], ...}, start_ranges: {Kpe: [0.1, 5], ...}}``;
         every key optional, None gives the defaults. A parameter given bounds
         but no starting range starts from its default range clipped to the new
@@ -233,6 +257,13 @@ def parse_fit_settings(
     oversample = s.integer("oversample", 1, 64, defaults.oversample)
     popsize = s.integer("popsize", 2, 200, defaults.popsize)
     maxiter = s.integer("maxiter", 1, 10_000, defaults.maxiter)
+    covariance = s.get("covariance", defaults.covariance)
+    if covariance not in COVARIANCES:
+        raise ConfigError(
+            f"{s.key('covariance')}: must be one of {', '.join(COVARIANCES)}, got {fmt(covariance)}"
+        )
+    lag = s.get("lag", defaults.lag)
+    _lag_check(lag, s.key("lag"))
     band = _pair(s, "band", default_band)
     if band is not None and not 0 < band[0] < band[1]:
         raise ConfigError(f"{s.key('band')}: must be [lo, hi] rad/s with 0 < lo < hi, got {list(band)}")
@@ -262,6 +293,8 @@ def parse_fit_settings(
         popsize=popsize,
         maxiter=maxiter,
         bounds=tuple(bounds),
+        covariance=covariance,
+        lag=float(lag),
     )
 
 

@@ -1,4 +1,5 @@
-"""Fitting the parametric HC model: the frequency and time targets and the optimiser."""
+"""Fitting the parametric HC model: the frequency, time and closed-loop targets, the optimiser
+and the estimates' standard errors."""
 
 from __future__ import annotations
 
@@ -13,9 +14,11 @@ from scipy import optimize
 
 from hcid.config.fit import UNITS, FitSettings
 from hcid.errors import DataError, IdentificationError
+from hcid.hcfit.closed_loop import _ClosedLoop
 from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials, _responses, _Simulator, simulate_hc
+from hcid.hcfit.uncertainty import Z95, covariance, jacobian
 
-__all__ = ["BOUND_TOLERANCE", "HCFit", "fit_frequency", "fit_hc", "fit_time"]
+__all__ = ["BOUND_TOLERANCE", "HCFit", "fit_closed_loop", "fit_frequency", "fit_hc", "fit_time"]
 
 #: A parameter is flagged ``at_bound`` when it lies within this share of its
 #: bound width of a bound (the local stage lands within ~1e-9 of an active one).
@@ -29,7 +32,7 @@ class HCFit:
     Attributes
     ----------
     target : str
-        ``frequency`` or ``time``.
+        ``frequency``, ``time`` or ``closed_loop``.
     names : tuple of str
         Fitted parameters: :data:`FEEDBACK_PARAMETERS`, then
         :data:`FEEDFORWARD_PARAMETERS` if the model has a feedforward path.
@@ -49,6 +52,14 @@ class HCFit:
     vaf_validation : float
         ``(1 - sum (u - u_par)^2 / sum u^2) * 100`` (%) over the validation
         rows; NaN when no record was given to a frequency fit.
+    se : tuple of float
+        Standard error of each estimate, in its unit (:mod:`hcid.hcfit.uncertainty`);
+        NaN for a parameter on a bound or an ill-conditioned Jacobian.
+    covariance : str
+        How ``se`` was computed: ``sandwich`` (lag window of ``lag`` samples) or
+        ``gauss_newton``.
+    lag : int
+        The sandwich's lag window (samples; 0 for Gauss-Newton).
     """
 
     target: str
@@ -59,6 +70,18 @@ class HCFit:
     starts: int
     start_costs: tuple[float, ...]
     vaf_validation: float
+    se: tuple[float, ...] = ()
+    covariance: str = "gauss_newton"
+    lag: int = 0
+
+    def __post_init__(self) -> None:
+        if not self.se:
+            object.__setattr__(self, "se", tuple(math.nan for _ in self.names))
+
+    def interval(self, name: str) -> tuple[float, float]:
+        """The 95% interval ``estimate +- 1.96 se`` of parameter ``name`` (NaN without an se)."""
+        i = self.names.index(name)
+        return self.estimates[i] - Z95 * self.se[i], self.estimates[i] + Z95 * self.se[i]
 
     @property
     def values(self) -> dict[str, float]:
@@ -70,20 +93,24 @@ class HCFit:
         return "Kpt" in self.names
 
     def rows(self) -> list[dict[str, Any]]:
-        """One dict per parameter: parameter, estimate, unit, at_bound, cost, vaf_validation,
-        target, starts."""
+        """One dict per parameter: parameter, estimate, se, ci_low, ci_high, unit, at_bound,
+        cost, vaf_validation, target, covariance, starts."""
         return [
             {
                 "parameter": name,
                 "estimate": value,
+                "se": se,
+                "ci_low": self.interval(name)[0],
+                "ci_high": self.interval(name)[1],
                 "unit": UNITS[name],
                 "at_bound": hit,
                 "cost": self.cost,
                 "vaf_validation": self.vaf_validation,
                 "target": self.target,
+                "covariance": self.covariance,
                 "starts": self.starts,
             }
-            for name, value, hit in zip(self.names, self.estimates, self.at_bound, strict=True)
+            for name, value, se, hit in zip(self.names, self.estimates, self.se, self.at_bound, strict=True)
         ]
 
     def to_arrow(self) -> pa.Table:
@@ -142,6 +169,45 @@ class _TimeProblem:
         return np.array([np.sum(self.residuals(thetas[:, i]) ** 2) for i in range(thetas.shape[1])])
 
 
+class _ClosedLoopProblem:
+    def __init__(self, record: TrackingRecord, plant, feedforward: bool, disturbance_at: str):
+        self.plant = plant
+        self.loop = _ClosedLoop(record, plant, feedforward, disturbance_at)
+        self.names = self.loop.names
+        self.u = record.u[record.estimation][:, None]
+        self.rows = record.estimation
+
+    def _errors(self, thetas: np.ndarray) -> np.ndarray:
+        return self.loop.u(thetas)[self.rows] - self.u
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        r = self._errors(x[:, None])[:, 0]
+        # An unstable loop (never at the bounds' interior optimum) gets a large finite cost.
+        return np.where(np.isfinite(r), r, 1e6)
+
+    def costs(self, thetas: np.ndarray) -> np.ndarray:
+        c = np.sum(self._errors(thetas) ** 2, axis=0)
+        return np.where(np.isfinite(c), c, np.inf)
+
+
+def _uncertainty(problem, x, lower, upper, at_bound, settings: FitSettings, rate: float | None):
+    """``(se, kind, lag)`` at the optimum ``x`` (see :mod:`hcid.hcfit.uncertainty`)."""
+    free = ~np.asarray(at_bound)
+    r = problem.residuals(x)
+    jac = jacobian(problem.residuals, x, lower, upper, free)
+    if rate is None:  # frequency target: residuals on a frequency grid, no time lag
+        kind, lag = "gauss_newton", 0
+    else:
+        kind = settings.covariance
+        lag = round(settings.lag * rate) if kind == "sandwich" else 0
+    with np.errstate(invalid="ignore"):
+        cov = covariance(kind, jac, r, lag)
+        se_free = np.sqrt(np.diag(cov))
+    se = np.full(x.size, np.nan)
+    se[free] = np.where(np.isfinite(se_free), se_free, np.nan)
+    return tuple(float(v) for v in se), kind, lag
+
+
 def _solve(problem, settings: FitSettings, target: str, record: TrackingRecord | None) -> HCFit:
     bounds = [settings.bound(n) for n in problem.names]
     lower = np.array([b.lower for b in bounds])
@@ -191,6 +257,9 @@ def _solve(problem, settings: FitSettings, target: str, record: TrackingRecord |
         for v, lo, hi, w in zip(x, lower, upper, width, strict=True)
     )
     values = dict(zip(problem.names, (float(v) for v in x), strict=True))
+    se, kind, lag = _uncertainty(
+        problem, x, lower, upper, at_bound, settings, None if target == "frequency" else record.rate
+    )
     vaf = math.nan
     if record is not None:
         u_par = simulate_hc(values, problem.plant, record, settings.oversample)
@@ -205,6 +274,9 @@ def _solve(problem, settings: FitSettings, target: str, record: TrackingRecord |
         starts=len(costs),
         start_costs=tuple(costs),
         vaf_validation=vaf,
+        se=se,
+        covariance=kind,
+        lag=lag,
     )
 
 
@@ -307,6 +379,47 @@ def fit_time(
     return _solve(problem, settings, "time", record)
 
 
+def fit_closed_loop(
+    record: TrackingRecord,
+    plant: control.TransferFunction,
+    feedforward: bool,
+    settings: FitSettings = FitSettings(),  # noqa: B008 (frozen)
+    disturbance_at: str = "output",
+) -> HCFit:
+    """Fit the parametric model in closed loop with the plant to the measured u.
+
+    Minimises ``sum (u - u_cl)^2`` over ``record.estimation``, with ``u_cl`` the
+    loop's output driven by the record's ft and fd (:func:`closed_loop_u`):
+    the remnant cannot reach these inputs, so it adds spread but no bias.
+
+    Parameters
+    ----------
+    record : TrackingRecord
+        Measured ft (unshifted), fd, u (rad) at ``record.rate`` (Hz), with the
+        estimation and validation rows; ``record.fd`` must be given.
+    plant : control.TransferFunction
+        ``Yc``.
+    feedforward : bool
+        Whether the selected model has a feedforward path (``nb_ft > 0``).
+    settings : FitSettings
+        ``target`` is not read.
+    disturbance_at : str
+        Where fd enters the loop: ``output`` (the paper) or ``input`` (SPEC 7).
+
+    Returns
+    -------
+    HCFit
+    """
+    if not isinstance(record, TrackingRecord):
+        raise IdentificationError(f"record: must be a TrackingRecord, got {type(record).__name__}")
+    if record.fd is None:
+        raise IdentificationError("record: the closed-loop target needs the record's fd")
+    if disturbance_at not in ("output", "input"):
+        raise IdentificationError(f"disturbance_at: must be output or input, got {disturbance_at!r}")
+    problem = _ClosedLoopProblem(record, plant, bool(feedforward), disturbance_at)
+    return _solve(problem, settings, "closed_loop", record)
+
+
 def fit_hc(
     settings: FitSettings,
     plant: control.TransferFunction,
@@ -316,13 +429,20 @@ def fit_hc(
     omega: np.ndarray | None = None,
     he: np.ndarray | None = None,
     hft: np.ndarray | None = None,
+    disturbance_at: str = "output",
 ) -> HCFit:
-    """Fit by ``settings.target``: :func:`fit_frequency` or :func:`fit_time`.
+    """Fit by ``settings.target``: :func:`fit_frequency`, :func:`fit_time` or
+    :func:`fit_closed_loop`.
 
     The frequency target needs ``omega`` and ``he`` (and ``hft`` exactly when
-    ``feedforward``); the time target needs ``record``, which the frequency
-    target uses for its validation VAF when given.
+    ``feedforward``); the time and closed-loop targets need ``record`` (the
+    closed-loop one with its fd), which the frequency target uses for its
+    validation VAF when given.
     """
+    if settings.target == "closed_loop":
+        if record is None:
+            raise IdentificationError("record: the closed-loop target needs the measured ft, fd and u")
+        return fit_closed_loop(record, plant, feedforward, settings, disturbance_at)
     if settings.target == "time":
         if record is None:
             raise IdentificationError("record: the time target needs the measured ft, e and u")

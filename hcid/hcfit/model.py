@@ -43,6 +43,8 @@ class TrackingRecord:
     estimation, validation : slice
         Rows of the time-domain cost and of the VAF (Python slices,
         e.g. ``slice(128, 1088)`` and ``slice(1088, 2048)``).
+    fd : ndarray, shape (N,), or None
+        Disturbance (rad); the closed-loop target needs it.
     """
 
     ft: np.ndarray
@@ -51,12 +53,15 @@ class TrackingRecord:
     rate: float
     estimation: slice
     validation: slice
+    fd: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         ft = _signal("ft", self.ft)
         object.__setattr__(self, "ft", ft)
         object.__setattr__(self, "e", _signal("e", self.e, ft.size))
         object.__setattr__(self, "u", _signal("u", self.u, ft.size))
+        if self.fd is not None:
+            object.__setattr__(self, "fd", _signal("fd", self.fd, ft.size))
         if isinstance(self.rate, bool) or not isinstance(self.rate, numbers.Real):
             raise DataError(f"rate: must be a positive number of Hz, got {self.rate!r}")
         if not (math.isfinite(self.rate) and self.rate > 0):

@@ -4,8 +4,8 @@ For every record (simulated realization or measured run) and method in
 ``frontier.parquet``, the model selected at each requested W is analysed by
 :func:`hcid.selected.analyse_selected` on the worker pool
 (:func:`~hcid.pipeline.parallel.parallel_map`), one task per record and method.
-Writes ``hc_parameters.parquet`` and ``residuals.parquet``
-(:data:`hcid.tables.HC_PARAMETERS`, :data:`hcid.tables.RESIDUALS`).
+Writes ``hc_parameters.parquet``, ``residuals.parquet``, ``hc_loop.parquet`` and
+``remnant_spectrum.parquet`` (:data:`OUTPUTS`).
 
 Resumable: each finished task is kept in ``RUN/.parts/fit_hc/<settings>/``
 until the tables are written; rows already in the tables (or parts) are reused
@@ -34,7 +34,7 @@ import pyarrow.compute  # noqa: F401  (pa.compute)
 from hcid import criteria, methods, results, selection, tables
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError, HcidError
-from hcid.hcfit import FEEDBACK_PARAMETERS, UNITS, parse_fit_settings
+from hcid.hcfit import FEEDBACK_PARAMETERS, TARGETS, UNITS, parse_fit_settings
 from hcid.pipeline.parallel import parallel_map
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
 from hcid.selected import (
@@ -42,13 +42,21 @@ from hcid.selected import (
     RESIDUAL_MAX_LAG,
     SelectedModel,
     analyse_selected,
+    true_loop,
     true_parameters,
 )
 
-__all__ = ["HCFitRun", "fit_hc_study", "requested_w"]
+__all__ = ["OUTPUTS", "HCFitRun", "fit_hc_study", "requested_w"]
 
 PARTS = Path(".parts") / "fit_hc"
 _KEY = ("model", "seed", "method", "w")
+#: The stage's tables, each under its name in the parts folder.
+OUTPUTS = {
+    "parameters": tables.HC_PARAMETERS,
+    "residuals": tables.RESIDUALS,
+    "loop": tables.HC_LOOP,
+    "spectrum": tables.REMNANT_SPECTRUM,
+}
 
 
 @dataclass(frozen=True)
@@ -61,6 +69,7 @@ class HCFitRun:
 
     parameters: pa.Table
     residuals: pa.Table
+    loop: pa.Table
     w_of: dict[str, list[tuple[float, str]]]
     computed: int
     reused: int
@@ -102,7 +111,7 @@ def requested_w(
 
 
 def _settings_digest(config: Config) -> str:
-    text = repr((config.fit_hc, RESIDUAL_MAX_LAG, RESIDUAL_CONFIDENCE))
+    text = repr((config.fit_hc, RESIDUAL_MAX_LAG, RESIDUAL_CONFIDENCE, config.timing.sim_rate))
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
@@ -189,44 +198,95 @@ def _base(key, w_source: str, sel: SelectedModel) -> dict:
     }
 
 
+def _parameter_rows(base: dict, fit, settings, truths: dict) -> list[dict]:
+    if fit is None:
+        fitted = [(n, math.nan, math.nan, (math.nan, math.nan), False) for n in FEEDBACK_PARAMETERS]
+        cost = vaf = math.nan
+        starts, status, covariance = 0, "no feedback path (nb_e = 0)", ""
+    else:
+        fitted = [
+            (n, v, se, fit.interval(n), hit)
+            for n, v, se, hit in zip(fit.names, fit.estimates, fit.se, fit.at_bound, strict=True)
+        ]
+        cost, vaf, starts, status, covariance = (
+            fit.cost,
+            fit.vaf_validation,
+            fit.starts,
+            "fitted",
+            fit.covariance,
+        )
+    rows = []
+    for name, estimate, se, (low, high), hit in fitted:
+        bound = settings.bound(name)
+        rows.append(
+            {
+                **base,
+                "status": status,
+                "parameter": name,
+                "unit": UNITS[name],
+                "estimate": estimate,
+                "se": se,
+                "ci_low": low,
+                "ci_high": high,
+                "covariance": covariance,
+                "true_value": truths.get(name, math.nan),
+                "lower": bound.lower,
+                "upper": bound.upper,
+                "at_bound": hit,
+                "cost": cost,
+                "vaf_validation": vaf,
+                "starts": starts,
+            }
+        )
+    return rows
+
+
+def _loop_rows(base: dict, loop, true_margins: tuple[float, float]) -> tuple[list[dict], list[dict]]:
+    rows, spectrum = [], []
+    for d in loop:
+        r = d.remnant
+        rows.append(
+            {
+                **base,
+                "source": d.source,
+                "crossover": d.crossover,
+                "phase_margin": d.phase_margin,
+                "n_crossovers": d.n_crossovers,
+                "true_crossover": true_margins[0],
+                "true_phase_margin": true_margins[1],
+                "share_ft": d.shares["ft"],
+                "share_e": d.shares["e"],
+                "share_remnant": d.shares["remnant"],
+                "remnant_kn": math.nan if r is None else r.kn,
+                "remnant_w_n": math.nan if r is None else r.w_n,
+                "remnant_zeta_n": math.nan if r is None else r.zeta_n,
+                "kn_rate": math.nan if r is None else r.kn_rate,
+            }
+        )
+        if r is not None:
+            key = {k: base[k] for k in _KEY}
+            spectrum += [
+                {**key, "source": d.source, "omega": float(o), "psd": float(p), "psd_fit": float(q)}
+                for o, p, q in zip(r.omega, r.psd, r.psd_fit, strict=True)
+            ]
+    return rows, spectrum
+
+
 def _fit_task(config, key, record, selected, sources, choices, truths, digest):
     method = methods.get(key[2])
     settings = config.fit_hc
-    parameter_rows, residual_rows = [], []
+    out = {name: [] for name in OUTPUTS}
+    true_margins = truths.get("_loop", (math.nan, math.nan))
     for sel, source in zip(selected, sources, strict=True):
         analysis = analyse_selected(sel, record, config, method, choices)
-        base = {**_base(key, source, sel), "target": settings.target, "settings": digest}
-        if analysis.fit is None:
-            fitted = [(n, math.nan, False) for n in FEEDBACK_PARAMETERS]
-            cost = vaf = math.nan
-            starts, status = 0, "no feedback path (nb_e = 0)"
-        else:
-            fit = analysis.fit
-            fitted = list(zip(fit.names, fit.estimates, fit.at_bound, strict=True))
-            cost, vaf, starts, status = fit.cost, fit.vaf_validation, fit.starts, "fitted"
-        for name, estimate, hit in fitted:
-            bound = settings.bound(name)
-            parameter_rows.append(
-                {
-                    **base,
-                    "status": status,
-                    "parameter": name,
-                    "unit": UNITS[name],
-                    "estimate": estimate,
-                    "true_value": truths.get(name, math.nan),
-                    "lower": bound.lower,
-                    "upper": bound.upper,
-                    "at_bound": hit,
-                    "cost": cost,
-                    "vaf_validation": vaf,
-                    "starts": starts,
-                }
-            )
+        base = _base(key, source, sel)
+        out["parameters"] += _parameter_rows(
+            {**base, "target": settings.target, "settings": digest}, analysis.fit, settings, truths
+        )
         res = analysis.residuals
         shares = {c.signal: c.share_outside for c in res.correlations}
-        base = _base(key, source, sel)
         for row in res.rows():
-            residual_rows.append(
+            out["residuals"].append(
                 {
                     **base,
                     **row,
@@ -235,24 +295,42 @@ def _fit_task(config, key, record, selected, sources, choices, truths, digest):
                     "confidence": res.confidence,
                 }
             )
-    return (
-        key,
-        pa.Table.from_pylist(parameter_rows, schema=tables.HC_PARAMETERS.arrow),
-        pa.Table.from_pylist(residual_rows, schema=tables.RESIDUALS.arrow),
-    )
+        loop_rows, spectrum_rows = _loop_rows(base, analysis.loop, true_margins)
+        out["loop"] += loop_rows
+        out["spectrum"] += spectrum_rows
+    return key, {name: pa.Table.from_pylist(out[name], schema=OUTPUTS[name].arrow) for name in OUTPUTS}
 
 
 # --------------------------------------------------------------------------- reuse
 
 
-def _groups(parameters: pa.Table | None, residuals: pa.Table | None, digest: str) -> dict:
-    """Rows made with these settings, by (model, seed, method, w): (parameters, residuals)."""
-    if parameters is None or residuals is None:
+def _groups(found: dict[str, pa.Table | None], digest: str) -> dict:
+    """Rows made with these settings, by (model, seed, method, w): ``{table name: rows}``."""
+    if any(found.get(name) is None for name in OUTPUTS):
         return {}
-    mask = pa.compute.equal(parameters.column("settings"), digest)
-    params = tables.split_by_key(parameters.filter(mask), _KEY)
-    res = tables.split_by_key(residuals, _KEY)
-    return {k: (p, res[k]) for k, p in params.items() if k in res}
+    mask = pa.compute.equal(found["parameters"].column("settings"), digest)
+    split = {"parameters": tables.split_by_key(found["parameters"].filter(mask), _KEY)}
+    for name in list(OUTPUTS)[1:]:
+        split[name] = tables.split_by_key(found[name], _KEY)
+    out = {}
+    for k, p in split["parameters"].items():
+        if k in split["residuals"]:
+            out[k] = {
+                "parameters": p,
+                **{name: split[name].get(k, OUTPUTS[name].arrow.empty_table()) for name in list(OUTPUTS)[1:]},
+            }
+    return out
+
+
+def _stored(run_dir: Path) -> dict[str, pa.Table | None]:
+    """The stage's tables as written, None for one missing or of an older layout (recomputed)."""
+    out = {}
+    for name, schema in OUTPUTS.items():
+        try:
+            out[name] = results.read_optional(schema, run_dir)
+        except DataError:
+            out[name] = None
+    return out
 
 
 def _read_parts(run_dir: Path, digest: str) -> dict:
@@ -261,9 +339,12 @@ def _read_parts(run_dir: Path, digest: str) -> dict:
     if not folder.is_dir():
         return found
     for path in sorted(folder.glob(f"*.parameters{results.PART_SUFFIX}")):
-        other = path.with_name(path.name.replace(".parameters.", ".residuals."))
         try:
-            found.update(_groups(results.read_part_table(path), results.read_part_table(other), digest))
+            tables_of = {
+                name: results.read_part_table(path.with_name(path.name.replace(".parameters.", f".{name}.")))
+                for name in OUTPUTS
+            }
+            found.update(_groups(tables_of, digest))
         except (pa.ArrowException, OSError):
             continue  # cut off mid-write: recomputed
     return found
@@ -271,7 +352,7 @@ def _read_parts(run_dir: Path, digest: str) -> dict:
 
 def _valid(group: tuple[pa.Table, pa.Table], sel: SelectedModel, source: str | None) -> bool:
     """Whether stored rows were made from this selected model (and, if given, W source)."""
-    first = group[0].slice(0, 1).to_pylist()[0]
+    first = group["parameters"].slice(0, 1).to_pylist()[0]
     same = tuple(first[c] for c in tables.ORDER_COLUMNS) == sel.orders and first["v"] == sel.v
     return same and (source is None or first["w_source"] == source)
 
@@ -310,7 +391,9 @@ def _plan(config, run_dir: Path, by_key: dict, w_of: dict, names: list[str], exi
         if record is None:
             raise DataError(f"{run_dir}: no record of {model}, seed {seed} (simulations or measured data)")
         stage_choices = _stage_choices(run_dir, choices, method_name, model, seed)
-        truths = true_parameters(config, model) if model in {m.name for m in config.models} else {}
+        truths = {}
+        if model in {m.name for m in config.models}:
+            truths = {**true_parameters(config, model), "_loop": true_loop(config, model)}
         tasks.append(
             (
                 config,
@@ -348,6 +431,7 @@ def fit_hc_study(
     method_names: Sequence[str] | None = None,
     w_values: Sequence[float] | None = None,
     *,
+    target: str | None = None,
     jobs: int = 2,
     force: bool = False,
     backend: str = "loky",
@@ -359,8 +443,9 @@ def fit_hc_study(
     For every record and method of ``frontier.parquet`` (``method_names``
     default: every registered method present), the models selected at
     :func:`requested_w` are analysed by :func:`hcid.selected.analyse_selected`.
-    Writes ``hc_parameters.parquet`` and ``residuals.parquet`` atomically;
-    reuses valid rows unless ``force``.
+    Writes the tables of :data:`OUTPUTS` atomically;
+    reuses valid rows unless ``force``. ``target`` overrides the config's
+    ``fit_hc.target``.
 
     Raises
     ------
@@ -381,6 +466,10 @@ def fit_hc_study(
     settings = config.fit_hc if config.fit_hc is not None else parse_fit_settings(None)
     if settings.band is None:  # settings built in code: the config's disturbance band (SPEC 5)
         settings = dataclasses.replace(settings, band=config.disturbance.band)
+    if target is not None:
+        if target not in TARGETS:
+            raise ConfigError(f"--target: must be one of {', '.join(TARGETS)}, got {target!r}")
+        settings = dataclasses.replace(settings, target=target)
     config = dataclasses.replace(config, fit_hc=settings)
     frontier = results.read(tables.FRONTIER, run_dir, hint="run `hcid identify` first")
     results.check_against_config(frontier, config, run_dir / tables.FRONTIER.file)
@@ -394,18 +483,14 @@ def fit_hc_study(
 
     existing = {}
     if not force:
-        existing = _groups(
-            results.read_optional(tables.HC_PARAMETERS, run_dir),
-            results.read_optional(tables.RESIDUALS, run_dir),
-            digest,
-        )
+        existing = _groups(_stored(run_dir), digest)
         existing.update(_read_parts(run_dir, digest))
     else:
         shutil.rmtree(run_dir / PARTS, ignore_errors=True)
 
     tasks, kept, reused = _plan(config, run_dir, by_key, w_of, names, existing, digest)
     parts_dir = run_dir / PARTS / digest
-    for key, params, res in parallel_map(
+    for key, made in parallel_map(
         _fit_task,
         tasks,
         jobs=jobs,
@@ -415,20 +500,32 @@ def fit_hc_study(
         scheduler=scheduler,
     ):
         stem = "__".join(str(k) for k in key)
-        results.write_part_table(params, parts_dir / f"{stem}.parameters{results.PART_SUFFIX}")
-        results.write_part_table(res, parts_dir / f"{stem}.residuals{results.PART_SUFFIX}")
-        kept.update(_groups(params, res, digest))
+        for name, table in made.items():  # parameters last: a part counts once it is there
+            if name != "parameters":
+                results.write_part_table(table, parts_dir / f"{stem}.{name}{results.PART_SUFFIX}")
+        results.write_part_table(made["parameters"], parts_dir / f"{stem}.parameters{results.PART_SUFFIX}")
+        kept.update(_groups(made, digest))
 
     order = {k: i for i, k in enumerate(by_key)}
     keys = sorted(kept, key=lambda k: (order.get(k[:3], len(order)), k[3]))
-    empty = (tables.HC_PARAMETERS.arrow.empty_table(), tables.RESIDUALS.arrow.empty_table())
-    parameters = tables.concat([empty[0]] + [kept[k][0] for k in keys])
-    residuals = tables.concat([empty[1]] + [kept[k][1] for k in keys])
+    written = {
+        name: tables.concat([schema.arrow.empty_table()] + [kept[k][name] for k in keys])
+        for name, schema in OUTPUTS.items()
+    }
     record_config(config, run_dir)
-    results.write(tables.HC_PARAMETERS, parameters, run_dir)
-    results.write(tables.RESIDUALS, residuals, run_dir)
+    for name, schema in OUTPUTS.items():
+        results.write(schema, written[name], run_dir)
     shutil.rmtree(run_dir / PARTS, ignore_errors=True)
     seconds = time.perf_counter() - start
     if tasks:
         results.append_run_log(run_dir, f"fit-hc ({len(tasks)} tasks)", seconds, jobs)
-    return HCFitRun(parameters, residuals, w_of, len(tasks), reused, seconds, run_dir)
+    return HCFitRun(
+        written["parameters"],
+        written["residuals"],
+        written["loop"],
+        w_of,
+        len(tasks),
+        reused,
+        seconds,
+        run_dir,
+    )

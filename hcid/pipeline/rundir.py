@@ -62,7 +62,8 @@ def known_files() -> list[str]:
     schemas = [
         tables.SIMULATIONS, tables.SIMULATION_SUMMARY, tables.MEASURED, tables.FRONTIER,
         tables.IDENTIFY_LOG, tables.SELECTION, tables.BREAKPOINTS, tables.thresholds(),
-        tables.CALIBRATION, tables.RUN_LOG, tables.HC_PARAMETERS, tables.RESIDUALS,
+        tables.CALIBRATION, tables.RUN_LOG, tables.HC_PARAMETERS, tables.RESIDUALS, tables.HC_LOOP,
+        tables.REMNANT_SPECTRUM,
         tables.RATES, tables.HANDOFF,
     ]  # fmt: skip
     files = [s.file for s in schemas] + ["config.yaml", folders.MANIFEST, LOCK]

@@ -103,3 +103,24 @@ def plot_residual_correlations(
     fig.suptitle(title)
     fig.tight_layout()
     return fig
+
+
+def plot_remnant_spectra(
+    curves: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], title: str = "", axes=None
+):
+    """Remnant densities (rad^2/Hz) against frequency (rad/s), log-log: Welch estimate and fitted filter.
+
+    ``curves`` holds ``(source, omega, psd, psd_fit)``.
+    """
+    fig, axes = _figure(axes, 1, 1, figsize=(6.5, 4.0))
+    ax = axes.flat[0]
+    for i, (source, omega, psd, fit) in enumerate(curves):
+        ax.loglog(omega, psd, color=f"C{i}", lw=0.8, alpha=0.6, label=f"{source}: Welch")
+        ax.loglog(omega, fit, color=f"C{i}", lw=2, label=f"{source}: fitted Yn")
+    ax.set_xlabel("frequency (rad/s)")
+    ax.set_ylabel("remnant density (rad²/Hz)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig

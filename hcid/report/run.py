@@ -25,6 +25,8 @@ _READS = {
     "calibration": (tables.CALIBRATION, None),
     "hc_parameters": (tables.HC_PARAMETERS, None),
     "residuals": (tables.RESIDUALS, None),
+    "hc_loop": (tables.HC_LOOP, None),
+    "remnant_spectrum": (tables.REMNANT_SPECTRUM, None),
     "rates": (tables.RATES, None),
     "handoff": (tables.HANDOFF, None),
 }
@@ -52,6 +54,8 @@ class RunTables:
     residuals: pa.Table | None = None
     rates: pa.Table | None = None
     handoff: pa.Table | None = None
+    hc_loop: pa.Table | None = None
+    remnant_spectrum: pa.Table | None = None
 
     def simulations(self) -> dict | None:
         """The simulated records by (model, seed), or None without simulations."""

@@ -10,6 +10,7 @@ import pyarrow as pa
 import pyarrow.compute  # noqa: F401  (pa.compute)
 
 from hcid import methods
+from hcid.calibration import clopper_pearson
 from hcid.hcfit import PARAMETERS, UNITS, hc_response
 from hcid.hcmodel import plant
 from hcid.report import compute as calc
@@ -33,10 +34,20 @@ class HCFitSection:
     residual_rows: list[list[str]] = field(default_factory=list)
     not_fitted: int = 0
     at_bound: int = 0
+    covariance: str = ""
+    loop_rows: list[list[str]] = field(default_factory=list)
+    spectrum: tuple[str, list] | None = None
 
 
 def _num(x: float, digits: int = 4) -> str:
     return "-" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
+
+
+def _with_se(value: float, se: float, at_bound: bool) -> str:
+    """``0.75 +- 0.02``; ``*`` on a bound (no standard error there)."""
+    if at_bound:
+        return _num(value) + "*"
+    return _num(value) + (f" ± {_num(se, 2)}" if se is not None and math.isfinite(se) else "")
 
 
 def _rank(run):
@@ -49,21 +60,60 @@ def _rank(run):
     )
 
 
-def bias_rows(params: pa.Table, order) -> list[list[str]]:
-    """Per simulated model, method, W and parameter: n, true, mean, bias, sd (unit and % of true),
-    estimates at a bound."""
-    rows = []
+def accuracy(params: pa.Table) -> dict[tuple, dict[str, float]]:
+    """Per (model, method, W, parameter) of fitted rows with a true value: how good the estimates are.
+
+    ``n``; ``true``; ``mean``; ``bias`` (mean - true); ``sd`` (across records, ddof 1);
+    ``rmse`` (``sqrt(mean((x - true)^2))``); ``se`` (RMS of the rows' standard errors);
+    ``se_ratio`` (``se / sd``: 1 when the standard errors are right); ``covered`` (rows whose
+    95% interval holds the true value) of ``n_se`` (rows with a standard error);
+    ``at_bound``. The three in % of ``|true|`` as ``*_pct`` where true is not 0.
+    """
+    out = {}
     fitted = params.filter(pa.compute.equal(params.column("status"), "fitted"))
-    groups = split_by_key(fitted, ("model", "method", "w", "parameter"))
-    for key in sorted(groups, key=lambda k: (*order(k[:2]), k[2], PARAMETERS.index(k[3]))):
-        t = groups[key]
-        model, method, w, name = key
-        x = t.column("estimate").to_numpy()
+    for key, t in split_by_key(fitted, ("model", "method", "w", "parameter")).items():
         true = t.column("true_value")[0].as_py()
-        mean = float(np.mean(x))
+        if true is None or not math.isfinite(true):
+            continue
+        x = t.column("estimate").to_numpy()
+        se = t.column("se").to_numpy()
+        low, high = t.column("ci_low").to_numpy(), t.column("ci_high").to_numpy()
+        has_se = np.isfinite(se)
         sd = float(np.std(x, ddof=1)) if x.size > 1 else math.nan
-        bias = mean - true if math.isfinite(true) else math.nan
-        pct = math.isfinite(true) and true != 0
+        row = {
+            "n": int(x.size),
+            "true": true,
+            "mean": float(np.mean(x)),
+            "bias": float(np.mean(x) - true),
+            "sd": sd,
+            "rmse": float(np.sqrt(np.mean((x - true) ** 2))),
+            "se": float(np.sqrt(np.mean(se[has_se] ** 2))) if has_se.any() else math.nan,
+            "covered": int(np.count_nonzero((low <= true) & (true <= high))),
+            "n_se": int(np.count_nonzero(has_se)),
+            "at_bound": int(np.count_nonzero(t.column("at_bound").to_numpy(zero_copy_only=False))),
+        }
+        row["se_ratio"] = row["se"] / sd if sd > 0 else math.nan
+        for name in ("bias", "sd", "rmse"):
+            row[f"{name}_pct"] = 100 * row[name] / abs(true) if true != 0 else math.nan
+        out[key] = row
+    return out
+
+
+def bias_rows(params: pa.Table, order) -> list[list[str]]:
+    """Per simulated model, method, W and parameter: n, true, mean, bias, sd, RMSE (% of true),
+    the standard errors against the spread, the 95% intervals' coverage (with its exact 95% band)
+    and the estimates at a bound."""
+    rows = []
+    found = accuracy(params)
+    for key in sorted(found, key=lambda k: (*order(k[:2]), k[2], PARAMETERS.index(k[3]))):
+        model, method, w, name = key
+        a = found[key]
+        pct = a["true"] != 0
+        if a["n_se"]:
+            lo, hi = clopper_pearson(np.array([a["covered"]]), a["n_se"])
+            coverage = f"{a['covered']}/{a['n_se']} ({100 * lo[0]:.0f}-{100 * hi[0]:.0f}%)"
+        else:
+            coverage = "-"
         rows.append(
             [
                 model,
@@ -71,14 +121,16 @@ def bias_rows(params: pa.Table, order) -> list[list[str]]:
                 f"{w:.4g}",
                 name,
                 UNITS[name],
-                str(x.size),
-                _num(true),
-                _num(mean),
-                _num(bias, 3),
-                _num(sd, 3),
-                f"{100 * bias / true:+.1f}" if pct else "-",
-                f"{100 * sd / abs(true):.1f}" if pct and math.isfinite(sd) else "-",
-                str(int(np.count_nonzero(t.column("at_bound").to_numpy(zero_copy_only=False)))),
+                str(a["n"]),
+                _num(a["true"]),
+                _num(a["mean"]),
+                f"{a['bias_pct']:+.1f}" if pct else _num(a["bias"], 3),
+                f"{a['sd_pct']:.1f}" if pct else _num(a["sd"], 3),
+                f"{a['rmse_pct']:.1f}" if pct else _num(a["rmse"], 3),
+                _num(a["se"], 3),
+                _num(a["se_ratio"], 3),
+                coverage,
+                str(a["at_bound"]),
             ]
         )
     return rows
@@ -110,12 +162,14 @@ def _measured(run, params: pa.Table, name: str):
         return rows, spread, bode
     by_fit = split_by_key(t, ("seed", "method", "w"))
     for (seed, method, w), g in by_fit.items():
-        values = dict(zip(g.column("parameter").to_pylist(), g.column("estimate").to_pylist(), strict=True))
-        hit = dict(zip(g.column("parameter").to_pylist(), g.column("at_bound").to_pylist(), strict=True))
+        names = g.column("parameter").to_pylist()
+        values = dict(zip(names, g.column("estimate").to_pylist(), strict=True))
+        ses = dict(zip(names, g.column("se").to_pylist(), strict=True))
+        hit = dict(zip(names, g.column("at_bound").to_pylist(), strict=True))
         first = g.slice(0, 1).to_pylist()[0]
         rows.append(
             [str(seed), method, f"{w:.4g}", f"{first['nb_ft']}"]
-            + [(_num(values[p]) + ("*" if hit[p] else "")) if p in values else "-" for p in PARAMETERS]
+            + [_with_se(values[p], ses[p], hit[p]) if p in values else "-" for p in PARAMETERS]
             + [_num(first["vaf_validation"], 3), _num(first["vaf_arx_validation"], 3)]
         )
     for (method, w, p), g in split_by_key(t, ("method", "w", "parameter")).items():
@@ -154,14 +208,18 @@ def _measured(run, params: pa.Table, name: str):
     return rows, spread, bode
 
 
-def _residual(run, res: pa.Table):
-    """The chosen record's residual correlations: the first measured run if any, else the
+def _shown_record(run, res: pa.Table) -> tuple | None:
+    """The record whose residuals and remnant are drawn: the first measured run if any, else the
     first feedforward model's first seed; the first method and W."""
     keys = list(split_by_key(res.select(["model", "seed", "method", "w"]), ("model", "seed", "method", "w")))
     data = run.config.data.name if run.config.data is not None else None
     ff = [m.name for m in run.config.models if m.has_feedforward]
     key = next((k for k in keys if k[0] == data), None) or next((k for k in keys if k[0] in ff), None)
-    key = key or (keys[0] if keys else None)
+    return key or (keys[0] if keys else None)
+
+
+def _residual(run, res: pa.Table, key):
+    """The residual correlations of the record ``key`` (model, seed, method, w)."""
     if key is None:
         return None
     mask = None
@@ -203,6 +261,63 @@ def _residual_rows(res: pa.Table, order) -> list[list[str]]:
     return rows
 
 
+def loop_rows(loop: pa.Table, order) -> list[list[str]]:
+    """Per model, method, W and source: records, crossover and phase margin (mean +- sd, and the
+    true loop's), the variance shares of u and the fitted remnant filter (means)."""
+    rows = []
+    groups = split_by_key(loop, ("model", "method", "w", "source"))
+    for key in sorted(groups, key=lambda k: (*order(k[:2]), k[2], k[3])):
+        t = groups[key]
+
+        def stat(column, digits=3, t=t):
+            x = t.column(column).to_numpy()
+            x = x[np.isfinite(x)]
+            if not x.size:
+                return "-"
+            sd = f" ± {_num(float(np.std(x, ddof=1)), 2)}" if x.size > 1 else ""
+            return _num(float(np.mean(x)), digits) + sd
+
+        true_wc, true_pm = t.column("true_crossover")[0].as_py(), t.column("true_phase_margin")[0].as_py()
+        rows.append(
+            [
+                key[0],
+                key[1],
+                f"{key[2]:.4g}",
+                key[3],
+                str(t.num_rows),
+                stat("crossover"),
+                _num(true_wc),
+                stat("phase_margin"),
+                _num(true_pm, 3),
+                stat("share_ft", 2),
+                stat("share_e", 2),
+                stat("share_remnant", 2),
+                stat("remnant_kn", 3),
+                stat("remnant_w_n", 3),
+                stat("remnant_zeta_n", 2),
+            ]
+        )
+    return rows
+
+
+def _spectrum(run, key) -> tuple[str, list] | None:
+    """The remnant spectra (ARX and fitted) of the record the residual figure shows."""
+    t = run.remnant_spectrum
+    if t is None or t.num_rows == 0 or key is None:
+        return None
+    mask = None
+    for col, value in zip(("model", "seed", "method", "w"), key, strict=True):
+        m = pa.compute.equal(t.column(col), value)
+        mask = m if mask is None else pa.compute.and_(mask, m)
+    t = t.filter(mask)
+    curves = [
+        (source, g.column("omega").to_numpy(), g.column("psd").to_numpy(), g.column("psd_fit").to_numpy())
+        for (source,), g in split_by_key(t, ("source",)).items()
+    ]
+    title = f"{key[0]} seed/run {key[1]}, {key[2]}, W = {key[3]:.4g}"
+    return (title, curves) if curves else None
+
+
 def compute(run, done) -> HCFitSection | None:
     params, res = run.hc_parameters, run.residuals
     if params is None or params.num_rows == 0:
@@ -224,6 +339,8 @@ def compute(run, done) -> HCFitSection | None:
     if run.config.data is not None and run.frontier is not None:
         measured_rows, spread, bode = _measured(run, params, run.config.data.name)
     status = params.column("status").to_pylist()
+    shown = _shown_record(run, res) if res is not None and res.num_rows else None
+    covariances = sorted({c for c in params.column("covariance").to_pylist() if c})
     return HCFitSection(
         target=params.column("target")[0].as_py(),
         w_text=", ".join(f"{m} W = {w:.4g} ({s})" for m, w, s in w_pairs),
@@ -232,10 +349,13 @@ def compute(run, done) -> HCFitSection | None:
         measured_rows=measured_rows,
         spread_rows=spread,
         bode=bode,
-        residual=_residual(run, res) if res is not None and res.num_rows else None,
+        residual=_residual(run, res, shown),
         residual_rows=_residual_rows(res, order) if res is not None and res.num_rows else [],
         not_fitted=sum(1 for s in status if s != "fitted"),
         at_bound=int(np.count_nonzero(params.column("at_bound").to_numpy(zero_copy_only=False))),
+        covariance=", ".join(covariances),
+        loop_rows=loop_rows(run.hc_loop, order) if run.hc_loop is not None else [],
+        spectrum=_spectrum(run, shown),
     )
 
 
@@ -246,11 +366,18 @@ def render(data: HCFitSection | None, doc: Doc) -> None:
     doc.text(
         f"The parametric HC model (SPEC 1, 8: Kpe, TL, tau_pe, w_nms, zeta_nms; Kpt, TI, tau_pt when the "
         f"selected model has a feedforward path) fitted to each selected model by the **{data.target}** "
-        f"target at {data.w_text}. Estimates on a bound are counted (and marked * below): "
-        f"{data.at_bound} parameter estimates at a bound; {data.not_fitted} parameter rows not fitted."
+        f"target at {data.w_text}. Standard errors: {data.covariance or '-'} (docs/parametric-fit.md); "
+        f"95% intervals are estimate ± 1.96 se. Estimates on a bound are counted (and marked * below; "
+        f"no standard error there): {data.at_bound} parameter estimates at a bound; {data.not_fitted} "
+        f"parameter rows not fitted."
     )
     if data.bias_rows:
-        doc.text("Simulations: bias and standard deviation of the estimates across realizations.")
+        doc.text(
+            "Simulations: bias, spread and RMSE of the estimates across realizations (in % of the true "
+            "value; in the parameter's unit where the true value is 0), the standard errors' RMS "
+            "beside it (se/sd near 1 when they are right) and how many 95% intervals hold the true "
+            "value, with the exact 95% band of that share."
+        )
         doc.table(
             [
                 "model",
@@ -261,10 +388,12 @@ def render(data: HCFitSection | None, doc: Doc) -> None:
                 "n",
                 "true",
                 "mean",
-                "bias",
-                "sd",
                 "bias %",
                 "sd %",
+                "RMSE %",
+                "se",
+                "se/sd",
+                "95% CI covers",
                 "at bound",
             ],
             data.bias_rows,
@@ -279,11 +408,34 @@ def render(data: HCFitSection | None, doc: Doc) -> None:
         )
     if data.measured_rows:
         doc.text(
-            "Measured data: parameters per run (* = at a bound), VAF (%) of the parametric and ARX "
-            "models on the validation rows."
+            "Measured data: parameters per run with their standard errors (* = at a bound), VAF (%) of "
+            "the parametric and ARX models on the validation rows."
         )
         doc.table(["run", "method", "W", "nb_ft", *PARAMETERS, "VAF par.", "VAF ARX"], data.measured_rows)
         doc.table(["method", "W", "parameter", "unit", "runs", "mean", "sd"], data.spread_rows)
+    if data.loop_rows:
+        doc.text(
+            "The loop each model implies (SPEC 8): crossover frequency and phase margin of He·Yc "
+            "(mean ± sd over records; the true loop's beside them for simulations), the shares of "
+            "var(u) through the target path, the error path and what they leave (the remnant ratio), "
+            "and SPEC 1's remnant filter fitted to the remnant's spectrum (Kn for unit white noise at "
+            "the simulation rate). Source arx: the selected ARX model; fitted: the parametric model."
+        )
+        doc.table(
+            [
+                "model", "method", "W", "source", "n", "wc (rad/s)", "true wc", "PM (deg)", "true PM",
+                "ft share", "e share", "remnant share", "Kn", "w_n", "zeta_n",
+            ],
+            data.loop_rows,
+        )  # fmt: skip
+    if data.spectrum is not None:
+        title, curves = data.spectrum
+        doc.figure(
+            "hc_remnant.png",
+            f"Remnant spectrum of {title}: what the ARX and the fitted models leave of u (Welch), "
+            "and the remnant filter fitted to each.",
+            lambda: figures_hcfit.plot_remnant_spectra(curves, title=title),
+        )
     for i, (title, omega, band, curves) in enumerate(data.bode):
         doc.figure(
             f"hc_bode_{i}.png",
