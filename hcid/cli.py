@@ -415,11 +415,13 @@ def _print_hc_fit(result) -> None:
     for method, pairs in result.w_of.items():
         typer.echo(f"{method:<9} W = " + ", ".join(f"{w:.4g} ({source})" for w, source in pairs))
     rows = result.parameters.to_pylist()
+    # The model column fits the longest name (a measured file's data name is often long).
+    m = max([10, *(len(r["model"]) + 1 for r in rows)])
     if rows:
         typer.echo(f"target {rows[0]['target']}, standard errors {rows[0]['covariance'] or '-'}")
     # One record: its estimate with se and 95% interval; several: medians, the spread across
     # records beside the median se, and how many 95% intervals hold the true value.
-    header = f"{'model':<10}{'method':<10}{'W':>9} {'parameter':<10}{'estimate':>10} {'se':>9}"
+    header = f"{'model':<{m}}{'method':<10}{'W':>9} {'parameter':<10}{'estimate':>10} {'se':>9}"
     header += f" {'sd':>9} {'95% interval':>21} {'true':>9}{'n':>5}{'covers':>7}{'bound':>6}"
     typer.echo(header)
     groups: dict[tuple, list[dict]] = {}
@@ -442,13 +444,13 @@ def _print_hc_fit(result) -> None:
             covers = f"{int(held.sum())}/{len(group)}"
         hits = sum(bool(r["at_bound"]) for r in group)
         typer.echo(
-            f"{model:<10}{method:<10}{w:>9.4g} {name:<10}{median:>10} {se_text:>9} {sd:>9} {interval:>21}"
+            f"{model:<{m}}{method:<10}{w:>9.4g} {name:<10}{median:>10} {se_text:>9} {sd:>9} {interval:>21}"
             f" {num(true):>9}{len(group):>5}{covers:>7}{hits:>6}"
         )
     loop = result.loop.to_pylist()
     if loop:
         typer.echo(
-            f"{'model':<10}{'method':<10}{'W':>9} {'source':<8}{'wc rad/s':>9} {'PM deg':>7}"
+            f"{'model':<{m}}{'method':<10}{'W':>9} {'source':<8}{'wc rad/s':>9} {'PM deg':>7}"
             f" {'true wc':>8} {'true PM':>7} {'remnant':>7} {'w_n':>6} {'zeta_n':>6}  (medians)"
         )
         by: dict[tuple, list[dict]] = {}
@@ -461,7 +463,7 @@ def _print_hc_fit(result) -> None:
                 return num(np.nanmedian(x)) if np.isfinite(x).any() else "-"
 
             typer.echo(
-                f"{model:<10}{method:<10}{w:>9.4g} {source:<8}{med('crossover'):>9} {med('phase_margin'):>7}"
+                f"{model:<{m}}{method:<10}{w:>9.4g} {source:<8}{med('crossover'):>9} {med('phase_margin'):>7}"
                 f" {med('true_crossover'):>8} {med('true_phase_margin'):>7} {med('share_remnant'):>7}"
                 f" {med('remnant_w_n'):>6} {med('remnant_zeta_n'):>6}"
             )
