@@ -115,8 +115,9 @@ def plot_remnant_spectra(
     fig, axes = _figure(axes, 1, 1, figsize=(6.5, 4.0))
     ax = axes.flat[0]
     for i, (source, omega, psd, fit) in enumerate(curves):
-        ax.loglog(omega, psd, color=f"C{i}", lw=0.8, alpha=0.6, label=f"{source}: Welch")
-        ax.loglog(omega, fit, color=f"C{i}", lw=2, label=f"{source}: fitted Yn")
+        name = "ARX model" if source == "arx" else "parametric model" if source == "fitted" else source
+        ax.loglog(omega, psd, color=f"C{i}", lw=0.8, alpha=0.6, label=f"what the {name} leaves (Welch)")
+        ax.loglog(omega, fit, color=f"C{i}", lw=2, label="its fitted remnant filter Yn")
     ax.set_xlabel("frequency (rad/s)")
     ax.set_ylabel("remnant density (rad²/Hz)")
     ax.grid(True, which="both", alpha=0.3)

@@ -1043,7 +1043,22 @@ def silent_answer_cases() -> list[Case]:
         # review of the change
         Case("--run a folder holding only the user's config.yaml", _users_config_folder, "refused"),
         Case("forcing file of several trials without run", _simulate_with(_two_trials), "refused"),
+        # issue 26: the estimator and its standard errors
+        Case("fit-hc --target ml", lambda t: ["fit-hc", str(_ready_run(t)), "--run", str(t / "run"), "--target",
+             "ml", "--quiet"], "refused"),
+        Case("fit_hc.covariance hac", lambda t: _fit_hc_with(t, {"covariance": "hac"}), "refused"),
+        Case("fit_hc.lag -1", lambda t: _fit_hc_with(t, {"lag": -1}), "refused"),
+        Case("fit_hc.lag 1e9", lambda t: _fit_hc_with(t, {"lag": 1e9}), "refused"),
+        Case("fit-hc --target closed_loop", lambda t: ["fit-hc", str(_ready_run(t)), "--run", str(t / "run"),
+             "--target", "closed_loop", "--quiet", "--jobs", "1"], "accepted",
+             ("hc_parameters.parquet", "hc_loop.parquet", "remnant_spectrum.parquet")),
     ]  # fmt: skip
+
+
+def _fit_hc_with(tmp: Path, fit_hc: dict) -> list[str]:
+    data = copy.deepcopy(BASE)
+    data["fit_hc"] = fit_hc
+    return ["fit-hc", str(_ready_run(tmp, data)), "--run", str(tmp / "run"), "--quiet", "--jobs", "1"]
 
 
 def _user_folder(tmp: Path) -> Path:

@@ -434,7 +434,7 @@ def render(data: HCFitSection | None, doc: Doc) -> None:
             "hc_remnant.png",
             f"Remnant spectrum of {title}: what the ARX and the fitted models leave of u (Welch), "
             "and the remnant filter fitted to each.",
-            lambda: figures_hcfit.plot_remnant_spectra(curves, title=title),
+            lambda c=curves, t=title: figures_hcfit.plot_remnant_spectra(c, title=t),
         )
     for i, (title, omega, band, curves) in enumerate(data.bode):
         doc.figure(
@@ -457,5 +457,5 @@ def render(data: HCFitSection | None, doc: Doc) -> None:
         doc.figure(
             "hc_residuals.png",
             f"Residual correlations of {title}; grey: 99% band of a white residual.",
-            lambda: figures_hcfit.plot_residual_correlations(series, title=title),
+            lambda s=series, t=title: figures_hcfit.plot_residual_correlations(s, title=t),
         )
