@@ -1,0 +1,230 @@
+"""Model-free (Fourier-coefficient) estimates of the HC's two paths (SPEC 10; pure numerical core).
+
+With multisine forcing functions on disjoint frequency sets ``W_t`` (target) and
+``W_d`` (disturbance), both over a whole number of periods of the window, and
+``U, E, Ft`` the DFT coefficients of the window:
+
+- at ``w in W_d`` ft has no power, so ``u = Hft ft + He e`` gives ``He(w) = U / E``;
+- at ``w in W_t``, ``He(w)`` is interpolated from the neighbouring disturbance
+  frequencies (linearly in log-frequency, on magnitude in dB and on unwrapped
+  phase; held at the ends), then ``Ht(w) = (U - He E) / Ft`` (van Paassen and
+  Mulder's two-loop method).
+
+Across runs that share the forcing functions, the coefficients are averaged
+before dividing (the remnant's, uncorrelated with the forcing functions, averages
+out); a DFT over a window of P whole periods is already the average over its
+periods. Per-run estimates give the spread.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from hcid.errors import DataError
+
+__all__ = ["FCEstimate", "ForcingLines", "fc_estimate", "forcing_lines"]
+
+#: A forcing function is a line spectrum over the window when its bins, sorted by power, fall
+#: into lines and the rest with a gap of at least :data:`LINE_GAP` (power ratio) between them,
+#: and the lines hold at least :data:`LINE_SHARE` of its power (DC left out). A multisine over
+#: whole periods has a gap of 1e20 and more; a recorded one, the logger's noise floor below it.
+LINE_GAP = 1e4
+LINE_SHARE = 0.999
+
+
+@dataclass(frozen=True)
+class ForcingLines:
+    """The DFT bins of the forcing functions over a window of ``n`` samples at ``rate`` Hz.
+
+    ``target`` and ``disturbance`` hold the bin indices (frequency ``2 pi k rate / n``);
+    ``problem`` says why no Fourier-coefficient estimate is possible (None when it is).
+    """
+
+    n: int
+    rate: float
+    target: np.ndarray
+    disturbance: np.ndarray
+    problem: str | None = None
+
+    def omega(self, bins: np.ndarray) -> np.ndarray:
+        """Frequencies (rad/s) of ``bins``."""
+        return 2.0 * np.pi * np.asarray(bins, dtype=np.float64) * self.rate / self.n
+
+
+def _lines(x: np.ndarray) -> tuple[np.ndarray, float]:
+    """The bins above the widest power gap (if at least LINE_GAP) and their share of the power.
+
+    Without such a gap (a broadband signal), no bins and a share of 0.
+    """
+    power = np.abs(np.fft.rfft(x - np.mean(x))) ** 2
+    power[0] = 0.0
+    total = float(power.sum())
+    if total == 0.0:
+        return np.zeros(0, dtype=np.int64), 0.0
+    order = np.argsort(power)[::-1]
+    ranked = power[order]
+    floor = np.maximum(ranked[1:], 1e-300 * ranked[0])
+    ratios = ranked[:-1] / floor
+    top = int(np.argmax(ratios[: max(1, ranked.size // 2)]))  # lines are the minority of the bins
+    if ratios[top] < LINE_GAP:
+        return np.zeros(0, dtype=np.int64), 0.0
+    bins = np.sort(order[: top + 1])
+    return bins, float(power[bins].sum() / total)
+
+
+def forcing_lines(ft: np.ndarray, fd: np.ndarray, rate: float) -> ForcingLines:
+    """Find the forcing functions' lines in one window of ``ft`` and ``fd`` (same length).
+
+    Each must be a line spectrum over the window (a multisine over whole periods: see
+    :data:`LINE_GAP`) and the two sets disjoint; otherwise ``problem`` says which
+    condition fails and the sets are empty.
+
+    Examples
+    --------
+    >>> t = np.arange(400) / 10.0                       # 40 s at 10 Hz: bins every 0.025 Hz
+    >>> ft = np.sin(2 * np.pi * 0.05 * t)                # bin 2
+    >>> fd = np.sin(2 * np.pi * 0.075 * t) + np.sin(2 * np.pi * 0.2 * t)   # bins 3 and 8
+    >>> lines = forcing_lines(ft, fd, 10.0)
+    >>> lines.target.tolist(), lines.disturbance.tolist(), lines.problem
+    ([2], [3, 8], None)
+    """
+    ft, fd = np.asarray(ft, dtype=np.float64), np.asarray(fd, dtype=np.float64)
+    n = ft.size
+    empty = np.zeros(0, dtype=np.int64)
+    target, share_t = _lines(ft)
+    dist, share_d = _lines(fd)
+    problem = None
+    if not np.any(np.diff(ft)):
+        problem = "the target is constant over the window"
+    elif not np.any(np.diff(fd)):
+        problem = "the disturbance is constant over the window"
+    elif share_t < LINE_SHARE:
+        problem = "the target is not a sum of sines over whole periods of the window"
+    elif share_d < LINE_SHARE:
+        problem = "the disturbance is not a sum of sines over whole periods of the window"
+    elif np.intersect1d(target, dist).size:
+        shared = np.intersect1d(target, dist)
+        problem = (
+            f"target and disturbance share {shared.size} frequencies (e.g. "
+            f"{2 * np.pi * shared[0] * rate / n:.3g} rad/s): the paths cannot be told apart there"
+        )
+    if problem is not None:
+        return ForcingLines(n, float(rate), empty, empty, problem)
+    return ForcingLines(n, float(rate), target, dist)
+
+
+@dataclass(frozen=True)
+class FCEstimate:
+    """Fourier-coefficient estimates of He (at the disturbance lines) and Ht (at the target lines).
+
+    Attributes
+    ----------
+    omega_e, omega_t : ndarray
+        Frequencies (rad/s) of the disturbance and target lines.
+    he, ht : ndarray of complex
+        Averaged over runs (coefficients averaged before dividing).
+    he_runs, ht_runs : ndarray of complex, shape (n_runs, n_lines)
+        Per run.
+    he_at_t : ndarray of complex
+        He interpolated at the target lines (what ``ht`` used).
+    extrapolated : ndarray of bool
+        Target lines outside the disturbance lines' range (He held, not interpolated).
+    """
+
+    omega_e: np.ndarray
+    omega_t: np.ndarray
+    he: np.ndarray
+    ht: np.ndarray
+    he_runs: np.ndarray
+    ht_runs: np.ndarray
+    he_at_t: np.ndarray
+    extrapolated: np.ndarray
+
+    def spread(self, which: str) -> tuple[np.ndarray, np.ndarray]:
+        """Across runs, per line: sd of the magnitude (dB) and of the phase (deg, unwrapped about
+        the mean), NaN for a single run."""
+        runs, mean = (self.he_runs, self.he) if which == "e" else (self.ht_runs, self.ht)
+        if runs.shape[0] < 2:
+            nan = np.full(mean.size, np.nan)
+            return nan, nan
+        db = 20.0 * np.log10(np.abs(runs))
+        phase = np.degrees(np.angle(runs / mean))
+        return np.std(db, axis=0, ddof=1), np.std(phase, axis=0, ddof=1)
+
+
+def _interpolate(omega_from: np.ndarray, h: np.ndarray, omega_to: np.ndarray) -> np.ndarray:
+    """Linear in log-frequency, on magnitude (dB) and unwrapped phase; held beyond the ends."""
+    x = np.log(omega_from)
+    db = np.interp(np.log(omega_to), x, 20.0 * np.log10(np.abs(h)))
+    phase = np.interp(np.log(omega_to), x, np.unwrap(np.angle(h)))
+    return 10.0 ** (db / 20.0) * np.exp(1j * phase)
+
+
+def _paths(lines: ForcingLines, u, e, ft) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(He at W_d, Ht at W_t, He at W_t) from DFT coefficients (arrays over all bins)."""
+    he = u[lines.disturbance] / e[lines.disturbance]
+    omega_e, omega_t = lines.omega(lines.disturbance), lines.omega(lines.target)
+    he_t = _interpolate(omega_e, he, omega_t)
+    ht = (u[lines.target] - he_t * e[lines.target]) / ft[lines.target]
+    return he, ht, he_t
+
+
+def fc_estimate(
+    runs: Sequence[dict[str, np.ndarray]], rate: float, rows: slice, lines: ForcingLines | None = None
+) -> FCEstimate:
+    """Fourier-coefficient estimates of both paths from runs that share their forcing functions.
+
+    Parameters
+    ----------
+    runs : sequence of mapping
+        ``ft`` (unshifted), ``fd``, ``e``, ``u`` (rad) per run, equal lengths.
+    rate : float
+        Sample rate (Hz).
+    rows : slice
+        The window: a whole number of the forcing functions' periods.
+    lines : ForcingLines, optional
+        The forcing lines; found from the first run's ft and fd over ``rows`` when not given.
+
+    Raises
+    ------
+    DataError
+        If the design allows no estimate (``lines.problem``), the runs' forcing functions
+        differ over the window, or e has no power at a disturbance line.
+    """
+    if not runs:
+        raise DataError("no runs for a Fourier-coefficient estimate")
+    window = [{k: np.asarray(r[k], dtype=np.float64)[rows] for k in ("ft", "fd", "e", "u")} for r in runs]
+    if lines is None:
+        lines = forcing_lines(window[0]["ft"], window[0]["fd"], rate)
+    if lines.problem is not None:
+        raise DataError(f"no Fourier-coefficient estimate: {lines.problem}")
+    spectra = [{k: np.fft.rfft(w[k]) for k in w} for w in window]
+    reference = spectra[0]
+    for i, s in enumerate(spectra[1:], start=2):
+        for k, bins in (("ft", lines.target), ("fd", lines.disturbance)):
+            if not np.allclose(
+                s[k][bins], reference[k][bins], rtol=1e-6, atol=1e-12 * np.abs(reference[k]).max()
+            ):
+                raise DataError(
+                    f"run {i} of the set has other forcing functions ({k}) than run 1: the runs' "
+                    "coefficients cannot be averaged"
+                )
+    if any(np.any(np.abs(s["e"][lines.disturbance]) == 0) for s in spectra):
+        raise DataError("e has no power at a disturbance frequency: He cannot be estimated there")
+    per_run = [_paths(lines, s["u"], s["e"], s["ft"]) for s in spectra]
+    mean = {k: np.mean([s[k] for s in spectra], axis=0) for k in ("u", "e", "ft")}
+    he, ht, he_t = _paths(lines, mean["u"], mean["e"], mean["ft"])
+    omega_e, omega_t = lines.omega(lines.disturbance), lines.omega(lines.target)
+    return FCEstimate(
+        omega_e=omega_e,
+        omega_t=omega_t,
+        he=he,
+        ht=ht,
+        he_runs=np.array([p[0] for p in per_run]),
+        ht_runs=np.array([p[1] for p in per_run]),
+        he_at_t=he_t,
+        extrapolated=(omega_t < omega_e.min()) | (omega_t > omega_e.max()),
+    )
