@@ -23,7 +23,17 @@ LAYERS = (
     ("arx", ("hcid.arx",)),
     ("methods", ("hcid.methods",)),
     ("selection", ("hcid.criteria", "hcid.selection")),
-    ("analyses", ("hcid.hcfit", "hcid.residuals", "hcid.selected", "hcid.calibration", "hcid.descriptors")),
+    (
+        "analyses",
+        (
+            "hcid.hcfit",
+            "hcid.residuals",
+            "hcid.selected",
+            "hcid.calibration",
+            "hcid.descriptors",
+            "hcid.fourier",
+        ),
+    ),
     ("results", ("hcid.results", "hcid.measured", "hcid.folders")),
     ("api", ("hcid.resolve", "hcid.api")),
     ("pipeline", ("hcid.pipeline",)),
