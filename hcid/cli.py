@@ -136,11 +136,13 @@ def identify(
     force: ForceOpt = False,
     quiet: QuietOpt = False,
     data: Annotated[
-        Path | None,
+        list[str] | None,
         typer.Option(
             "--data",
-            help="Measured data (.csv, .parquet or .mat) to identify instead of "
-            "simulations; columns mapped by the config's data section.",
+            help="Measured data to identify instead of simulations: a file (.csv, .parquet, .mat), "
+            "a quoted glob ('trials/*.csv'), a folder, or a manifest CSV with a 'file' column and "
+            "one column per factor; repeat for several. Columns mapped and factors named by the "
+            "config's data section.",
         ),
     ] = None,
 ):
@@ -152,7 +154,7 @@ def identify(
         cfg,
         run_dir,
         _methods(method),
-        data_path=data,
+        data_path=data or None,
         jobs=jobs,
         force=force,
         backend=backend,

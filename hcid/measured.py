@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import csv
 import io
+import re
 from pathlib import Path
 
 import numpy as np
@@ -43,9 +44,12 @@ __all__ = [
     "MAX_FILE_BYTES",
     "READERS",
     "check_signal",
+    "csv_layout",
+    "read_file_runs",
     "load_data",
     "read_signal",
     "records_table",
+    "samples_needed",
 ]
 
 #: Largest magnitude a signal may hold: its square, summed over a record and scaled by a loop's gains,
@@ -56,6 +60,7 @@ LARGEST = 1e100
 MAX_FILE_BYTES = 1 << 30
 
 _BOM = b"\xef\xbb\xbf"
+_BLANK_LINE = re.compile(rb"(?:^|\n)[ \t\r]*\n")
 _BLOCK = 1 << 20
 
 
@@ -96,15 +101,29 @@ def _check_size(path: Path) -> None:
         )
 
 
-def _table_columns(table: pa.Table, path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
+def _table_columns(
+    table: pa.Table, path: Path, wanted: dict[str, str], labels: dict[str, str | int] | None = None
+) -> dict[str, np.ndarray]:
+    """The ``wanted`` columns of ``table`` as float64; ``labels`` name them in messages."""
     out = {}
     for name, column in wanted.items():
         if column in table.column_names:
             try:
                 out[name] = table.column(column).to_numpy(zero_copy_only=False).astype(np.float64)
             except (pa.ArrowException, ValueError, TypeError) as exc:
-                raise DataError(f"{path}: column {quote(column)} is not numeric") from exc
+                given = (labels or wanted)[name]
+                label = f"column {given}" if isinstance(given, int) else f"column {quote(given)}"
+                raise DataError(f"{path}: {label} is not numeric") from exc
     return out
+
+
+def _by_name(path: Path, wanted: dict[str, str | int]) -> None:
+    """Columns by position are a CSV's: refused for the other formats."""
+    positions = [c for c in wanted.values() if isinstance(c, int)]
+    if positions:
+        raise DataError(
+            f"{path}: columns by position (e.g. {positions[0]}) are for CSV files; name the columns"
+        )
 
 
 def _is_comment(line: bytes) -> bool:
@@ -139,8 +158,10 @@ class _Uncommented(io.RawIOBase):
                 block = self._tail + block
                 cut = block.rfind(b"\n") + 1
                 whole, self._tail = block[:cut], block[cut:]
-            if b"#" in whole:
-                whole = b"".join(line for line in whole.splitlines(keepends=True) if not _is_comment(line))
+            if b"#" in whole or _BLANK_LINE.search(whole):
+                whole = b"".join(
+                    line for line in whole.splitlines(keepends=True) if line.strip() and not _is_comment(line)
+                )
             self._out = whole
 
     def readinto(self, buffer) -> int:
@@ -151,44 +172,100 @@ class _Uncommented(io.RawIOBase):
         return n
 
 
-def _csv_header(path: Path) -> list[str]:
-    """The first non-blank line after the comments, as column names (any line ending)."""
-    with open(path, "rb") as f:
-        head = io.BufferedReader(_Uncommented(f)).read(1 << 16)
-    lines = head.decode("utf-8", errors="replace").splitlines()
-    text = next((line.strip() for line in lines if line.strip()), "")
+def _fields(line: str, path: Path) -> list[str]:
     try:
-        return next(csv.reader([text]), []) if text else []
+        return [f.strip() for f in next(csv.reader([line]), [])]
     except csv.Error as exc:
         raise DataError(f"{path}: cannot read its header line ({exc})") from exc
 
 
-def _read_csv(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
+def _numeric(fields: list[str]) -> bool:
+    try:
+        [float(f) for f in fields]
+    except ValueError:
+        return False
+    return bool(fields)
+
+
+def csv_layout(path: str | Path) -> tuple[list[str], bool, int]:
+    """``(names, header_row, width)`` of a CSV file.
+
+    ``names``: the header row's fields, or, when the first row is numbers (no header row),
+    those of the last ``#`` comment line above it if it names at least two columns
+    (a logger's layout), else none. ``width``: fields in the first row of numbers, which
+    may exceed the names (a file with one column more than its header names).
+    """
+    path = Path(path)
+    with open(path, "rb") as f:
+        head = f.read(1 << 16).removeprefix(_BOM)
+    comment = None
+    rows = []
+    for raw in head.decode("utf-8", errors="replace").splitlines():
+        line = raw.strip()
+        if not line:
+            continue
+        if line.startswith("#"):
+            if not rows:
+                comment = line.lstrip("#").strip()
+            continue
+        rows.append(line)
+        if len(rows) == 2:
+            break
+    if not rows:
+        return [], False, 0
+    first = _fields(rows[0], path)
+    if not _numeric(first):
+        width = len(_fields(rows[1], path)) if len(rows) > 1 else len(first)
+        return first, True, max(width, len(first))
+    names = _fields(comment, path) if comment else []
+    if len(names) < 2 or _numeric(names):
+        names = []
+    return names, False, len(first)
+
+
+def _label(column: str | int) -> str:
+    """A column as messages name it: its name, or ``column 4`` for a position."""
+    return f"column {column}" if isinstance(column, int) else column
+
+
+def _read_csv(path: Path, wanted: dict[str, str | int]) -> dict[str, np.ndarray]:
     import pyarrow.csv as pacsv
 
-    header = _csv_header(path)
-    include = sorted({c for c in wanted.values() if c in header})
-    if not include:
+    names, header_row, width = csv_layout(path)
+    index = {}
+    for key, column in wanted.items():
+        if isinstance(column, int):
+            if 1 <= column <= width:
+                index[key] = column
+        elif column in names:
+            index[key] = names.index(column) + 1
+    if not index:
         return {}
+    generated = [f"_c{i}" for i in range(1, width + 1)]
     with open(path, "rb") as f:
         table = pacsv.read_csv(
             io.BufferedReader(_Uncommented(f), _BLOCK),
-            convert_options=pacsv.ConvertOptions(include_columns=include),
+            read_options=pacsv.ReadOptions(column_names=generated, skip_rows=1 if header_row else 0),
+            convert_options=pacsv.ConvertOptions(
+                include_columns=sorted({generated[i - 1] for i in index.values()})
+            ),
         )
-    return _table_columns(table, path, wanted)
+    return _table_columns(table, path, {key: generated[i - 1] for key, i in index.items()}, wanted)
 
 
-def _read_parquet(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
+def _read_parquet(path: Path, wanted: dict[str, str | int]) -> dict[str, np.ndarray]:
     import pyarrow.parquet as pq
 
+    _by_name(path, wanted)
     names = pq.read_schema(path).names
     include = sorted({c for c in wanted.values() if c in names})
     return _table_columns(pq.read_table(path, columns=include), path, wanted) if include else {}
 
 
-def _read_mat(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
+def _read_mat(path: Path, wanted: dict[str, str | int]) -> dict[str, np.ndarray]:
     import scipy.io
 
+    _by_name(path, wanted)
     try:
         mat = scipy.io.loadmat(path, variable_names=sorted(set(wanted.values())))
     except Exception as exc:  # noqa: BLE001 (a damaged file makes scipy's reader raise almost anything)
@@ -418,8 +495,12 @@ def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarra
         One line naming the file and the problem.
     """
     data = config.data if config.data is not None else default_data()
-    need = max(max(s.validation.last, s.estimation.last) for _, s in config.identify.stages)
-    return read_runs(path, data, config.timing.output_rate, need)[0]
+    return read_runs(path, data, config.timing.output_rate, samples_needed(config))[0]
+
+
+def samples_needed(config: Config) -> int:
+    """Samples a run must hold after its lead-in: the end of the last identification window."""
+    return max(max(s.validation.last, s.estimation.last) for _, s in config.identify.stages)
 
 
 def read_runs(
@@ -455,23 +536,32 @@ def read_runs(
     DataError
         One line naming the file and the problem.
     """
+    records, rate, _ = read_file_runs(path, data, rate, need)
+    return records, rate
+
+
+def read_file_runs(
+    path: str | Path, data: DataConfig, rate: float | None = None, need: int = 1
+) -> tuple[dict[int, dict[str, np.ndarray]], float, dict[int, float]]:
+    """:func:`read_runs`, and each run's own sample rate (Hz) before resampling."""
     path = Path(path)
     given = rate is not None
     cols = _named_signals(path, _read_columns(path, data), data)
-    records = {}
+    records, natives = {}, {}
     for run_id, run in _split_runs(path, cols, data).items():
         where = f"{path}: run {run_id}"
         for name in (*SIGNALS, "time"):
             if name in run:
-                run[name] = check_signal(run[name], f"{where}: {data.columns[name]}")
+                run[name] = check_signal(run[name], f"{where}: {_label(data.columns[name])}")
         found = _run_rate(where, run, data, rate)
         if rate is None:
             rate = found
+        natives[run_id] = float(found)
         signals_ = _at_rate(where, {name: run[name] for name in SIGNALS}, found, rate, given)
         records[run_id] = _after_lead_in(where, signals_, rate, data, need)
     if not records:
         raise DataError(f"{path}: holds no samples")
-    return records, float(rate)
+    return records, float(rate), natives
 
 
 def _named_signals(path: Path, cols: dict[str, np.ndarray], data: DataConfig) -> dict[str, np.ndarray]:
@@ -486,7 +576,7 @@ def _named_signals(path: Path, cols: dict[str, np.ndarray], data: DataConfig) ->
             )
         cols["e"] = cols["ft"] - cols["theta"]  # e = ft - theta
     cols.pop("theta", None)
-    missing = [data.columns[n] for n in SIGNALS if n not in cols]
+    missing = [_label(data.columns[n]) for n in SIGNALS if n not in cols]
     if missing:
         hint = (
             f" (or a system output '{data.columns['theta']}' for e = ft - theta)"

@@ -14,6 +14,8 @@ file                            one row per                                    w
 ``simulations.parquet``         model, seed and sample                         ``hcid simulate``
 ``simulation_summary.parquet``  model and seed                                 ``hcid simulate``
 ``measured.parquet``            run and sample of imported data                ``hcid identify --data``
+``runs.parquet``                run of imported data: its file, the file's     ``hcid identify --data``
+                                own run id and its factors
 ``frontier.parquet``            model, seed, method and order triple           ``hcid identify``
 ``<stage>.parquet``             model and seed: the model a non-final stage    ``hcid identify``
                                 hands on (``stage1.parquet``)
@@ -58,6 +60,7 @@ __all__ = [
     "RATES",
     "REMNANT_SPECTRUM",
     "RESIDUALS",
+    "RUNS",
     "RUN_LOG",
     "SELECTED_COLUMNS",
     "SELECTION",
@@ -164,6 +167,15 @@ MEASURED = _schema(
     "measured.parquet",
     [("model", _STR), ("seed", _INT), ("k", _INT), ("t", _F64)] + [(c, _F64) for c in SIGNALS],
     _REALIZATION_KEY,
+)
+#: ``runs.parquet`` (``hcid identify --data``): one row per imported run: ``model`` (the data
+#: name), ``seed`` (the run id every table uses), ``file`` (as given), ``file_run`` (the file's
+#: own run id), then one string column per factor of the data set (subject, condition, ...;
+#: from a manifest or ``data.pattern``), which join every table by (model, seed).
+RUNS = _schema(
+    "runs.parquet",
+    [("model", _STR), ("seed", _INT), ("file", _STR), ("file_run", _INT)],
+    ("model", "seed"),
 )
 FRONTIER = _schema(
     "frontier.parquet",

@@ -277,8 +277,12 @@ def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataC
     columns = {}
     for key, default in _DATA_COLUMNS.items():
         col = cs.get(key, default)
-        if not isinstance(col, str) or not col:
-            raise ConfigError(f"data.columns.{key}: must be a column or variable name, got {fmt(col)}")
+        position = isinstance(col, int) and not isinstance(col, bool) and 1 <= col <= 10_000
+        if not position and (not isinstance(col, str) or not col):
+            raise ConfigError(
+                f"data.columns.{key}: must be a column or variable name, or a CSV column's position "
+                f"(1 for the first), got {fmt(col)}"
+            )
         columns[key] = col
     time_default = "time" not in cs.data
     cs.done()
@@ -289,6 +293,9 @@ def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataC
         or not all(isinstance(w, int | float) and not isinstance(w, bool) and w > 0 for w in w_raw)
     ):
         raise ConfigError(f"data.w_report: must be a non-empty list of W > 0, got {fmt(w_raw)}")
+    pattern = s.get("pattern", None)
+    if pattern is not None:
+        check_pattern(pattern, "data.pattern")
     lead_in = s.number("lead_in", 0.0, 1e4, 0.0)
     rate = timing.output_rate
     if abs(lead_in * rate - round(lead_in * rate)) > 1e-6:
@@ -302,7 +309,46 @@ def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataC
         w_report=tuple(float(w) for w in w_raw),
         lead_in=lead_in,
         time_default=time_default,
+        pattern=pattern,
     )
+
+
+#: Names a file-name pattern's factors may not take: hcid's own columns in the tables.
+RESERVED_FACTORS = ("model", "seed", "run", "file", "file_run", "method", "w", "k", "t")
+_PLACEHOLDER = re.compile(r"\{([^{}]*)\}")
+
+
+def check_pattern(pattern: object, key: str) -> tuple[str, ...]:
+    """The factor names of a file-name pattern such as ``{subject}_{condition}_{trial}.csv``.
+
+    Raises
+    ------
+    ConfigError
+        For a pattern that is not a string, holds no ``{factor}``, a factor that is not an
+        identifier or is reserved (:data:`RESERVED_FACTORS`), a repeated factor, two factors
+        with nothing between them, or a ``/``.
+    """
+    if not isinstance(pattern, str) or not pattern:
+        raise ConfigError(
+            f"{key}: must be a file-name pattern such as '{{subject}}_{{trial}}.csv', got {fmt(pattern)}"
+        )
+    names = _PLACEHOLDER.findall(pattern)
+    if not names:
+        raise ConfigError(f"{key}: names no factor ({{subject}}, {{condition}}, ...): {fmt(pattern)}")
+    for name in names:
+        if not name.isidentifier() or name in RESERVED_FACTORS:
+            raise ConfigError(
+                f"{key}: factor {fmt(name)} must be an identifier other than {', '.join(RESERVED_FACTORS)}"
+            )
+    if len(set(names)) != len(names):
+        raise ConfigError(f"{key}: a factor appears twice in {fmt(pattern)}")
+    if "}{" in pattern:
+        raise ConfigError(
+            f"{key}: two factors with nothing between them cannot be told apart: {fmt(pattern)}"
+        )
+    if "/" in pattern or "\\" in pattern:
+        raise ConfigError(f"{key}: matches a file's name, not its folder: {fmt(pattern)}")
+    return tuple(names)
 
 
 def _fit_hc_section(top: Section, band: tuple[float, float], timing: Timing) -> FitSettings:

@@ -411,14 +411,17 @@ class DataConfig:
     time column was not named, so ``time`` is accepted too. ``w_report`` are the W
     values at which the report shows the data's models; ``lead_in`` (s, whole
     samples at the analysis rate) is skipped at the start of every run, after the
-    data are resampled to the analysis rate.
+    data are resampled to the analysis rate. A column given as an integer is a CSV
+    column's position (1 for the first). ``pattern`` (e.g.
+    ``{subject}_{condition}_{trial}.csv``) gives each file's factors from its name.
     """
 
     name: str
-    columns: dict[str, str]
+    columns: dict[str, str | int]
     w_report: tuple[float, ...]
     lead_in: float = 0.0
     time_default: bool = False
+    pattern: str | None = None
 
 
 @dataclass(frozen=True)

@@ -60,7 +60,7 @@ os.register_at_fork(after_in_child=_forget_held)
 def known_files() -> list[str]:
     """Every file name hcid writes in a run directory."""
     schemas = [
-        tables.SIMULATIONS, tables.SIMULATION_SUMMARY, tables.MEASURED, tables.FRONTIER,
+        tables.SIMULATIONS, tables.SIMULATION_SUMMARY, tables.MEASURED, tables.RUNS, tables.FRONTIER,
         tables.IDENTIFY_LOG, tables.SELECTION, tables.BREAKPOINTS, tables.thresholds(),
         tables.CALIBRATION, tables.RUN_LOG, tables.HC_PARAMETERS, tables.RESIDUALS, tables.HC_LOOP,
         tables.REMNANT_SPECTRUM,

@@ -18,9 +18,10 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from hcid import measured, methods, results, tables
+from hcid import datasets, measured, methods, results, tables
 from hcid.calibration import calibrate
 from hcid.config import Config, IdentifyConfig
+from hcid.config.parse import default_data
 from hcid.errors import ConfigError, DataError
 from hcid.pipeline.parallel import check_scheduler, parallel_map
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
@@ -246,13 +247,29 @@ def _load_records(config: Config, run_dir: Path) -> dict[tuple[str, int], dict[s
     return recs
 
 
-def _import_data(config: Config, run_dir: Path, path: Path, force: bool) -> dict[int, dict[str, np.ndarray]]:
-    """Read and check a measured-data file and keep a copy in ``run_dir/measured.parquet``."""
-    records = measured.load_data(path, config)
+def _import_data(
+    config: Config, run_dir: Path, sources: Sequence[str | Path], force: bool
+) -> dict[int, dict[str, np.ndarray]]:
+    """Read and check a data set; keep a copy in ``measured.parquet`` and its runs' factors in
+    ``runs.parquet``. Other data than the run's earlier identification results were made from
+    are refused without ``force``: their results would be reused as if they were these data's."""
+    data = config.data if config.data is not None else default_data()
+    files = datasets.data_files(sources, data.pattern)
+    data_set = datasets.read_set(files, data, config.timing.output_rate, measured.samples_needed(config))
     check_run_dir(config, run_dir, "identify", force=force)
+    table = measured.records_table(data.name, data_set.records)
+    if not force:
+        old = results.read_optional(tables.MEASURED, run_dir)
+        if old is not None and (run_dir / tables.FRONTIER.file).exists() and not old.equals(table):
+            raise DataError(
+                f"{run_dir}: holds identification results of other measured data (its "
+                f"{tables.MEASURED.file} differs from these files); use --force to replace them, "
+                "or another --run"
+            )
     record_config(config, run_dir)
-    results.write(tables.MEASURED, measured.records_table(config.data.name, records), run_dir)
-    return records
+    results.write(tables.MEASURED, table, run_dir)
+    results.write(tables.RUNS, datasets.runs_table(data.name, data_set), run_dir)
+    return data_set.records
 
 
 def _done(run_dir: Path, keys: list, names: tuple[str, ...], force: bool) -> dict:
@@ -295,7 +312,7 @@ def identify_study(
     run_dir: Path,
     method_names: Sequence[str] | None = None,
     *,
-    data_path: Path | None = None,
+    data_path: str | Path | Sequence[str | Path] | None = None,
     jobs: int = 2,
     force: bool = False,
     backend: str = "loky",
@@ -311,9 +328,11 @@ def identify_study(
     (``stage1.parquet``) and ``identify_log.parquet``; the first two are
     identical whatever ``jobs``, backend or interruptions.
 
-    With ``data_path`` (a measured-data file, :func:`hcid.measured.load_data`),
-    its runs are identified instead, under model name ``config.data.name`` and
-    seed = run number, beside any simulated realizations already in the tables.
+    With ``data_path`` (measured data: files, globs, folders or manifests,
+    :func:`hcid.datasets.data_files`), its runs are identified instead, under model
+    name ``config.data.name`` and seed = run id (the file's own for one file; 1, 2,
+    ... over a set of files, whose files and factors ``runs.parquet`` keeps), beside
+    any simulated realizations already in the tables.
     ``method_names`` defaults to every registered method.
     """
     names = tuple(methods.METHODS) if method_names is None else tuple(method_names)
@@ -322,7 +341,8 @@ def identify_study(
     check_scheduler(backend, scheduler, worker_timeout)  # refused before anything is read or written
     simulation = None
     if data_path is not None:
-        data = _import_data(config, run_dir, data_path, force)
+        sources = [data_path] if isinstance(data_path, str | Path) else list(data_path)
+        data = _import_data(config, run_dir, sources, force)
         records = {(config.data.name, run): rec for run, rec in data.items()}
         keys = list(records)
         noise_free = {}

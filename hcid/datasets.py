@@ -1,0 +1,261 @@
+"""A measured study's data set: many files, their factors, one record per run (results layer).
+
+``--data`` names files, globs, folders or manifests (:func:`data_files`):
+
+- a data file (CSV, Parquet, MATLAB) is itself;
+- a glob (``trials/*.csv``) is every file it matches, sorted by path;
+- a folder is every data file directly in it, sorted by name;
+- a manifest is a CSV with a ``file`` column (paths relative to the manifest's
+  folder) and one column per factor (subject, condition, trial, ...).
+
+Factors come from the manifest and from the config's ``data.pattern``, matched
+against each file's name (``{subject}_{condition}_{trial}.csv``). Every file of a
+set must give the same factors, have the same columns (CSV headers, Parquet
+schemas) and be sampled at the same rate. The runs of a one-file set keep the
+file's run ids; the runs of several files are numbered 1, 2, ... in file order,
+and ``runs.parquet`` (:func:`runs_table`) keeps each run's file, the file's own
+run id and its factors, for every table to be joined with.
+"""
+
+from __future__ import annotations
+
+import csv
+import glob
+import os
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+
+from hcid.config import DataConfig
+from hcid.config.parse import RESERVED_FACTORS, check_pattern
+from hcid.errors import ConfigError, DataError
+from hcid.measured import READERS, csv_layout, read_file_runs
+from hcid.tables import RUNS
+
+__all__ = ["DataFile", "DataSet", "data_files", "read_set", "runs_table"]
+
+_GLOB = re.compile(r"[*?\[]")
+
+
+@dataclass(frozen=True)
+class DataFile:
+    """One file of a data set and its factors (name, value), in the set's factor order."""
+
+    path: Path
+    factors: tuple[tuple[str, str], ...] = ()
+
+
+@dataclass(frozen=True)
+class DataSet:
+    """The runs of a data set at the analysis rate.
+
+    ``records`` by run id (``t``, ``ft``, ``fd``, ``e``, ``u``); ``runs`` one row per
+    run: ``file``, ``file_run`` and the factors (:data:`hcid.tables.RUNS`).
+    """
+
+    records: dict[int, dict[str, np.ndarray]]
+    runs: list[dict[str, object]]
+    factors: tuple[str, ...]
+    rate: float
+
+
+def _pattern_regex(pattern: str) -> re.Pattern:
+    out, pos = [], 0
+    for m in re.finditer(r"\{([^{}]*)\}", pattern):
+        out.append(re.escape(pattern[pos : m.start()]))
+        out.append(f"(?P<{m.group(1)}>.+?)")
+        pos = m.end()
+    out.append(re.escape(pattern[pos:]))
+    return re.compile("".join(out))
+
+
+def _is_manifest(path: Path) -> bool:
+    if path.suffix.lower() != ".csv":
+        return False
+    names, header_row, _ = csv_layout(path)
+    return header_row and "file" in names
+
+
+def _manifest(path: Path) -> list[DataFile]:
+    """The files a manifest names, with its factor columns."""
+    with open(path, newline="", encoding="utf-8-sig") as f:
+        rows = [r for r in csv.reader(line for line in f if not line.lstrip().startswith("#")) if any(r)]
+    header = [h.strip() for h in rows[0]]
+    factors = [h for h in header if h != "file"]
+    for name in factors:
+        if not name.isidentifier() or name in RESERVED_FACTORS:
+            raise DataError(
+                f"{path}: factor column {name!r} must be an identifier other than "
+                f"{', '.join(RESERVED_FACTORS)}"
+            )
+    if len(set(header)) != len(header):
+        raise DataError(f"{path}: a column appears twice in its header")
+    if len(rows) < 2:
+        raise DataError(f"{path}: names no file (an empty manifest)")
+    out = []
+    for number, row in enumerate(rows[1:], start=2):
+        if len(row) != len(header):
+            raise DataError(f"{path}: row {number} has {len(row)} fields, its header {len(header)}")
+        values = dict(zip(header, (v.strip() for v in row), strict=True))
+        for name in factors:
+            if not values[name]:
+                raise DataError(f"{path}: row {number}: factor {name!r} is empty")
+        if not values["file"]:
+            raise DataError(f"{path}: row {number}: no file")
+        out.append(DataFile(path.parent / values["file"], tuple((n, values[n]) for n in factors)))
+    return out
+
+
+def _expand(source: str | Path) -> list[DataFile]:
+    text = str(source)
+    path = Path(text)
+    if _GLOB.search(text) and not path.exists():
+        found = sorted(Path(m) for m in glob.glob(text, recursive=True) if Path(m).is_file())
+        found = [p for p in found if p.suffix.lower() in READERS]
+        if not found:
+            raise DataError(f"{text}: matches no data file ({', '.join(READERS)})")
+        return [DataFile(p) for p in found]
+    if path.is_dir():
+        found = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in READERS)
+        found = [p for p in found if not _is_manifest(p)]
+        if not found:
+            raise DataError(f"{path}: holds no data file ({', '.join(READERS)})")
+        return [DataFile(p) for p in found]
+    if not path.exists():
+        raise DataError(f"{path}: no such file or folder")
+    if _is_manifest(path):
+        return _manifest(path)
+    return [DataFile(path)]
+
+
+def data_files(sources: Sequence[str | Path], pattern: str | None = None) -> list[DataFile]:
+    """The files of a data set with their factors, in order.
+
+    Raises
+    ------
+    DataError
+        One line: a source that is missing or matches nothing, a file named twice, a
+        file whose name does not match ``pattern``, a factor given twice with two
+        values, or files that do not all give the same factors.
+    """
+    if isinstance(sources, str | Path):
+        sources = [sources]
+    if not sources:
+        raise DataError("--data: no data given")
+    files = [f for source in sources for f in _expand(source)]
+    seen: dict[Path, Path] = {}
+    for f in files:
+        key = f.path.resolve()
+        if key in seen:
+            raise DataError(f"{f.path}: named twice in the data set")
+        seen[key] = f.path
+    if pattern is not None:
+        try:
+            check_pattern(pattern, "data.pattern")
+        except ConfigError as exc:
+            raise DataError(str(exc)) from None
+        regex = _pattern_regex(pattern)
+        named = []
+        for f in files:
+            m = regex.fullmatch(f.path.name)
+            if m is None:
+                raise DataError(f"{f.path}: its name does not match data.pattern {pattern!r}")
+            given = dict(f.factors)
+            for name, value in m.groupdict().items():
+                if name in given and given[name] != value:
+                    raise DataError(
+                        f"{f.path}: factor {name!r} is {given[name]!r} in the manifest and {value!r} "
+                        "in its name"
+                    )
+                given[name] = value
+            named.append(DataFile(f.path, tuple(given.items())))
+        files = named
+    names = [tuple(n for n, _ in f.factors) for f in files]
+    for f, n in zip(files, names, strict=True):
+        if set(n) != set(names[0]):
+            missing = sorted(set(names[0]) ^ set(n))
+            raise DataError(f"{f.path}: factors {n} differ from the set's {names[0]} (missing {missing})")
+    return files
+
+
+def _columns(path: Path) -> tuple[str, ...] | None:
+    """The file's column names, to compare across a set (None for a MATLAB file)."""
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        return tuple(csv_layout(path)[0]) or None
+    if suffix in (".parquet", ".pq"):
+        import pyarrow.parquet as pq
+
+        return tuple(pq.read_schema(path).names)
+    return None
+
+
+def read_set(
+    files: Sequence[DataFile], data: DataConfig, rate: float | None = None, need: int = 1
+) -> DataSet:
+    """Read and check every file of a set (:func:`hcid.measured.read_runs` each).
+
+    Raises
+    ------
+    DataError
+        One line: a file's own problem (named), files of different formats,
+        columns or sample rates (the first that differs named against the first
+        file), or an empty set.
+    """
+    if not files:
+        raise DataError("--data: the data set holds no file")
+    suffixes = {f.path.suffix.lower().replace(".pq", ".parquet") for f in files}
+    if len(suffixes) > 1:
+        raise DataError(f"the data set mixes formats ({', '.join(sorted(suffixes))}): give one kind of file")
+    first_columns = _columns(files[0].path)
+    records: dict[int, dict[str, np.ndarray]] = {}
+    runs: list[dict[str, object]] = []
+    native = None
+    several = len(files) > 1
+    for f in files:
+        columns = _columns(f.path)
+        if columns != first_columns:
+            raise DataError(
+                f"{f.path}: columns {list(columns or [])} differ from {files[0].path.name}'s "
+                f"{list(first_columns or [])}"
+            )
+        file_records, rate, natives = read_file_runs(f.path, data, rate, need)
+        for file_run, found in natives.items():
+            if native is None:
+                native = (found, f.path, file_run)
+            elif not np.isclose(found, native[0], rtol=1e-6):
+                raise DataError(
+                    f"{f.path}: run {file_run} is sampled at {found:.6g} Hz, {native[1].name} at "
+                    f"{native[0]:.6g} Hz: a set's files share one rate"
+                )
+        for file_run, record in file_records.items():
+            run = len(records) + 1 if several else file_run
+            records[run] = record
+            runs.append({"run": run, "file": str(f.path), "file_run": int(file_run), **dict(f.factors)})
+    factors = tuple(n for n, _ in files[0].factors)
+    # Files by their path under the set's common folder: the same whatever the set was given as.
+    root = Path(os.path.commonpath([str(f.path.resolve().parent) for f in files]))
+    names = {str(f.path): f.path.resolve().relative_to(root).as_posix() for f in files}
+    for r in runs:
+        r["file"] = names[r["file"]]
+    return DataSet(records, runs, factors, float(rate))
+
+
+def runs_table(name: str, data_set: DataSet) -> pa.Table:
+    """``runs.parquet``: model (the data name), seed (the run id), file, file_run, then a string
+    column per factor."""
+    columns = {
+        "model": pa.array([name] * len(data_set.runs), pa.string()),
+        "seed": pa.array([r["run"] for r in data_set.runs], pa.int64()),
+        "file": pa.array([r["file"] for r in data_set.runs], pa.string()),
+        "file_run": pa.array([r["file_run"] for r in data_set.runs], pa.int64()),
+    }
+    for factor in data_set.factors:
+        columns[factor] = pa.array([str(r[factor]) for r in data_set.runs], pa.string())
+    table = pa.table(columns)
+    assert RUNS.problem(table) is None
+    return table

@@ -1,0 +1,231 @@
+"""A measured study's data set (issue 27): many files, factors from names and manifests, one
+line for every bad set."""
+
+import csv
+import shutil
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from hcid import datasets, tables
+from hcid.cli import app
+from hcid.errors import DataError
+from hcid.measured import load_data
+from hcid.resolve import parse_config
+
+from .conftest import CI_CONFIG
+from .test_measured import COLUMNS, EXAMPLE
+
+runner = CliRunner()
+# The example file's three trials as a logger writes them: one file per trial, the factors in
+# its name, the column names on the last '#' line (no header row).
+LAYOUT = {1: ("P01", "easy", "1"), 2: ("P01", "hard", "1"), 3: ("P02", "easy", "2")}
+PATTERN = "{subject}_{condition}_trial{trial}.csv"
+NAMES = ["time_s", "target", "disturbance", "error", "stick"]
+
+
+def _trials():
+    with open(EXAMPLE, newline="") as f:
+        rows = list(csv.reader(f))[1:]
+    by_trial = {}
+    for row in rows:
+        by_trial.setdefault(int(row[0]), []).append(row[1:])
+    return by_trial
+
+
+@pytest.fixture(scope="module")
+def trial_folder(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("trials")
+    for trial, rows in _trials().items():
+        subject, condition, number = LAYOUT[trial]
+        path = folder / f"{subject}_{condition}_trial{number}.csv"
+        with open(path, "w", newline="") as f:
+            f.write(f"# logger v3, subject {subject}\n# {','.join(NAMES)}\n")
+            csv.writer(f).writerows(rows)
+    with open(folder / "manifest.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["file", "subject", "condition", "trial"])
+        for trial in sorted(LAYOUT, key=lambda t: f"{LAYOUT[t][0]}_{LAYOUT[t][1]}_trial{LAYOUT[t][2]}.csv"):
+            s, c, n = LAYOUT[trial]
+            w.writerow([f"{s}_{c}_trial{n}.csv", s, c, n])
+    return folder
+
+
+def _config(tmp_path, pattern=PATTERN, columns=None):
+    raw = yaml.safe_load(CI_CONFIG.read_text())
+    raw["name"] = "lab"
+    raw["seeds"] = [1]
+    cols = {k: v for k, v in COLUMNS.items() if k != "run"} if columns is None else columns
+    raw["data"] = {"name": "lab", "columns": cols, "w_report": [0.00715]}
+    if pattern is not None:
+        raw["data"]["pattern"] = pattern
+    path = tmp_path / "lab.yaml"
+    path.write_text(yaml.safe_dump(raw, sort_keys=False))
+    return path
+
+
+def test_factors_come_from_the_names_and_the_manifest(trial_folder, tmp_path):
+    config = parse_config(yaml.safe_load(_config(tmp_path).read_text()), "lab")
+    by_glob = datasets.data_files([str(trial_folder / "*_trial*.csv")], config.data.pattern)
+    assert [dict(f.factors) for f in by_glob] == [
+        {"subject": "P01", "condition": "easy", "trial": "1"},
+        {"subject": "P01", "condition": "hard", "trial": "1"},
+        {"subject": "P02", "condition": "easy", "trial": "2"},
+    ]
+    by_manifest = datasets.data_files([trial_folder / "manifest.csv"])
+    assert [(f.path.name, f.factors) for f in by_manifest] == [(f.path.name, f.factors) for f in by_glob]
+    # A folder: every data file in it but the manifest.
+    assert [f.path.name for f in datasets.data_files([trial_folder], PATTERN)] == [
+        f.path.name for f in by_glob
+    ]
+
+
+def test_header_on_the_last_comment_line_and_an_extra_column(trial_folder, tmp_path):
+    # Source: the example file itself (one run per trial), read through its header row.
+    config = parse_config(yaml.safe_load(_config(tmp_path).read_text()), "lab")
+    expected = load_data(EXAMPLE, parse_config(
+        yaml.safe_load(_config(tmp_path, None, COLUMNS).read_text()), "lab"))  # fmt: skip
+    files = datasets.data_files([trial_folder], PATTERN)
+    got = datasets.read_set(files, config.data, 25.0)
+    assert list(got.records) == [1, 2, 3]
+    for run, f in zip(got.records, files, strict=True):
+        trial = {v: k for k, v in LAYOUT.items()}[tuple(v for _, v in f.factors)]
+        for name in ("ft", "fd", "e", "u"):
+            np.testing.assert_array_equal(got.records[run][name], expected[trial][name])
+    # One column more in the rows than the '#' header names, read by position.
+    extra = tmp_path / "extra"
+    extra.mkdir()
+    for f in files:
+        lines = f.path.read_text().splitlines()
+        (extra / f.path.name).write_text("\n".join(lines[:2] + [line + ",7" for line in lines[2:]]) + "\n")
+    by_position = {"time": 1, "ft": 2, "fd": 3, "e": 4, "u": 5}
+    config = parse_config(yaml.safe_load(_config(tmp_path, PATTERN, by_position).read_text()), "lab")
+    again = datasets.read_set(datasets.data_files([extra], PATTERN), config.data, 25.0)
+    for run in got.records:
+        np.testing.assert_array_equal(again.records[run]["u"], got.records[run]["u"])
+
+
+def test_glob_folder_manifest_and_pattern_give_identical_tables(trial_folder, tmp_path):
+    config = _config(tmp_path)
+    (tmp_path / "m").mkdir()
+    manifest_config = _config(tmp_path / "m", pattern=None)
+    ways = {
+        "glob": (config, [str(trial_folder / "*_trial*.csv")]),
+        "folder": (config, [str(trial_folder)]),
+        "manifest": (manifest_config, [str(trial_folder / "manifest.csv")]),
+        "files": (config, [str(p) for p in sorted(trial_folder.glob("*_trial*.csv"))]),
+    }
+    digests = {}
+    for way, (cfg, sources) in ways.items():
+        run = tmp_path / f"run_{way}"
+        args = ["identify", str(cfg), "--run", str(run), "--method", "direct", "--quiet", "--jobs", "1"]
+        for source in sources:
+            args += ["--data", source]
+        result = runner.invoke(app, args)
+        assert result.exit_code == 0, result.output
+        digests[way] = {
+            name: pq.read_table(run / name)
+            for name in ("measured.parquet", "runs.parquet", "frontier.parquet")
+        }
+    first = digests["glob"]
+    for way, found in digests.items():
+        for name, table in found.items():
+            assert table.equals(first[name]), (way, name)
+    runs = first["runs.parquet"].to_pylist()
+    assert tables.RUNS.problem(first["runs.parquet"]) is None
+    assert [
+        (r["seed"], r["file"], r["file_run"], r["subject"], r["condition"], r["trial"]) for r in runs
+    ] == [
+        (1, "P01_easy_trial1.csv", 1, "P01", "easy", "1"),
+        (2, "P01_hard_trial1.csv", 1, "P01", "hard", "1"),
+        (3, "P02_easy_trial2.csv", 1, "P02", "easy", "2"),
+    ]
+
+
+def _bad_sets(folder, tmp):
+    """(description, sources, pattern, message) of sets a lab might give by mistake."""
+    odd = tmp / "odd"
+    odd.mkdir()
+    for f in sorted(folder.glob("*_trial*.csv")):
+        shutil.copy(f, odd / f.name)
+    (odd / "P03-easy-trial1.csv").write_text((folder / "P01_easy_trial1.csv").read_text())
+    cols = tmp / "cols"
+    shutil.copytree(odd, cols)
+    (cols / "P03-easy-trial1.csv").unlink()
+    text = (folder / "P01_easy_trial1.csv").read_text().replace("stick", "joystick")
+    (cols / "P04_easy_trial1.csv").write_text(text)
+    rate = tmp / "rate"
+    shutil.copytree(folder, rate)
+    lines = (folder / "P02_easy_trial2.csv").read_text().splitlines()
+    fast = [",".join([str(float(line.split(",")[0]) / 2)] + line.split(",")[1:]) for line in lines[2:]]
+    (rate / "P02_easy_trial2.csv").write_text("\n".join(lines[:2] + fast) + "\n")
+    manifest = tmp / "manifest.csv"
+    manifest.write_text(f"file,subject\n{folder / 'P01_easy_trial1.csv'},\n")
+    empty = tmp / "empty"
+    empty.mkdir()
+    return [
+        ("a name the pattern does not match", [odd], PATTERN, "P03-easy-trial1.csv: its name does not match"),
+        ("files with other columns", [cols], PATTERN, "differ from"),
+        ("files at other rates", [rate], PATTERN, "a set's files share one rate"),
+        ("a manifest row without its factor", [manifest], None, "row 2: factor 'subject' is empty"),
+        ("an empty folder", [empty], PATTERN, "holds no data file"),
+        ("a glob matching nothing", [str(tmp / "*.parquet")], PATTERN, "matches no data file"),
+        ("a file named twice", [folder / "P01_easy_trial1.csv"] * 2, PATTERN, "named twice"),
+    ]
+
+
+def test_every_bad_set_is_one_line_and_writes_nothing(trial_folder, tmp_path):
+    for described, sources, pattern, message in _bad_sets(trial_folder, tmp_path):
+        config = parse_config(yaml.safe_load(_config(tmp_path, pattern).read_text()), "lab")
+        with pytest.raises(DataError, match=message):
+            files = datasets.data_files(sources, config.data.pattern)
+            datasets.read_set(files, config.data, 25.0)
+        run = tmp_path / "run"
+        args = ["identify", str(_config(tmp_path, pattern)), "--run", str(run), "--quiet"]
+        for source in sources:
+            args += ["--data", str(source)]
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2, described
+        assert len(result.stderr.strip().splitlines()) == 1, described
+        assert not run.exists(), described
+
+
+def test_other_data_into_a_run_with_results_is_refused(trial_folder, tmp_path):
+    # Before: results of one file were silently reused for another file with the same run ids.
+    config = _config(tmp_path)
+    run = tmp_path / "run"
+    base = ["identify", str(config), "--run", str(run), "--method", "direct", "--quiet", "--jobs", "1"]
+    assert runner.invoke(app, [*base, "--data", str(trial_folder)]).exit_code == 0
+    before = (run / "frontier.parquet").read_bytes()
+    other = tmp_path / "other"
+    shutil.copytree(trial_folder, other)
+    path = other / "P01_easy_trial1.csv"
+    lines = path.read_text().splitlines()
+    scaled = [",".join(line.split(",")[:4] + [str(2 * float(line.split(",")[4]))]) for line in lines[2:]]
+    path.write_text("\n".join(lines[:2] + scaled) + "\n")
+    result = runner.invoke(app, [*base, "--data", str(other)])
+    assert result.exit_code == 2
+    assert "holds identification results of other measured data" in result.stderr
+    assert (run / "frontier.parquet").read_bytes() == before
+    forced = runner.invoke(app, [*base, "--data", str(other), "--force"])
+    assert forced.exit_code == 0 and "identified 3" in forced.output
+
+
+@pytest.mark.parametrize(
+    ("pattern", "message"),
+    [
+        ("trial.csv", "names no factor"),
+        ("{run}_{x}.csv", "factor 'run' must be an identifier other than"),
+        ("{a}{b}.csv", "nothing between them"),
+        ("{a}_{a}.csv", "appears twice"),
+        ("data/{a}.csv", "not its folder"),
+    ],
+)
+def test_a_bad_pattern_names_the_key(tmp_path, pattern, message):
+    from hcid.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=f"data.pattern: .*{message}"):
+        parse_config(yaml.safe_load(_config(tmp_path, pattern).read_text()), "lab")
