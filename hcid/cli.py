@@ -442,8 +442,9 @@ def _print_hc_fit(result) -> None:
         interval = f"[{num(column['ci_low'][0])}, {num(column['ci_high'][0])}]" if one else "-"
         covers = "-"
         if true is not None and np.isfinite(true):
-            held = (column["ci_low"] <= true) & (true <= column["ci_high"])
-            covers = f"{int(held.sum())}/{len(group)}"
+            given = np.isfinite(column["se"])  # rows with an interval (none on a bound)
+            held = given & (column["ci_low"] <= true) & (true <= column["ci_high"])
+            covers = f"{int(held.sum())}/{int(given.sum())}"
         hits = sum(bool(r["at_bound"]) for r in group)
         typer.echo(
             f"{model:<{m}}{method:<10}{w:>9.4g} {name:<10}{median:>10} {se_text:>9} {sd:>9} {interval:>21}"

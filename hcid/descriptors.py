@@ -44,8 +44,8 @@ class LoopMargins:
         ``180 + arg L(j wc)`` (deg), the phase continuous from the band's low end;
         NaN without a crossover.
     n_crossovers : int
-        Gain crossovers found in the band; with several, the one of the smallest
-        ``|phase_margin|`` is reported (python-control's rule).
+        Gain crossovers found in the band; with several, the lowest is reported
+        (SPEC 8; python-control's ``margin`` takes the one of the smallest margin).
     """
 
     crossover: float
@@ -125,7 +125,7 @@ def loop_margins(
         found.append((wc, 180.0 + np.degrees(phase[i] + step)))
     if not found:
         return LoopMargins(float("nan"), float("nan"), 0)
-    wc, pm = min(found, key=lambda item: abs(item[1]))
+    wc, pm = found[0]  # SPEC 8: the lowest crossing (python-control takes the smallest margin)
     return LoopMargins(float(wc), float(pm), len(found))
 
 
@@ -167,6 +167,9 @@ class RemnantFit:
         Damping (-).
     kn_rate : float
         The rate ``kn`` refers to (Hz).
+    at_bound : bool
+        ``w_n`` or ``zeta_n`` on a bound of the search (0.5 rad/s to Nyquist, 0.02 to 5):
+        the spectrum is not the filter's shape, and the three values mean little.
     omega : ndarray
         Frequencies of the spectrum (rad/s).
     psd : ndarray
@@ -179,6 +182,7 @@ class RemnantFit:
     w_n: float
     zeta_n: float
     kn_rate: float
+    at_bound: bool
     omega: np.ndarray
     psd: np.ndarray
     psd_fit: np.ndarray
@@ -238,18 +242,17 @@ def fit_remnant(
         return float(np.sum(np.log(kn2 * shape))), kn2
 
     best = None
+    limits = [(np.log(0.5), np.log(np.pi * rate)), (np.log(0.02), np.log(5.0))]
     for w0 in (5.0, 12.0, 25.0):
         for z0 in (0.2, 0.7):
             res = optimize.minimize(
-                lambda x: profiled(x)[0],
-                np.log([w0, z0]),
-                method="L-BFGS-B",
-                bounds=[(np.log(0.5), np.log(np.pi * rate)), (np.log(0.02), np.log(5.0))],
+                lambda x: profiled(x)[0], np.log([w0, z0]), method="L-BFGS-B", bounds=limits
             )
             if best is None or res.fun < best.fun:
                 best = res
     w_n, zeta_n = (float(v) for v in np.exp(best.x))
     kn = float(np.sqrt(profiled(best.x)[1]))
+    hit = any(min(abs(v - lo), abs(hi - v)) < 1e-6 for v, (lo, hi) in zip(best.x, limits, strict=True))
     return RemnantFit(
-        kn, w_n, zeta_n, float(kn_rate), omega, psd, kn**2 * _unit_density(omega, w_n, zeta_n, kn_rate)
+        kn, w_n, zeta_n, float(kn_rate), hit, omega, psd, kn**2 * _unit_density(omega, w_n, zeta_n, kn_rate)
     )

@@ -270,6 +270,7 @@ def describe_loop(
     record: Mapping[str, np.ndarray],
     yc: control.TransferFunction,
     kn_rate: float,
+    oversample: int = 4,
 ) -> tuple[LoopDescription, ...]:
     """The loop's descriptors from the selected ARX model and, when fitted, the parametric model.
 
@@ -279,7 +280,7 @@ def describe_loop(
     spectrum is fitted with SPEC 1's filter (``kn`` for unit white noise at
     ``kn_rate`` Hz). Crossover and phase margin of ``He Yc``: the ARX model's up to
     its Nyquist frequency, the parametric model's (with its continuous delay)
-    up to 1000 rad/s.
+    up to 1000 rad/s, simulated at ``oversample`` times the record's rate (the fit's).
     """
     rate = selected.rate
     rows = _span(selected)
@@ -301,8 +302,8 @@ def describe_loop(
     tracking = hcfit.TrackingRecord(ft, e, u, rate, rows, rows)
     values = fit.values
     feedback = {k: values[k] for k in hcfit.FEEDBACK_PARAMETERS}
-    u_e = hcfit.simulate_hc(feedback, yc, tracking)
-    parts = {"ft": hcfit.simulate_hc(values, yc, tracking) - u_e, "e": u_e}
+    u_e = hcfit.simulate_hc(feedback, yc, tracking, oversample)
+    parts = {"ft": hcfit.simulate_hc(values, yc, tracking, oversample) - u_e, "e": u_e}
     fitted = _describe(
         "fitted",
         lambda w: hcfit.hc_response(values, yc, w)[1],
@@ -410,5 +411,7 @@ def analyse_selected(
         rate=rate,
         confidence=RESIDUAL_CONFIDENCE,
     )
-    loop = describe_loop(selected, fit, record, plant(config.loop), config.timing.sim_rate)
+    loop = describe_loop(
+        selected, fit, record, plant(config.loop), config.timing.sim_rate, config.fit_hc.oversample
+    )
     return SelectedAnalysis(model=selected, fit=fit, residuals=residuals, loop=loop)

@@ -324,13 +324,15 @@ HC_PARAMETERS = _schema(
     + [("true_value", _F64), ("lower", _F64), ("upper", _F64), ("at_bound", _BOOL)]
     + [("cost", _F64), ("vaf_validation", _F64), ("starts", _INT)],
     (*_ANALYSIS_KEY, "parameter"),
+    optional=("se", "ci_low", "ci_high", "covariance"),  # absent from a fit-hc before issue 26
 )
 #: ``hc_loop.parquet`` (``hcid fit-hc``): one row per record, method, W and ``source``
 #: (``arx``: the selected ARX model; ``fitted``: the parametric fit): crossover
 #: (rad/s) and phase margin (deg) of ``He Yc``, the shares of var(u) through the
 #: target path, the error path and the remnant (``share_remnant``, the remnant
 #: ratio), and SPEC 1's remnant filter fitted to the remnant's spectrum
-#: (``remnant_kn`` for unit white noise at ``kn_rate`` Hz). ``true_*`` are the
+#: (``remnant_kn`` for unit white noise at ``kn_rate`` Hz; ``remnant_at_bound``: its w_n or
+#: zeta_n on a bound of the search, the three then mean little). ``true_*`` are the
 #: simulated model's loop (NaN for measured data).
 HC_LOOP = _schema(
     "hc_loop.parquet",
@@ -339,7 +341,8 @@ HC_LOOP = _schema(
     + [("source", _STR), ("crossover", _F64), ("phase_margin", _F64), ("n_crossovers", _INT)]
     + [("true_crossover", _F64), ("true_phase_margin", _F64)]
     + [("share_ft", _F64), ("share_e", _F64), ("share_remnant", _F64)]
-    + [("remnant_kn", _F64), ("remnant_w_n", _F64), ("remnant_zeta_n", _F64), ("kn_rate", _F64)],
+    + [("remnant_kn", _F64), ("remnant_w_n", _F64), ("remnant_zeta_n", _F64), ("kn_rate", _F64)]
+    + [("remnant_at_bound", _BOOL)],
     (*_ANALYSIS_KEY, "source"),
 )
 #: ``remnant_spectrum.parquet`` (``hcid fit-hc``): the remnant's Welch density (one-sided,

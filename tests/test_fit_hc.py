@@ -127,7 +127,12 @@ def test_a_bad_target_is_one_line_and_writes_nothing(fitted, tmp_path):
     assert {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()} == before
 
 
-@pytest.mark.parametrize("name", [tables.HC_PARAMETERS.file, tables.RESIDUALS.file])
+FIT_TABLES = [
+    t.file for t in (tables.HC_PARAMETERS, tables.RESIDUALS, tables.HC_LOOP, tables.REMNANT_SPECTRUM)
+]
+
+
+@pytest.mark.parametrize("name", FIT_TABLES)
 def test_tables_identical_for_jobs_1_and_2(fitted, name):
     _, out = fitted
     # Byte for byte (Table.equals would call NaN unequal: a FB fit has no true TI).
@@ -246,7 +251,7 @@ def test_interrupted_fit_resumes_from_its_parts(fitted, tmp_path, monkeypatch):
     config, out = fitted
     run = tmp_path / "run"
     shutil.copytree(out[2][0], run)  # the uninterrupted run (W_BIC only; other tests add rows to out[1])
-    for name in (tables.HC_PARAMETERS.file, tables.RESIDUALS.file):
+    for name in FIT_TABLES:
         (run / name).unlink()
     real = interrupt_after(monkeypatch, fit, "_fit_task", 3)
     result = runner.invoke(app, ["fit-hc", str(config), "--run", str(run), "--jobs", "1", "--quiet"])
@@ -256,7 +261,7 @@ def test_interrupted_fit_resumes_from_its_parts(fitted, tmp_path, monkeypatch):
     result = runner.invoke(app, ["fit-hc", str(config), "--run", str(run), "--jobs", "1", "--quiet"])
     assert result.exit_code == 0, result.output
     assert "fitted 5 record-methods, reused 3" in result.output
-    for name in (tables.HC_PARAMETERS.file, tables.RESIDUALS.file):
+    for name in FIT_TABLES:
         assert (run / name).read_bytes() == (out[2][0] / name).read_bytes()
     assert not (run / ".parts" / "fit_hc").exists()
 

@@ -20,7 +20,8 @@ Three targets (:data:`TARGETS`):
   and e (:func:`simulate_hc`).
 - ``closed_loop``: the parametric model in closed loop with the plant, driven
   by the measured ft and fd, output error on u (:func:`closed_loop_u`): the
-  least biased, as the remnant cannot reach its inputs, but more spread.
+  least biased on the paper study, as the remnant cannot reach its inputs, but
+  more spread.
 - ``frequency`` (the authors' approach): minimise
   ``sum_w |H_arx - H_par|^2 / |H_arx|^2`` over both paths on a log grid of the
   disturbance band (:func:`band_grid`; the config's

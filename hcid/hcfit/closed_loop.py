@@ -32,6 +32,7 @@ import math
 
 import numpy as np
 
+from hcid.errors import IdentificationError
 from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials
 
 __all__ = ["PADE_ORDER", "closed_loop_u", "loop_is_stable"]
@@ -90,9 +91,9 @@ class _ClosedLoop:
 
     def __init__(self, record: TrackingRecord, plant, feedforward: bool, disturbance_at: str):
         if record.fd is None:
-            raise ValueError("the closed-loop target needs the record's fd")
+            raise IdentificationError("record: the closed-loop target needs the record's fd")
         if disturbance_at not in ("output", "input"):
-            raise ValueError(f"disturbance_at: must be output or input, got {disturbance_at!r}")
+            raise IdentificationError(f"disturbance_at: must be output or input, got {disturbance_at!r}")
         self.num_c, self.den_c = _plant_polynomials(plant)
         self.names = _names(feedforward)
         self.n = record.ft.size

@@ -4,7 +4,7 @@ and the estimates' standard errors."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import control
@@ -54,10 +54,11 @@ class HCFit:
         rows; NaN when no record was given to a frequency fit.
     se : tuple of float
         Standard error of each estimate, in its unit (:mod:`hcid.hcfit.uncertainty`);
-        NaN for a parameter on a bound or an ill-conditioned Jacobian.
+        NaN for a parameter on a bound and for the frequency target, inf for one the
+        record does not determine. Not compared by ``==`` (NaN is not equal to itself).
     covariance : str
-        How ``se`` was computed: ``sandwich`` (lag window of ``lag`` samples) or
-        ``gauss_newton``.
+        How ``se`` was computed: ``sandwich`` (lag window of ``lag`` samples),
+        ``gauss_newton``, or ``none`` (the frequency target).
     lag : int
         The sandwich's lag window (samples; 0 for Gauss-Newton).
     """
@@ -70,7 +71,7 @@ class HCFit:
     starts: int
     start_costs: tuple[float, ...]
     vaf_validation: float
-    se: tuple[float, ...] = ()
+    se: tuple[float, ...] = field(default=(), compare=False)
     covariance: str = "gauss_newton"
     lag: int = 0
 
@@ -192,19 +193,19 @@ class _ClosedLoopProblem:
 
 def _uncertainty(problem, x, lower, upper, at_bound, settings: FitSettings, rate: float | None):
     """``(se, kind, lag)`` at the optimum ``x`` (see :mod:`hcid.hcfit.uncertainty`)."""
+    if rate is None:
+        # The frequency target's residuals are the ARX model's approximation error on a chosen
+        # grid, not noise: a covariance from them shrinks with the grid's size. None is given.
+        return tuple(math.nan for _ in x), "none", 0
     free = ~np.asarray(at_bound)
     r = problem.residuals(x)
     jac = jacobian(problem.residuals, x, lower, upper, free)
-    if rate is None:  # frequency target: residuals on a frequency grid, no time lag
-        kind, lag = "gauss_newton", 0
-    else:
-        kind = settings.covariance
-        lag = round(settings.lag * rate) if kind == "sandwich" else 0
+    kind = settings.covariance
+    lag = round(settings.lag * rate) if kind == "sandwich" else 0
     with np.errstate(invalid="ignore"):
-        cov = covariance(kind, jac, r, lag)
-        se_free = np.sqrt(np.diag(cov))
+        se_free = np.sqrt(np.diag(covariance(kind, jac, r, lag)))
     se = np.full(x.size, np.nan)
-    se[free] = np.where(np.isfinite(se_free), se_free, np.nan)
+    se[free] = se_free
     return tuple(float(v) for v in se), kind, lag
 
 

@@ -11,7 +11,8 @@ With residuals ``r`` (n,) and their Jacobian ``J`` (n, p) at the optimum:
   correlation dies out within ``L`` samples.
 
 Parameters on a bound are left out (their standard error is NaN): the
-quadratic approximation behind both formulas does not hold there.
+quadratic approximation behind both formulas does not hold there. Parameters the
+residuals cannot tell apart get an infinite standard error (see :func:`covariance`).
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+
+from hcid.errors import IdentificationError
 
 __all__ = ["COVARIANCES", "Z95", "covariance", "jacobian"]
 
@@ -36,8 +39,8 @@ def jacobian(
 ) -> np.ndarray:
     """Central-difference Jacobian (n, n_free) of ``residuals`` at ``x`` over the free parameters.
 
-    The step is ``1e-4 max(|x_i|, 0.01 (upper_i - lower_i))``; a step that would
-    leave the bounds is taken one-sided.
+    The step is ``1e-4 max(|x_i|, 0.01 (upper_i - lower_i))`` each way, cut short at a
+    bound (the difference then spans the shorter interval).
     """
     columns = []
     for i in np.flatnonzero(free):
@@ -53,7 +56,12 @@ def covariance(kind: str, jac: np.ndarray, r: np.ndarray, lag: int = 0) -> np.nd
     """Covariance (p, p) of the estimates from the Jacobian ``jac`` (n, p) and residuals ``r`` (n,).
 
     ``kind`` is ``gauss_newton`` or ``sandwich`` (``lag`` samples of Bartlett
-    window). NaN throughout when ``J^T J`` is singular or ``n <= p``.
+    window). ``J^T J`` is inverted through the SVD of J with unit columns: a
+    direction of the parameters the residuals do not see (a singular value below
+    1e-8 of the largest, e.g. TL and tau_pe when TL is near 0, ``TL s + 1 ~ exp(s TL)``)
+    is left out, and the parameters that move along it get an infinite variance
+    (the record does not determine them); the others keep theirs. NaN throughout
+    when ``n <= p``.
 
     Examples
     --------
@@ -64,25 +72,31 @@ def covariance(kind: str, jac: np.ndarray, r: np.ndarray, lag: int = 0) -> np.nd
     >>> bool(np.allclose(covariance("gauss_newton", jac, r), 0.05 * np.linalg.inv(jac.T @ jac)))
     True
     """
+    if kind not in COVARIANCES:
+        raise IdentificationError(f"kind: must be one of {COVARIANCES}, got {kind!r}")
     n, p = jac.shape
     if p == 0:
         return np.zeros((0, 0))
-    if n <= p:
+    if n <= p or not np.all(np.isfinite(jac)):
         return np.full((p, p), np.nan)
-    jtj = jac.T @ jac
-    try:
-        bread = np.linalg.inv(jtj)
-    except np.linalg.LinAlgError:
-        return np.full((p, p), np.nan)
-    if not np.all(np.isfinite(bread)) or np.linalg.cond(jtj) > 1e14:
-        return np.full((p, p), np.nan)
+    norms = np.linalg.norm(jac, axis=0)
+    norms = np.where(norms > 0, norms, 1.0)
+    _, sing, vt = np.linalg.svd(jac / norms, full_matrices=False)
+    kept = sing > 1e-8 * sing[0]
+    v = vt[kept].T / sing[kept]
+    bread = (v @ v.T) / np.outer(norms, norms)  # (J^T J)^+ in the parameters' units
     if kind == "gauss_newton":
-        return float(r @ r) / (n - p) * bread
-    if kind != "sandwich":
-        raise ValueError(f"kind: must be one of {COVARIANCES}, got {kind!r}")
-    g = jac * r[:, None]
-    meat = g.T @ g
-    for lag_l in range(1, min(lag, n - 1) + 1):
-        gamma = g[lag_l:].T @ g[:-lag_l]
-        meat += (1.0 - lag_l / (lag + 1.0)) * (gamma + gamma.T)
-    return n / (n - p) * bread @ meat @ bread
+        cov = float(r @ r) / (n - p) * bread
+    else:
+        g = jac * r[:, None]
+        meat = g.T @ g
+        for lag_l in range(1, min(lag, n - 1) + 1):
+            gamma = g[lag_l:].T @ g[:-lag_l]
+            meat += (1.0 - lag_l / (lag + 1.0)) * (gamma + gamma.T)
+        cov = n / (n - p) * bread @ meat @ bread
+    # Parameters along a left-out direction: not determined by these residuals.
+    lost = np.any(np.abs(vt[~kept]) > 0.1, axis=0) if (~kept).any() else np.zeros(p, dtype=bool)
+    cov[lost, :] = np.nan
+    cov[:, lost] = np.nan
+    cov[lost, lost] = np.inf
+    return cov

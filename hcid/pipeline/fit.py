@@ -261,6 +261,7 @@ def _loop_rows(base: dict, loop, true_margins: tuple[float, float]) -> tuple[lis
                 "remnant_w_n": math.nan if r is None else r.w_n,
                 "remnant_zeta_n": math.nan if r is None else r.zeta_n,
                 "kn_rate": math.nan if r is None else r.kn_rate,
+                "remnant_at_bound": False if r is None else r.at_bound,
             }
         )
         if r is not None:
@@ -272,11 +273,10 @@ def _loop_rows(base: dict, loop, true_margins: tuple[float, float]) -> tuple[lis
     return rows, spectrum
 
 
-def _fit_task(config, key, record, selected, sources, choices, truths, digest):
+def _fit_task(config, key, record, selected, sources, choices, truths, true_margins, digest):
     method = methods.get(key[2])
     settings = config.fit_hc
     out = {name: [] for name in OUTPUTS}
-    true_margins = truths.get("_loop", (math.nan, math.nan))
     for sel, source in zip(selected, sources, strict=True):
         analysis = analyse_selected(sel, record, config, method, choices)
         base = _base(key, source, sel)
@@ -350,7 +350,7 @@ def _read_parts(run_dir: Path, digest: str) -> dict:
     return found
 
 
-def _valid(group: tuple[pa.Table, pa.Table], sel: SelectedModel, source: str | None) -> bool:
+def _valid(group: dict[str, pa.Table], sel: SelectedModel, source: str | None) -> bool:
     """Whether stored rows were made from this selected model (and, if given, W source)."""
     first = group["parameters"].slice(0, 1).to_pylist()[0]
     same = tuple(first[c] for c in tables.ORDER_COLUMNS) == sel.orders and first["v"] == sel.v
@@ -391,9 +391,9 @@ def _plan(config, run_dir: Path, by_key: dict, w_of: dict, names: list[str], exi
         if record is None:
             raise DataError(f"{run_dir}: no record of {model}, seed {seed} (simulations or measured data)")
         stage_choices = _stage_choices(run_dir, choices, method_name, model, seed)
-        truths = {}
+        truths, true_margins = {}, (math.nan, math.nan)
         if model in {m.name for m in config.models}:
-            truths = {**true_parameters(config, model), "_loop": true_loop(config, model)}
+            truths, true_margins = true_parameters(config, model), true_loop(config, model)
         tasks.append(
             (
                 config,
@@ -403,6 +403,7 @@ def _plan(config, run_dir: Path, by_key: dict, w_of: dict, names: list[str], exi
                 [src for _, src in todo],
                 stage_choices,
                 truths,
+                true_margins,
                 digest,
             )
         )

@@ -104,6 +104,17 @@ def _load_config(run_dir: Path) -> Config:
         raise DataError(f"{path}: {exc}" if not str(exc).startswith(str(path)) else str(exc)) from exc
 
 
+def _with_optional(table: pa.Table, schema: tables.Schema) -> pa.Table:
+    """``table`` with the schema's optional columns an older hcid did not write: NaN, or ""."""
+    types = dict(schema.fields)
+    for name in schema.optional:
+        if name not in table.column_names:
+            kind = types[name]
+            value = "" if kind == pa.string() else float("nan")
+            table = table.append_column(pa.field(name, kind), pa.array([value] * table.num_rows, kind))
+    return table
+
+
 def read_run(run_dir: Path) -> RunTables:
     """Read a run directory for its report; one-line DataError for a damaged table or config."""
     loaded = {name: results.read_optional(schema, run_dir, cols) for name, (schema, cols) in _READS.items()}
@@ -117,4 +128,6 @@ def read_run(run_dir: Path) -> RunTables:
     for name, table in loaded.items():
         if table is not None:
             results.check_against_config(table, config, run_dir / _READS[name][0].file)
+    if loaded["hc_parameters"] is not None:
+        loaded["hc_parameters"] = _with_optional(loaded["hc_parameters"], tables.HC_PARAMETERS)
     return RunTables(run_dir=run_dir, config=config, choices=choices, **loaded)

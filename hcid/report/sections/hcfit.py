@@ -88,7 +88,7 @@ def accuracy(params: pa.Table) -> dict[tuple, dict[str, float]]:
             "sd": sd,
             "rmse": float(np.sqrt(np.mean((x - true) ** 2))),
             "se": float(np.sqrt(np.mean(se[has_se] ** 2))) if has_se.any() else math.nan,
-            "covered": int(np.count_nonzero((low <= true) & (true <= high))),
+            "covered": int(np.count_nonzero(has_se & (low <= true) & (true <= high))),
             "n_se": int(np.count_nonzero(has_se)),
             "at_bound": int(np.count_nonzero(t.column("at_bound").to_numpy(zero_copy_only=False))),
         }
