@@ -247,6 +247,57 @@ def calibrate_w(
     typer.echo(f"wrote {run_dir / 'calibration.parquet'}")
 
 
+@app.command()
+@_user_errors
+def analyse(
+    config: ConfigArg,
+    data: Annotated[
+        list[str],
+        typer.Option(
+            "--data",
+            help="The study's data: files, a quoted glob ('trials/*.csv'), a folder, or a manifest CSV "
+            "(a 'file' column and one column per factor); repeat for several.",
+        ),
+    ],
+    run: RunOpt = None,
+    by: Annotated[
+        str | None,
+        typer.Option(
+            "--by",
+            help="Factor(s) whose runs share one calibrated W, comma-separated (default: condition, "
+            "if the data set has it; e.g. --by subject or --by subject,condition).",
+        ),
+    ] = None,
+    twins: Annotated[
+        int, typer.Option("--twins", help="Realizations of each twin (FB and FF) per group.")
+    ] = 20,
+    jobs: JobsOpt = 2,
+    backend: BackendOpt = "loky",
+    scheduler: SchedulerOpt = None,
+    force: ForceOpt = False,
+    quiet: QuietOpt = False,
+):
+    """Analyse a measured study end to end: identify every run, calibrate W per condition on twins of
+    the condition's own fitted model, select every run there and fit its parameters; writes
+    RUN/analysis.parquet, analysis.csv and analysis_groups.parquet."""
+    from hcid.pipeline.analyse import analyse_study
+
+    cfg, run_dir = _load(config, run, backend, scheduler)
+    result = analyse_study(
+        cfg,
+        run_dir,
+        data,
+        by=None if by is None else [b.strip() for b in by.split(",") if b.strip()],
+        twins=twins,
+        jobs=jobs,
+        force=force,
+        backend=backend,
+        scheduler=scheduler,
+        show_progress=not quiet,
+    )
+    _print_analysis(result)
+
+
 @app.command("fit-hc")
 @_user_errors
 def fit_hc(
@@ -404,6 +455,43 @@ def _print_thresholds(sweep, is_paper: bool) -> None:
     for nf, names in by_nf.items():
         marks = ", ".join(f"{c.label} = {c.w(nf):.4g}" for c in sweep.criteria)
         typer.echo(f"{marks} (Nf = {nf}: {', '.join(names)})")
+
+
+def _print_analysis(result) -> None:
+    """Per group and method: the answer first (feedforward in k of N runs at W, how sure), then
+    the parameters and the loop (medians over the group's runs, median standard error)."""
+    import numpy as np
+
+    def pct(k: float, lo: float, hi: float) -> str:
+        return f"{100 * k:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}]"
+
+    runs = result.runs.to_pylist()
+    for g in result.groups.to_pylist():
+        rows = [r for r in runs if r["group"] == g["group"] and r["method"] == g["method"]]
+        safe = (
+            f"safe interval [{g['safe_low']:.3g}, {g['safe_high']:.3g})"
+            if not g["uncertain"]
+            else "NO W separates the twins: W of least total error, every decision UNCERTAIN"
+        )
+        typer.echo(
+            f"{g['group']}, {g['method']}: feedforward in {g['n_feedforward']} of {g['n_runs']} runs at "
+            f"W = {g['w']:.3g} ({safe}; twins' FP {pct(g['fp_rate'], g['fp_low'], g['fp_high'])}, "
+            f"FN {pct(g['fn_rate'], g['fn_low'], g['fn_high'])})"
+        )
+        parts = []
+        for p in ("Kpe", "TL", "tau_pe", "w_nms", "zeta_nms", "Kpt", "TI", "tau_pt"):
+            x = np.array([r[p] for r in rows], dtype=float)
+            se = np.array([r[f"{p}_se"] for r in rows], dtype=float)
+            if np.isfinite(x).any():
+                se_text = f" ± {np.nanmedian(se):.2g}" if np.isfinite(se).any() else ""
+                parts.append(f"{p} {np.nanmedian(x):.3g}{se_text}")
+        wc = np.nanmedian([r["crossover"] for r in rows])
+        pm = np.nanmedian([r["phase_margin"] for r in rows])
+        typer.echo(f"    {', '.join(parts)}; crossover {wc:.3g} rad/s, phase margin {pm:.3g} deg")
+    typer.echo(
+        f"analysed in {result.seconds:.1f} s; wrote {result.run_dir / 'analysis.parquet'} (and .csv: one row "
+        f"per run and method, with its factors) and {result.run_dir / 'analysis_groups.parquet'}"
+    )
 
 
 def _print_hc_fit(result) -> None:

@@ -55,6 +55,8 @@ __all__ = [
 #: Largest magnitude a signal may hold: its square, summed over a record and scaled by a loop's gains,
 #: must stay far from overflow (1.8e308) in the simulations and least-squares fits.
 LARGEST = 1e100
+#: A time column's steps may differ from their mean by this share of it (rounded time stamps).
+TIME_JITTER = 1e-2
 #: Largest data file (bytes) hcid reads, checked before reading: 1 GiB, about 20 million rows
 #: of a CSV with seven columns, or an hour of six signals at 1 kHz in binary.
 MAX_FILE_BYTES = 1 << 30
@@ -595,11 +597,15 @@ def _run_rate(where: str, run: dict[str, np.ndarray], data: DataConfig, default:
     """A run's sample rate (Hz): from its uniformly sampled time column, else its rate column."""
     if "time" in run:
         steps = np.diff(run["time"])
-        if steps.size and not np.allclose(steps, steps[0], rtol=1e-6, atol=1e-9):
-            k = int(np.argmax(np.abs(steps - steps[0]) > 1e-6 * abs(steps[0]) + 1e-9))
+        # A logger's time stamps are rounded (to 1 us, say: 6e-5 of a 60 Hz step): each step may
+        # differ from the mean by TIME_JITTER of it, a dropped or doubled sample may not.
+        mean = (run["time"][-1] - run["time"][0]) / steps.size if steps.size else 0.0
+        off = np.abs(steps - mean) > TIME_JITTER * abs(mean) + 1e-9
+        if steps.size and off.any():
+            k = int(np.argmax(off))
             raise DataError(
                 f"{where}: time is not uniformly sampled (step {steps[k]:.6g} s at sample "
-                f"{k + 1}, first step {steps[0]:.6g} s)"
+                f"{k + 1}, mean step {mean:.6g} s)"
             )
         if steps.size and steps[0] <= 0:
             raise DataError(f"{where}: time does not increase (step {steps[0]:.6g} s)")

@@ -243,7 +243,8 @@ def _disturbance_lines(config: Config) -> tuple[np.ndarray, np.ndarray]:
 
 
 def remnant_gain(config: Config) -> float:
-    """Kn that gives ``var(n)/var(u) = remnant_ratio`` in the disturbance-only task.
+    """Kn that gives ``var(n)/var(u) = remnant_ratio`` in the disturbance-only task (or the
+    config's ``loop.remnant_gain`` when it gives Kn itself).
 
     Computed once, analytically, from the discrete loop's frequency responses
     (ft = 0, feedback path of the first model; SPEC: all models share one Kn):
@@ -258,6 +259,8 @@ def remnant_gain(config: Config) -> float:
 
     and ``Kn^2 = r var(u_fd) / (var(n1) - r var(n1 / (1 + Yc He)))``.
     """
+    if config.loop.remnant_gain is not None:  # given as Kn (a twin of a measured person)
+        return float(config.loop.remnant_gain)
     dloop = DiscreteLoop.build(_feedback_only(config.models[0]), config.loop, config.timing.sim_dt)
     ratio = config.loop.remnant_ratio
     if ratio == 0.0:

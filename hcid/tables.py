@@ -36,6 +36,11 @@ file                            one row per                                    w
                                 model): crossover, phase margin, variance
                                 split of u, the remnant's fitted filter
 ``remnant_spectrum.parquet``    record, method, W, source and frequency        ``hcid fit-hc``
+``analysis.parquet`` (and .csv)  measured run and method: its group's W, the   ``hcid analyse``
+                                decision, the parameters with their standard
+                                errors, the loop; the run's factors
+``analysis_groups.parquet``     group of runs and method: the calibrated W,    ``hcid analyse``
+                                the twins' rates there, the twins
 ``run_log.parquet``             stage run (wall seconds)                       every computing stage
 ==============================  =============================================  ==========================
 """
@@ -48,6 +53,8 @@ from dataclasses import dataclass
 import pyarrow as pa
 
 __all__ = [
+    "ANALYSIS",
+    "ANALYSIS_GROUPS",
     "BREAKPOINTS",
     "CALIBRATION",
     "FRONTIER",
@@ -364,4 +371,47 @@ RESIDUALS = _schema(
     + [("signal", _STR), ("kind", _STR), ("lag", _INT), ("lag_s", _F64), ("correlation", _F64)]
     + [("bound", _F64), ("outside", _BOOL), ("share_outside", _F64), ("n", _INT), ("confidence", _F64)],
     (*_ANALYSIS_KEY, "signal", "lag"),
+)
+
+
+# --------------------------------------------------------------------------- hcid analyse
+
+#: The parametric model's parameters (SPEC 8), as the analysis tables name their columns.
+HC_PARAMETER_NAMES = ("Kpe", "TL", "tau_pe", "w_nms", "zeta_nms", "Kpt", "TI", "tau_pt")
+_RATE_FIELDS = [(c, _F64) for c in ("fp_rate", "fp_low", "fp_high", "fn_rate", "fn_low", "fn_high")]
+_CHOICE_FIELDS = (
+    [("group", _STR), ("method", _STR), ("w", _F64), ("w_rule", _STR), ("uncertain", _BOOL)]
+    + [("safe_low", _F64), ("safe_high", _F64)]
+    + _RATE_FIELDS
+)
+
+#: ``analysis.parquet`` (``hcid analyse``; also written as ``analysis.csv``): one row per
+#: measured run (``model`` the data name, ``seed`` the run id) and method: its group's W
+#: (``w_rule``: ``safe interval``, or ``least total error (no safe W)`` with ``uncertain``
+#: true), the twins' false-positive and false-negative rates there with their exact 95%
+#: bands, the selected structure, ``feedforward`` (nb_ft > 0), the ARX and parametric
+#: models' validation VAF, each parameter with its standard error (``<p>`` and ``<p>_se``;
+#: NaN where not fitted), the fitted loop's crossover (rad/s), phase margin (deg) and
+#: remnant share, then one string column per factor of the data set.
+ANALYSIS = _schema(
+    "analysis.parquet",
+    [("model", _STR), ("seed", _INT)]
+    + _CHOICE_FIELDS
+    + [(c, _INT) for c in ORDER_COLUMNS]
+    + [("feedforward", _BOOL), ("vaf_arx_validation", _F64), ("target", _STR), ("vaf_validation", _F64)]
+    + [f for p in HC_PARAMETER_NAMES for f in ((p, _F64), (f"{p}_se", _F64))]
+    + [("crossover", _F64), ("phase_margin", _F64), ("share_remnant", _F64)],
+    ("model", "seed", "method"),
+)
+#: ``analysis_groups.parquet`` (``hcid analyse``): one row per group of runs (``--by``) and
+#: method: the W used and why, the safe interval, the twins' rates at W, the runs and how
+#: many of them have feedforward there, and the twins (the group's fitted model, ``twin_<p>``;
+#: the FB twin has Kpt = 0) with their remnant filter and number of realizations each.
+ANALYSIS_GROUPS = _schema(
+    "analysis_groups.parquet",
+    _CHOICE_FIELDS
+    + [("n_runs", _INT), ("n_feedforward", _INT)]
+    + [(f"twin_{p}", _F64) for p in HC_PARAMETER_NAMES]
+    + [("twin_kn", _F64), ("twin_w_n", _F64), ("twin_zeta_n", _F64), ("twins", _INT)],
+    ("group", "method"),
 )

@@ -48,6 +48,9 @@ _DATA_COLUMNS = {
 #: The sections only a config that simulates holds; a config without them (and with a
 #: ``data`` section) describes measured data only.
 SIMULATION_SECTIONS = ("models", "loop", "signals", "seeds")
+#: A data config may hold a ``loop`` (its plant, for the parametric fit and the twins): these
+#: are the sections that make a config a simulating one.
+_SIMULATING = ("models", "signals", "seeds")
 
 
 # --------------------------------------------------------------------------- models and loop
@@ -142,7 +145,12 @@ def _plant(loop: Section) -> Plant:
     return plant
 
 
-def _loop_section(top: Section) -> Loop:
+#: A measured study's loop needs only its plant: the rest is the simulations' (SPEC 1's values).
+_LOOP_DEFAULTS = {"w_nms": 10.1, "zeta_nms": 0.35, "w_n": 12.7, "zeta_n": 0.26, "remnant_ratio": 0.15}
+
+
+def _loop_section(top: Section, plant_only: bool = False) -> Loop:
+    """``loop``; with ``plant_only`` (a measured study) every key but the plant may be left out."""
     s = top.section("loop")
     if "plant" in s.data:
         both = [k for k in ("Kc", "wb") if k in s.data]
@@ -160,15 +168,27 @@ def _loop_section(top: Section) -> Loop:
         raise ConfigError(
             f"loop.disturbance_at: must be one of {', '.join(DISTURBANCE_POINTS)}, got {fmt(point)}"
         )
+
+    def number(key: str, lo: float, hi: float, **kw) -> float:
+        if plant_only:
+            return s.number(key, lo, hi, _LOOP_DEFAULTS[key], **kw)
+        return s.number(key, lo, hi, **kw)
+
     loop = Loop(
         plant=plant,
-        w_nms=s.number("w_nms", 0.0, 1e3, open_lo=True),
-        zeta_nms=s.number("zeta_nms", 0.0, 10.0, open_lo=True),
-        w_n=s.number("w_n", 0.0, 1e3, open_lo=True),
-        zeta_n=s.number("zeta_n", 0.0, 10.0, open_lo=True),
-        remnant_ratio=s.number("remnant_ratio", 0.0, 0.9),
+        w_nms=number("w_nms", 0.0, 1e3, open_lo=True),
+        zeta_nms=number("zeta_nms", 0.0, 10.0, open_lo=True),
+        w_n=number("w_n", 0.0, 1e3, open_lo=True),
+        zeta_n=number("zeta_n", 0.0, 10.0, open_lo=True),
+        remnant_ratio=number("remnant_ratio", 0.0, 0.9) if "remnant_gain" not in s.data else 0.0,
         disturbance_at=point,
+        remnant_gain=s.number("remnant_gain", 0.0, 1e3) if "remnant_gain" in s.data else None,
     )
+    if "remnant_gain" in s.data and "remnant_ratio" in s.data:
+        raise ConfigError(
+            "loop.remnant_gain: give the remnant either as loop.remnant_ratio (var(n)/var(u) in the "
+            "disturbance-only task) or as loop.remnant_gain (Kn), not both"
+        )
     s.done()
     return loop
 
@@ -255,6 +275,47 @@ def _data_timing(top: Section) -> Timing:
             f"data.window: must be whole samples at data.analysis_rate ({rate:g} Hz), got {window:g} s"
         )
     return Timing(sim_rate=rate, output_rate=rate, run_in=0.0, window=window, periods=1)
+
+
+def data_identify_defaults(timing: Timing) -> dict:
+    """The identify section of a measured study that gives none: SPEC 3's grids and windows in
+    seconds, scaled to the analysis rate and the record.
+
+    Delays: direct and final stages ``nk_ft`` up to 2 s and ``nk_e`` up to 0.4 s, stage 1 both up
+    to 0.2 s (at least one sample); orders as SPEC 3; estimation ``[W/16, 17 W/32)`` and
+    validation ``[17 W/32, W)`` of the window W (the paper's 129..1088 and 1089..2048 of 2048
+    samples); target shift 1 s. At 25 Hz and W = 81.92 s this is SPEC 3's section exactly.
+
+    Examples
+    --------
+    >>> d = data_identify_defaults(Timing(20.0, 20.0, 0.0, 40.0, 1))
+    >>> d["direct"]["nk1"], d["direct"]["nk2"], d["direct"]["estimation"], d["direct"]["validation"]
+    ([1, 40], [1, 8], [2.5, 21.25], [21.25, 40.0])
+    """
+    rate, window = timing.output_rate, timing.window
+    n = round(window * rate)
+
+    def samples(seconds: float) -> int:
+        return max(1, round(seconds * rate))
+
+    cut = (round(n / 16) / rate, round(17 * n / 32) / rate)
+    final = {"na": [1, 7], "nb1": [0, 7], "nb2": [0, 7], "nk1": [1, samples(2.0)], "nk2": [1, samples(0.4)],
+             "estimation": [cut[0], cut[1]], "validation": [cut[1], n / rate]}  # fmt: skip
+    return {
+        "target_shift": round(rate) / rate,
+        "windows_in": "seconds",
+        "direct": dict(final),
+        "stage1": {
+            "na": [1, 10],
+            "nb1": [0, 25],
+            "nb2": [0, 10],
+            "nk1": [1, samples(0.2)],
+            "nk2": [1, samples(0.2)],
+            "estimation": "auto",
+            "validation": "auto",
+        },  # fmt: skip
+        "stage2": dict(final),
+    }
 
 
 def default_data() -> DataConfig:
@@ -407,7 +468,15 @@ def describe_config(data: Any, name: str, base: Path | None = None) -> Config:
     """
     top = Section(data, "")
     study_name = _study_name(top.get("name", name))
-    simulates = "data" not in top.data or any(k in top.data for k in SIMULATION_SECTIONS)
+    simulates = "data" not in top.data or any(k in top.data for k in _SIMULATING)
+    if not simulates and "identify" not in top.data:
+        # A measured study without an identify section: the paper's grids and windows in
+        # seconds, scaled to the analysis rate and the record (data_identify_defaults).
+        given = Section(data, "")
+        timing = timing_section(given) if "timing" in data else _data_timing(given)
+        data = {**data, "identify": data_identify_defaults(timing)}
+        top = Section(data, "")
+        top.get("name", name)
     if simulates:
         models = _models_section(top)
         loop = _loop_section(top)
@@ -416,7 +485,8 @@ def describe_config(data: Any, name: str, base: Path | None = None) -> Config:
         check_against_timing(timing, (disturbance, target), models)
         seeds = _seeds_section(top)
     else:
-        models, loop, disturbance, target, seeds = (), None, None, None, ()
+        models, disturbance, target, seeds = (), None, None, ()
+        loop = _loop_section(top, plant_only=True) if "loop" in top.data else None
         timing = timing_section(top) if "timing" in top.data else _data_timing(top)
     identify = identify_section(top, timing)
     selection, selection_raw = _selection_section(top)

@@ -160,6 +160,9 @@ class Loop:
     zeta_n: float
     remnant_ratio: float
     disturbance_at: str = "output"
+    #: Kn itself (white noise of unit variance at the simulation rate), when the config gives it
+    #: instead of ``remnant_ratio``: a twin given the remnant a person showed.
+    remnant_gain: float | None = None
 
 
 @dataclass(frozen=True)
@@ -447,8 +450,9 @@ class Config:
 
     @property
     def simulates(self) -> bool:
-        """Whether the config holds the simulation sections (models, loop, signals, seeds)."""
-        return self.loop is not None
+        """Whether the config holds the simulation sections (models, loop, signals, seeds); a
+        measured study's config may hold a loop (its plant) and still not simulate."""
+        return bool(self.models)
 
     def require_simulation(self, command: str) -> None:
         """Refuse a command that simulates on a data-only config.

@@ -63,10 +63,10 @@ def known_files() -> list[str]:
         tables.SIMULATIONS, tables.SIMULATION_SUMMARY, tables.MEASURED, tables.RUNS, tables.FRONTIER,
         tables.IDENTIFY_LOG, tables.SELECTION, tables.BREAKPOINTS, tables.thresholds(),
         tables.CALIBRATION, tables.RUN_LOG, tables.HC_PARAMETERS, tables.RESIDUALS, tables.HC_LOOP,
-        tables.REMNANT_SPECTRUM,
+        tables.REMNANT_SPECTRUM, tables.ANALYSIS, tables.ANALYSIS_GROUPS,
         tables.RATES, tables.HANDOFF,
     ]  # fmt: skip
-    files = [s.file for s in schemas] + ["config.yaml", folders.MANIFEST, LOCK]
+    files = [s.file for s in schemas] + ["config.yaml", folders.MANIFEST, LOCK, "analysis.csv", "forcing.csv"]
     files += [tables.stage_choice(s.name, s.inputs).file for m in METHODS.values() for s in m.choice_stages]
     return files
 

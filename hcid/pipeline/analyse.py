@@ -1,0 +1,391 @@
+"""``hcid analyse``: a measured study end to end, W calibrated on each group's own fitted model.
+
+1. Identify every run of the data set by every method (:func:`identify_study`).
+2. Fit the parametric HC model (the config's estimator, ``time`` by default) to every run
+   with and without its feedforward path, and SPEC 1's remnant filter to what the
+   feedforward fit leaves.
+3. Per group of runs (``--by``, default the factor ``condition``; one group without it):
+   the twins are the group's fitted model (medians over its runs; the FF twin) and the
+   same with ``Kpt = 0`` (the FB twin), with the group's fitted neuromuscular system
+   and remnant, driven by the group's first run's recorded ft and fd at the data's
+   rate and window (SPEC 10). ``calibrate-w`` on them (``RUN/twins/<group>/``) gives
+   the safe interval and the recommended W per method.
+4. Every run is selected at its group's W; the selected structure's parametric model
+   is fitted (:func:`hcid.selected.analyse_selected`).
+
+Where no W separates a group's twins (an empty safe interval) the W of the grid with
+the least total error rate (FP + FN) is used and every decision there is marked
+``uncertain``. Writes ``analysis.parquet`` and ``analysis.csv`` (one row per run and
+method, with the run's factors: statistics-ready) and ``analysis_groups.parquet``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+
+from hcid import datasets, folders, hcfit, methods, results, selection, tables
+from hcid.config import Config
+from hcid.config.parse import default_data
+from hcid.descriptors import fit_remnant
+from hcid.errors import ConfigError, DataError, IdentificationError
+from hcid.hcmodel import plant
+from hcid.pipeline.fit import _choices, _records, _stage_choices
+from hcid.pipeline.parallel import parallel_map
+from hcid.pipeline.rundir import check_run_dir, holds_run_dir, using
+from hcid.pipeline.studies import calibrate_study, identify_study
+from hcid.resolve import parse_config
+from hcid.selected import SelectedModel, analyse_selected
+
+__all__ = ["AnalysisRun", "analyse_study"]
+
+#: Realizations of each twin (FB and FF) per group.
+TWINS = 20
+#: The twins' simulation rate: the smallest multiple of the analysis rate at or above this (Hz).
+TWIN_SIM_RATE = 100.0
+
+
+@dataclass(frozen=True)
+class AnalysisRun:
+    """What ``hcid analyse`` found: ``groups`` (one row per group and method) and ``runs``
+    (one row per run and method), as written to the run directory."""
+
+    groups: pa.Table
+    runs: pa.Table
+    seconds: float
+    run_dir: Path
+
+
+# --------------------------------------------------------------------------- per-run fits
+
+
+def _tracking(record: dict, config: Config) -> hcfit.TrackingRecord:
+    stage = config.identify.stage(methods.get("direct").final_stage.name)
+    return hcfit.TrackingRecord(
+        record["ft"], record["e"], record["u"], config.timing.output_rate,
+        stage.estimation.rows(), stage.validation.rows(), fd=record["fd"],
+    )  # fmt: skip
+
+
+def _fit_run(config: Config, seed: int, record: dict, kn_rate: float):
+    """The run's FF and FB fits and the remnant its FF fit leaves."""
+    yc = plant(config.loop)
+    tracking = _tracking(record, config)
+    settings = config.fit_hc
+    fits = {
+        ff: hcfit.fit_hc(settings, yc, ff, record=tracking, disturbance_at=config.loop.disturbance_at)
+        for ff in (True, False)
+    }
+    rows = slice(tracking.estimation.start, tracking.validation.stop)
+    n = record["u"] - hcfit.simulate_hc(fits[True].values, yc, tracking, settings.oversample)
+    try:
+        remnant = fit_remnant(n[rows], config.timing.output_rate, kn_rate)
+    except IdentificationError:
+        remnant = None
+    return seed, fits, remnant
+
+
+# --------------------------------------------------------------------------- the twins
+
+
+def _slug(key: tuple[str, ...]) -> str:
+    text = "_".join(key) or "all"
+    return re.sub(r"[^A-Za-z0-9_.+-]", "-", text)[:60]
+
+
+def _twin_rate(rate: float) -> float:
+    return rate * max(1, math.ceil(TWIN_SIM_RATE / rate - 1e-9))
+
+
+def _twin_raw(config: Config, fitted: dict, remnant: tuple, forcing: Path, twins: int, name: str) -> dict:
+    """The twins' config (as YAML would give it): the group's fitted model and its FB twin."""
+    loop_raw = dict(config.raw.get("loop", {}))
+    kn, w_n, zeta_n = remnant
+    rate, window = config.timing.output_rate, config.timing.window
+    sim = _twin_rate(rate)
+    ff = {k: float(fitted[k]) for k in ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe")}
+    for k in ("tau_pt", "tau_pe"):  # the simulation delays by whole samples (SPEC 1)
+        ff[k] = round(ff[k] * sim) / sim
+    return {
+        "name": name,
+        "models": {"FB": {**ff, "Kpt": 0.0}, "FF": ff},
+        "loop": {
+            "plant": loop_raw["plant"]
+            if "plant" in loop_raw
+            else {"kind": "second_order", "K": loop_raw["Kc"], "wb": loop_raw["wb"]},
+            "disturbance_at": config.loop.disturbance_at,
+            "w_nms": float(fitted["w_nms"]),
+            "zeta_nms": float(fitted["zeta_nms"]),
+            "w_n": float(w_n),
+            "zeta_n": float(zeta_n),
+            "remnant_gain": float(kn),
+        },  # fmt: skip
+        "signals": {
+            "target": {"kind": "file", "path": str(forcing), "column": "ft", "rate": rate, "start": 0.0},
+            "disturbance": {"kind": "file", "path": str(forcing), "column": "fd", "rate": rate, "start": 0.0},
+        },
+        "timing": {
+            "sim_rate": _twin_rate(rate),
+            "output_rate": rate,
+            "run_in": 10.0,
+            "window": window,
+            "periods": 2,
+        },  # fmt: skip
+        "seeds": {"first": 1, "count": twins},
+        "identify": config.raw["identify"],
+        "selection": config.raw["selection"],
+        "fit_hc": config.raw.get("fit_hc") or {},
+    }
+
+
+def _forcing_text(record: dict, n: int) -> str:
+    """The group's forcing functions over one window, as the twins' file (CSV, full precision)."""
+    lines = ["ft,fd"] + [
+        f"{a:.17g},{b:.17g}" for a, b in zip(record["ft"][:n], record["fd"][:n], strict=True)
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _choose_w(cal) -> tuple[float, str, bool]:
+    """The group's W: the recommended one of a safe interval, else the grid's least total error."""
+    if cal.has_safe_interval and math.isfinite(cal.recommended):
+        return float(cal.recommended), "safe interval", False
+    total = cal.fp_rate + cal.fn_rate
+    i = int(np.argmin(total))
+    return float(cal.w[i]), "least total error (no safe W)", True
+
+
+def _rates_at(cal, w: float) -> dict:
+    i = int(np.argmin(np.abs(np.log(cal.w) - math.log(w))))
+    return {
+        "fp_rate": float(cal.fp_rate[i]), "fp_low": float(cal.fp_low[i]), "fp_high": float(cal.fp_high[i]),
+        "fn_rate": float(cal.fn_rate[i]), "fn_low": float(cal.fn_low[i]), "fn_high": float(cal.fn_high[i]),
+    }  # fmt: skip
+
+
+# --------------------------------------------------------------------------- the study
+
+
+def _groups(runs: pa.Table, by: Sequence[str]) -> dict[tuple[str, ...], list[int]]:
+    missing = [f for f in by if f not in runs.column_names]
+    if missing:
+        factors = [c for c in runs.column_names if c not in tables.RUNS.names]
+        raise ConfigError(
+            f"--by {','.join(by)}: the data set has no factor {missing[0]!r} (its factors: "
+            f"{', '.join(factors) or 'none'})"
+        )
+    out: dict[tuple[str, ...], list[int]] = {}
+    for row in runs.to_pylist():
+        out.setdefault(tuple(str(row[f]) for f in by), []).append(int(row["seed"]))
+    return out
+
+
+def _final_task(config, seed, record, method_name, sel, choices):
+    analysis = analyse_selected(sel, record, config, methods.get(method_name), choices)
+    return seed, method_name, analysis
+
+
+def _twin_dir_ready(twin_dir: Path, forcing_text: str) -> None:
+    """Keep the twins' earlier results only if their forcing functions are these (other data: new twins)."""
+    path = twin_dir / "forcing.csv"
+    if path.is_file() and path.read_text() != forcing_text:
+        folders.remove_owned(twin_dir)
+
+
+def _tables(config, runs, groups, by, calibrations, chosen, twin_params, finals, twins):
+    factors = [c for c in runs.column_names if c not in tables.RUNS.names]
+    factor_of = {int(r["seed"]): r for r in runs.to_pylist()}
+    group_rows, run_rows = [], []
+    for key, seeds in groups.items():
+        name = ", ".join(f"{f}={v}" for f, v in zip(by, key, strict=True)) or "all runs"
+        median, remnant = twin_params[key]
+        for method_name in methods.METHODS:
+            cal = calibrations[key][method_name]
+            w, rule, uncertain = chosen[(key, method_name)]
+            choice = {
+                "group": name,
+                "method": method_name,
+                "w": w,
+                "w_rule": rule,
+                "uncertain": uncertain,
+                "safe_low": float(cal.safe_low),
+                "safe_high": float(cal.safe_high),
+                **_rates_at(cal, w),
+            }
+            n_ff = 0
+            for seed in seeds:
+                a = finals[(seed, method_name)]
+                sel, fit = a.model, a.fit
+                n_ff += sel.nb_ft > 0
+                values = dict(zip(fit.names, fit.estimates, strict=True)) if fit else {}
+                ses = dict(zip(fit.names, fit.se, strict=True)) if fit else {}
+                fitted_loop = next((d for d in a.loop if d.source == "fitted"), None)
+                row = {
+                    "model": config.data.name, "seed": seed, **choice,
+                    **dict(zip(tables.ORDER_COLUMNS, sel.orders, strict=True)),
+                    "feedforward": bool(sel.nb_ft > 0), "vaf_arx_validation": sel.vaf_validation,
+                    "target": config.fit_hc.target,
+                    "vaf_validation": fit.vaf_validation if fit else math.nan,
+                }  # fmt: skip
+                for p in tables.HC_PARAMETER_NAMES:
+                    row[p] = values.get(p, math.nan)
+                    row[f"{p}_se"] = ses.get(p, math.nan)
+                row["crossover"] = fitted_loop.crossover if fitted_loop else math.nan
+                row["phase_margin"] = fitted_loop.phase_margin if fitted_loop else math.nan
+                row["share_remnant"] = fitted_loop.shares["remnant"] if fitted_loop else math.nan
+                for f in factors:
+                    row[f] = str(factor_of[seed][f])
+                run_rows.append(row)
+            group_rows.append(
+                {**choice, "n_runs": len(seeds), "n_feedforward": int(n_ff),
+                 **{f"twin_{p}": median[p] for p in tables.HC_PARAMETER_NAMES},
+                 "twin_kn": remnant[0], "twin_w_n": remnant[1], "twin_zeta_n": remnant[2], "twins": twins}
+            )  # fmt: skip
+    schema = tables.ANALYSIS.arrow
+    for f in factors:
+        schema = schema.append(pa.field(f, pa.string()))
+    return (
+        pa.Table.from_pylist(group_rows, schema=tables.ANALYSIS_GROUPS.arrow),
+        pa.Table.from_pylist(run_rows, schema=schema),
+    )
+
+
+def _write_csv(table: pa.Table, path: str) -> None:
+    import pyarrow.csv as pacsv
+
+    pacsv.write_csv(table, path)
+
+
+@holds_run_dir(create=True)
+def analyse_study(
+    config: Config,
+    run_dir: Path,
+    sources: Sequence[str | Path],
+    *,
+    by: Sequence[str] | None = None,
+    twins: int = TWINS,
+    jobs: int = 2,
+    force: bool = False,
+    backend: str = "loky",
+    scheduler: str | None = None,
+    show_progress: bool = True,
+) -> AnalysisRun:
+    """Analyse a measured study with W calibrated on each group's own fitted model (module notes).
+
+    Raises
+    ------
+    ConfigError
+        Without a plant (``loop``), or for a ``by`` factor the data set does not have.
+    DataError
+        For a bad data set (one line, nothing written).
+    """
+    if config.loop is None:
+        raise ConfigError(
+            "loop: missing; `hcid analyse` needs the plant of the experiment (loop.plant and "
+            "loop.disturbance_at) for the parametric fit and the twins"
+        )
+    if not 2 <= twins <= 1000:
+        raise ConfigError(f"--twins: must be an integer in [2, 1000], got {twins}")
+    data = config.data if config.data is not None else default_data()
+    files = datasets.data_files(sources, data.pattern)  # a bad set is refused before any work
+    factors = [n for n, _ in files[0].factors]
+    if by is None:
+        by = ["condition"] if "condition" in factors else []
+    missing = [f for f in by if f not in factors]
+    if missing:
+        raise ConfigError(
+            f"--by {','.join(by)}: the data set has no factor {missing[0]!r} (its factors: "
+            f"{', '.join(factors) or 'none'}; name them with data.pattern or a manifest)"
+        )
+    start = time.perf_counter()
+    names = tuple(methods.METHODS)
+    identify_study(config, run_dir, names, data_path=list(sources), jobs=jobs, force=force,
+                   backend=backend, scheduler=scheduler, show_progress=show_progress)  # fmt: skip
+    runs = results.read(tables.RUNS, run_dir)
+    records = {seed: r for (model, seed), r in _records(run_dir).items() if model == data.name}
+    groups = _groups(runs, by)
+    kn_rate = _twin_rate(config.timing.output_rate)
+
+    # 2. Every run fitted with and without feedforward.
+    fitted = {
+        seed: (fits, remnant)
+        for seed, fits, remnant in parallel_map(
+            _fit_run, [(config, s, records[s], kn_rate) for s in sorted(records)], jobs=jobs,
+            label="fit runs", show_progress=show_progress, backend=backend, scheduler=scheduler,
+        )
+    }  # fmt: skip
+
+    # 3. Per group: the twins and their calibration.
+    calibrations, twin_params = {}, {}
+    for key, seeds in groups.items():
+        ff_values = [fitted[s][0][True].values for s in seeds]
+        median = {p: float(np.median([v[p] for v in ff_values])) for p in hcfit.PARAMETERS}
+        remnants = [fitted[s][1] for s in seeds if fitted[s][1] is not None and not fitted[s][1].at_bound]
+        if not remnants:
+            raise DataError(f"group {_slug(key)}: no run's remnant could be fitted; cannot build its twins")
+        remnant = tuple(float(np.median([getattr(r, a) for r in remnants])) for a in ("kn", "w_n", "zeta_n"))
+        twin_dir = run_dir / "twins" / _slug(key)
+        with using(twin_dir):
+            forcing = twin_dir / "forcing.csv"
+            text = _forcing_text(records[seeds[0]], round(config.timing.window * config.timing.output_rate))
+            _twin_dir_ready(twin_dir, text)
+            folders.atomic_write(forcing, lambda tmp, text=text: Path(tmp).write_text(text))
+            raw = _twin_raw(config, median, remnant, forcing, twins, f"{config.name}_twins_{_slug(key)}")
+            twin_config = parse_config(raw, raw["name"])
+            try:
+                check_run_dir(twin_config, twin_dir, "simulate")
+            except DataError:  # the group's fitted model changed (other settings): new twins
+                folders.remove_owned(
+                    twin_dir, [n for n in folders.owned_files(twin_dir) if n != "forcing.csv"]
+                )
+            run = calibrate_study(twin_config, twin_dir, jobs=jobs, backend=backend, scheduler=scheduler,
+                                  show_progress=show_progress)  # fmt: skip
+        calibrations[key] = {c.method: c for c in run.calibrations}
+        twin_params[key] = (median, remnant)
+
+    # 4. Every run selected at its group's W and its selected structure fitted.
+    frontier = results.read(tables.FRONTIER, run_dir)
+    by_key = tables.split_by_key(frontier, tables.FRONTIER.key)
+    stored = _choices(run_dir)
+    chosen, tasks = {}, []
+    for key, seeds in groups.items():
+        for method_name in names:
+            w, rule, uncertain = _choose_w(calibrations[key][method_name])
+            chosen[(key, method_name)] = (w, rule, uncertain)
+            stage = config.identify.stage(methods.get(method_name).final_stage.name)
+            for seed in seeds:
+                t = by_key[(data.name, seed, method_name)]
+                orders = np.column_stack([t.column(c).to_numpy() for c in tables.ORDER_COLUMNS])
+                row = selection.select_at(t.column("d").to_numpy(), t.column("v").to_numpy(), orders,
+                                          np.array([w]))[0]  # fmt: skip
+                sel = SelectedModel.from_frontier(
+                    t,
+                    int(row),
+                    w,
+                    rate=config.timing.output_rate,
+                    target_shift=config.identify.target_shift,
+                    stage=stage,
+                )
+                choices = _stage_choices(run_dir, stored, method_name, data.name, seed)
+                tasks.append((config, seed, records[seed], method_name, sel, choices))
+    finals = {
+        (seed, method_name): analysis
+        for seed, method_name, analysis in parallel_map(
+            _final_task, tasks, jobs=jobs, label="fit selected",
+            show_progress=show_progress, backend=backend, scheduler=scheduler,
+        )
+    }  # fmt: skip
+    group_table, run_table = _tables(
+        config, runs, groups, by, calibrations, chosen, twin_params, finals, twins
+    )
+    results.write(tables.ANALYSIS_GROUPS, group_table, run_dir)
+    results.write(tables.ANALYSIS, run_table, run_dir)
+    folders.atomic_write(run_dir / "analysis.csv", lambda tmp: _write_csv(run_table, tmp))
+    return AnalysisRun(group_table, run_table, time.perf_counter() - start, run_dir)
