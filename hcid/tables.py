@@ -56,6 +56,7 @@ __all__ = [
     "ANALYSIS",
     "ANALYSIS_GROUPS",
     "BREAKPOINTS",
+    "FC_ESTIMATES",
     "CALIBRATION",
     "FRONTIER",
     "HANDOFF",
@@ -414,4 +415,17 @@ ANALYSIS_GROUPS = _schema(
     + [(f"twin_{p}", _F64) for p in HC_PARAMETER_NAMES]
     + [("twin_kn", _F64), ("twin_w_n", _F64), ("twin_zeta_n", _F64), ("twins", _INT)],
     ("group", "method"),
+)
+#: ``fc_estimates.parquet`` (``hcid analyse``): the model-free (Fourier-coefficient, SPEC 10)
+#: estimates per group and forcing line: ``path`` ``e`` (He at a disturbance line) or ``ft``
+#: (Ht at a target line, He interpolated there; ``extrapolated`` beyond the disturbance
+#: lines), the group's coefficient average as magnitude (dB) and phase (deg), its spread
+#: across runs (sd, dB and deg), and the group's fitted parametric model there (``model_db``,
+#: ``model_deg``). A group whose design allows no estimate has one row with ``problem`` set.
+FC_ESTIMATES = _schema(
+    "fc_estimates.parquet",
+    [("group", _STR), ("path", _STR), ("omega", _F64), ("magnitude_db", _F64), ("phase_deg", _F64)]
+    + [("sd_db", _F64), ("sd_deg", _F64), ("extrapolated", _BOOL), ("n_runs", _INT)]
+    + [("model_db", _F64), ("model_deg", _F64), ("problem", _STR)],
+    ("group", "path", "omega"),
 )

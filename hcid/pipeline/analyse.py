@@ -16,7 +16,9 @@
 Where no W separates a group's twins (an empty safe interval) the W of the grid with
 the least total error rate (FP + FN) is used and every decision there is marked
 ``uncertain``. Writes ``analysis.parquet`` and ``analysis.csv`` (one row per run and
-method, with the run's factors: statistics-ready) and ``analysis_groups.parquet``.
+method, with the run's factors: statistics-ready), ``analysis_groups.parquet`` and
+``fc_estimates.parquet`` (each group's model-free estimates of both paths, SPEC 10, beside
+its fitted model).
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from hcid.config import Config
 from hcid.config.parse import default_data
 from hcid.descriptors import fit_remnant
 from hcid.errors import ConfigError, DataError, IdentificationError
+from hcid.fourier import fc_estimate
 from hcid.hcmodel import plant
 from hcid.pipeline.fit import _choices, _records, _stage_choices
 from hcid.pipeline.parallel import parallel_map
@@ -257,6 +260,40 @@ def _tables(config, runs, groups, by, calibrations, chosen, twin_params, finals,
     )
 
 
+def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median: dict) -> list[dict]:
+    """The group's Fourier-coefficient estimates and its fitted model at the same lines."""
+    n = round(config.timing.window * config.timing.output_rate)
+    rows = slice(0, n)
+    base = {"group": name, "n_runs": len(seeds)}
+    try:
+        fc = fc_estimate([records[s] for s in seeds], config.timing.output_rate, rows)
+    except DataError as exc:
+        nan = math.nan
+        return [{**base, "path": "", "omega": nan, "magnitude_db": nan, "phase_deg": nan, "sd_db": nan,
+                 "sd_deg": nan, "extrapolated": False, "model_db": nan, "model_deg": nan,
+                 "problem": str(exc)}]  # fmt: skip
+    yc = plant(config.loop)
+    out = []
+    for path, omega, h, extrapolated in (
+        ("e", fc.omega_e, fc.he, np.zeros(fc.omega_e.size, dtype=bool)),
+        ("ft", fc.omega_t, fc.ht, fc.extrapolated),
+    ):
+        sd_db, sd_deg = fc.spread(path)
+        hft, he = hcfit.hc_response(median, yc, omega)
+        model = he if path == "e" else hft
+        for i in range(omega.size):
+            out.append(
+                {**base, "path": path, "omega": float(omega[i]),
+                 "magnitude_db": float(20 * np.log10(abs(h[i]))),
+                 "phase_deg": float(np.degrees(np.angle(h[i]))), "sd_db": float(sd_db[i]),
+                 "sd_deg": float(sd_deg[i]), "extrapolated": bool(extrapolated[i]),
+                 "model_db": float(20 * np.log10(abs(model[i]))),
+                 "model_deg": float(np.degrees(np.angle(model[i] / h[i])) + np.degrees(np.angle(h[i]))),
+                 "problem": ""}
+            )  # fmt: skip
+    return out
+
+
 def _write_csv(table: pa.Table, path: str) -> None:
     import pyarrow.csv as pacsv
 
@@ -384,6 +421,13 @@ def analyse_study(
     }  # fmt: skip
     group_table, run_table = _tables(
         config, runs, groups, by, calibrations, chosen, twin_params, finals, twins
+    )
+    fc_rows = []
+    for key, seeds in groups.items():
+        name = ", ".join(f"{f}={v}" for f, v in zip(by, key, strict=True)) or "all runs"
+        fc_rows += _fc_rows(config, name, seeds, records, twin_params[key][0])
+    results.write(
+        tables.FC_ESTIMATES, pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow), run_dir
     )
     results.write(tables.ANALYSIS_GROUPS, group_table, run_dir)
     results.write(tables.ANALYSIS, run_table, run_dir)

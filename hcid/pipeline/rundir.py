@@ -63,7 +63,7 @@ def known_files() -> list[str]:
         tables.SIMULATIONS, tables.SIMULATION_SUMMARY, tables.MEASURED, tables.RUNS, tables.FRONTIER,
         tables.IDENTIFY_LOG, tables.SELECTION, tables.BREAKPOINTS, tables.thresholds(),
         tables.CALIBRATION, tables.RUN_LOG, tables.HC_PARAMETERS, tables.RESIDUALS, tables.HC_LOOP,
-        tables.REMNANT_SPECTRUM, tables.ANALYSIS, tables.ANALYSIS_GROUPS,
+        tables.REMNANT_SPECTRUM, tables.ANALYSIS, tables.ANALYSIS_GROUPS, tables.FC_ESTIMATES,
         tables.RATES, tables.HANDOFF,
     ]  # fmt: skip
     files = [s.file for s in schemas] + ["config.yaml", folders.MANIFEST, LOCK, "analysis.csv", "forcing.csv"]

@@ -1,0 +1,101 @@
+"""`hcid analyse` (issue 27): a measured study end to end on a slice of the example lab study."""
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from typer.testing import CliRunner
+
+from hcid import tables
+from hcid.cli import app
+
+runner = CliRunner()
+LAB = Path(__file__).resolve().parents[1] / "configs" / "lab_example"
+CONFIG = LAB.parent / "lab_example.yaml"
+
+
+@pytest.fixture(scope="module")
+def analysed(tmp_path_factory):
+    """Subjects S1 and S2, trials 1 and 2 of both conditions (8 files), 4 twins each, --jobs 1 and 2."""
+    base = tmp_path_factory.mktemp("lab")
+    data = base / "data"
+    data.mkdir()
+    for path in sorted(LAB.glob("S[12]_*_trial[12].csv")):
+        shutil.copy(path, data / path.name)
+    out = {}
+    for jobs in (1, 2):
+        run = base / f"run{jobs}"
+        args = ["analyse", str(CONFIG), "--data", str(data), "--run", str(run), "--twins", "4", "--quiet",
+                "--jobs", str(jobs)]  # fmt: skip
+        result = runner.invoke(app, args)
+        assert result.exit_code == 0, result.output
+        out[jobs] = (run, result.output)
+    return data, out
+
+
+def test_every_run_and_group_is_answered_with_its_factors(analysed):
+    _, out = analysed
+    run, output = out[1]
+    runs = pq.read_table(run / tables.ANALYSIS.file)
+    assert tables.ANALYSIS.problem(runs) is None
+    rows = runs.to_pylist()
+    # 8 runs x 2 methods, every row with the file name's factors.
+    assert len(rows) == 16
+    assert {(r["subject"], r["condition"], r["trial"]) for r in rows} == {
+        (s, c, t) for s in ("S1", "S2") for c in ("pursuit", "compensatory") for t in ("1", "2")
+    }
+    groups = pq.read_table(run / tables.ANALYSIS_GROUPS.file).to_pylist()
+    assert {(g["group"], g["method"]) for g in groups} == {
+        (f"condition={c}", m) for c in ("pursuit", "compensatory") for m in ("direct", "indirect")
+    }
+    for g in groups:
+        mine = [r for r in rows if r["group"] == g["group"] and r["method"] == g["method"]]
+        assert g["n_runs"] == 4 and g["n_feedforward"] == sum(r["feedforward"] for r in mine)
+        assert all(r["w"] == g["w"] for r in mine)
+        # An empty safe interval is never presented as certain.
+        assert g["uncertain"] == (not g["safe_low"] < g["safe_high"])
+        assert 0 <= g["fp_low"] <= g["fp_rate"] <= g["fp_high"] <= 1
+    # The pursuit condition's twins separate: there the direct method finds the feedforward
+    # every subject used (Kpt 0.8 and 1.0, configs/lab_example/make.py).
+    pursuit = next(g for g in groups if g["group"] == "condition=pursuit" and g["method"] == "direct")
+    assert not pursuit["uncertain"] and pursuit["n_feedforward"] == 4
+    assert (run / "analysis.csv").read_text().splitlines()[0].startswith('"model","seed","group"')
+    assert "feedforward in 4 of 4 runs" in output
+
+
+def test_model_free_estimates_are_written_per_group(analysed):
+    _, out = analysed
+    fc = pq.read_table(out[1][0] / tables.FC_ESTIMATES.file).to_pylist()
+    # The example's multisines: 10 disturbance and 10 target lines per group, no problem.
+    for group in ("condition=pursuit", "condition=compensatory"):
+        mine = [r for r in fc if r["group"] == group]
+        assert sorted({r["path"] for r in mine}) == ["e", "ft"]
+        assert sum(r["path"] == "e" for r in mine) == 10 and sum(r["path"] == "ft" for r in mine) == 10
+        assert all(r["problem"] == "" for r in mine)
+    # He at the disturbance lines: the fitted model within a few dB of the estimate below 10 rad/s.
+    low = [r for r in fc if r["path"] == "e" and r["omega"] < 10]
+    assert np.median([abs(r["magnitude_db"] - r["model_db"]) for r in low]) < 2.0
+
+
+@pytest.mark.parametrize(
+    "name", [tables.ANALYSIS.file, tables.ANALYSIS_GROUPS.file, tables.FC_ESTIMATES.file]
+)
+def test_the_same_bytes_for_any_number_of_workers(analysed, name):
+    _, out = analysed
+    assert (out[1][0] / name).read_bytes() == (out[2][0] / name).read_bytes()
+
+
+def test_bad_requests_are_one_line(analysed, tmp_path):
+    data, _ = analysed
+    run = tmp_path / "run"
+    cases = [
+        (["--by", "session"], "--by session: the data set has no factor 'session'"),
+        (["--twins", "1"], "--twins: must be an integer in [2, 1000], got 1"),
+    ]
+    for extra, message in cases:
+        result = runner.invoke(app, ["analyse", str(CONFIG), "--data", str(data), "--run", str(run), *extra])
+        assert result.exit_code == 2
+        assert result.stderr.strip().splitlines() == [f"hcid: error: {message}"] or message in result.stderr
+        assert not run.exists()
