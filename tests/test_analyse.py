@@ -99,3 +99,18 @@ def test_bad_requests_are_one_line(analysed, tmp_path):
         assert result.exit_code == 2
         assert result.stderr.strip().splitlines() == [f"hcid: error: {message}"] or message in result.stderr
         assert not run.exists()
+
+
+def test_the_report_answers_first(analysed, tmp_path):
+    # A measured study's report: the answer per group first, no paper sections, no "missing".
+    from hcid.report import build_report
+
+    _, out = analysed
+    run = tmp_path / "run"
+    shutil.copytree(out[1][0], run)
+    report = build_report(run)
+    text = report.markdown.read_text()
+    assert text.index("## The study's answer") < text.index("feedforward in")
+    assert "Missing stages" not in text and "Fig." not in text
+    names = {p.name for p in report.figures}
+    assert {"calibration_pursuit.png", "calibration_compensatory.png", "fc_pursuit.png"} <= names

@@ -17,7 +17,7 @@ from hcid.pipeline.rundir import using
 from hcid.report import figures
 from hcid.report.document import Doc, to_html, to_markdown
 from hcid.report.run import RunTables, read_run
-from hcid.report.sections import SECTIONS
+from hcid.report.sections import SECTIONS, STUDY_SECTIONS
 
 __all__ = ["Report", "ReportData", "build_report", "compute_report", "write_report"]
 
@@ -32,7 +32,7 @@ class ReportData:
 
     @property
     def verdicts(self) -> list:
-        verdicts = self.sections["verdicts"]
+        verdicts = self.sections.get("verdicts")
         return verdicts[1] if verdicts is not None else []
 
 
@@ -55,6 +55,10 @@ def compute_report(run_dir: str | Path) -> ReportData:
     """Read ``run_dir`` and compute every section's data (no drawing, no writing)."""
     run = read_run(Path(run_dir))
     done: dict[str, Any] = {}
+    if run.analysis is not None:  # a measured study (hcid analyse): its answer, no paper sections
+        for section in STUDY_SECTIONS:
+            done[_section_name(section)] = section.compute(run, done)
+        return ReportData(run=run, sections=done, missing=())
     for section in SECTIONS:
         done[_section_name(section)] = section.compute(run, done)
     missing = tuple(
@@ -79,7 +83,7 @@ def render(data: ReportData) -> Doc:
             + ", ".join(data.missing)
             + ". Run `hcid run CONFIG` to complete them; what is there is reported below."
         )
-    for section in SECTIONS:
+    for section in STUDY_SECTIONS if data.run.analysis is not None else SECTIONS:
         section.render(data.sections[_section_name(section)], doc)
     return doc
 

@@ -26,6 +26,9 @@ _READS = {
     "hc_parameters": (tables.HC_PARAMETERS, None),
     "residuals": (tables.RESIDUALS, None),
     "hc_loop": (tables.HC_LOOP, None),
+    "analysis": (tables.ANALYSIS, None),
+    "analysis_groups": (tables.ANALYSIS_GROUPS, None),
+    "fc_estimates": (tables.FC_ESTIMATES, None),
     "remnant_spectrum": (tables.REMNANT_SPECTRUM, None),
     "rates": (tables.RATES, None),
     "handoff": (tables.HANDOFF, None),
@@ -56,6 +59,9 @@ class RunTables:
     handoff: pa.Table | None = None
     hc_loop: pa.Table | None = None
     remnant_spectrum: pa.Table | None = None
+    analysis: pa.Table | None = None
+    analysis_groups: pa.Table | None = None
+    fc_estimates: pa.Table | None = None
 
     def simulations(self) -> dict | None:
         """The simulated records by (model, seed), or None without simulations."""

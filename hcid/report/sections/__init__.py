@@ -18,6 +18,7 @@ from hcid.report.sections import (
     rates,
     responses,
     simulation,
+    study,
     verdicts,
 )
 
@@ -36,4 +37,8 @@ SECTIONS = (
     hcfit,
 )
 
-__all__ = ["SECTIONS"]
+#: The sections of a measured study's report (a run of ``hcid analyse``): the answer first, no
+#: paper sections.
+STUDY_SECTIONS = (study,)
+
+__all__ = ["SECTIONS", "STUDY_SECTIONS"]

@@ -1,0 +1,155 @@
+"""A measured study's answer (``hcid analyse``): per group, feedforward or not at the calibrated W
+and how sure, the parameters, the twins' calibration and the model-free estimates."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyarrow as pa
+
+from hcid import results, tables
+from hcid.report import figures, figures_hcfit
+from hcid.report.document import Doc
+from hcid.tables import HC_PARAMETER_NAMES
+
+TITLE = "The study's answer"
+
+
+@dataclass(frozen=True)
+class StudyData:
+    answers: list[list[str]]
+    uncertain: list[str]
+    parameters: list[list[str]]
+    runs_header: list[str]
+    runs: list[list[str]]
+    calibrations: list[tuple[str, pa.Table]] = field(default_factory=list)
+    fc: list[tuple[str, dict]] = field(default_factory=list)
+    fc_problems: list[str] = field(default_factory=list)
+
+
+def _num(x, digits: int = 3) -> str:
+    return "-" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
+
+
+def _pct(rate: float, low: float, high: float) -> str:
+    return f"{100 * rate:.0f}% [{100 * low:.0f}, {100 * high:.0f}]"
+
+
+def _slug(group: str) -> str:
+    """The twins' folder of a group, as hcid analyse named it."""
+    import re
+
+    values = [part.split("=", 1)[1] for part in group.split(", ")] if group != "all runs" else []
+    return re.sub(r"[^A-Za-z0-9_.+-]", "-", "_".join(values) or "all")[:60]
+
+
+def compute(run, done) -> StudyData | None:
+    groups, runs = run.analysis_groups, run.analysis
+    if groups is None or runs is None:
+        return None
+    answers, uncertain, parameters = [], [], []
+    rows = runs.to_pylist()
+    for g in groups.to_pylist():
+        safe = f"[{_num(g['safe_low'])}, {_num(g['safe_high'])})" if not g["uncertain"] else "none"
+        answers.append(
+            [g["group"], g["method"], f"{g['n_feedforward']} of {g['n_runs']}", _num(g["w"]), g["w_rule"],
+             safe, _pct(g["fp_rate"], g["fp_low"], g["fp_high"]),
+             _pct(g["fn_rate"], g["fn_low"], g["fn_high"]), "UNCERTAIN" if g["uncertain"] else "yes"]
+        )  # fmt: skip
+        if g["uncertain"]:
+            uncertain.append(f"{g['group']} ({g['method']})")
+        mine = [r for r in rows if r["group"] == g["group"] and r["method"] == g["method"]]
+        for p in HC_PARAMETER_NAMES:
+            x = np.array([r[p] for r in mine], dtype=float)
+            se = np.array([r[f"{p}_se"] for r in mine], dtype=float)
+            if not np.isfinite(x).any():
+                continue
+            spread = float(np.nanstd(x, ddof=1)) if np.isfinite(x).sum() > 1 else math.nan
+            parameters.append(
+                [g["group"], g["method"], p, str(int(np.isfinite(x).sum())), _num(float(np.nanmedian(x))),
+                 _num(spread, 2), _num(float(np.nanmedian(se)), 2) if np.isfinite(se).any() else "-"]
+            )  # fmt: skip
+    factors = [c for c in runs.column_names if c not in tables.ANALYSIS.names]
+    header = ["run", *factors, "method", "nb_ft", "feedforward", "Kpt", "Kpe", "tau_pe", "wc rad/s", "PM deg",
+              "VAF %"]  # fmt: skip
+    table_rows = []
+    for r in rows:
+
+        def with_se(p, r=r):
+            return _num(r[p]) + (f" ± {_num(r[p + '_se'], 2)}" if math.isfinite(r[p + "_se"]) else "")
+
+        table_rows.append(
+            [str(r["seed"]), *[str(r[f]) for f in factors], r["method"], str(r["nb_ft"]),
+             ("yes" if r["feedforward"] else "no") + (" (uncertain)" if r["uncertain"] else ""),
+             with_se("Kpt"), with_se("Kpe"), with_se("tau_pe"), _num(r["crossover"]), _num(r["phase_margin"]),
+             _num(r["vaf_validation"])]
+        )  # fmt: skip
+    calibrations = []
+    for name in dict.fromkeys(g["group"] for g in groups.to_pylist()):
+        twin_dir = run.run_dir / "twins" / _slug(name)
+        table = results.read_optional(tables.CALIBRATION, twin_dir)
+        if table is not None:
+            calibrations.append((name, table))
+    fc, problems = [], []
+    if run.fc_estimates is not None:
+        for name in dict.fromkeys(run.fc_estimates.column("group").to_pylist()):
+            t = [r for r in run.fc_estimates.to_pylist() if r["group"] == name]
+            if t[0]["problem"]:
+                problems.append(f"{name}: {t[0]['problem']}")
+                continue
+            fc.append((name, {path: [r for r in t if r["path"] == path] for path in ("e", "ft")}))
+    return StudyData(answers, uncertain, parameters, header, table_rows, calibrations, fc, problems)
+
+
+def render(data: StudyData | None, doc: Doc) -> None:
+    if data is None:
+        return
+    doc.text(f"## {TITLE}")
+    doc.text(
+        "Per group of runs and method: feedforward (nb_ft > 0) in how many runs at the group's W, "
+        "calibrated on twins of the group's own fitted model (FF twin) and the same without "
+        "feedforward (FB twin), with the twins' false-positive and false-negative rates there and "
+        "their exact 95% bands. Where no W separates the twins, W is the grid's least total error "
+        "and the decisions are **uncertain**."
+    )
+    doc.table(
+        ["group", "method", "feedforward in", "W", "rule", "safe interval", "twins' FP at W",
+         "twins' FN at W", "decided"],
+        data.answers,
+    )  # fmt: skip
+    if data.uncertain:
+        doc.text(
+            "**No W separates the twins of** " + "; ".join(data.uncertain) + ": the feedforward decisions "
+            "there cannot be trusted at any W (the group's fitted feedforward is too weak, or its "
+            "feedback twin finds feedforward too often)."
+        )
+    for name, table in data.calibrations:
+        doc.figure(
+            f"calibration_{_slug(name)}.png",
+            f"{name}: the twins' false-positive and false-negative rates over W (exact 95% bands), "
+            "the safe interval and its recommended W.",
+            lambda t=table, n=name: figures.plot_calibration(t, n),
+        )
+    doc.text(
+        "Parameters per group (SPEC 8): median and spread over the runs, and the runs' median standard error."
+    )
+    doc.table(
+        ["group", "method", "parameter", "runs", "median", "sd over runs", "median se"], data.parameters
+    )
+    for name, paths in data.fc:
+        doc.figure(
+            f"fc_{_slug(name)}.png",
+            f"{name}: model-free (Fourier-coefficient) estimates of both paths at the forcing lines, "
+            "the group's coefficient average with its spread across runs, and the group's fitted "
+            "parametric model (line).",
+            lambda p=paths, n=name: figures_hcfit.plot_fc(p, title=n),
+        )
+    for problem in data.fc_problems:
+        doc.text(f"No model-free estimate for {problem}.")
+    doc.text(
+        "Every run (`analysis.csv` holds all columns, one row per run and method, ready for a "
+        "repeated-measures ANOVA or a mixed model):"
+    )
+    doc.table(data.runs_header, data.runs)
