@@ -215,7 +215,7 @@ def read_set(
     records: dict[int, dict[str, np.ndarray]] = {}
     runs: list[dict[str, object]] = []
     native = None
-    several = len(files) > 1
+    several = len(files) > 1 or data.dimensions is not None
     for f in files:
         columns = _columns(f.path)
         if columns != first_columns:
@@ -224,7 +224,8 @@ def read_set(
                 f"{list(first_columns or [])}"
             )
         file_records, rate, natives = read_file_runs(f.path, data, rate, need)
-        for file_run, found in natives.items():
+        for file_run, info in natives.items():
+            found = info["rate"]
             if native is None:
                 native = (found, f.path, file_run)
             elif not np.isclose(found, native[0], rtol=1e-6):
@@ -235,8 +236,13 @@ def read_set(
         for file_run, record in file_records.items():
             run = len(records) + 1 if several else file_run
             records[run] = record
-            runs.append({"run": run, "file": str(f.path), "file_run": int(file_run), **dict(f.factors)})
-    factors = tuple(n for n, _ in files[0].factors)
+            runs.append(
+                {"run": run, "file": str(f.path), "file_run": int(file_run), **dict(f.factors),
+                 **natives[file_run]["factors"]}
+            )  # fmt: skip
+    factors = tuple(n for n, _ in files[0].factors) + tuple(
+        d for d in (data.dimensions or ()) if d != "sample"
+    )
     # Files by their path under the set's common folder: the same whatever the set was given as.
     root = Path(os.path.commonpath([str(f.path.resolve().parent) for f in files]))
     names = {str(f.path): f.path.resolve().relative_to(root).as_posix() for f in files}

@@ -264,14 +264,34 @@ def _read_parquet(path: Path, wanted: dict[str, str | int]) -> dict[str, np.ndar
     return _table_columns(pq.read_table(path, columns=include), path, wanted) if include else {}
 
 
-def _read_mat(path: Path, wanted: dict[str, str | int]) -> dict[str, np.ndarray]:
+def _read_mat(
+    path: Path, wanted: dict[str, str | int], struct: str | None = None, nd: bool = False
+) -> dict[str, np.ndarray]:
+    """The wanted variables of a MATLAB v5/v7 file (or the fields of its ``struct`` variable).
+
+    Without ``nd`` a variable must be a vector or a samples x runs matrix; with it, any number
+    of dimensions (named by ``data.dimensions``).
+    """
     import scipy.io
 
     _by_name(path, wanted)
+    names = [struct] if struct is not None else sorted(set(wanted.values()))
     try:
-        mat = scipy.io.loadmat(path, variable_names=sorted(set(wanted.values())))
+        mat = scipy.io.loadmat(path, variable_names=names)
+    except NotImplementedError as exc:  # scipy's reader stops at MATLAB v7.3 (HDF5)
+        raise DataError(
+            f"{path}: a MATLAB v7.3 (HDF5) file, which hcid does not read yet; save it with "
+            "save(..., '-v7') or as CSV"
+        ) from exc
     except Exception as exc:  # noqa: BLE001 (a damaged file makes scipy's reader raise almost anything)
         raise DataError(f"{path}: not a readable MATLAB file ({str(exc).splitlines()[0][:80]})") from exc
+    if struct is not None:
+        if struct not in mat:
+            raise DataError(f"{path}: has no variable {struct!r} (data.struct)")
+        record = mat[struct]
+        if record.dtype.names is None or record.size != 1:
+            raise DataError(f"{path}: {struct!r} is not a MATLAB struct (data.struct)")
+        mat = {field: record[field].flat[0] for field in record.dtype.names}
     out = {}
     for name, var in wanted.items():
         if var not in mat:
@@ -283,12 +303,15 @@ def _read_mat(path: Path, wanted: dict[str, str | int]) -> dict[str, np.ndarray]
             value = np.asarray(raw, dtype=np.float64)
         except (TypeError, ValueError) as exc:
             raise DataError(f"{path}: variable {var!r} is not numeric") from exc
+        if nd and name not in ("rate", "time", "time_alt", "run"):
+            out[name] = value
+            continue
         # MATLAB stores vectors as 1 x n or n x 1 matrices, and may add singleton dimensions.
         value = value.reshape([d for d in value.shape if d != 1] or [value.size])
         if value.ndim > 2:
             raise DataError(
-                f"{path}: variable {var!r} has shape {mat[var].shape}: more than two non-singleton "
-                "dimensions (use a vector or a samples x runs matrix)"
+                f"{path}: variable {var!r} has shape {raw.shape}: more than two non-singleton "
+                "dimensions (name them with data.dimensions, e.g. [sample, trial, subject])"
             )
         out[name] = value
     return out
@@ -299,16 +322,21 @@ def _read_mat(path: Path, wanted: dict[str, str | int]) -> dict[str, np.ndarray]
 READERS = {".csv": _read_csv, ".parquet": _read_parquet, ".pq": _read_parquet, ".mat": _read_mat}
 
 
-def _read(path: Path, wanted: dict[str, str]) -> dict[str, np.ndarray]:
-    """The ``wanted`` columns of a data file that it holds, after the size check."""
+def _read(path: Path, wanted: dict[str, str], **options) -> dict[str, np.ndarray]:
+    """The ``wanted`` columns of a data file that it holds, after the size check.
+
+    ``options`` (``struct``, ``nd``) are the MATLAB reader's; other formats take none.
+    """
     _check_size(path)
     reader = READERS.get(path.suffix.lower())
     if reader is None:
         raise DataError(
             f"{path}: unknown data format {quote(path.suffix.lower())} (use {', '.join(READERS)})"
         )
+    if options and reader is not _read_mat:
+        raise DataError(f"{path}: data.struct and data.dimensions are for MATLAB files")
     try:
-        return reader(path, wanted)
+        return reader(path, wanted, **options)
     except DataError:
         raise
     except (pa.ArrowException, OSError, ValueError) as exc:
@@ -323,7 +351,12 @@ def _read_columns(path: Path, data: DataConfig) -> dict[str, np.ndarray]:
     }
     if data.time_default:
         wanted["time_alt"] = "time"  # default names: 't' or 'time'
-    return _read(path, wanted)
+    options = {}
+    if data.struct is not None:
+        options["struct"] = data.struct
+    if data.dimensions is not None:
+        options["nd"] = True
+    return _read(path, wanted, **options)
 
 
 def run_blocks(ids: np.ndarray, where: str, column: str) -> dict[int, slice]:
@@ -414,10 +447,41 @@ def _id_list(blocks: dict[int, slice]) -> str:
     return ", ".join(map(str, ids)) if len(ids) <= 6 else f"{ids[0]}, {ids[1]}, ..., {ids[-1]}"
 
 
+def _split_dimensions(path: Path, cols: dict[str, np.ndarray], data: DataConfig) -> dict[int, dict]:
+    """Runs of N-D arrays whose axes ``data.dimensions`` names (``sample`` and factors), run ids
+    1, 2, ... over the factors in C order; each run's factors (1-based indices) under ``_factors``."""
+    dims = list(data.dimensions)
+    signals_ = {n: v for n, v in cols.items() if n not in ("rate", "time", "time_alt", "run")}
+    shapes = {n: v.shape for n, v in signals_.items()}
+    for name, shape in shapes.items():
+        if len(shape) != len(dims):
+            raise DataError(
+                f"{path}: {data.columns[name]!r} has shape {shape}, data.dimensions names "
+                f"{len(dims)} axes {dims}"
+            )
+    if len(set(shapes.values())) > 1:
+        raise DataError(
+            f"{path}: signals of unequal shapes ({', '.join(f'{n} {s}' for n, s in shapes.items())})"
+        )
+    axis = dims.index("sample")
+    factors = [d for d in dims if d != "sample"]
+    moved = {n: np.moveaxis(v, axis, 0) for n, v in signals_.items()}
+    shape = next(iter(moved.values())).shape[1:]
+    out = {}
+    for run, index in enumerate(np.ndindex(*shape), start=1):
+        rec = {n: v[(slice(None), *index)] for n, v in moved.items()}
+        rec.update({n: v for n, v in cols.items() if n not in signals_})
+        rec["_factors"] = {f: str(i + 1) for f, i in zip(factors, index, strict=True)}
+        out[run] = rec
+    return out
+
+
 def _split_runs(
     path: Path, cols: dict[str, np.ndarray], data: DataConfig
 ) -> dict[int, dict[str, np.ndarray]]:
     """The file's runs by their ids: the run column's values, or 1, 2, ... for a matrix's columns."""
+    if data.dimensions is not None:
+        return _split_dimensions(path, cols, data)
     lengths = {name: v.shape[0] for name, v in cols.items() if name != "rate" and v.ndim >= 1}
     if len(set(lengths.values())) > 1:
         described = ", ".join(f"{data.columns[n]} {n_}" for n, n_ in lengths.items())
@@ -544,13 +608,16 @@ def read_runs(
 
 def read_file_runs(
     path: str | Path, data: DataConfig, rate: float | None = None, need: int = 1
-) -> tuple[dict[int, dict[str, np.ndarray]], float, dict[int, float]]:
-    """:func:`read_runs`, and each run's own sample rate (Hz) before resampling."""
+) -> tuple[dict[int, dict[str, np.ndarray]], float, dict[int, dict]]:
+    """:func:`read_runs`, and per run ``{"rate": its own sample rate (Hz) before resampling,
+    "factors": the factors its position in N-D arrays gives (data.dimensions), else {}}``."""
     path = Path(path)
     given = rate is not None
     cols = _named_signals(path, _read_columns(path, data), data)
     records, natives = {}, {}
+    factors = {}
     for run_id, run in _split_runs(path, cols, data).items():
+        factors[run_id] = run.pop("_factors", {})
         where = f"{path}: run {run_id}"
         for name in (*SIGNALS, "time"):
             if name in run:
@@ -558,7 +625,7 @@ def read_file_runs(
         found = _run_rate(where, run, data, rate)
         if rate is None:
             rate = found
-        natives[run_id] = float(found)
+        natives[run_id] = {"rate": float(found), "factors": factors[run_id]}
         signals_ = _at_rate(where, {name: run[name] for name in SIGNALS}, found, rate, given)
         records[run_id] = _after_lead_in(where, signals_, rate, data, need)
     if not records:

@@ -229,3 +229,40 @@ def test_a_bad_pattern_names_the_key(tmp_path, pattern, message):
 
     with pytest.raises(ConfigError, match=f"data.pattern: .*{message}"):
         parse_config(yaml.safe_load(_config(tmp_path, pattern).read_text()), "lab")
+
+
+def test_a_matlab_struct_of_samples_x_trials_x_subjects(tmp_path):
+    # Source: the example file's three trials, laid out as published lab data sets do: one
+    # struct per condition file with arrays samples x repeats x participants. Read back, every
+    # run's signals equal the trial's, and its factors are its indices (1-based).
+    import scipy.io
+
+    from hcid.measured import load_data
+
+    config = parse_config(yaml.safe_load(_config(tmp_path, None, COLUMNS).read_text()), "lab")
+    trials = load_data(EXAMPLE, config)
+    n = 2048
+    cube = {k: np.zeros((n, 1, 3)) for k in ("target", "disturbance", "error", "stick")}
+    for subject, trial in enumerate(sorted(trials)):
+        for k, name in (("target", "ft"), ("disturbance", "fd"), ("error", "e"), ("stick", "u")):
+            cube[k][:, 0, subject] = trials[trial][name]
+    path = tmp_path / "pursuit.mat"
+    scipy.io.savemat(path, {"exp": {**cube, "fs": 25.0}})
+    columns = {"ft": "target", "fd": "disturbance", "e": "error", "u": "stick", "rate": "fs"}
+    raw = yaml.safe_load(_config(tmp_path, "{condition}.mat", columns).read_text())
+    raw["data"]["struct"] = "exp"
+    raw["data"]["dimensions"] = ["sample", "trial", "subject"]
+    mat_config = parse_config(raw, "lab")
+    got = datasets.read_set(datasets.data_files([path], mat_config.data.pattern), mat_config.data, 25.0)
+    assert [(r["run"], r["condition"], r["trial"], r["subject"]) for r in got.runs] == [
+        (1, "pursuit", "1", "1"), (2, "pursuit", "1", "2"), (3, "pursuit", "1", "3")
+    ]  # fmt: skip
+    for run, trial in zip(got.records, sorted(trials), strict=True):
+        np.testing.assert_array_equal(got.records[run]["u"], trials[trial]["u"])
+    # A v7.3 (HDF5) file is named as such, in one line.
+    v73 = tmp_path / "v73.mat"
+    text = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, HDF5 schema 1.00 ."
+    # The 128-byte MAT header: text, subsystem offset, version 0x0200 (v7.3) and the endian mark.
+    v73.write_bytes(text.ljust(116) + b"\0" * 8 + b"\x00\x02IM" + b"\0" * 512)
+    with pytest.raises(DataError, match="a MATLAB v7.3 \\(HDF5\\) file, which hcid does not read yet"):
+        datasets.read_set(datasets.data_files([v73]), mat_config.data, 25.0)

@@ -357,6 +357,24 @@ def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataC
     pattern = s.get("pattern", None)
     if pattern is not None:
         check_pattern(pattern, "data.pattern")
+    struct = s.get("struct", None)
+    if struct is not None and (not isinstance(struct, str) or not struct.isidentifier()):
+        raise ConfigError(f"data.struct: must be a MATLAB variable name, got {fmt(struct)}")
+    dimensions = s.get("dimensions", None)
+    if dimensions is not None:
+        ok = isinstance(dimensions, list) and all(isinstance(d, str) for d in dimensions)
+        if not ok or dimensions.count("sample") != 1 or len(set(dimensions)) != len(dimensions):
+            raise ConfigError(
+                f"data.dimensions: must name each axis once, 'sample' among them (e.g. [sample, trial, "
+                f"subject]), got {fmt(dimensions)}"
+            )
+        for d in dimensions:
+            if d != "sample" and (not d.isidentifier() or d in RESERVED_FACTORS):
+                raise ConfigError(
+                    f"data.dimensions: factor {fmt(d)} must be an identifier other than "
+                    f"{', '.join(RESERVED_FACTORS)}"
+                )
+        dimensions = tuple(dimensions)
     lead_in = s.number("lead_in", 0.0, 1e4, 0.0)
     rate = timing.output_rate
     if abs(lead_in * rate - round(lead_in * rate)) > 1e-6:
@@ -371,6 +389,8 @@ def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataC
         lead_in=lead_in,
         time_default=time_default,
         pattern=pattern,
+        struct=struct,
+        dimensions=dimensions,
     )
 
 

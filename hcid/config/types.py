@@ -425,6 +425,11 @@ class DataConfig:
     lead_in: float = 0.0
     time_default: bool = False
     pattern: str | None = None
+    #: A MATLAB file's struct variable holding the signals as fields (None: plain variables).
+    struct: str | None = None
+    #: The axes of a MATLAB file's N-D arrays: ``sample`` and one factor per other axis, e.g.
+    #: ``("sample", "trial", "subject")`` for arrays of samples x repeats x participants.
+    dimensions: tuple[str, ...] | None = None
 
 
 @dataclass(frozen=True)
