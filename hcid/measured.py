@@ -267,10 +267,11 @@ def _read_parquet(path: Path, wanted: dict[str, str | int]) -> dict[str, np.ndar
 def _read_mat(
     path: Path, wanted: dict[str, str | int], struct: str | None = None, nd: bool = False
 ) -> dict[str, np.ndarray]:
-    """The wanted variables of a MATLAB v5/v7 file (or the fields of its ``struct`` variable).
+    """The wanted variables of a MATLAB file (or the fields of its ``struct`` variable).
 
-    Without ``nd`` a variable must be a vector or a samples x runs matrix; with it, any number
-    of dimensions (named by ``data.dimensions``).
+    v5/v7 files by scipy, v7.3 files (HDF5) by h5py. Without ``nd`` a variable must be a
+    vector or a samples x runs matrix; with it, any number of dimensions (named by
+    ``data.dimensions``).
     """
     import scipy.io
 
@@ -278,20 +279,58 @@ def _read_mat(
     names = [struct] if struct is not None else sorted(set(wanted.values()))
     try:
         mat = scipy.io.loadmat(path, variable_names=names)
-    except NotImplementedError as exc:  # scipy's reader stops at MATLAB v7.3 (HDF5)
-        raise DataError(
-            f"{path}: a MATLAB v7.3 (HDF5) file, which hcid does not read yet; save it with "
-            "save(..., '-v7') or as CSV"
-        ) from exc
+    except NotImplementedError:  # scipy's reader stops at MATLAB v7.3, an HDF5 file
+        mat = _read_mat73(path, names, struct)
     except Exception as exc:  # noqa: BLE001 (a damaged file makes scipy's reader raise almost anything)
         raise DataError(f"{path}: not a readable MATLAB file ({str(exc).splitlines()[0][:80]})") from exc
-    if struct is not None:
-        if struct not in mat:
-            raise DataError(f"{path}: has no variable {struct!r} (data.struct)")
-        record = mat[struct]
-        if record.dtype.names is None or record.size != 1:
-            raise DataError(f"{path}: {struct!r} is not a MATLAB struct (data.struct)")
-        mat = {field: record[field].flat[0] for field in record.dtype.names}
+    else:
+        if struct is not None:
+            if struct not in mat:
+                raise DataError(f"{path}: has no variable {struct!r} (data.struct)")
+            record = mat[struct]
+            if record.dtype.names is None or record.size != 1:
+                raise DataError(f"{path}: {struct!r} is not a MATLAB struct (data.struct)")
+            mat = {field: record[field].flat[0] for field in record.dtype.names}
+    return _mat_values(path, mat, wanted, nd)
+
+
+def _read_mat73(path: Path, names: list[str], struct: str | None) -> dict[str, np.ndarray]:
+    """The named variables (or ``struct``'s fields) of a MATLAB v7.3 file, in MATLAB's shape.
+
+    MATLAB writes arrays column-major, so HDF5 shows their dimensions reversed: transposed back.
+    """
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            if struct is not None:
+                if struct not in f:
+                    raise DataError(f"{path}: has no variable {struct!r} (data.struct)")
+                group = f[struct]
+                if not isinstance(group, h5py.Group):
+                    raise DataError(f"{path}: {struct!r} is not a MATLAB struct (data.struct)")
+                items = {k: group[k] for k in group}
+            else:
+                items = {k: f[k] for k in names if k in f}
+            out = {}
+            for name, item in items.items():
+                if not isinstance(item, h5py.Dataset):
+                    raise DataError(
+                        f"{path}: variable {name!r} is not an array (structs inside are not read)"
+                    )
+                if item.dtype.names is not None:  # MATLAB's complex: a compound of real and imag
+                    raise DataError(f"{path}: variable {name!r} holds complex values; give the real signal")
+                if item.dtype.kind not in "fiub":
+                    raise DataError(f"{path}: variable {name!r} is not numeric (cells are not read)")
+                out[name] = np.asarray(item[()], dtype=np.float64).T
+            return out
+    except DataError:
+        raise
+    except Exception as exc:  # noqa: BLE001 (h5py raises OSError, KeyError, ... on damaged files)
+        raise DataError(f"{path}: not a readable MATLAB v7.3 file ({str(exc).splitlines()[0][:80]})") from exc
+
+
+def _mat_values(path: Path, mat: dict, wanted: dict[str, str | int], nd: bool) -> dict[str, np.ndarray]:
     out = {}
     for name, var in wanted.items():
         if var not in mat:
@@ -310,7 +349,7 @@ def _read_mat(
         value = value.reshape([d for d in value.shape if d != 1] or [value.size])
         if value.ndim > 2:
             raise DataError(
-                f"{path}: variable {var!r} has shape {raw.shape}: more than two non-singleton "
+                f"{path}: variable {var!r} has shape {np.shape(raw)}: more than two non-singleton "
                 "dimensions (name them with data.dimensions, e.g. [sample, trial, subject])"
             )
         out[name] = value

