@@ -468,9 +468,17 @@ class Config:
             Naming the missing sections and the command.
         """
         if not self.simulates:
+            missing = (
+                "models, signals, timing, seeds"
+                if self.loop is not None
+                else "models, loop, signals, timing, seeds"
+            )
+            hint = (
+                "; for a measured study, `hcid analyse` calibrates W on twins of the data's own fitted model"
+            )
             raise ConfigError(
-                f"models, loop, signals, timing, seeds: missing; `hcid {command}` simulates and needs "
-                "them (this config describes measured data only)"
+                f"{missing}: missing; `hcid {command}` simulates and needs them (this config describes "
+                f"measured data only{hint if self.loop is not None else ''})"
             )
 
     @staticmethod
