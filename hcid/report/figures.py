@@ -301,9 +301,10 @@ def plot_data_structure(data, marks: dict[str, float], name: str, axes=None):
     return fig
 
 
-def plot_calibration(table, name: str, axes=None):
+def plot_calibration(table, name: str, axes=None, used: dict[str, float] | None = None):
     """False-positive (FB twin) and false-negative (FF twin) rates vs W with 95% bands,
-    the safe interval shaded and the recommended W marked, one panel per method."""
+    the safe interval shaded and the recommended W marked, one panel per method; ``used``
+    marks, per method, a W chosen otherwise (the least total error where no W is safe)."""
     methods = methods_in((None, m) for m in table.column("method").to_pylist())
     fig, axes = _figure(axes, 1, len(methods), figsize=(5.8 * len(methods), 4.3))
     rows = table.to_pylist()
@@ -329,6 +330,9 @@ def plot_calibration(table, name: str, axes=None):
             ax.axvspan(max(lo, w[0]), min(hi, w[-1]), color="tab:green", alpha=0.12, label="safe interval")
         if np.isfinite(rec):
             ax.axvline(rec, color="tab:green", lw=2, label=f"recommended W = {rec:.3g}")
+        elif used is not None and method in used:
+            ax.axvline(used[method], color="0.2", lw=2, ls="--",
+                       label=f"W used = {used[method]:.3g} (least total error; no safe W)")  # fmt: skip
         ax.axhline(r[0]["target_rate"], color="0.4", lw=0.8, ls=":")
         ax.set_xscale("log")
         ax.set_ylim(-0.02, 1.02)

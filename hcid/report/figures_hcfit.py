@@ -127,41 +127,50 @@ def plot_remnant_spectra(
     return fig
 
 
-def plot_fc(paths: dict[str, list[dict]], title: str = "", axes=None):
-    """Bode plot of the model-free estimates (points with their spread across runs) and the fitted
-    model at the same lines (lines): He at the disturbance lines, Ht at the target lines.
+def plot_fc(paths: dict[str, list[dict]], curves: dict, title: str = "", axes=None):
+    """Bode plot of the model-free estimates (points with their spread across runs) and the
+    fitted model on a dense grid (lines, phase unwrapped from low frequency): He at the
+    disturbance lines, Ht at the target lines. Each point's phase is taken within 180 deg of
+    the model's at its frequency.
 
-    ``paths`` maps ``e`` and ``ft`` to rows of ``fc_estimates.parquet``.
+    ``paths`` maps ``e`` and ``ft`` to rows of ``fc_estimates.parquet``; ``curves`` holds
+    ``omega`` and the model's ``e`` and ``ft`` responses (``ft`` None without feedforward).
     """
     fig, axes = _figure(axes, 2, 1, figsize=(7.5, 6.5), sharex=True)
     ax_mag, ax_ph = axes[0][0], axes[1][0]
     labels = {"e": "He (u per e), disturbance lines", "ft": "Ht (u per ft), target lines"}
     for (path, rows), color in zip(paths.items(), ("C0", "C1"), strict=False):
         label = labels.get(path, path)
+        model = curves.get(path)
+        phase_model = None
+        if model is not None:
+            phase_model = np.degrees(np.unwrap(np.angle(model)))
+            ax_mag.plot(curves["omega"], 20 * np.log10(np.abs(model)), "-", color=color, lw=1.2,
+                        label=f"{label}: fitted model")  # fmt: skip
+            ax_ph.plot(curves["omega"], phase_model, "-", color=color, lw=1.2)
         if not rows:
             continue
         w = np.array([r["omega"] for r in rows])
-        for ax, est, sd, model in (
-            (ax_mag, "magnitude_db", "sd_db", "model_db"),
-            (ax_ph, "phase_deg", "sd_deg", "model_deg"),
-        ):
-            y = np.array([r[est] for r in rows])
-            if ax is ax_ph:
-                y = np.degrees(np.unwrap(np.radians(y)))
-            err = np.array([r[sd] for r in rows])
-            ax.errorbar(w, y, yerr=np.where(np.isfinite(err), err, 0.0), fmt="o", color=color, ms=4,
+        mag = np.array([r["magnitude_db"] for r in rows])
+        ph = np.array([r["phase_deg"] for r in rows])
+        if phase_model is not None:
+            near = np.interp(np.log(w), np.log(curves["omega"]), phase_model)
+            ph = ph + 360.0 * np.round((near - ph) / 360.0)
+        else:
+            ph = np.degrees(np.unwrap(np.radians(ph)))
+        sd_db = np.array([r["sd_db"] for r in rows])
+        sd_deg = np.array([r["sd_deg"] for r in rows])
+        ax_mag.errorbar(w, mag, yerr=np.where(np.isfinite(sd_db), sd_db, 0.0), fmt="o", color=color, ms=4,
                         capsize=2, label=f"{label}: model-free")  # fmt: skip
-            m = np.array([r[model] for r in rows])
-            if ax is ax_ph:
-                m = y + (m - np.array([r[est] for r in rows]))
-            ax.plot(w, m, "-", color=color, lw=1.2, label=f"{label}: fitted model")
+        ax_ph.errorbar(w, ph, yerr=np.where(np.isfinite(sd_deg), sd_deg, 0.0), fmt="o", color=color, ms=4,
+                       capsize=2)  # fmt: skip
     ax_mag.set_ylabel("magnitude (dB)")
     ax_ph.set_ylabel("phase (deg)")
     ax_ph.set_xlabel("frequency (rad/s)")
     for ax in (ax_mag, ax_ph):
         ax.set_xscale("log")
         ax.grid(True, which="both", alpha=0.3)
-    ax_mag.legend(fontsize=7)
+    ax_mag.legend(fontsize=7, loc="best")
     fig.suptitle(title)
     fig.tight_layout()
     return fig

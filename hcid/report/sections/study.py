@@ -24,8 +24,8 @@ class StudyData:
     parameters: list[list[str]]
     runs_header: list[str]
     runs: list[list[str]]
-    calibrations: list[tuple[str, pa.Table]] = field(default_factory=list)
-    fc: list[tuple[str, dict]] = field(default_factory=list)
+    calibrations: list[tuple[str, pa.Table, dict]] = field(default_factory=list)
+    fc: list[tuple[str, dict, dict]] = field(default_factory=list)
     fc_problems: list[str] = field(default_factory=list)
 
 
@@ -43,6 +43,19 @@ def _slug(group: str) -> str:
 
     values = [part.split("=", 1)[1] for part in group.split(", ")] if group != "all runs" else []
     return re.sub(r"[^A-Za-z0-9_.+-]", "-", "_".join(values) or "all")[:60]
+
+
+def _model_curves(run, twin: dict, lines: list[float]) -> dict:
+    """The group's fitted model (the FF twin's parameters) on a dense grid around the forcing
+    lines (half the lowest to 1.5 times the highest): omega, He, Ht."""
+    from hcid.hcfit import hc_response
+    from hcid.hcmodel import plant
+
+    top = min(1.5 * max(lines), np.pi * run.config.timing.output_rate)
+    omega = np.geomspace(0.5 * min(lines), top, 300)
+    values = {p: twin[f"twin_{p}"] for p in HC_PARAMETER_NAMES}
+    hft, he = hc_response(values, plant(run.config.loop), omega)
+    return {"omega": omega, "e": he, "ft": hft if values["Kpt"] > 0 else None}
 
 
 def compute(run, done) -> StudyData | None:
@@ -72,26 +85,31 @@ def compute(run, done) -> StudyData | None:
                  _num(spread, 2), _num(float(np.nanmedian(se)), 2) if np.isfinite(se).any() else "-"]
             )  # fmt: skip
     factors = [c for c in runs.column_names if c not in tables.ANALYSIS.names]
-    header = ["run", *factors, "method", "nb_ft", "feedforward", "Kpt", "Kpe", "tau_pe", "wc rad/s", "PM deg",
-              "VAF %"]  # fmt: skip
+    header = ["seed (run)", *factors, "method", "nb_ft", "feedforward", "Kpt", "Kpe", "tau_pe", "w_nms",
+              "zeta_nms", "wc rad/s", "PM deg", "VAF %"]  # fmt: skip
     table_rows = []
     for r in rows:
 
         def with_se(p, r=r):
-            return _num(r[p]) + (f" ± {_num(r[p + '_se'], 2)}" if math.isfinite(r[p + "_se"]) else "")
+            """The estimate with its se; * where it has none although fitted (on a bound)."""
+            if not math.isfinite(r[p]):
+                return "-"
+            return _num(r[p]) + (f" ± {_num(r[p + '_se'], 2)}" if math.isfinite(r[p + "_se"]) else "*")
 
         table_rows.append(
             [str(r["seed"]), *[str(r[f]) for f in factors], r["method"], str(r["nb_ft"]),
              ("yes" if r["feedforward"] else "no") + (" (uncertain)" if r["uncertain"] else ""),
-             with_se("Kpt"), with_se("Kpe"), with_se("tau_pe"), _num(r["crossover"]), _num(r["phase_margin"]),
-             _num(r["vaf_validation"])]
+             with_se("Kpt"), with_se("Kpe"), with_se("tau_pe"), with_se("w_nms"), with_se("zeta_nms"),
+             _num(r["crossover"]), _num(r["phase_margin"]), _num(r["vaf_validation"])]
         )  # fmt: skip
     calibrations = []
-    for name in dict.fromkeys(g["group"] for g in groups.to_pylist()):
+    group_rows = groups.to_pylist()
+    for name in dict.fromkeys(g["group"] for g in group_rows):
         twin_dir = run.run_dir / "twins" / _slug(name)
         table = results.read_optional(tables.CALIBRATION, twin_dir)
+        used = {g["method"]: g["w"] for g in group_rows if g["group"] == name and g["uncertain"]}
         if table is not None:
-            calibrations.append((name, table))
+            calibrations.append((name, table, used))
     fc, problems = [], []
     if run.fc_estimates is not None:
         for name in dict.fromkeys(run.fc_estimates.column("group").to_pylist()):
@@ -99,7 +117,9 @@ def compute(run, done) -> StudyData | None:
             if t[0]["problem"]:
                 problems.append(f"{name}: {t[0]['problem']}")
                 continue
-            fc.append((name, {path: [r for r in t if r["path"] == path] for path in ("e", "ft")}))
+            twin = next(g for g in group_rows if g["group"] == name)
+            fc.append((name, {path: [r for r in t if r["path"] == path] for path in ("e", "ft")},
+                       _model_curves(run, twin, [r["omega"] for r in t])))  # fmt: skip
     return StudyData(answers, uncertain, parameters, header, table_rows, calibrations, fc, problems)
 
 
@@ -125,12 +145,16 @@ def render(data: StudyData | None, doc: Doc) -> None:
             "there cannot be trusted at any W (the group's fitted feedforward is too weak, or its "
             "feedback twin finds feedforward too often)."
         )
-    for name, table in data.calibrations:
+    for name, table, used in data.calibrations:
+        what = (
+            "the W used, the least total error: no W is safe"
+            if used
+            else "the safe interval and its recommended W"
+        )
         doc.figure(
             f"calibration_{_slug(name)}.png",
-            f"{name}: the twins' false-positive and false-negative rates over W (exact 95% bands), "
-            "the safe interval and its recommended W.",
-            lambda t=table, n=name: figures.plot_calibration(t, n),
+            f"{name}: the twins' false-positive and false-negative rates over W (exact 95% bands), {what}.",
+            lambda t=table, n=name, u=used: figures.plot_calibration(t, n, used=u),
         )
     doc.text(
         "Parameters per group (SPEC 8): median and spread over the runs, and the runs' median standard error."
@@ -138,13 +162,13 @@ def render(data: StudyData | None, doc: Doc) -> None:
     doc.table(
         ["group", "method", "parameter", "runs", "median", "sd over runs", "median se"], data.parameters
     )
-    for name, paths in data.fc:
+    for name, paths, curves in data.fc:
         doc.figure(
             f"fc_{_slug(name)}.png",
             f"{name}: model-free (Fourier-coefficient) estimates of both paths at the forcing lines, "
-            "the group's coefficient average with its spread across runs, and the group's fitted "
-            "parametric model (line).",
-            lambda p=paths, n=name: figures_hcfit.plot_fc(p, title=n),
+            "the group's coefficient average with its spread across runs (points), and the group's "
+            "fitted parametric model (lines; Ht only where its fitted Kpt is above 0).",
+            lambda p=paths, n=name, c=curves: figures_hcfit.plot_fc(p, c, title=n),
         )
     for problem in data.fc_problems:
         doc.text(f"No model-free estimate for {problem}.")
