@@ -468,11 +468,15 @@ def _print_analysis(result) -> None:
     runs = result.runs.to_pylist()
     for g in result.groups.to_pylist():
         rows = [r for r in runs if r["group"] == g["group"] and r["method"] == g["method"]]
-        safe = (
-            f"safe interval [{g['safe_low']:.3g}, {g['safe_high']:.3g})"
-            if not g["uncertain"]
-            else "NO W separates the twins: W of least total error, every decision UNCERTAIN"
-        )
+        if g["w_rule"] == "safe interval":
+            safe = f"safe interval [{g['safe_low']:.3g}, {g['safe_high']:.3g})"
+        elif g["uncertain"]:
+            safe = "NO W separates the twins: W of least total error, every decision UNCERTAIN"
+        else:
+            safe = (
+                "no contiguous safe interval; W of least total error, where the twins' rates are "
+                "within the target"
+            )
         typer.echo(
             f"{g['group']}, {g['method']}: feedforward in {g['n_feedforward']} of {g['n_runs']} runs at "
             f"W = {g['w']:.3g} ({safe}; twins' FP {pct(g['fp_rate'], g['fp_low'], g['fp_high'])}, "

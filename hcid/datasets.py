@@ -63,11 +63,13 @@ class DataSet:
     rate: float
 
 
-def _pattern_regex(pattern: str) -> re.Pattern:
+def _pattern_regex(pattern: str, lazy: bool = True) -> re.Pattern:
+    """The pattern's regex: each factor one or more characters, matched lazily or greedily
+    (a name both match alike is read in one way only)."""
     out, pos = [], 0
     for m in re.finditer(r"\{([^{}]*)\}", pattern):
         out.append(re.escape(pattern[pos : m.start()]))
-        out.append(f"(?P<{m.group(1)}>.+?)")
+        out.append(f"(?P<{m.group(1)}>.+{'?' if lazy else ''})")
         pos = m.end()
     out.append(re.escape(pattern[pos:]))
     return re.compile("".join(out))
@@ -106,7 +108,10 @@ def _manifest(path: Path) -> list[DataFile]:
                 raise DataError(f"{path}: row {number}: factor {name!r} is empty")
         if not values["file"]:
             raise DataError(f"{path}: row {number}: no file")
-        out.append(DataFile(path.parent / values["file"], tuple((n, values[n]) for n in factors)))
+        named = path.parent / values["file"]
+        if not named.is_file():
+            raise DataError(f"{path}: row {number}: {values['file']}: no such file")
+        out.append(DataFile(named, tuple((n, values[n]) for n in factors)))
     return out
 
 
@@ -158,12 +163,18 @@ def data_files(sources: Sequence[str | Path], pattern: str | None = None) -> lis
             check_pattern(pattern, "data.pattern")
         except ConfigError as exc:
             raise DataError(str(exc)) from None
-        regex = _pattern_regex(pattern)
+        regex, greedy = _pattern_regex(pattern), _pattern_regex(pattern, lazy=False)
         named = []
         for f in files:
             m = regex.fullmatch(f.path.name)
             if m is None:
                 raise DataError(f"{f.path}: its name does not match data.pattern {pattern!r}")
+            if greedy.fullmatch(f.path.name).groupdict() != m.groupdict():
+                raise DataError(
+                    f"{f.path}: its name matches data.pattern {pattern!r} in more than one way (e.g. "
+                    f"{m.groupdict()} or {greedy.fullmatch(f.path.name).groupdict()}); make the pattern's "
+                    "separators occur in no factor value"
+                )
             given = dict(f.factors)
             for name, value in m.groupdict().items():
                 if name in given and given[name] != value:

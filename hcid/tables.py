@@ -387,8 +387,9 @@ _CHOICE_FIELDS = (
 )
 
 #: ``analysis.parquet`` (``hcid analyse``; also written as ``analysis.csv``): one row per
-#: measured run (``model`` the data name, ``seed`` the run id) and method: its group's W
-#: (``w_rule``: ``safe interval``, or ``least total error (no safe W)`` with ``uncertain``
+#: measured run (``model`` the data name, ``seed`` the run id, ``file`` and the file's own
+#: ``file_run``) and method: its group's W
+#: (``w_rule``: ``safe interval``, or ``least total error (...)`` with ``uncertain``
 #: true), the twins' false-positive and false-negative rates there with their exact 95%
 #: bands, the selected structure, ``feedforward`` (nb_ft > 0), the ARX and parametric
 #: models' validation VAF, each parameter with its standard error (``<p>`` and ``<p>_se``;
@@ -396,7 +397,7 @@ _CHOICE_FIELDS = (
 #: remnant share, then one string column per factor of the data set.
 ANALYSIS = _schema(
     "analysis.parquet",
-    [("model", _STR), ("seed", _INT)]
+    [("model", _STR), ("seed", _INT), ("file", _STR), ("file_run", _INT)]
     + _CHOICE_FIELDS
     + [(c, _INT) for c in ORDER_COLUMNS]
     + [("feedforward", _BOOL), ("vaf_arx_validation", _F64), ("target", _STR), ("vaf_validation", _F64)]
@@ -406,14 +407,15 @@ ANALYSIS = _schema(
 )
 #: ``analysis_groups.parquet`` (``hcid analyse``): one row per group of runs (``--by``) and
 #: method: the W used and why, the safe interval, the twins' rates at W, the runs and how
-#: many of them have feedforward there, and the twins (the group's fitted model, ``twin_<p>``;
-#: the FB twin has Kpt = 0) with their remnant filter and number of realizations each.
+#: many of them have feedforward there, and the twins (the group's fitted model as simulated,
+#: ``twin_<p>``: delays in whole samples, tau_pt at least 0, Kpt at least 0.001; the FB twin has
+#: Kpt = 0) with their remnant filter, number of realizations each and run directory.
 ANALYSIS_GROUPS = _schema(
     "analysis_groups.parquet",
     _CHOICE_FIELDS
     + [("n_runs", _INT), ("n_feedforward", _INT)]
     + [(f"twin_{p}", _F64) for p in HC_PARAMETER_NAMES]
-    + [("twin_kn", _F64), ("twin_w_n", _F64), ("twin_zeta_n", _F64), ("twins", _INT)],
+    + [("twin_kn", _F64), ("twin_w_n", _F64), ("twin_zeta_n", _F64), ("twins", _INT), ("twins_folder", _STR)],
     ("group", "method"),
 )
 #: ``fc_estimates.parquet`` (``hcid analyse``): the model-free (Fourier-coefficient, SPEC 10)

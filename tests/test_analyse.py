@@ -54,14 +54,23 @@ def test_every_run_and_group_is_answered_with_its_factors(analysed):
         mine = [r for r in rows if r["group"] == g["group"] and r["method"] == g["method"]]
         assert g["n_runs"] == 4 and g["n_feedforward"] == sum(r["feedforward"] for r in mine)
         assert all(r["w"] == g["w"] for r in mine)
-        # An empty safe interval is never presented as certain.
-        assert g["uncertain"] == (not g["safe_low"] < g["safe_high"])
+        # A W outside a safe interval is certain only where both twins' rates there are within
+        # the target rate (0): never presented as certain otherwise.
+        if g["w_rule"] == "safe interval":
+            assert not g["uncertain"] and g["safe_low"] <= g["w"] < g["safe_high"]
+        else:
+            assert g["uncertain"] == (max(g["fp_rate"], g["fn_rate"]) > 0)
         assert 0 <= g["fp_low"] <= g["fp_rate"] <= g["fp_high"] <= 1
     # The pursuit condition's twins separate: there the direct method finds the feedforward
     # every subject used (Kpt 0.8 and 1.0, configs/lab_example/make.py).
     pursuit = next(g for g in groups if g["group"] == "condition=pursuit" and g["method"] == "direct")
     assert not pursuit["uncertain"] and pursuit["n_feedforward"] == 4
-    assert (run / "analysis.csv").read_text().splitlines()[0].startswith('"model","seed","group"')
+    assert (
+        (run / "analysis.csv")
+        .read_text()
+        .splitlines()[0]
+        .startswith('"model","seed","file","file_run","group"')
+    )
     assert "feedforward in 4 of 4 runs" in output
 
 
@@ -90,14 +99,37 @@ def test_the_same_bytes_for_any_number_of_workers(analysed, name):
 def test_bad_requests_are_one_line(analysed, tmp_path):
     data, _ = analysed
     run = tmp_path / "run"
+    manifest = tmp_path / "manifest.csv"
+    manifest.write_text(
+        "file,group\n" + "".join(f"{p},{i % 2}\n" for i, p in enumerate(sorted(data.glob("*.csv"))))
+    )
+    (tmp_path / "m2").mkdir()
+    missing = tmp_path / "m2" / "manifest.csv"
+    missing.write_text("file,subject\nS9_pursuit_trial1.csv,S9\n")
+    frequency = tmp_path / "frequency.yaml"
+    frequency.write_text(CONFIG.read_text() + "fit_hc: {target: frequency}\n")
     cases = [
-        (["--by", "session"], "--by session: the data set has no factor 'session'"),
-        (["--twins", "1"], "--twins: must be an integer in [2, 1000], got 1"),
+        (
+            [str(CONFIG), "--data", str(data), "--by", "session"],
+            "--by session: the data set has no factor 'session'",
+        ),
+        (
+            [str(CONFIG), "--data", str(data), "--twins", "1"],
+            "--twins: must be an integer in [2, 1000], got 1",
+        ),
+        # A factor named like a column of the analysis tables (the review found a traceback).
+        (
+            [str(CONFIG), "--data", str(manifest)],
+            "factor 'group': the analysis tables have a column of that name",
+        ),
+        ([str(CONFIG), "--data", str(missing)], "row 2: S9_pursuit_trial1.csv: no such file"),
+        ([str(frequency), "--data", str(data)], "fit_hc.target: frequency fits an ARX model's responses"),
     ]
-    for extra, message in cases:
-        result = runner.invoke(app, ["analyse", str(CONFIG), "--data", str(data), "--run", str(run), *extra])
+    for args, message in cases:
+        result = runner.invoke(app, ["analyse", *args, "--run", str(run)])
         assert result.exit_code == 2
-        assert result.stderr.strip().splitlines() == [f"hcid: error: {message}"] or message in result.stderr
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and message in lines[0]
         assert not run.exists()
 
 
@@ -112,5 +144,16 @@ def test_the_report_answers_first(analysed, tmp_path):
     text = report.markdown.read_text()
     assert text.index("## The study's answer") < text.index("feedforward in")
     assert "Missing stages" not in text and "Fig." not in text
-    names = {p.name for p in report.figures}
-    assert {"calibration_pursuit.png", "calibration_compensatory.png", "fc_pursuit.png"} <= names
+    names = sorted(p.name for p in report.figures)
+    for stem in ("calibration_pursuit-", "calibration_compensatory-", "fc_pursuit-", "fc_compensatory-"):
+        assert sum(n.startswith(stem) for n in names) == 1, (stem, names)
+
+
+def test_every_group_has_its_own_twins_folder():
+    # Source: the review's collision, "a b" and "a-b" (and ("x_y", "z") against ("x", "y_z")),
+    # once made safe for a path, were one folder: the digest of the values tells them apart.
+    from hcid.pipeline.analyse import _slug
+
+    assert _slug(("a b",)) != _slug(("a-b",))
+    assert _slug(("x_y", "z")) != _slug(("x", "y_z"))
+    assert _slug(("pursuit",)).startswith("pursuit-")

@@ -166,6 +166,8 @@ def _bad_sets(folder, tmp):
     manifest.write_text(f"file,subject\n{folder / 'P01_easy_trial1.csv'},\n")
     empty = tmp / "empty"
     empty.mkdir()
+    ambiguous = tmp / "P_1_easy_trial1.csv"
+    ambiguous.write_text((folder / "P01_easy_trial1.csv").read_text())
     return [
         ("a name the pattern does not match", [odd], PATTERN, "P03-easy-trial1.csv: its name does not match"),
         ("files with other columns", [cols], PATTERN, "differ from"),
@@ -174,6 +176,12 @@ def _bad_sets(folder, tmp):
         ("an empty folder", [empty], PATTERN, "holds no data file"),
         ("a glob matching nothing", [str(tmp / "*.parquet")], PATTERN, "matches no data file"),
         ("a file named twice", [folder / "P01_easy_trial1.csv"] * 2, PATTERN, "named twice"),
+        (
+            "a name the pattern reads two ways",
+            [ambiguous],
+            "{subject}_{condition}_trial{trial}.csv",
+            "matches data.pattern .* in more than one way",
+        ),
     ]
 
 

@@ -282,7 +282,8 @@ def data_identify_defaults(timing: Timing) -> dict:
     seconds, scaled to the analysis rate and the record.
 
     Delays: direct and final stages ``nk_ft`` up to 2 s and ``nk_e`` up to 0.4 s, stage 1 both up
-    to 0.2 s (at least one sample); orders as SPEC 3; estimation ``[W/16, 17 W/32)`` and
+    to 0.2 s (at least one sample); orders as SPEC 3, stage 1's nb1 up to 1 s of lags above 25 Hz
+    (its ft_s lags must reach the target shift); estimation ``[W/16, 17 W/32)`` and
     validation ``[17 W/32, W)`` of the window W (the paper's 129..1088 and 1089..2048 of 2048
     samples); target shift 1 s. At 25 Hz and W = 81.92 s this is SPEC 3's section exactly.
 
@@ -305,9 +306,11 @@ def data_identify_defaults(timing: Timing) -> dict:
         "target_shift": round(rate) / rate,
         "windows_in": "seconds",
         "direct": dict(final),
+        # Stage 1's ft_s lags must reach the 1 s target shift (ft enters e at lag 0): nb1 grows
+        # with the rate above 25 Hz.
         "stage1": {
             "na": [1, 10],
-            "nb1": [0, 25],
+            "nb1": [0, max(25, samples(1.0))],
             "nb2": [0, 10],
             "nk1": [1, samples(0.2)],
             "nk2": [1, samples(0.2)],

@@ -23,6 +23,7 @@ its fitted model).
 
 from __future__ import annotations
 
+import hashlib
 import math
 import re
 import time
@@ -99,12 +100,32 @@ def _fit_run(config: Config, seed: int, record: dict, kn_rate: float):
 
 
 def _slug(key: tuple[str, ...]) -> str:
-    text = "_".join(key) or "all"
-    return re.sub(r"[^A-Za-z0-9_.+-]", "-", text)[:60]
+    """The group's twins folder: its factor values made safe for a path, and a digest of the
+    values themselves, so that two groups never share one folder ("a b" and "a-b")."""
+    text = re.sub(r"[^A-Za-z0-9_.+-]", "-", "_".join(key) or "all")[:48]
+    digest = hashlib.sha256(repr(tuple(key)).encode()).hexdigest()[:8]
+    return f"{text}-{digest}"
 
 
 def _twin_rate(rate: float) -> float:
     return rate * max(1, math.ceil(TWIN_SIM_RATE / rate - 1e-9))
+
+
+#: The FF twin's smallest Kpt: a group whose fitted Kpt is below it (nobody uses feedforward)
+#: gets twins that nearly coincide, and the calibration says that no W separates them.
+MIN_TWIN_KPT = 1e-3
+
+
+def twin_values(fitted: dict, sim_rate: float) -> dict[str, float]:
+    """The FF twin's HC parameters as simulated: delays in whole samples at ``sim_rate``, an
+    anticipating tau_pt (< 0, which the simulation cannot delay by) at 0, Kpt at least
+    :data:`MIN_TWIN_KPT`."""
+    ff = {k: float(fitted[k]) for k in ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe")}
+    ff["Kpt"] = max(ff["Kpt"], MIN_TWIN_KPT)
+    ff["tau_pt"] = max(ff["tau_pt"], 0.0)
+    for k in ("tau_pt", "tau_pe"):  # the simulation delays by whole samples (SPEC 1)
+        ff[k] = round(ff[k] * sim_rate) / sim_rate
+    return ff
 
 
 def _twin_raw(config: Config, fitted: dict, remnant: tuple, forcing: Path, twins: int, name: str) -> dict:
@@ -113,9 +134,7 @@ def _twin_raw(config: Config, fitted: dict, remnant: tuple, forcing: Path, twins
     kn, w_n, zeta_n = remnant
     rate, window = config.timing.output_rate, config.timing.window
     sim = _twin_rate(rate)
-    ff = {k: float(fitted[k]) for k in ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe")}
-    for k in ("tau_pt", "tau_pe"):  # the simulation delays by whole samples (SPEC 1)
-        ff[k] = round(ff[k] * sim) / sim
+    ff = twin_values(fitted, sim)
     return {
         "name": name,
         "models": {"FB": {**ff, "Kpt": 0.0}, "FF": ff},
@@ -148,6 +167,21 @@ def _twin_raw(config: Config, fitted: dict, remnant: tuple, forcing: Path, twins
     }
 
 
+def _same_forcing(key, seeds: list[int], records: dict, config: Config) -> None:
+    """The twins are driven by the group's first run's ft and fd: every run must share them."""
+    n = round(config.timing.window * config.timing.output_rate)
+    first = records[seeds[0]]
+    for seed in seeds[1:]:
+        for name in ("ft", "fd"):
+            a, b = first[name][:n], records[seed][name][:n]
+            if np.sqrt(np.mean((a - b) ** 2)) > 1e-3 * np.sqrt(np.mean(a**2)):
+                raise DataError(
+                    f"group {', '.join(key) or 'all runs'}: runs {seeds[0]} and {seed} have other "
+                    f"{name} (more than 0.1% RMS apart); the twins need one set of forcing functions: "
+                    "choose --by so that each group's runs share theirs"
+                )
+
+
 def _forcing_text(record: dict, n: int) -> str:
     """The group's forcing functions over one window, as the twins' file (CSV, full precision)."""
     lines = ["ft,fd"] + [
@@ -157,12 +191,26 @@ def _forcing_text(record: dict, n: int) -> str:
 
 
 def _choose_w(cal) -> tuple[float, str, bool]:
-    """The group's W: the recommended one of a safe interval, else the grid's least total error."""
+    """The group's W and whether its decisions are uncertain.
+
+    The recommended W of a safe interval; else the grid's least total error (FP + FN), the
+    geometric middle of the range of grid points that tie for it (twins that nearly coincide
+    tie almost everywhere: the smallest W would call everything feedforward). Uncertain when
+    either twin's rate there exceeds the target rate.
+    """
     if cal.has_safe_interval and math.isfinite(cal.recommended):
         return float(cal.recommended), "safe interval", False
     total = cal.fp_rate + cal.fn_rate
-    i = int(np.argmin(total))
-    return float(cal.w[i]), "least total error (no safe W)", True
+    tied = np.flatnonzero(total <= total.min() + 1e-12)
+    i = int(tied[len(tied) // 2])
+    rates = _rates_at(cal, float(cal.w[i]))
+    uncertain = max(rates["fp_rate"], rates["fn_rate"]) > cal.target_rate
+    rule = (
+        "least total error (no safe interval)"
+        if uncertain
+        else "least total error (no contiguous safe interval)"
+    )
+    return float(cal.w[i]), rule, uncertain
 
 
 def _rates_at(cal, w: float) -> dict:
@@ -208,7 +256,7 @@ def _tables(config, runs, groups, by, calibrations, chosen, twin_params, finals,
     group_rows, run_rows = [], []
     for key, seeds in groups.items():
         name = ", ".join(f"{f}={v}" for f, v in zip(by, key, strict=True)) or "all runs"
-        median, remnant = twin_params[key]
+        median, remnant, slug = twin_params[key]
         for method_name in methods.METHODS:
             cal = calibrations[key][method_name]
             w, rule, uncertain = chosen[(key, method_name)]
@@ -231,7 +279,9 @@ def _tables(config, runs, groups, by, calibrations, chosen, twin_params, finals,
                 ses = dict(zip(fit.names, fit.se, strict=True)) if fit else {}
                 fitted_loop = next((d for d in a.loop if d.source == "fitted"), None)
                 row = {
-                    "model": config.data.name, "seed": seed, **choice,
+                    "model": config.data.name, "seed": seed,
+                    "file": str(factor_of[seed]["file"]), "file_run": int(factor_of[seed]["file_run"]),
+                    **choice,
                     **dict(zip(tables.ORDER_COLUMNS, sel.orders, strict=True)),
                     "feedforward": bool(sel.nb_ft > 0), "vaf_arx_validation": sel.vaf_validation,
                     "target": config.fit_hc.target,
@@ -249,7 +299,8 @@ def _tables(config, runs, groups, by, calibrations, chosen, twin_params, finals,
             group_rows.append(
                 {**choice, "n_runs": len(seeds), "n_feedforward": int(n_ff),
                  **{f"twin_{p}": median[p] for p in tables.HC_PARAMETER_NAMES},
-                 "twin_kn": remnant[0], "twin_w_n": remnant[1], "twin_zeta_n": remnant[2], "twins": twins}
+                 "twin_kn": remnant[0], "twin_w_n": remnant[1], "twin_zeta_n": remnant[2], "twins": twins,
+                 "twins_folder": f"twins/{slug}"}
             )  # fmt: skip
     schema = tables.ANALYSIS.arrow
     for f in factors:
@@ -330,9 +381,20 @@ def analyse_study(
         )
     if not 2 <= twins <= 1000:
         raise ConfigError(f"--twins: must be an integer in [2, 1000], got {twins}")
+    if config.fit_hc.target == "frequency":
+        raise ConfigError(
+            "fit_hc.target: frequency fits an ARX model's responses, and hcid analyse fits every run "
+            "before any model is selected; use time (the default) or closed_loop"
+        )
     data = config.data if config.data is not None else default_data()
     files = datasets.data_files(sources, data.pattern)  # a bad set is refused before any work
-    factors = [n for n, _ in files[0].factors]
+    factors = [n for n, _ in files[0].factors] + [d for d in (data.dimensions or ()) if d != "sample"]
+    taken = sorted(set(factors) & (set(tables.ANALYSIS.names) | set(tables.ANALYSIS_GROUPS.names)))
+    if taken:
+        raise ConfigError(
+            f"factor {taken[0]!r}: the analysis tables have a column of that name; rename the factor "
+            "(data.pattern, the manifest's header or data.dimensions)"
+        )
     if by is None:
         by = ["condition"] if "condition" in factors else []
     missing = [f for f in by if f not in factors]
@@ -342,6 +404,10 @@ def analyse_study(
             f"{', '.join(factors) or 'none'}; name them with data.pattern or a manifest)"
         )
     start = time.perf_counter()
+    if force:  # recompute everything, the twins included
+        for folder in sorted((run_dir / "twins").glob("*/")) if (run_dir / "twins").is_dir() else []:
+            if (folder / folders.MANIFEST).is_file():
+                folders.remove_owned(folder)
     names = tuple(methods.METHODS)
     identify_study(config, run_dir, names, data_path=list(sources), jobs=jobs, force=force,
                    backend=backend, scheduler=scheduler, show_progress=show_progress)  # fmt: skip
@@ -368,6 +434,7 @@ def analyse_study(
         if not remnants:
             raise DataError(f"group {_slug(key)}: no run's remnant could be fitted; cannot build its twins")
         remnant = tuple(float(np.median([getattr(r, a) for r in remnants])) for a in ("kn", "w_n", "zeta_n"))
+        _same_forcing(key, seeds, records, config)
         twin_dir = run_dir / "twins" / _slug(key)
         with using(twin_dir):
             forcing = twin_dir / "forcing.csv"
@@ -385,7 +452,7 @@ def analyse_study(
             run = calibrate_study(twin_config, twin_dir, jobs=jobs, backend=backend, scheduler=scheduler,
                                   show_progress=show_progress)  # fmt: skip
         calibrations[key] = {c.method: c for c in run.calibrations}
-        twin_params[key] = (median, remnant)
+        twin_params[key] = ({**median, **twin_values(median, kn_rate)}, remnant, _slug(key))
 
     # 4. Every run selected at its group's W and its selected structure fitted.
     frontier = results.read(tables.FRONTIER, run_dir)

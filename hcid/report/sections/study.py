@@ -24,8 +24,8 @@ class StudyData:
     parameters: list[list[str]]
     runs_header: list[str]
     runs: list[list[str]]
-    calibrations: list[tuple[str, pa.Table, dict]] = field(default_factory=list)
-    fc: list[tuple[str, dict, dict]] = field(default_factory=list)
+    calibrations: list[tuple[str, str, pa.Table, dict]] = field(default_factory=list)
+    fc: list[tuple[str, str, dict, dict]] = field(default_factory=list)
     fc_problems: list[str] = field(default_factory=list)
 
 
@@ -37,12 +37,9 @@ def _pct(rate: float, low: float, high: float) -> str:
     return f"{100 * rate:.0f}% [{100 * low:.0f}, {100 * high:.0f}]"
 
 
-def _slug(group: str) -> str:
-    """The twins' folder of a group, as hcid analyse named it."""
-    import re
-
-    values = [part.split("=", 1)[1] for part in group.split(", ")] if group != "all runs" else []
-    return re.sub(r"[^A-Za-z0-9_.+-]", "-", "_".join(values) or "all")[:60]
+def _slug(folder: str) -> str:
+    """A group's name for its figure files: its twins folder's (unique per group)."""
+    return folder.rsplit("/", 1)[-1]
 
 
 def _model_curves(run, twin: dict, lines: list[float]) -> dict:
@@ -104,12 +101,14 @@ def compute(run, done) -> StudyData | None:
         )  # fmt: skip
     calibrations = []
     group_rows = groups.to_pylist()
-    for name in dict.fromkeys(g["group"] for g in group_rows):
-        twin_dir = run.run_dir / "twins" / _slug(name)
-        table = results.read_optional(tables.CALIBRATION, twin_dir)
-        used = {g["method"]: g["w"] for g in group_rows if g["group"] == name and g["uncertain"]}
+    folder_of = {g["group"]: g["twins_folder"] for g in group_rows}
+    for name, folder in folder_of.items():
+        table = results.read_optional(tables.CALIBRATION, run.run_dir / folder)
+        used = {
+            g["method"]: g["w"] for g in group_rows if g["group"] == name and g["w_rule"] != "safe interval"
+        }
         if table is not None:
-            calibrations.append((name, table, used))
+            calibrations.append((name, folder, table, used))
     fc, problems = [], []
     if run.fc_estimates is not None:
         for name in dict.fromkeys(run.fc_estimates.column("group").to_pylist()):
@@ -118,8 +117,9 @@ def compute(run, done) -> StudyData | None:
                 problems.append(f"{name}: {t[0]['problem']}")
                 continue
             twin = next(g for g in group_rows if g["group"] == name)
-            fc.append((name, {path: [r for r in t if r["path"] == path] for path in ("e", "ft")},
-                       _model_curves(run, twin, [r["omega"] for r in t])))  # fmt: skip
+            by_path = {path: [r for r in t if r["path"] == path] for path in ("e", "ft")}
+            curves = _model_curves(run, twin, [r["omega"] for r in t])
+            fc.append((name, folder_of.get(name, name), by_path, curves))
     return StudyData(answers, uncertain, parameters, header, table_rows, calibrations, fc, problems)
 
 
@@ -145,14 +145,14 @@ def render(data: StudyData | None, doc: Doc) -> None:
             "there cannot be trusted at any W (the group's fitted feedforward is too weak, or its "
             "feedback twin finds feedforward too often)."
         )
-    for name, table, used in data.calibrations:
+    for name, folder, table, used in data.calibrations:
         what = (
             "the W used, the least total error: no W is safe"
             if used
             else "the safe interval and its recommended W"
         )
         doc.figure(
-            f"calibration_{_slug(name)}.png",
+            f"calibration_{_slug(folder)}.png",
             f"{name}: the twins' false-positive and false-negative rates over W (exact 95% bands), {what}.",
             lambda t=table, n=name, u=used: figures.plot_calibration(t, n, used=u),
         )
@@ -162,9 +162,9 @@ def render(data: StudyData | None, doc: Doc) -> None:
     doc.table(
         ["group", "method", "parameter", "runs", "median", "sd over runs", "median se"], data.parameters
     )
-    for name, paths, curves in data.fc:
+    for name, folder, paths, curves in data.fc:
         doc.figure(
-            f"fc_{_slug(name)}.png",
+            f"fc_{_slug(folder)}.png",
             f"{name}: model-free (Fourier-coefficient) estimates of both paths at the forcing lines, "
             "the group's coefficient average with its spread across runs (points), and the group's "
             "fitted parametric model (lines; Ht only where its fitted Kpt is above 0).",
