@@ -78,19 +78,25 @@ def _load(
     method_names: tuple[str, ...] | None = None,
     *,
     reopen: bool = False,
+    data: list[str] | None = None,
 ):
     """The config resolved for ``method_names`` (None: every method) and its run directory.
+
+    ``data``: the measured data of the command, from which a measured study's analysis rate
+    and window are taken when its config leaves them out.
 
     ``reopen``: a command that reads a run's results resolves the methods the run
     recorded (a method registered since changes nothing). A bad --backend or
     --scheduler is refused before any work.
     """
     from hcid.pipeline import check_backend
-    from hcid.resolve import describe_file, methods_of_run, resolve_config
+    from hcid.resolve import describe_file, described_name, methods_of_run, resolve_config
 
     check_backend(backend, scheduler)
-    described = describe_file(config)
-    run_dir = run if run is not None else Path("runs") / described.name
+    # The run directory's default needs the study's name, read first from the YAML itself.
+    name = described_name(config)
+    run_dir = run if run is not None else Path("runs") / name
+    described = describe_file(config, data, run_dir)
     if reopen and method_names is None:
         method_names = methods_of_run(run_dir)
     return resolve_config(described, method_names), run_dir
@@ -149,7 +155,7 @@ def identify(
     """Identify every model x seed of CONFIG (or every run of --data); writes RUN/frontier.parquet."""
     from hcid.pipeline import identify_study
 
-    cfg, run_dir = _load(config, run, backend, scheduler, _methods(method))
+    cfg, run_dir = _load(config, run, backend, scheduler, _methods(method), data=data)
     result = identify_study(
         cfg,
         run_dir,
@@ -282,7 +288,7 @@ def analyse(
     RUN/analysis.parquet, analysis.csv and analysis_groups.parquet."""
     from hcid.pipeline.analyse import analyse_study
 
-    cfg, run_dir = _load(config, run, backend, scheduler)
+    cfg, run_dir = _load(config, run, backend, scheduler, data=data)
     result = analyse_study(
         cfg,
         run_dir,

@@ -150,10 +150,107 @@ def parse_config(
     return resolve_config(describe_config(data, name, base), method_names)
 
 
-def describe_file(path: str | Path) -> Config:
-    """Read a YAML study config and describe it (:func:`~hcid.config.parse.describe_config`), unresolved."""
+def described_name(path: str | Path) -> str:
+    """The study's name as a config gives it (its ``name`` key, else the file's stem)."""
     path = Path(path)
-    return describe_config(read_yaml(path), path.stem, path.parent)
+    raw = read_yaml(path)
+    name = raw.get("name") if isinstance(raw, dict) else None
+    return name if isinstance(name, str) and name else path.stem
+
+
+def describe_file(
+    path: str | Path, sources: Sequence[str | Path] | None = None, run_dir: Path | None = None
+) -> Config:
+    """Read a YAML study config and describe it (:func:`~hcid.config.parse.describe_config`), unresolved.
+
+    A measured study that leaves ``data.analysis_rate`` or ``data.window`` out takes them from
+    its data ``sources`` (:func:`data_timing`) when given, else from the run directory's recorded
+    config (a command after ``hcid identify --data`` or ``hcid analyse``).
+    """
+    path = Path(path)
+    raw = read_yaml(path)
+    if _needs_timing(raw):
+        if sources:
+            raw = data_timing(raw, sources, path.parent)
+        else:
+            recorded = (run_dir / "config.yaml") if run_dir is not None else None
+            if recorded is None or not recorded.is_file():
+                raise ConfigError(
+                    "data.analysis_rate, data.window: missing; give them, or let `hcid identify --data` "
+                    "or `hcid analyse` take them from the data first"
+                )
+            earlier = read_yaml(recorded, "run config").get("data", {})
+            raw = {
+                **raw,
+                "data": {
+                    **raw["data"],
+                    **{k: earlier[k] for k in ("analysis_rate", "window") if k in earlier},
+                },
+            }
+    return describe_config(raw, path.stem, path.parent)
+
+
+#: The analysis rate a measured study defaults to when its data are faster (Hz): SPEC 3's.
+DEFAULT_ANALYSIS_RATE = 25.0
+_SIMULATING = ("models", "signals", "seeds")
+
+
+def _needs_timing(raw: Any) -> bool:
+    """Whether a measured study's config leaves its analysis rate or window to the data."""
+    if not isinstance(raw, dict) or "data" not in raw or "timing" in raw:
+        return False
+    if any(k in raw for k in _SIMULATING) or not isinstance(raw["data"], dict):
+        return False
+    return "analysis_rate" not in raw["data"] or "window" not in raw["data"]
+
+
+def data_timing(raw: dict, sources: Sequence[str | Path], base: Path | None = None) -> dict:
+    """``raw`` with the data section's ``analysis_rate`` and ``window`` taken from the data where
+    the config leaves them out.
+
+    The analysis rate: the first run's own rate if at most :data:`DEFAULT_ANALYSIS_RATE`, else
+    that rate (25 Hz, SPEC 3's; or the data's own when 25 Hz is no ratio p/q with p, q <= 100).
+    The window: the shortest run after ``data.lead_in``, in whole samples at the analysis rate.
+
+    Raises
+    ------
+    DataError, ConfigError
+        For a bad data set or data section, in one line.
+    """
+    from hcid.datasets import data_files
+    from hcid.measured import read_file_runs, resampling_factors
+
+    data = dict(raw["data"])
+    lead_in = data.get("lead_in", 0.0)
+    # The data section described on its own, at a placeholder timing, to read the files.
+    probe = {k: v for k, v in raw.items() if k in ("name", "data")}
+    probe["data"] = {
+        **data,
+        "analysis_rate": data.get("analysis_rate", 1000.0),
+        "window": 1.0,
+        "lead_in": 0.0,
+    }
+    reading = describe_config(probe, "probe", base).data
+    files = data_files(sources, reading.pattern)
+    first, native, _ = read_file_runs(files[0].path, reading)
+    if "analysis_rate" not in data:
+        rate = native if native <= DEFAULT_ANALYSIS_RATE else DEFAULT_ANALYSIS_RATE
+        try:
+            resampling_factors(native, rate)
+        except DataError:
+            rate = native
+        data["analysis_rate"] = float(rate)
+    rate = float(data["analysis_rate"])
+    if "window" not in data:
+        shortest = min(len(r["ft"]) for f in files for r in read_file_runs(f.path, reading, rate)[0].values())
+        skip = round(float(lead_in) * rate)
+        if shortest - skip < 2:
+            raise DataError(
+                f"{files[0].path}: runs of {shortest} samples at {rate:g} Hz, none after the lead-in"
+            )
+        data["window"] = (shortest - skip) / rate
+    del first
+    return {**raw, "data": data}
 
 
 def load_config(path: str | Path, method_names: Sequence[str] | None = None) -> Config:

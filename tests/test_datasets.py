@@ -285,3 +285,23 @@ def test_a_matlab_struct_of_samples_x_trials_x_subjects(tmp_path):
     assert again.runs == got.runs | {} if False else [{**r, "file": "pursuit.mat"} for r in got.runs]
     for run in got.records:
         np.testing.assert_array_equal(again.records[run]["u"], got.records[run]["u"])
+
+
+def test_the_analysis_rate_and_window_come_from_the_data(trial_folder, tmp_path):
+    # Source: the example file's trials: 25 Hz (at most 25 Hz: kept), 2048 samples each, so the
+    # window is 81.92 s; recorded in the run's config.yaml, which later commands read back.
+    raw = yaml.safe_load(_config(tmp_path).read_text())
+    for key in ("models", "loop", "signals", "timing", "seeds", "identify", "selection", "fit_hc"):
+        raw.pop(key, None)
+    config = tmp_path / "lab_min.yaml"
+    config.write_text(yaml.safe_dump(raw))
+    run = tmp_path / "run"
+    args = ["identify", str(config), "--run", str(run), "--data", str(trial_folder), "--method", "direct",
+            "--quiet", "--jobs", "1"]  # fmt: skip
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    recorded = yaml.safe_load((run / "config.yaml").read_text())["data"]
+    assert recorded["analysis_rate"] == 25.0 and recorded["window"] == pytest.approx(81.92)
+    assert runner.invoke(app, ["sweep-w", str(config), "--run", str(run)]).exit_code == 0
+    result = runner.invoke(app, ["sweep-w", str(config), "--run", str(tmp_path / "elsewhere")])
+    assert result.exit_code == 2 and "data.analysis_rate, data.window: missing" in result.stderr
