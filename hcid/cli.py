@@ -277,6 +277,14 @@ def analyse(
     twins: Annotated[
         int, typer.Option("--twins", help="Realizations of each twin (FB and FF) per group.")
     ] = 20,
+    ff_twin: Annotated[
+        str,
+        typer.Option(
+            "--ff-twin",
+            help="The FF twin's feedforward: own (the group's fitted model, the default) or study (the "
+            "group with the largest fitted Kpt: would feedforward of the size seen in the study be found?).",
+        ),
+    ] = "own",
     jobs: JobsOpt = 2,
     backend: BackendOpt = "loky",
     scheduler: SchedulerOpt = None,
@@ -295,6 +303,7 @@ def analyse(
         data,
         by=None if by is None else [b.strip() for b in by.split(",") if b.strip()],
         twins=twins,
+        ff_twin=ff_twin,
         jobs=jobs,
         force=force,
         backend=backend,

@@ -52,6 +52,10 @@ __all__ = ["AnalysisRun", "analyse_study"]
 
 #: Realizations of each twin (FB and FF) per group.
 TWINS = 20
+#: Where the FF twin's feedforward path comes from: ``own`` (the group's fitted model, SPEC 10)
+#: or ``study`` (the group with the largest fitted Kpt: a power question for a group whose own
+#: fitted feedforward is too weak to tell its twins apart).
+FF_TWINS = ("own", "study")
 #: The twins' simulation rate: the smallest multiple of the analysis rate at or above this (Hz).
 TWIN_SIM_RATE = 100.0
 
@@ -359,6 +363,7 @@ def analyse_study(
     *,
     by: Sequence[str] | None = None,
     twins: int = TWINS,
+    ff_twin: str = "own",
     jobs: int = 2,
     force: bool = False,
     backend: str = "loky",
@@ -381,6 +386,8 @@ def analyse_study(
         )
     if not 2 <= twins <= 1000:
         raise ConfigError(f"--twins: must be an integer in [2, 1000], got {twins}")
+    if ff_twin not in FF_TWINS:
+        raise ConfigError(f"--ff-twin: must be one of {', '.join(FF_TWINS)}, got {ff_twin!r}")
     if config.fit_hc.target == "frequency":
         raise ConfigError(
             "fit_hc.target: frequency fits an ARX model's responses, and hcid analyse fits every run "
@@ -427,9 +434,17 @@ def analyse_study(
 
     # 3. Per group: the twins and their calibration.
     calibrations, twin_params = {}, {}
+    medians = {
+        key: {p: float(np.median([fitted[s][0][True].values[p] for s in seeds])) for p in hcfit.PARAMETERS}
+        for key, seeds in groups.items()
+    }
+    # --ff-twin study: every group's FF twin gets the feedforward path of the group with the
+    # largest fitted Kpt ("would feedforward of the size seen in this study be found here?").
+    strongest = max(medians, key=lambda k: medians[k]["Kpt"])
     for key, seeds in groups.items():
-        ff_values = [fitted[s][0][True].values for s in seeds]
-        median = {p: float(np.median([v[p] for v in ff_values])) for p in hcfit.PARAMETERS}
+        median = dict(medians[key])
+        if ff_twin == "study":
+            median.update({p: medians[strongest][p] for p in ("Kpt", "TI", "tau_pt")})
         remnants = [fitted[s][1] for s in seeds if fitted[s][1] is not None and not fitted[s][1].at_bound]
         if not remnants:
             raise DataError(f"group {_slug(key)}: no run's remnant could be fitted; cannot build its twins")
