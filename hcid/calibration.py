@@ -22,7 +22,7 @@ from scipy import stats
 from hcid import tables
 from hcid.selection import SelectionPath
 
-__all__ = ["ERRORS", "Calibration", "RateCurve", "calibrate", "clopper_pearson", "error_rates"]
+__all__ = ["rates_at", "ERRORS", "Calibration", "RateCurve", "calibrate", "clopper_pearson", "error_rates"]
 
 #: The two errors of SPEC 4 and 9, by name: which selected nb_ft counts as wrong.
 #: FB realizations (no feedforward) are judged for false positives, FF ones for false negatives.
@@ -43,6 +43,29 @@ def clopper_pearson(k: np.ndarray, n: int, level: float = 0.95) -> tuple[np.ndar
 
 def _counts(segments: list[SelectionPath], nb_ft: list[np.ndarray], w: np.ndarray, positive) -> np.ndarray:
     return np.sum([positive(nb[s.at(w)]) for s, nb in zip(segments, nb_ft, strict=True)], axis=0)
+
+
+def rates_at(
+    fb: tuple[list[SelectionPath], list[np.ndarray]],
+    ff: tuple[list[SelectionPath], list[np.ndarray]],
+    w: float,
+) -> dict[str, float]:
+    """The twins' false-positive and false-negative rates at one W, exactly (from their
+    selection paths, not the nearest grid point), with exact 95% bands (SPEC 9).
+
+    ``fb``, ``ff`` as for :func:`calibrate`. Keys ``fp_rate``, ``fp_low``, ``fp_high``,
+    ``fn_rate``, ``fn_low``, ``fn_high``.
+    """
+    at = np.array([float(w)])
+    n_fb, n_ff = len(fb[0]), len(ff[0])
+    fp = _counts(*fb, at, lambda nb: nb > 0)
+    fn = _counts(*ff, at, lambda nb: nb < 2)
+    fp_low, fp_high = clopper_pearson(fp, n_fb)
+    fn_low, fn_high = clopper_pearson(fn, n_ff)
+    return {
+        "fp_rate": float(fp[0] / n_fb), "fp_low": float(fp_low[0]), "fp_high": float(fp_high[0]),
+        "fn_rate": float(fn[0] / n_ff), "fn_low": float(fn_low[0]), "fn_high": float(fn_high[0]),
+    }  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,7 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import datasets, folders, hcfit, methods, results, selection, tables
+from hcid.calibration import rates_at
 from hcid.config import Config
 from hcid.config.parse import default_data
 from hcid.descriptors import fit_remnant
@@ -45,6 +46,7 @@ from hcid.pipeline.fit import _choices, _records, _stage_choices
 from hcid.pipeline.parallel import parallel_map
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, using
 from hcid.pipeline.studies import calibrate_study, identify_study
+from hcid.pipeline.sweep import selections
 from hcid.resolve import parse_config
 from hcid.selected import SelectedModel, analyse_selected
 
@@ -217,6 +219,19 @@ def _choose_w(cal) -> tuple[float, str, bool]:
     return float(cal.w[i]), rule, uncertain
 
 
+def _twin_paths(twin_config: Config, twin_dir: Path) -> dict[str, tuple]:
+    """Per method, the FB and FF twins' selection paths and nb_ft (for rates at any W)."""
+    chosen = selections(results.read(tables.FRONTIER, twin_dir), twin_dir)
+    out = {}
+    for method in methods.METHODS:
+        pair = []
+        for model in ("FB", "FF"):
+            keys = [(model, s, method) for s in twin_config.seeds]
+            pair.append(([chosen[k][0] for k in keys], [chosen[k][1]["nb_ft"] for k in keys]))
+        out[method] = tuple(pair)
+    return out
+
+
 def _rates_at(cal, w: float) -> dict:
     i = int(np.argmin(np.abs(np.log(cal.w) - math.log(w))))
     return {
@@ -254,7 +269,7 @@ def _twin_dir_ready(twin_dir: Path, forcing_text: str) -> None:
         folders.remove_owned(twin_dir)
 
 
-def _tables(config, runs, groups, by, calibrations, chosen, twin_params, finals, twins):
+def _tables(config, runs, groups, by, calibrations, chosen, twin_params, finals, twins, twin_paths):
     factors = [c for c in runs.column_names if c not in tables.RUNS.names]
     factor_of = {int(r["seed"]): r for r in runs.to_pylist()}
     group_rows, run_rows = [], []
@@ -272,7 +287,8 @@ def _tables(config, runs, groups, by, calibrations, chosen, twin_params, finals,
                 "uncertain": uncertain,
                 "safe_low": float(cal.safe_low),
                 "safe_high": float(cal.safe_high),
-                **_rates_at(cal, w),
+                # Exactly at W, from the twins' selection paths (W need not be on the grid).
+                **rates_at(*twin_paths[key][method_name], w),
             }
             n_ff = 0
             for seed in seeds:
@@ -433,7 +449,7 @@ def analyse_study(
     }  # fmt: skip
 
     # 3. Per group: the twins and their calibration.
-    calibrations, twin_params = {}, {}
+    calibrations, twin_params, twin_paths = {}, {}, {}
     medians = {
         key: {p: float(np.median([fitted[s][0][True].values[p] for s in seeds])) for p in hcfit.PARAMETERS}
         for key, seeds in groups.items()
@@ -467,6 +483,7 @@ def analyse_study(
             run = calibrate_study(twin_config, twin_dir, jobs=jobs, backend=backend, scheduler=scheduler,
                                   show_progress=show_progress)  # fmt: skip
         calibrations[key] = {c.method: c for c in run.calibrations}
+        twin_paths[key] = _twin_paths(twin_config, twin_dir)
         twin_params[key] = ({**median, **twin_values(median, kn_rate)}, remnant, _slug(key))
 
     # 4. Every run selected at its group's W and its selected structure fitted.
@@ -502,7 +519,7 @@ def analyse_study(
         )
     }  # fmt: skip
     group_table, run_table = _tables(
-        config, runs, groups, by, calibrations, chosen, twin_params, finals, twins
+        config, runs, groups, by, calibrations, chosen, twin_params, finals, twins, twin_paths
     )
     fc_rows = []
     for key, seeds in groups.items():
