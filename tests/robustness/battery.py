@@ -1049,10 +1049,45 @@ def silent_answer_cases() -> list[Case]:
         Case("fit_hc.covariance hac", lambda t: _fit_hc_with(t, {"covariance": "hac"}), "refused"),
         Case("fit_hc.lag -1", lambda t: _fit_hc_with(t, {"lag": -1}), "refused"),
         Case("fit_hc.lag 1e9", lambda t: _fit_hc_with(t, {"lag": 1e9}), "refused"),
+        # issue 27: a lab's data set and hcid analyse
+        Case("analyse a glob matching nothing", lambda t: _analyse(t, [str(t / "*.csv")]), "refused"),
+        Case("analyse a manifest naming a missing file", lambda t: _analyse(t, [_manifest_missing(t)]), "refused"),
+        Case("analyse --by a factor the set lacks", lambda t: _analyse(t, [_lab_slice(t)], "--by", "session"),
+             "refused"),
+        Case("analyse a file whose name the pattern misses",
+             lambda t: _analyse(t, [_lab_slice(t, extra="trial1_S1.csv")]), "refused"),
         Case("fit-hc --target closed_loop", lambda t: ["fit-hc", str(_ready_run(t)), "--run", str(t / "run"),
              "--target", "closed_loop", "--quiet", "--jobs", "1"], "accepted",
              ("hc_parameters.parquet", "hc_loop.parquet", "remnant_spectrum.parquet")),
     ]  # fmt: skip
+
+
+LAB = ROOT / "configs" / "lab_example"
+
+
+def _lab_slice(tmp: Path, extra: str | None = None) -> Path:
+    """Two files of the example lab study (and one more under another name)."""
+    folder = tmp / "lab"
+    folder.mkdir(exist_ok=True)
+    for name in ("S1_pursuit_trial1.csv", "S1_compensatory_trial1.csv"):
+        shutil.copy(LAB / name, folder / name)
+    if extra is not None:
+        shutil.copy(LAB / "S1_pursuit_trial1.csv", folder / extra)
+    return folder
+
+
+def _manifest_missing(tmp: Path) -> Path:
+    path = tmp / "manifest.csv"
+    path.write_text("file,subject\nS9_pursuit_trial1.csv,S9\n")
+    return path
+
+
+def _analyse(tmp: Path, data: list, *extra: str) -> list[str]:
+    args = ["analyse", str(ROOT / "configs" / "lab_example.yaml"), "--run", str(tmp / "run"), "--quiet",
+            "--twins", "2", "--jobs", "1"]  # fmt: skip
+    for d in data:
+        args += ["--data", str(d)]
+    return [*args, *extra]
 
 
 def _fit_hc_with(tmp: Path, fit_hc: dict) -> list[str]:
