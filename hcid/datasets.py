@@ -201,7 +201,10 @@ def _columns(path: Path) -> tuple[str, ...] | None:
     if suffix in (".parquet", ".pq"):
         import pyarrow.parquet as pq
 
-        return tuple(pq.read_schema(path).names)
+        try:
+            return tuple(pq.read_schema(path).names)
+        except (pa.ArrowException, OSError) as exc:
+            raise DataError(f"{path}: cannot read ({str(exc).splitlines()[0][:160]})") from exc
     return None
 
 

@@ -305,3 +305,14 @@ def test_the_analysis_rate_and_window_come_from_the_data(trial_folder, tmp_path)
     assert runner.invoke(app, ["sweep-w", str(config), "--run", str(run)]).exit_code == 0
     result = runner.invoke(app, ["sweep-w", str(config), "--run", str(tmp_path / "elsewhere")])
     assert result.exit_code == 2 and "data.analysis_rate, data.window: missing" in result.stderr
+
+
+def test_a_corrupt_parquet_file_is_one_line(tmp_path):
+    # The battery found it: the set's column check read the schema outside the reader's guard.
+    bad = tmp_path / "data.parquet"
+    bad.write_bytes(b"not parquet at all")
+    with pytest.raises(DataError, match="data.parquet: cannot read"):
+        datasets.read_set(
+            datasets.data_files([bad]),
+            parse_config(yaml.safe_load(_config(tmp_path).read_text()), "lab").data,
+        )
