@@ -33,7 +33,8 @@ import pyarrow as pa
 from hcid.config import DataConfig
 from hcid.config.parse import RESERVED_FACTORS, check_pattern
 from hcid.errors import ConfigError, DataError
-from hcid.measured import READERS, csv_layout, read_file_runs
+from hcid.formats import READERS, csv_layout
+from hcid.measured import read_file_runs
 from hcid.tables import RUNS
 
 __all__ = ["DataFile", "DataSet", "data_files", "read_set", "runs_table"]

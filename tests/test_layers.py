@@ -34,7 +34,7 @@ LAYERS = (
             "hcid.fourier",
         ),
     ),
-    ("results", ("hcid.results", "hcid.measured", "hcid.datasets", "hcid.folders")),
+    ("results", ("hcid.results", "hcid.formats", "hcid.measured", "hcid.datasets", "hcid.folders")),
     ("api", ("hcid.resolve", "hcid.api")),
     ("pipeline", ("hcid.pipeline",)),
     ("report", ("hcid.report",)),

@@ -547,9 +547,9 @@ def test_byte_order_mark_before_comment_lines(tmp_path, data_config):
 def test_comment_lines_across_read_blocks(tmp_path, monkeypatch, data_config):
     # The comment filter reads block by block: lines cut by a block edge and comment lines
     # in the middle of the data give the same records as the plain file.
-    from hcid import measured
+    from hcid import formats
 
-    monkeypatch.setattr(measured, "_BLOCK", 97)
+    monkeypatch.setattr(formats, "_BLOCK", 97)
     lines = EXAMPLE.read_bytes().splitlines(keepends=True)
     path = tmp_path / "mid.csv"
     path.write_bytes(b"# head\n" + b"".join(lines[:500]) + b"  # a note mid-file\n" + b"".join(lines[500:]))
@@ -561,17 +561,17 @@ def test_comment_lines_across_read_blocks(tmp_path, monkeypatch, data_config):
 def test_a_file_above_the_size_limit_is_refused_before_reading(tmp_path, monkeypatch, data_config):
     # The limit is checked with stat(): a sparse file of 2 GiB is refused without reading a byte
     # (before: read whole, 17-22 s and 4.5 GB). MAX_FILE_BYTES is lowered here to test the edge.
-    from hcid import measured
+    from hcid import formats
 
     path = tmp_path / "big.csv"
     with open(path, "wb") as f:
         f.truncate(2 << 30)
     with pytest.raises(DataError, match="2,147,483,648 bytes, above the 1,073,741,824-byte limit"):
         load_data(path, data_config)
-    monkeypatch.setattr(measured, "MAX_FILE_BYTES", EXAMPLE.stat().st_size - 1)
+    monkeypatch.setattr(formats, "MAX_FILE_BYTES", EXAMPLE.stat().st_size - 1)
     with pytest.raises(DataError, match="-byte limit on a data file"):
         load_data(EXAMPLE, data_config)
-    monkeypatch.setattr(measured, "MAX_FILE_BYTES", EXAMPLE.stat().st_size)
+    monkeypatch.setattr(formats, "MAX_FILE_BYTES", EXAMPLE.stat().st_size)
     assert list(load_data(EXAMPLE, data_config)) == [1, 2, 3]
 
 

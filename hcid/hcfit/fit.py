@@ -413,10 +413,7 @@ def fit_closed_loop(
     """
     if not isinstance(record, TrackingRecord):
         raise IdentificationError(f"record: must be a TrackingRecord, got {type(record).__name__}")
-    if record.fd is None:
-        raise IdentificationError("record: the closed-loop target needs the record's fd")
-    if disturbance_at not in ("output", "input"):
-        raise IdentificationError(f"disturbance_at: must be output or input, got {disturbance_at!r}")
+    # _ClosedLoop refuses a record without fd and an unknown disturbance point.
     problem = _ClosedLoopProblem(record, plant, bool(feedforward), disturbance_at)
     return _solve(problem, settings, "closed_loop", record)
 

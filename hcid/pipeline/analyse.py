@@ -244,13 +244,7 @@ def _rates_at(cal, w: float) -> dict:
 
 
 def _groups(runs: pa.Table, by: Sequence[str]) -> dict[tuple[str, ...], list[int]]:
-    missing = [f for f in by if f not in runs.column_names]
-    if missing:
-        factors = [c for c in runs.column_names if c not in tables.RUNS.names]
-        raise ConfigError(
-            f"--by {','.join(by)}: the data set has no factor {missing[0]!r} (its factors: "
-            f"{', '.join(factors) or 'none'})"
-        )
+    """The runs (ids) of each group: the values of the ``by`` factors (checked by the caller)."""
     out: dict[tuple[str, ...], list[int]] = {}
     for row in runs.to_pylist():
         out.setdefault(tuple(str(row[f]) for f in by), []).append(int(row["seed"]))
