@@ -281,10 +281,11 @@ def analyse(
         str,
         typer.Option(
             "--ff-twin",
-            help="The FF twin's feedforward: own (the group's fitted model, the default) or study (the "
-            "group with the largest fitted Kpt: would feedforward of the size seen in the study be found?).",
+            help="The FF twin's feedforward: own (the group's fitted model), study (the group with the "
+            "largest fitted Kpt: would feedforward of the size seen in the study be found?) or auto (the "
+            "default: own, and study where no W separates a group's own twins).",
         ),
-    ] = "own",
+    ] = "auto",
     jobs: JobsOpt = 2,
     backend: BackendOpt = "loky",
     scheduler: SchedulerOpt = None,
@@ -485,6 +486,11 @@ def _print_analysis(result) -> None:
         rows = [r for r in runs if r["group"] == g["group"] and r["method"] == g["method"]]
         if g["w_rule"] == "safe interval":
             safe = f"safe interval [{g['safe_low']:.3g}, {g['safe_high']:.3g})"
+            if g["ff_twin"] == "study":
+                safe += (
+                    f" for the study's feedforward (Kpt {g['twin_Kpt']:.2g}; this group's own, "
+                    f"Kpt {g['fitted_Kpt']:.2g}, cannot be told from none)"
+                )
         elif g["uncertain"]:
             safe = "NO W separates the twins: W of least total error, every decision UNCERTAIN"
         else:
@@ -508,7 +514,9 @@ def _print_analysis(result) -> None:
         pm = np.nanmedian([r["phase_margin"] for r in rows])
         typer.echo(f"    {', '.join(parts)}; crossover {wc:.3g} rad/s, phase margin {pm:.3g} deg")
     typer.echo(
-        f"analysed in {result.seconds:.1f} s; wrote {result.run_dir / 'analysis.parquet'} (and .csv: one row "
+        f"analysed in {result.seconds:.1f} s ("
+        + ", ".join(f"{name} {sec:.1f}" for name, sec in result.stages.items())
+        + f"); wrote {result.run_dir / 'analysis.parquet'} (and .csv: one row "
         f"per run and method, with its factors) and {result.run_dir / 'analysis_groups.parquet'}"
     )
 

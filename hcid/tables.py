@@ -381,7 +381,14 @@ RESIDUALS = _schema(
 HC_PARAMETER_NAMES = ("Kpe", "TL", "tau_pe", "w_nms", "zeta_nms", "Kpt", "TI", "tau_pt")
 _RATE_FIELDS = [(c, _F64) for c in ("fp_rate", "fp_low", "fp_high", "fn_rate", "fn_low", "fn_high")]
 _CHOICE_FIELDS = (
-    [("group", _STR), ("method", _STR), ("w", _F64), ("w_rule", _STR), ("uncertain", _BOOL)]
+    [
+        ("group", _STR),
+        ("method", _STR),
+        ("w", _F64),
+        ("w_rule", _STR),
+        ("uncertain", _BOOL),
+        ("ff_twin", _STR),
+    ]
     + [("safe_low", _F64), ("safe_high", _F64)]
     + _RATE_FIELDS
 )
@@ -415,6 +422,7 @@ ANALYSIS_GROUPS = _schema(
     _CHOICE_FIELDS
     + [("n_runs", _INT), ("n_feedforward", _INT)]
     + [(f"twin_{p}", _F64) for p in HC_PARAMETER_NAMES]
+    + [(f"fitted_{p}", _F64) for p in ("Kpt", "TI", "tau_pt")]
     + [("twin_kn", _F64), ("twin_w_n", _F64), ("twin_zeta_n", _F64), ("twins", _INT), ("twins_folder", _STR)],
     ("group", "method"),
 )

@@ -74,6 +74,35 @@ def test_every_run_and_group_is_answered_with_its_factors(analysed):
     assert "feedforward in 4 of 4 runs" in output
 
 
+def test_a_group_whose_own_twins_no_w_separates_is_calibrated_on_the_studys_feedforward(analysed):
+    # --ff-twin auto (the default): the compensatory condition (nobody uses feedforward) has own
+    # twins that nearly coincide; for every method where no W separates them, its FF twin takes
+    # the pursuit condition's fitted feedforward path on its own feedback (module notes).
+    _, out = analysed
+    run = out[1][0]
+    groups = pq.read_table(run / tables.ANALYSIS_GROUPS.file).to_pylist()
+    pursuit = next(g for g in groups if g["group"] == "condition=pursuit")
+    calibration = {}
+    for g in groups:
+        own = g["twins_folder"].removesuffix("-study")
+        table = pq.read_table(run / own / tables.CALIBRATION.file).to_pylist()
+        calibration[g["group"], g["method"]] = next(r for r in table if r["method"] == g["method"])
+    for g in groups:
+        own = calibration[g["group"], g["method"]]
+        separated = np.isfinite(own["safe_low"]) and np.isfinite(own["recommended"])
+        if g["group"] == "condition=pursuit":  # the strongest feedforward: its own twins always
+            assert g["ff_twin"] == "own" and g["twins_folder"].endswith(pursuit["twins_folder"][-8:])
+            continue
+        assert g["ff_twin"] == ("own" if separated else "study")
+        if g["ff_twin"] == "study":
+            assert g["twins_folder"].endswith("-study")
+            for p in ("Kpt", "TI", "tau_pt"):  # the pursuit condition's feedforward ...
+                assert g[f"twin_{p}"] == pytest.approx(pursuit[f"twin_{p}"])
+            assert g["twin_Kpe"] != pursuit["twin_Kpe"]  # ... on the group's own feedback
+            assert g["fitted_Kpt"] < 0.5 * g["twin_Kpt"]
+    assert any(g["ff_twin"] == "study" for g in groups)
+
+
 def test_model_free_estimates_are_written_per_group(analysed):
     _, out = analysed
     fc = pq.read_table(out[1][0] / tables.FC_ESTIMATES.file).to_pylist()
@@ -146,7 +175,10 @@ def test_the_report_answers_first(analysed, tmp_path):
     assert "Missing stages" not in text and "Fig." not in text
     names = sorted(p.name for p in report.figures)
     for stem in ("calibration_pursuit-", "calibration_compensatory-", "fc_pursuit-", "fc_compensatory-"):
-        assert sum(n.startswith(stem) for n in names) == 1, (stem, names)
+        assert sum(n.startswith(stem) and "-study" not in n for n in names) == 1, (stem, names)
+    # The compensatory condition's study twins (the test above) have their figure too.
+    assert sum(n.startswith("calibration_compensatory-") and n.endswith("-study.png") for n in names) == 1
+    assert "study's FF (Kpt" in text
 
 
 def test_every_group_has_its_own_twins_folder():

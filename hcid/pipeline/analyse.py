@@ -13,12 +13,16 @@
 4. Every run is selected at its group's W; the selected structure's parametric model
    is fitted (:func:`hcid.selected.analyse_selected`).
 
-Where no W separates a group's twins (an empty safe interval) the W of the grid with
-the least total error rate (FP + FN) is used and every decision there is marked
-``uncertain``. Writes ``analysis.parquet`` and ``analysis.csv`` (one row per run and
-method, with the run's factors: statistics-ready), ``analysis_groups.parquet`` and
-``fc_estimates.parquet`` (each group's model-free estimates of both paths, SPEC 10, beside
-its fitted model).
+Where no W separates a group's own twins and another group's fitted feedforward is stronger
+(``--ff-twin auto``, the default: a group where nobody uses feedforward has twins that nearly
+coincide), the group is calibrated again with that group's feedforward path on its own
+feedback: "would feedforward of the size this study shows be found here?"; ``ff_twin`` says
+which twins gave W. Where no W separates the twins used, the W of the grid with the least
+total error rate (FP + FN) is used and every decision there is marked ``uncertain``.
+
+Writes ``analysis.parquet`` and ``analysis.csv`` (one row per run and method, with the run's
+factors: statistics-ready), ``analysis_groups.parquet`` and ``fc_estimates.parquet`` (each
+group's model-free estimates of both paths, SPEC 10, beside its fitted model).
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ import math
 import re
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -54,10 +58,13 @@ __all__ = ["AnalysisRun", "analyse_study"]
 
 #: Realizations of each twin (FB and FF) per group.
 TWINS = 20
-#: Where the FF twin's feedforward path comes from: ``own`` (the group's fitted model, SPEC 10)
-#: or ``study`` (the group with the largest fitted Kpt: a power question for a group whose own
-#: fitted feedforward is too weak to tell its twins apart).
-FF_TWINS = ("own", "study")
+#: Where the FF twin's feedforward path comes from: ``own`` (the group's fitted model, SPEC 10),
+#: ``study`` (the group with the largest fitted Kpt: a power question for a group whose own
+#: fitted feedforward is too weak to tell its twins apart) or ``auto`` (own; study for a group
+#: whose own twins no W separates, for each method without a safe interval on its own twins).
+FF_TWINS = ("auto", "own", "study")
+#: The feedforward path's parameters (what ``study`` twins borrow).
+FF_PATH = ("Kpt", "TI", "tau_pt")
 #: The twins' simulation rate: the smallest multiple of the analysis rate at or above this (Hz).
 TWIN_SIM_RATE = 100.0
 
@@ -71,6 +78,8 @@ class AnalysisRun:
     runs: pa.Table
     seconds: float
     run_dir: Path
+    #: Wall seconds per stage: identify, fit runs, twins, fit selected, tables.
+    stages: dict[str, float] = field(default_factory=dict)
 
 
 # --------------------------------------------------------------------------- per-run fits
@@ -219,6 +228,46 @@ def _choose_w(cal) -> tuple[float, str, bool]:
     return float(cal.w[i]), rule, uncertain
 
 
+@dataclass(frozen=True)
+class _Twins:
+    """One calibration of a group: its twins (``kind`` own or study), per method."""
+
+    kind: str
+    model: dict  # the FF twin's parameters as simulated (the FB twin: Kpt = 0)
+    remnant: tuple  # kn, w_n, zeta_n
+    folder: str  # under the run directory
+    calibrations: dict  # method -> Calibration
+    paths: dict  # method -> the twins' selection paths and nb_ft (_twin_paths)
+
+
+def _separates(cal) -> bool:
+    """Whether a calibration has a safe interval (a W that tells its twins apart)."""
+    return bool(cal.has_safe_interval and math.isfinite(cal.recommended))
+
+
+def _calibrate_twins(config, run_dir, key, record, model, remnant, twins, kind, kn_rate, **pool) -> _Twins:
+    """Simulate, identify and calibrate one pair of twins of a group in ``RUN/twins/<group>[-study]``
+    (resumed when its inputs are the same, made anew when not)."""
+    slug = _slug(key) + ("-study" if kind == "study" else "")
+    twin_dir = run_dir / "twins" / slug
+    with using(twin_dir):
+        forcing = twin_dir / "forcing.csv"
+        text = _forcing_text(record, round(config.timing.window * config.timing.output_rate))
+        _twin_dir_ready(twin_dir, text)
+        folders.atomic_write(forcing, lambda tmp: Path(tmp).write_text(text))
+        raw = _twin_raw(config, model, remnant, forcing, twins, f"{config.name}_twins_{slug}")
+        twin_config = parse_config(raw, raw["name"])
+        try:
+            check_run_dir(twin_config, twin_dir, "simulate")
+        except DataError:  # the group's fitted model changed (other settings): new twins
+            folders.remove_owned(twin_dir, [n for n in folders.owned_files(twin_dir) if n != "forcing.csv"])
+        run = calibrate_study(twin_config, twin_dir, **pool)
+    return _Twins(
+        kind, {**model, **twin_values(model, kn_rate)}, remnant, f"twins/{slug}",
+        {c.method: c for c in run.calibrations}, _twin_paths(twin_config, twin_dir),
+    )  # fmt: skip
+
+
 def _twin_paths(twin_config: Config, twin_dir: Path) -> dict[str, tuple]:
     """Per method, the FB and FF twins' selection paths and nb_ft (for rates at any W)."""
     chosen = selections(results.read(tables.FRONTIER, twin_dir), twin_dir)
@@ -263,15 +312,15 @@ def _twin_dir_ready(twin_dir: Path, forcing_text: str) -> None:
         folders.remove_owned(twin_dir)
 
 
-def _tables(config, runs, groups, by, calibrations, chosen, twin_params, finals, twins, twin_paths):
+def _tables(config, runs, groups, by, used, chosen, finals, twins, medians):
     factors = [c for c in runs.column_names if c not in tables.RUNS.names]
     factor_of = {int(r["seed"]): r for r in runs.to_pylist()}
     group_rows, run_rows = [], []
     for key, seeds in groups.items():
         name = ", ".join(f"{f}={v}" for f, v in zip(by, key, strict=True)) or "all runs"
-        median, remnant, slug = twin_params[key]
         for method_name in methods.METHODS:
-            cal = calibrations[key][method_name]
+            pair = used[(key, method_name)]
+            cal = pair.calibrations[method_name]
             w, rule, uncertain = chosen[(key, method_name)]
             choice = {
                 "group": name,
@@ -279,10 +328,11 @@ def _tables(config, runs, groups, by, calibrations, chosen, twin_params, finals,
                 "w": w,
                 "w_rule": rule,
                 "uncertain": uncertain,
+                "ff_twin": pair.kind,
                 "safe_low": float(cal.safe_low),
                 "safe_high": float(cal.safe_high),
                 # Exactly at W, from the twins' selection paths (W need not be on the grid).
-                **rates_at(*twin_paths[key][method_name], w),
+                **rates_at(*pair.paths[method_name], w),
             }
             n_ff = 0
             for seed in seeds:
@@ -312,9 +362,10 @@ def _tables(config, runs, groups, by, calibrations, chosen, twin_params, finals,
                 run_rows.append(row)
             group_rows.append(
                 {**choice, "n_runs": len(seeds), "n_feedforward": int(n_ff),
-                 **{f"twin_{p}": median[p] for p in tables.HC_PARAMETER_NAMES},
-                 "twin_kn": remnant[0], "twin_w_n": remnant[1], "twin_zeta_n": remnant[2], "twins": twins,
-                 "twins_folder": f"twins/{slug}"}
+                 **{f"twin_{p}": pair.model[p] for p in tables.HC_PARAMETER_NAMES},
+                 **{f"fitted_{p}": medians[key][p] for p in FF_PATH},
+                 "twin_kn": pair.remnant[0], "twin_w_n": pair.remnant[1], "twin_zeta_n": pair.remnant[2],
+                 "twins": twins, "twins_folder": pair.folder}
             )  # fmt: skip
     schema = tables.ANALYSIS.arrow
     for f in factors:
@@ -373,7 +424,7 @@ def analyse_study(
     *,
     by: Sequence[str] | None = None,
     twins: int = TWINS,
-    ff_twin: str = "own",
+    ff_twin: str = "auto",
     jobs: int = 2,
     force: bool = False,
     backend: str = "loky",
@@ -421,6 +472,12 @@ def analyse_study(
             f"{', '.join(factors) or 'none'}; name them with data.pattern or a manifest)"
         )
     start = time.perf_counter()
+    stages, lap = {}, [start]
+
+    def lap_done(name: str) -> None:
+        now = time.perf_counter()
+        stages[name], lap[0] = now - lap[0], now
+
     if force:  # recompute everything, the twins included
         for folder in sorted((run_dir / "twins").glob("*/")) if (run_dir / "twins").is_dir() else []:
             if (folder / folders.MANIFEST).is_file():
@@ -428,6 +485,7 @@ def analyse_study(
     names = tuple(methods.METHODS)
     identify_study(config, run_dir, names, data_path=list(sources), jobs=jobs, force=force,
                    backend=backend, scheduler=scheduler, show_progress=show_progress)  # fmt: skip
+    lap_done("identify")
     runs = results.read(tables.RUNS, run_dir)
     records = {seed: r for (model, seed), r in _records(run_dir).items() if model == data.name}
     groups = _groups(runs, by)
@@ -442,43 +500,43 @@ def analyse_study(
         )
     }  # fmt: skip
 
+    lap_done("fit runs")
+
     # 3. Per group: the twins and their calibration.
-    calibrations, twin_params, twin_paths = {}, {}, {}
     medians = {
         key: {p: float(np.median([fitted[s][0][True].values[p] for s in seeds])) for p in hcfit.PARAMETERS}
         for key, seeds in groups.items()
     }
-    # --ff-twin study: every group's FF twin gets the feedforward path of the group with the
-    # largest fitted Kpt ("would feedforward of the size seen in this study be found here?").
+    # The study's strongest feedforward (--ff-twin study and auto): the group with the largest
+    # fitted Kpt ("would feedforward of the size seen in this study be found here?").
     strongest = max(medians, key=lambda k: medians[k]["Kpt"])
+    twin_args = dict(jobs=jobs, backend=backend, scheduler=scheduler, show_progress=show_progress)
+    used = {}  # (group, method) -> _Twins
     for key, seeds in groups.items():
-        median = dict(medians[key])
-        if ff_twin == "study":
-            median.update({p: medians[strongest][p] for p in ("Kpt", "TI", "tau_pt")})
         remnants = [fitted[s][1] for s in seeds if fitted[s][1] is not None and not fitted[s][1].at_bound]
         if not remnants:
             raise DataError(f"group {_slug(key)}: no run's remnant could be fitted; cannot build its twins")
         remnant = tuple(float(np.median([getattr(r, a) for r in remnants])) for a in ("kn", "w_n", "zeta_n"))
         _same_forcing(key, seeds, records, config)
-        twin_dir = run_dir / "twins" / _slug(key)
-        with using(twin_dir):
-            forcing = twin_dir / "forcing.csv"
-            text = _forcing_text(records[seeds[0]], round(config.timing.window * config.timing.output_rate))
-            _twin_dir_ready(twin_dir, text)
-            folders.atomic_write(forcing, lambda tmp, text=text: Path(tmp).write_text(text))
-            raw = _twin_raw(config, median, remnant, forcing, twins, f"{config.name}_twins_{_slug(key)}")
-            twin_config = parse_config(raw, raw["name"])
-            try:
-                check_run_dir(twin_config, twin_dir, "simulate")
-            except DataError:  # the group's fitted model changed (other settings): new twins
-                folders.remove_owned(
-                    twin_dir, [n for n in folders.owned_files(twin_dir) if n != "forcing.csv"]
-                )
-            run = calibrate_study(twin_config, twin_dir, jobs=jobs, backend=backend, scheduler=scheduler,
-                                  show_progress=show_progress)  # fmt: skip
-        calibrations[key] = {c.method: c for c in run.calibrations}
-        twin_paths[key] = _twin_paths(twin_config, twin_dir)
-        twin_params[key] = ({**median, **twin_values(median, kn_rate)}, remnant, _slug(key))
+        study_model = {**medians[key], **{p: medians[strongest][p] for p in FF_PATH}}
+        first = "study" if ff_twin == "study" and key != strongest else "own"
+        twins_of = {
+            first: _calibrate_twins(config, run_dir, key, records[seeds[0]], medians[key] if first == "own"
+                                    else study_model, remnant, twins, first, kn_rate, **twin_args)
+        }  # fmt: skip
+        own = twins_of[first]
+        if (
+            ff_twin == "auto"
+            and key != strongest
+            and not all(_separates(c) for c in own.calibrations.values())
+        ):
+            twins_of["study"] = _calibrate_twins(config, run_dir, key, records[seeds[0]], study_model,
+                                                 remnant, twins, "study", kn_rate, **twin_args)  # fmt: skip
+        for method_name in names:
+            use = first if _separates(own.calibrations[method_name]) else next(reversed(twins_of))
+            used[(key, method_name)] = twins_of[use]
+
+    lap_done("twins")
 
     # 4. Every run selected at its group's W and its selected structure fitted.
     frontier = results.read(tables.FRONTIER, run_dir)
@@ -487,7 +545,7 @@ def analyse_study(
     chosen, tasks = {}, []
     for key, seeds in groups.items():
         for method_name in names:
-            w, rule, uncertain = _choose_w(calibrations[key][method_name])
+            w, rule, uncertain = _choose_w(used[(key, method_name)].calibrations[method_name])
             chosen[(key, method_name)] = (w, rule, uncertain)
             stage = config.identify.stage(methods.get(method_name).final_stage.name)
             for seed in seeds:
@@ -512,17 +570,19 @@ def analyse_study(
             show_progress=show_progress, backend=backend, scheduler=scheduler,
         )
     }  # fmt: skip
-    group_table, run_table = _tables(
-        config, runs, groups, by, calibrations, chosen, twin_params, finals, twins, twin_paths
-    )
+    lap_done("fit selected")
+    group_table, run_table = _tables(config, runs, groups, by, used, chosen, finals, twins, medians)
     fc_rows = []
     for key, seeds in groups.items():
         name = ", ".join(f"{f}={v}" for f, v in zip(by, key, strict=True)) or "all runs"
-        fc_rows += _fc_rows(config, name, seeds, records, twin_params[key][0])
+        fc_rows += _fc_rows(
+            config, name, seeds, records, {**medians[key], **twin_values(medians[key], kn_rate)}
+        )
     results.write(
         tables.FC_ESTIMATES, pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow), run_dir
     )
     results.write(tables.ANALYSIS_GROUPS, group_table, run_dir)
     results.write(tables.ANALYSIS, run_table, run_dir)
     folders.atomic_write(run_dir / "analysis.csv", lambda tmp: _write_csv(run_table, tmp))
-    return AnalysisRun(group_table, run_table, time.perf_counter() - start, run_dir)
+    lap_done("tables")
+    return AnalysisRun(group_table, run_table, time.perf_counter() - start, run_dir, stages)

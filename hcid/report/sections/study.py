@@ -50,7 +50,8 @@ def _model_curves(run, twin: dict, lines: list[float]) -> dict:
 
     top = min(1.5 * max(lines), np.pi * run.config.timing.output_rate)
     omega = np.geomspace(0.5 * min(lines), top, 300)
-    values = {p: twin[f"twin_{p}"] for p in HC_PARAMETER_NAMES}
+    # The group's own fitted model: the FF twin's feedback, its own fitted feedforward path.
+    values = {p: twin.get(f"fitted_{p}", twin[f"twin_{p}"]) for p in HC_PARAMETER_NAMES}
     hft, he = hc_response(values, plant(run.config.loop), omega)
     return {"omega": omega, "e": he, "ft": hft if values["Kpt"] > 0 else None}
 
@@ -65,6 +66,7 @@ def compute(run, done) -> StudyData | None:
         safe = f"[{_num(g['safe_low'])}, {_num(g['safe_high'])})" if not g["uncertain"] else "none"
         answers.append(
             [g["group"], g["method"], f"{g['n_feedforward']} of {g['n_runs']}", _num(g["w"]), g["w_rule"],
+             "own" if g["ff_twin"] == "own" else f"study's FF (Kpt {_num(g['twin_Kpt'], 2)})",
              safe, _pct(g["fp_rate"], g["fp_low"], g["fp_high"]),
              _pct(g["fn_rate"], g["fn_low"], g["fn_high"]), "UNCERTAIN" if g["uncertain"] else "yes"]
         )  # fmt: skip
@@ -101,14 +103,23 @@ def compute(run, done) -> StudyData | None:
         )  # fmt: skip
     calibrations = []
     group_rows = groups.to_pylist()
-    folder_of = {g["group"]: g["twins_folder"] for g in group_rows}
-    for name, folder in folder_of.items():
+    # Each group's twins: its own (always calibrated) and, where they were not separated, the
+    # study's feedforward on its feedback (--ff-twin auto/study); the W marked where it is not a
+    # safe interval's.
+    folders = {(g["group"], g["twins_folder"].removesuffix("-study")): None for g in group_rows}
+    folders.update({(g["group"], g["twins_folder"]): None for g in group_rows})
+    for name, folder in folders:
         table = results.read_optional(tables.CALIBRATION, run.run_dir / folder)
-        used = {
-            g["method"]: g["w"] for g in group_rows if g["group"] == name and g["w_rule"] != "safe interval"
-        }
+        mine = [g for g in group_rows if g["group"] == name and g["twins_folder"] == folder]
+        used = {g["method"]: g["w"] for g in mine if g["w_rule"] != "safe interval"}
+        if folder.endswith("-study"):
+            kpt = next((g["twin_Kpt"] for g in mine), math.nan)
+            twins = f"twins with the study's strongest feedforward (Kpt {_num(kpt, 2)}) on its own feedback"
+        else:
+            twins = "twins of its own fitted model"
+        methods = ", ".join(g["method"] for g in mine) or "no method (not separated)"
         if table is not None:
-            calibrations.append((name, folder, table, used))
+            calibrations.append((f"{name}, {twins}, used for {methods}", folder, table, used))
     fc, problems = [], []
     if run.fc_estimates is not None:
         for name in dict.fromkeys(run.fc_estimates.column("group").to_pylist()):
@@ -119,7 +130,7 @@ def compute(run, done) -> StudyData | None:
             twin = next(g for g in group_rows if g["group"] == name)
             by_path = {path: [r for r in t if r["path"] == path] for path in ("e", "ft")}
             curves = _model_curves(run, twin, [r["omega"] for r in t])
-            fc.append((name, folder_of.get(name, name), by_path, curves))
+            fc.append((name, twin["twins_folder"].removesuffix("-study"), by_path, curves))
     return StudyData(answers, uncertain, parameters, header, table_rows, calibrations, fc, problems)
 
 
@@ -131,11 +142,14 @@ def render(data: StudyData | None, doc: Doc) -> None:
         "Per group of runs and method: feedforward (nb_ft > 0) in how many runs at the group's W, "
         "calibrated on twins of the group's own fitted model (FF twin) and the same without "
         "feedforward (FB twin), with the twins' false-positive and false-negative rates there and "
-        "their exact 95% bands. Where no W separates the twins, W is the grid's least total error "
-        "and the decisions are **uncertain**."
+        "their exact 95% bands. Where no W separates a group's own twins (nobody there uses "
+        "feedforward, or too little to tell), its FF twin takes the feedforward path of the group "
+        'with the strongest ("study\'s FF"): would feedforward of that size be found here? Where '
+        "no W separates the twins used, W is the grid's least total error and the decisions are "
+        "**uncertain**."
     )
     doc.table(
-        ["group", "method", "feedforward in", "W", "rule", "safe interval", "twins' FP at W",
+        ["group", "method", "feedforward in", "W", "rule", "FF twin", "safe interval", "twins' FP at W",
          "twins' FN at W", "decided"],
         data.answers,
     )  # fmt: skip
