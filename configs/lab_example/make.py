@@ -8,6 +8,8 @@ the factors in the file name (``{subject}_{condition}_trial{trial}.csv``).
 
 - ``lab_example``: in ``pursuit`` the target is shown and every subject uses feedforward
   (Kpt 0.6 to 1.0); in ``compensatory`` only the error is shown and no subject does (Kpt = 0).
+  (A condition whose name starts with ``pursuit`` has feedforward: benchmarks/lab_study.py makes
+  larger studies with :func:`make`.)
 - ``lab_weak``: the same design, but the feedforward is weak (Kpt 0.12 to 0.25) and the
   remnant twice as strong: twins that no W separates (the report's honest answer).
 
@@ -60,15 +62,18 @@ TRUTH = STUDIES["lab_example"]["truth"]
 
 
 def model(subject: str, condition: str, truth: dict = TRUTH) -> HCModel:
+    """The subject's HC model in the condition: feedforward only where the condition's name
+    starts with ``pursuit``."""
     p = truth[subject]
-    if condition == "compensatory":
+    if not condition.startswith("pursuit"):
         return HCModel(f"{subject}_{condition}", 0.0, 0.0, 0.0, p["Kpe"], p["TL"], p["tau_pe"])
     return HCModel(f"{subject}_{condition}", p["Kpt"], p["TI"], p["tau_pt"], p["Kpe"], p["TL"], p["tau_pe"])
 
 
-def make(study: str, folder: Path) -> None:
-    """Write ``study``'s 24 files into ``folder``."""
-    spec = STUDIES[study]
+def make(study: str | dict, folder: Path) -> None:
+    """Write a study's files into ``folder``: one of STUDIES by name, or a spec of the same
+    keys (``truth``, ``remnant``, ``seed``, and optionally ``conditions`` and ``trials``)."""
+    spec = STUDIES[study] if isinstance(study, str) else study
     config = load_config(HERE.parent / "integrator_example.yaml")
     # 300 Hz, written at 60 Hz; two 40 s periods (periodic for the decimation's FFT), the
     # last 45 s of them written.
@@ -81,8 +86,8 @@ def make(study: str, folder: Path) -> None:
     seed = spec["seed"]
     folder.mkdir(exist_ok=True)
     for subject in spec["truth"]:
-        for condition in CONDITIONS:
-            for trial in TRIALS:
+        for condition in spec.get("conditions", CONDITIONS):
+            for trial in spec.get("trials", TRIALS):
                 seed += 1
                 r = simulate_realization(config, model(subject, condition, spec["truth"]), seed, kn)
                 lines = [
