@@ -24,7 +24,7 @@ class StudyData:
     parameters: list[list[str]]
     runs_header: list[str]
     runs: list[list[str]]
-    calibrations: list[tuple[str, str, pa.Table, dict]] = field(default_factory=list)
+    calibrations: list[tuple[str, str, str, pa.Table, dict]] = field(default_factory=list)
     fc: list[tuple[str, str, dict, dict]] = field(default_factory=list)
     fc_problems: list[str] = field(default_factory=list)
 
@@ -114,12 +114,13 @@ def compute(run, done) -> StudyData | None:
         used = {g["method"]: g["w"] for g in mine if g["w_rule"] != "safe interval"}
         if folder.endswith("-study"):
             kpt = next((g["twin_Kpt"] for g in mine), math.nan)
+            title = f"{name}, study's FF"
             twins = f"twins with the study's strongest feedforward (Kpt {_num(kpt, 2)}) on its own feedback"
         else:
-            twins = "twins of its own fitted model"
-        methods = ", ".join(g["method"] for g in mine) or "no method (not separated)"
+            title, twins = name, "twins of its own fitted model"
+        methods = ", ".join(g["method"] for g in mine) or "no method (no W separates them, below)"
         if table is not None:
-            calibrations.append((f"{name}, {twins}, used for {methods}", folder, table, used))
+            calibrations.append((title, f"{name}, {twins}, used for {methods}", folder, table, used))
     fc, problems = [], []
     if run.fc_estimates is not None:
         for name in dict.fromkeys(run.fc_estimates.column("group").to_pylist()):
@@ -159,16 +160,16 @@ def render(data: StudyData | None, doc: Doc) -> None:
             "there cannot be trusted at any W (the group's fitted feedforward is too weak, or its "
             "feedback twin finds feedforward too often)."
         )
-    for name, folder, table, used in data.calibrations:
+    for title, caption, folder, table, used in data.calibrations:
         what = (
             "the W used, the least total error: no W is safe"
             if used
-            else "the safe interval and its recommended W"
+            else "the safe interval and its recommended W where there is one"
         )
         doc.figure(
             f"calibration_{_slug(folder)}.png",
-            f"{name}: the twins' false-positive and false-negative rates over W (exact 95% bands), {what}.",
-            lambda t=table, n=name, u=used: figures.plot_calibration(t, n, used=u),
+            f"{caption}: the twins' FP and FN rates over W (exact 95% bands), {what}.",
+            lambda t=table, n=title, u=used: figures.plot_calibration(t, n, used=u),
         )
     doc.text(
         "Parameters per group (SPEC 8): median and spread over the runs, and the runs' median standard error."
