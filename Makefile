@@ -65,6 +65,7 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/arx_engine.py
 	$(BIN)/python benchmarks/fit_hc.py
+	$(BIN)/python benchmarks/cold_start.py
 
 robustness: $(STAMP)
 	$(BIN)/python tests/robustness/battery.py

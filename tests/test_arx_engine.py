@@ -1519,10 +1519,10 @@ def test_a_frontier_row_off_the_search_or_an_overflow_is_searched_again(paper_re
     best0 = start[0] + int(np.argmin(unfused.candidates["v"].to_numpy()[: size[0]]))
     blocks = _blocks.simulate_blocks
 
-    def overflow_once(*args):
+    def overflow_once(*args):  # the vector steps run the fused pass only (v_all: args[15])
         blocks(*args)
-        if args[15] and args[1][0] == start[0]:  # the fused pass over every triple
-            args[16][best0] = np.inf
+        if args[1][0] == start[0]:  # the fused pass over every triple
+            args[15][best0] = np.inf
 
     monkeypatch.setattr(_blocks, "simulate_blocks", overflow_once)
     _assert_same_frontier(fit_grid(*signals, grid, *DIRECT_ROWS, fused=True), unfused)

@@ -68,7 +68,7 @@ def _waiting_by_score(v_all, score, start, size):
     return waiting[np.argsort(keys[:m], kind="mergesort")]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _simulate_block(
     row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
     val_start, val_stop, prune, v_all, counts,
@@ -163,10 +163,10 @@ def _affine_groups(first_row, stop_row, block_orders, block_start, bounds, v_all
     return rows[:m], firsts[:m]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _simulate_affine_groups(
     first_row, stop_row, block_orders, block_start, bounds, theta_all, score, i1p, i2p, pad, o,
-    val_start, val_stop, prune, fused, v_all, counts, best,
+    val_start, val_stop, prune, v_all, counts, best,
 ):  # fmt: skip
     """Simulate the affine groups of one run (:func:`_affine_groups`), ``_GROUPS`` per batch
     (:func:`simulate_affine`); ``best`` (per block of the run) as in :func:`_simulate_run`."""
@@ -197,7 +197,7 @@ def _simulate_affine_groups(
         b1t[:, :] = 0.0
         b2t[:, :] = 0.0
         used[:] = False
-        batch_nb2 = 0
+        batch_nb2 = np.int64(0)  # not a literal 0: a callee would be compiled for Literal[int](0) too
         for g in range(_GROUPS):
             # A short last batch repeats its first group's delays in the idle group.
             i = at + g if at + g < rows.shape[0] else at
@@ -217,7 +217,7 @@ def _simulate_affine_groups(
                     lane_bound[lane] = best[row - first_row]
         done = simulate_affine(
             coef, na, b1t, nb1, c1, b2t, batch_nb2, c2, used, r1, i1p, i2p, pad, o, val_start,
-            val_stop, lane_bound, xt, yh, eacc, v, pruned, fused,
+            val_stop, lane_bound, xt, yh, eacc, v, pruned, True,
         )  # fmt: skip
         for g in range(_GROUPS):
             if at + g >= rows.shape[0]:
@@ -233,10 +233,10 @@ def _simulate_affine_groups(
                         best[row - first_row] = v[lane]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _simulate_run(
     first_row, stop_row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
-    tv1, tv2, pad, o, val_start, val_stop, prune, fused, v_all, counts,
+    tv1, tv2, pad, o, val_start, val_stop, prune, v_all, counts,
 ):  # fmt: skip
     """Simulate the stable candidates of blocks ``first_row .. stop_row - 1`` (one na and
     nb1), ``LANES`` at a time on the vector steps.
@@ -260,7 +260,7 @@ def _simulate_run(
     best = np.full(stop_row - first_row, np.inf)
     _simulate_affine_groups(
         first_row, stop_row, block_orders, block_start, bounds, theta_all, score, i1p, i2p, pad, o,
-        val_start, val_stop, prune, fused, v_all, counts, best,
+        val_start, val_stop, prune, v_all, counts, best,
     )  # fmt: skip
     total = 0
     m2 = 0
@@ -292,7 +292,7 @@ def _simulate_run(
     eacc = _aligned_zeros(4 * LANES)
     for first in range(0, m, LANES):
         used = min(LANES, m - first)
-        batch_nb2 = 0
+        batch_nb2 = np.int64(0)  # not a literal 0: a callee would be compiled for Literal[int](0) too
         for lane in range(used):
             batch_nb2 = max(batch_nb2, block_orders[owner[first + lane], 2])
         coef[:] = 0.0
@@ -311,7 +311,7 @@ def _simulate_run(
             lane_bound[lane] = best[row - first_row]
         done = simulate_wide(
             coef, na, b1, nb1, nk1, b2, batch_nb2, nk2, used, tv1, tv2, pad, o, val_start, val_stop,
-            lane_bound, off1, off2, xt, yh, eacc, v, pruned, fused,
+            lane_bound, off1, off2, xt, yh, eacc, v, pruned, True,
         )  # fmt: skip
         for lane in range(used):
             c = queue[first + lane]
@@ -340,31 +340,35 @@ def _runs(block_orders):
     return firsts[: g + 1]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _simulate_group(
     g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1, tv2,
     pad, o, val_start, val_stop, prune, fused, v_all, counts,
 ):  # fmt: skip
     first_row, stop_row = firsts[g], firsts[g + 1]
-    if _WIDE and block_orders[first_row, 0] <= MAX_NA:
+    if _WIDE and fused and block_orders[first_row, 0] <= MAX_NA:
         _simulate_run(
             first_row, stop_row, block_orders, block_start, block_size, bounds, theta_all, score,
-            i1p, i2p, tv1, tv2, pad, o, val_start, val_stop, prune, fused, v_all, counts,
+            i1p, i2p, tv1, tv2, pad, o, val_start, val_stop, prune, v_all, counts,
         )  # fmt: skip
-    else:
-        _simulate_block(
-            first_row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
-            pad, o, val_start, val_stop, prune, v_all, counts,
-        )  # fmt: skip
+    else:  # each block alone (a run of the vector steps' blocks when not fused)
+        for row in range(first_row, stop_row):
+            _simulate_block(
+                row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
+                pad, o, val_start, val_stop, prune, v_all, counts,
+            )  # fmt: skip
 
 
 @njit(cache=True)
 def simulate_blocks(
     block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1, tv2, pad, o,
-    val_start, val_stop, prune, fused, v_all, counts,
+    val_start, val_stop, prune, v_all, counts,
 ):  # fmt: skip
-    """Serial driver of the simulations: every order triple, the runs of blocks of one
-    (na, nb1) by :func:`_simulate_run`, or each block alone by :func:`_simulate_block`.
+    """Serial driver of the vector steps: the runs of blocks of one (na, nb1), each by
+    :func:`_simulate_run`, every multiply-add fused. Every block's na is at most ``MAX_NA``
+    (the caller's choice, :func:`hcid.arx.engine.fit_grid`); the plain path is
+    :func:`simulate_blocks_plain`, a kernel of its own so that each is compiled only when
+    taken (docs/engine.md, "Compile time").
 
     Parameters
     ----------
@@ -384,18 +388,31 @@ def simulate_blocks(
         block's best V).
     prune : bool
         False: every stable candidate is simulated in full.
-    fused : bool
-        Fused multiply-adds in the vector steps (module docstring); the
-        plain path (without the JIT, above ``MAX_NA``) is always unfused.
     counts : int64 array, shape (n_blocks, 3), zeros
         Out per block: candidates simulated in full, candidates pruned, and
         candidate-samples simulated (lanes times samples).
     """
     firsts = _runs(block_orders)
     for g in range(firsts.shape[0] - 1):
-        _simulate_group(
-            g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1,
-            tv2, pad, o, val_start, val_stop, prune, fused, v_all, counts,
+        _simulate_run(
+            firsts[g], firsts[g + 1], block_orders, block_start, block_size, bounds, theta_all, score,
+            i1p, i2p, tv1, tv2, pad, o, val_start, val_stop, prune, v_all, counts,
+        )  # fmt: skip
+
+
+@njit(cache=True)
+def simulate_blocks_plain(
+    block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
+    val_start, val_stop, prune, v_all, counts,
+):  # fmt: skip
+    """Serial driver of the plain path: each block alone by :func:`_simulate_block` (four
+    lanes, unfused; each V bit-identical to the vector steps' unfused). The path without the
+    JIT, above ``MAX_NA``, for ``fit_grid(fused=False)`` and for the triples searched again
+    unfused. Arguments as in :func:`simulate_blocks`."""
+    for row in range(block_orders.shape[0]):
+        _simulate_block(
+            row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
+            val_start, val_stop, prune, v_all, counts,
         )  # fmt: skip
 
 
@@ -404,8 +421,10 @@ def simulate_blocks_parallel(
     block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1, tv2, pad, o,
     val_start, val_stop, prune, fused, v_all, counts, n_threads,
 ):  # fmt: skip
-    """Parallel driver: thread t takes runs t, t + n_threads, ... of :func:`simulate_blocks`;
-    each run alone decides its pruning, so the result is bit-identical to it."""
+    """Parallel driver: thread t takes runs t, t + n_threads, ... (:func:`_runs`): the vector
+    steps (:func:`simulate_blocks`) if ``fused`` and na is at most ``MAX_NA``, else the plain
+    path (:func:`simulate_blocks_plain`); each run alone decides its pruning, so the result is
+    bit-identical to theirs."""
     firsts = _runs(block_orders)
     n_groups = firsts.shape[0] - 1
     for t in prange(n_threads):

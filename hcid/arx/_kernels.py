@@ -443,7 +443,7 @@ def _fit_unit(
 
     for g1 in range(g1_lo, g1_hi + 1):
         branch_start(unit, m1, m2, na_hi, g1, branch, group)
-        stepped = 0
+        stepped = np.int64(0)  # not a literal 0: a callee would be compiled for Literal[int](0) too
         for g2 in range(g2_lo, g2_hi + 1):
             # Subset [i1 lags 1..g1, i2 lags 1..g2, o lags 1..na_hi]: every
             # na of the range is a prefix of this one factorisation.

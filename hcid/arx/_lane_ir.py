@@ -149,9 +149,14 @@ def _msub(builder, fused, x, a, y):
     return builder.fsub(x, builder.fmul(a, y))
 
 
-def _both(builder, fused, emit):
-    """``emit(True)`` if the run-time flag ``fused`` is set, else ``emit(False)``: two copies
-    of a whole loop, chosen once."""
+def _both(builder, fused, emit, fused_type):
+    """``emit(True)`` if the flag ``fused`` is set, else ``emit(False)``: for a run-time flag two
+    copies of a whole loop, chosen once; for a literal one (``fused_type`` a
+    ``types.BooleanLiteral``: the lane kernels' own path) only the copy it names, so that
+    numba compiles half the code."""
+    if isinstance(fused_type, types.BooleanLiteral):
+        emit(bool(fused_type.literal_value))
+        return
     with builder.if_else(fused) as (then, otherwise):
         with then:
             emit(True)
@@ -254,7 +259,7 @@ def lane_inputs(typingctx, b1, nb1, off1, tv1, b2, nb2, off2, tv2, steps, xt, fu
                             row = builder.mul(builder.add(q, _c(h * _WIDTH + s)), _c(LANES))
                             _store(builder, by_sample[s], out, builder.add(row, _c(g * _WIDTH)))
 
-        _both(builder, args[10], emit)
+        _both(builder, args[10], emit, ty[10])
         return context.get_dummy_value()
 
     return sig, codegen
@@ -326,7 +331,7 @@ def lane_inputs_affine(typingctx, b1t, nb1, r1, base1, b2t, nb2, i2p, base2, k0,
                             builder.branch(after)
                     builder.position_at_end(after)
 
-        _both(builder, args[11], emit)
+        _both(builder, args[11], emit, ty[11])
         return context.get_dummy_value()
 
     return sig, codegen
@@ -403,7 +408,7 @@ def lane_recursion(typingctx, coef, na, xt, m, yh, row0, o, k0, val_start, val_s
                     builder.branch(done)
             builder.position_at_end(done)
 
-        _both(builder, args[12], emit)
+        _both(builder, args[12], emit, ty[12])
         return builder.load(handled)
 
     return sig, codegen

@@ -111,7 +111,7 @@ def simulate_lanes(
     for lane in range(4):
         v_out[lane] = np.inf
         pruned[lane] = False
-    k0 = 0
+    k0 = np.int64(0)  # not a literal 0: a callee would be compiled for Literal[int](0) too
     while k0 < n:
         # Chunks end on val_start + multiples of _CHUNK, so the pruning
         # checks fall on whole quadruples of validation rows.
@@ -299,7 +299,7 @@ def _check_lanes(x1, x2, pad, n, per_value, b1, nb1, b2, nb2):
         raise ValueError("vector lanes: B must have one row per lane and at least nb columns")
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def simulate_wide(
     coef, na, b1, nb1, nk1, b2, nb2, nk2, n_lanes, tv1, tv2, pad, o, val_start, val_stop, bound,
     off1, off2, xt, yh, eacc, v_out, pruned, fused,
@@ -329,7 +329,7 @@ def simulate_wide(
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def simulate_affine(
     coef, na, b1t, nb1, c1, b2t, nb2, c2, used, r1, i1p, i2p, pad, o, val_start, val_stop, bound,
     xt, yh, eacc, v_out, pruned, fused,

@@ -21,7 +21,7 @@ from hcid.arx.grid import Grid, candidates, max_lag, n_parameters, order_blocks
 from hcid.arx.simulation import checked_rows, checked_signal, padded, simulate
 from hcid.errors import IdentificationError
 
-__all__ = ["GridFit", "best", "fit_grid", "simulate"]
+__all__ = ["KERNEL_PARTS", "GridFit", "best", "compile_kernels", "fit_grid", "simulate"]
 
 # Frontier rows whose squared errors are held at once for their VAF (a
 # few MB, so that they stay in cache instead of paging in a stage-1
@@ -271,6 +271,63 @@ def _fused(fused) -> bool:
     return bool(fused)
 
 
+#: The engine's kernels in two parts of about equal compile time, which two processes can
+#: compile at once on a cold cache (:func:`compile_kernels`; docs/engine.md, "Compile time").
+KERNEL_PARTS = ("vector", "rest")
+
+
+def compile_kernels(part: str) -> None:
+    """Compile one part of the kernels :func:`fit_grid` runs, or load it from numba's cache,
+    with the argument types of every fit, on a record of 64 samples.
+
+    ``vector``: the vector steps (:func:`hcid.arx._blocks.simulate_blocks`, the largest kernel);
+    ``rest``: every other kernel a fit or :func:`simulate` runs. Does nothing without the JIT.
+    Compiling ahead changes no result; it lets a caller compile the two parts in two processes
+    at once and fork its workers after (:func:`hcid.pipeline.parallel.compile_kernels`).
+    """
+    if part not in KERNEL_PARTS:
+        raise ValueError(f"part: one of {KERNEL_PARTS}, got {part!r}")
+    if not _lanes._WIDE:
+        return
+    x = np.sin(0.3 * np.arange(64.0))
+    grid = Grid((1, 1), (1, 1), (1, 1), (1, 1), (1, 1))
+    if part == "rest":
+        fit = fit_grid(x, np.cos(x), np.roll(x, 1), grid, slice(8, 32), slice(32, 64), fused=False)
+        simulate(fit.a[0], fit.b1[0], fit.b2[0], 1, 1, x, x)
+        return
+    pad = max_lag(grid)
+    i1p = padded(x, pad)
+    tv = _tap_vectors(i1p)
+    block_na, block_nb1, block_nb2, start, size = order_blocks(grid)
+    _, v_all, theta_all, score, _ = _outputs(grid, start, size)
+    v_all[:] = np.nan
+    theta_all[:, 0] = 0.5
+    orders = np.stack((block_na, block_nb1, block_nb2), axis=1)
+    bounds = np.array([grid.na, grid.nb1, grid.nb2, grid.nk1, grid.nk2], dtype=np.int64)
+    blocks = np.arange(start.size)
+    _simulate_part(True, blocks, orders, start, size, bounds, theta_all, score, i1p, i1p, tv, tv, pad,
+                   x, 32, 64, True, v_all)  # fmt: skip
+
+
+def _vector_blocks(block_na: np.ndarray, fuse: bool) -> np.ndarray:
+    """Which blocks take the vector steps (fused, na up to ``MAX_NA``, with the JIT); the
+    others take the plain path (unfused)."""
+    return np.asarray(block_na <= _lanes.MAX_NA) & bool(fuse and _lanes._WIDE)
+
+
+def _simulate_part(vector, blocks, orders, start, size, bounds, theta_all, score, i1p, i2p, tv1, tv2,
+                   pad, o, val_start, val_stop, prune, v_all) -> np.ndarray:  # fmt: skip
+    """``blocks`` simulated on the vector steps (:func:`hcid.arx._blocks.simulate_blocks`) or
+    the plain path (``simulate_blocks_plain``): their counts."""
+    done = np.zeros((blocks.size, 3), dtype=np.int64)
+    common = (orders[blocks], start[blocks], size[blocks], bounds, theta_all, score, i1p, i2p)
+    if vector:
+        _blocks.simulate_blocks(*common, tv1, tv2, pad, o, val_start, val_stop, prune, v_all, done)
+    else:
+        _blocks.simulate_blocks_plain(*common, pad, o, val_start, val_stop, prune, v_all, done)
+    return done
+
+
 def _checked(i1, i2, o, grid, estimation_rows, validation_rows):
     """The signals as float64 vectors of one length and the windows as ``(start, stop)``, checked."""
     if not isinstance(grid, Grid):
@@ -342,15 +399,25 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
             waiting = np.isnan(v_all)
 
             def simulate_blocks(blocks, fuse):
-                args = (orders[blocks], start[blocks], size[blocks], bounds, theta_all, score, i1p, i2p,
-                        tv1, tv2, pad, o, val_start, val_stop, not keep_candidates, fuse, v_all)  # fmt: skip
-                done = np.zeros((blocks.size, 3), dtype=np.int64)
-                if threads == 1:
-                    _blocks.simulate_blocks(*args, done)
-                else:
+                if threads > 1:
+                    args = (orders[blocks], start[blocks], size[blocks], bounds, theta_all, score, i1p,
+                            i2p, tv1, tv2, pad, o, val_start, val_stop, not keep_candidates, fuse,
+                            v_all)  # fmt: skip
+                    done = np.zeros((blocks.size, 3), dtype=np.int64)
                     _kernels.run_parallel(_blocks.simulate_blocks_parallel, (*args, done), threads)
-                counts[blocks, :2] = done[:, :2]  # each candidate once: its last simulation
-                counts[blocks, 2] += done[:, 2]  # the work: every simulation
+                    parts = [(blocks, done)]
+                else:  # the vector steps (fused) and the plain path: each a kernel of its own
+                    vector = _vector_blocks(block_na[blocks], fuse)
+                    parts = [
+                        (part, _simulate_part(wide, part, orders, start, size, bounds, theta_all,
+                                              score, i1p, i2p, tv1, tv2, pad, o, val_start, val_stop,
+                                              not keep_candidates, v_all))
+                        for part, wide in ((blocks[vector], True), (blocks[~vector], False))
+                        if part.size
+                    ]  # fmt: skip
+                for part, done in parts:
+                    counts[part, :2] = done[:, :2]  # each candidate once: its last simulation
+                    counts[part, 2] += done[:, 2]  # the work: every simulation
 
             def search_again_unfused(again):
                 """The stable candidates of the blocks ``again`` (a mask) simulated anew, unfused."""

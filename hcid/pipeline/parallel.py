@@ -27,7 +27,7 @@ from typing import Any
 
 from hcid.errors import HcidError
 
-__all__ = ["BACKENDS", "check_backend", "check_scheduler", "parallel_map"]
+__all__ = ["BACKENDS", "check_backend", "check_scheduler", "compile_kernels", "parallel_map"]
 
 BACKENDS = ("loky", "dask")
 
@@ -104,6 +104,44 @@ def parallel_map(
                 f"a worker process died (killed, or out of memory?) with {finished} of {len(tasks)} "
                 "tasks finished; rerun (identify and fit-hc resume from the finished ones)"
             ) from None
+
+
+_compiled = False
+
+
+def compile_kernels() -> None:
+    """The identification engine's kernels compiled, or loaded from numba's cache, in this
+    process before it forks its workers, so that they start with them instead of each
+    compiling its own (issue 28). On a cold cache, where compiling takes most of a small
+    study's time, the two parts of :data:`hcid.arx.engine.KERNEL_PARTS` compile at once: the
+    ``rest`` in a forked child that writes them to the cache, the ``vector`` steps here; then
+    this process loads the child's from the cache. Where forking is not safe
+    (:func:`_can_fork`) one part after the other, here. Once per process.
+    """
+    global _compiled
+    from hcid.arx.engine import compile_kernels as compile_part
+
+    if _compiled:
+        return
+    child = 0
+    if _can_fork():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        child = os.fork()
+        if child == 0:  # the child: compile, write the cache, and leave without any cleanup
+            code = 1
+            try:
+                compile_part("rest")
+                code = 0
+            finally:
+                os._exit(code)
+    try:
+        compile_part("vector")
+    finally:
+        if child:
+            os.waitpid(child, 0)  # its part is in the cache now (or, if it failed, compiled below)
+    compile_part("rest")
+    _compiled = True
 
 
 def _local_stream(func, tasks, jobs, stack: contextlib.ExitStack) -> Iterator:

@@ -23,7 +23,7 @@ from hcid.calibration import calibrate
 from hcid.config import Config, IdentifyConfig
 from hcid.config.parse import default_data
 from hcid.errors import ConfigError, DataError
-from hcid.pipeline.parallel import check_scheduler, parallel_map
+from hcid.pipeline.parallel import check_scheduler, compile_kernels, parallel_map
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
 from hcid.pipeline.sweep import SweepRun, selections, sweep_study
 from hcid.simulate import remnant_gain, simulate_realization
@@ -368,6 +368,8 @@ def identify_study(
         if (model, seed, method) not in done
     ]
     reused = sum(1 for k in keys for me in names if (*k, me) in done)
+    if tasks and backend == "loky":
+        compile_kernels()  # once, here: forked workers start with them (hcid.pipeline.parallel)
     for key, parts in parallel_map(
         _identify_task,
         tasks,
