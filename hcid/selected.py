@@ -372,6 +372,7 @@ def analyse_selected(
     config: Config,
     method: Method,
     choices: tuple[StageChoice, ...] = (),
+    fit: hcfit.HCFit | None = None,
 ) -> SelectedAnalysis:
     """Fit the parametric HC model to a selected model and analyse its residual.
 
@@ -389,6 +390,11 @@ def analyse_selected(
         The method that selected the model (:data:`hcid.methods.METHODS`).
     choices : tuple of StageChoice
         The earlier stages' choices on this record (``stage1.parquet``).
+    fit : HCFit, optional
+        What :func:`fit_selected` would return, already computed by the caller (``hcid
+        analyse`` fits every run with and without feedforward before it selects): the
+        ``time`` or ``closed_loop`` fit of this record over the selected model's windows,
+        with feedforward exactly when it has some. Not checked beyond that.
 
     Returns
     -------
@@ -396,7 +402,8 @@ def analyse_selected(
     """
     rate = config.timing.output_rate
     validation = config.identify.stage(method.final_stage.name).validation.rows()
-    fit = fit_selected(selected, record, plant(config.loop), config.fit_hc, config.loop.disturbance_at)
+    if fit is None:
+        fit = fit_selected(selected, record, plant(config.loop), config.fit_hc, config.loop.disturbance_at)
     shift = config.identify.shift_samples(rate)
     i1, i2, o = method.final_signals(record, config.identify, shift, choices)
     o_hat = simulate(selected.a, selected.b_ft, selected.b_e, selected.nk_ft, selected.nk_e, i1, i2)

@@ -300,9 +300,19 @@ def _groups(runs: pa.Table, by: Sequence[str]) -> dict[tuple[str, ...], list[int
     return out
 
 
-def _final_task(config, seed, record, method_name, sel, choices):
-    analysis = analyse_selected(sel, record, config, methods.get(method_name), choices)
+def _final_task(config, seed, record, method_name, sel, choices, fit):
+    analysis = analyse_selected(sel, record, config, methods.get(method_name), choices, fit=fit)
     return seed, method_name, analysis
+
+
+def _same_fit(config: Config, sel: SelectedModel, fits: dict):
+    """The run's own fit (step 2) of the selected structure when it is the one
+    :func:`hcid.selected.fit_selected` would make (same windows: the direct method's final
+    stage's), else None (fitted again)."""
+    stage = config.identify.stage(methods.get("direct").final_stage.name)  # _tracking's windows
+    if (sel.estimation.rows(), sel.validation.rows()) != (stage.estimation.rows(), stage.validation.rows()):
+        return None
+    return fits[bool(sel.has_feedforward)]
 
 
 def _twin_dir_ready(twin_dir: Path, forcing_text: str) -> None:
@@ -562,7 +572,8 @@ def analyse_study(
                     stage=stage,
                 )
                 choices = _stage_choices(run_dir, stored, method_name, data.name, seed)
-                tasks.append((config, seed, records[seed], method_name, sel, choices))
+                own = _same_fit(config, sel, fitted[seed][0])  # shared, not fitted twice
+                tasks.append((config, seed, records[seed], method_name, sel, choices, own))
     finals = {
         (seed, method_name): analysis
         for seed, method_name, analysis in parallel_map(
