@@ -43,12 +43,29 @@ RANGES = {"Kpe": (1.7, 2.4), "TL": (0.10, 0.20), "tau_pe": (0.22, 0.30), "Kpt": 
 PARAMETERS = ("Kpe", "TL", "tau_pe", "w_nms", "zeta_nms", "Kpt", "TI", "tau_pt")
 
 
+def _margins_ok(p: dict) -> bool:
+    """Whether the subject's loop with the example's plant is one a person tracks with: one
+    gain crossover, phase margin at least 30 deg (the ranges also hold loops that the
+    neuromuscular peak makes unstable near 10 rad/s)."""
+    from hcid.descriptors import loop_margins
+    from hcid.hcfit import hc_response
+    from hcid.hcmodel import plant
+    from hcid.resolve import load_config
+
+    yc = plant(load_config(ROOT / "configs" / "lab_example.yaml").loop)
+    m = loop_margins(lambda w: hc_response({**p, **NMS}, yc, w)[1] * np.asarray(yc(1j * w)).ravel())
+    return m.n_crossovers == 1 and m.phase_margin >= 30.0
+
+
 def large_spec(subjects: int = 20, trials: int = 5, seed: int = 7) -> dict:
-    """``subjects`` drawn from the example's ranges, 4 conditions, ``trials`` each."""
+    """``subjects`` drawn from the example's ranges (drawn again until their loop has a phase
+    margin of 30 deg or more: :func:`_margins_ok`), 4 conditions, ``trials`` each."""
     rng = np.random.default_rng(seed)
     truth = {}
-    for i in range(subjects):
-        truth[f"P{i + 1:02d}"] = {p: round(float(rng.uniform(lo, hi)), 3) for p, (lo, hi) in RANGES.items()}
+    while len(truth) < subjects:
+        p = {p: round(float(rng.uniform(lo, hi)), 3) for p, (lo, hi) in RANGES.items()}
+        if _margins_ok(p):
+            truth[f"P{len(truth) + 1:02d}"] = p
     conditions = ("pursuit", "pursuit2", "compensatory", "compensatory2")
     return {"truth": truth, "remnant": 1.0, "seed": 9000, "conditions": conditions,
             "trials": tuple(range(1, trials + 1))}  # fmt: skip

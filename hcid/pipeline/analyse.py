@@ -256,7 +256,14 @@ def _calibrate_twins(config, run_dir, key, record, model, remnant, twins, kind, 
         _twin_dir_ready(twin_dir, text)
         folders.atomic_write(forcing, lambda tmp: Path(tmp).write_text(text))
         raw = _twin_raw(config, model, remnant, forcing, twins, f"{config.name}_twins_{slug}")
-        twin_config = parse_config(raw, raw["name"])
+        try:
+            twin_config = parse_config(raw, raw["name"])
+        except ConfigError as exc:  # e.g. a median model that is unstable with the plant
+            raise DataError(
+                f"group {', '.join(key) or 'all runs'}: its twins (the group's fitted model, medians "
+                f"over its runs) cannot be simulated: {exc}; look at its runs' fits, or group them "
+                "otherwise (--by)"
+            ) from None
         try:
             check_run_dir(twin_config, twin_dir, "simulate")
         except DataError:  # the group's fitted model changed (other settings): new twins

@@ -119,12 +119,14 @@ def compile_kernels() -> None:
     (:func:`_can_fork`) one part after the other, here. Once per process.
     """
     global _compiled
+    import numba
+
     from hcid.arx.engine import compile_kernels as compile_part
 
     if _compiled:
         return
     child = 0
-    if _can_fork():
+    if _can_fork() and not numba.config.DISABLE_JIT:
         sys.stdout.flush()
         sys.stderr.flush()
         child = os.fork()
