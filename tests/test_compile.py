@@ -38,10 +38,11 @@ before = signatures()
 rng = np.random.default_rng(1)
 i1, i2 = rng.standard_normal(600), rng.standard_normal(600)
 o = np.convolve(i1, [0.0, 0.5, 0.2])[:600] + 0.1 * rng.standard_normal(600)
-# The vector steps (affine groups and general lanes, fused), the plain path (na 13 and unfused).
+# The vector steps (affine groups and general lanes, fused) and the plain path (unfused). Not
+# na above 12 (no study of the paper's grids has it): its frontier's errors are a kernel of
+# their own (_kernels.squared_errors), compiled when first taken.
 for grid, fused in (
     (Grid((1, 3), (0, 3), (0, 2), (1, 12), (1, 3)), None),
-    (Grid((13, 13), (1, 1), (0, 1), (1, 2), (1, 1)), None),
     (Grid((1, 2), (0, 2), (0, 1), (1, 9), (1, 2)), False),
 ):
     fit = engine.fit_grid(i1, i2, o, grid, slice(50, 300), slice(300, 600), fused=fused)
