@@ -47,6 +47,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+#: The checkout of hcid measured (``--source``; this one by default): the children run in it,
+#: with it first on their path.
+SOURCE = ROOT
 #: Kernel groups, by the module that defines the jitted function; everything else is "other".
 GROUPS = ("hcid.arx._lanes", "hcid.arx._kernels", "hcid.arx._blocks", "hcid.arx._lane_ir", "hcid.simulate")
 OTHER = "other"
@@ -273,6 +276,7 @@ class _CompileRecorder:
 def _environment(cache: Path) -> dict:
     env = dict(os.environ)
     env["NUMBA_CACHE_DIR"] = str(cache)
+    env["PYTHONPATH"] = os.pathsep.join([str(SOURCE), *filter(None, [env.get("PYTHONPATH")])])
     return env
 
 
@@ -293,7 +297,7 @@ def _run(command: list[str], cache: Path, what: str) -> tuple[float, float]:
     """
     cpu = _children_cpu()
     start = time.perf_counter()
-    proc = subprocess.run(command, cwd=ROOT, env=_environment(cache), capture_output=True, text=True)
+    proc = subprocess.run(command, cwd=SOURCE, env=_environment(cache), capture_output=True, text=True)
     seconds = time.perf_counter() - start
     _check(proc, what)
     return seconds, _children_cpu() - cpu
@@ -359,7 +363,7 @@ def _cpu() -> str:
 
 def _commit() -> str:
     def git(*args):
-        proc = subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True)
+        proc = subprocess.run(["git", *args], cwd=SOURCE, capture_output=True, text=True)
         return proc.stdout.strip() if proc.returncode == 0 else ""
 
     head = git("rev-parse", "--short", "HEAD") or "unknown"
@@ -493,7 +497,14 @@ def main():
     parser.add_argument(
         "--repeat", type=int, default=1, help="wall-time rounds (default 1; 0: only the recorded runs)"
     )
+    parser.add_argument(
+        "--source", type=Path, default=ROOT, help="the hcid checkout to measure (default: this one)"
+    )
     args = parser.parse_args()
+    global SOURCE
+    SOURCE = args.source.resolve()
+    if not (SOURCE / "hcid" / "__init__.py").is_file():
+        parser.error(f"--source: no hcid package in {args.source}")
     if args.repeat < 0:
         parser.error(f"--repeat: must be at least 0, got {args.repeat}")
     config = Path(args.config).resolve()
