@@ -129,11 +129,14 @@ def _children(pid: int) -> list[int]:
 
 @pytest.fixture(scope="module")
 def simulated(tmp_path_factory):
-    """configs/ci.yaml with the paper's grids (SPEC 3: ~1.4 s a task on one core, 12 tasks, so
-    the workers are busy well past the first part), simulated; a copy per test."""
+    """configs/ci.yaml with the paper's grids (SPEC 3) and 8 seeds, simulated; a copy per test.
+    32 tasks of about 0.3 to 0.5 s each on one core (make bench), so the workers are busy for
+    seconds past the first part; with 12 the run could end before the test's signal reached it
+    (seen on a fresh clone: exit 0 where 130 was expected)."""
     base = tmp_path_factory.mktemp("busy")
     raw = yaml.safe_load(CI_CONFIG.read_text())
     raw["identify"] = {"target_shift": raw["identify"]["target_shift"]}
+    raw["seeds"] = list(range(1, 9))
     config = base / "ci_paper_grids.yaml"
     config.write_text(yaml.safe_dump(raw))
     subprocess.run([HCID, "simulate", str(config), "--run", str(base / "run"), "--quiet"], check=True)
