@@ -541,16 +541,17 @@ def analyse_study(
             first: _calibrate_twins(config, run_dir, key, records[seeds[0]], medians[key] if first == "own"
                                     else study_model, remnant, twins, first, kn_rate, **twin_args)
         }  # fmt: skip
-        own = twins_of[first]
+        earlier = twins_of[first]
         if (
             ff_twin == "auto"
             and key != strongest
-            and not all(_separates(c) for c in own.calibrations.values())
+            and not all(_separates(c) for c in earlier.calibrations.values())
         ):
             twins_of["study"] = _calibrate_twins(config, run_dir, key, records[seeds[0]], study_model,
                                                  remnant, twins, "study", kn_rate, **twin_args)  # fmt: skip
         for method_name in names:
-            use = first if _separates(own.calibrations[method_name]) else next(reversed(twins_of))
+            # The first twins where they separate; else the last made (study's, or the same).
+            use = first if _separates(earlier.calibrations[method_name]) else next(reversed(twins_of))
             used[(key, method_name)] = twins_of[use]
 
     lap_done("twins")
