@@ -488,11 +488,12 @@ def _print_analysis(result) -> None:
             safe = f"safe interval [{g['safe_low']:.3g}, {g['safe_high']:.3g})"
             if g["ff_twin"] == "study":
                 safe += (
-                    f" for the study's feedforward (Kpt {g['twin_Kpt']:.2g}; this group's own, "
-                    f"Kpt {g['fitted_Kpt']:.2g}, cannot be told from none)"
+                    f" for the study's feedforward (Kpt {g['twin_Kpt']:.2g}; this group's own fitted "
+                    f"Kpt is {g['fitted_Kpt']:.2g})"
                 )
         elif g["uncertain"]:
-            safe = "NO W separates the twins: W of least total error, every decision UNCERTAIN"
+            whose = " (with the study's feedforward)" if g["ff_twin"] == "study" else ""
+            safe = f"NO W separates the twins{whose}: W of least total error, every decision UNCERTAIN"
         else:
             safe = (
                 "no contiguous safe interval; W of least total error, where the twins' rates are "

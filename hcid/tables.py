@@ -416,7 +416,9 @@ ANALYSIS = _schema(
 #: method: the W used and why, the safe interval, the twins' rates at W, the runs and how
 #: many of them have feedforward there, and the twins (the group's fitted model as simulated,
 #: ``twin_<p>``: delays in whole samples, tau_pt at least 0, Kpt at least 0.001; the FB twin has
-#: Kpt = 0) with their remnant filter, number of realizations each and run directory.
+#: Kpt = 0) with their remnant filter, number of realizations each and run directory; ``ff_twin``
+#: says whose feedforward they carry (``own`` or the ``study``'s strongest) and ``fitted_<p>`` the
+#: group's own feedforward path, simulated so.
 ANALYSIS_GROUPS = _schema(
     "analysis_groups.parquet",
     _CHOICE_FIELDS

@@ -131,8 +131,7 @@ def _children(pid: int) -> list[int]:
 def simulated(tmp_path_factory):
     """configs/ci.yaml with the paper's grids (SPEC 3) and 8 seeds, simulated; a copy per test.
     32 tasks of about 0.3 to 0.5 s each on one core (make bench), so the workers are busy for
-    seconds past the first part; with 12 the run could end before the test's signal reached it
-    (seen on a fresh clone: exit 0 where 130 was expected)."""
+    seconds past the first part."""
     base = tmp_path_factory.mktemp("busy")
     raw = yaml.safe_load(CI_CONFIG.read_text())
     raw["identify"] = {"target_shift": raw["identify"]["target_shift"]}
@@ -151,6 +150,9 @@ def _identify_mid_run(simulated, tmp_path):
     proc = subprocess.Popen(
         [HCID, "identify", str(config), "--run", str(run), "--jobs", "2", "--quiet"],
         start_new_session=True,
+        # Ctrl-C as in a terminal: a test run from a background shell (`make test &`) inherits
+        # SIGINT ignored, and so would hcid (seen: exit 0 where 130 was expected).
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

@@ -4,7 +4,11 @@ For each order triple its stable candidates wait with V = NaN; :func:`simulate_b
 simulates them best prediction error first, as affine groups where eight candidates
 share a triple's consecutive nk1 (:func:`_simulate_affine_groups`) and in general
 lanes otherwise (:func:`_simulate_run`), pruning each against the triple's best V
-so far; :func:`squared_errors_wide` gives the frontier's squared errors.
+so far, on the vector steps (fused); :func:`simulate_blocks_plain` does the same four lanes
+at a time, unfused, for the triples searched again unfused, ``fused=False``, na above
+``MAX_NA`` and without the JIT; :func:`squared_errors_wide` gives the frontier's squared
+errors. The two drivers are kernels of their own, each compiled when first taken; the
+walkers below them are inlined (docs/engine.md, "Compile time").
 """
 
 import numpy as np
@@ -325,8 +329,9 @@ def _simulate_run(
 
 @njit(cache=True)
 def _runs(block_orders):
-    """First block of each run :func:`_simulate_group` takes at once, then the number of
-    blocks: consecutive blocks of one (na, nb1) on the vector path, any other block alone."""
+    """First block of each run of blocks taken at once (:func:`simulate_blocks`,
+    :func:`simulate_blocks_parallel`), then the number of blocks: consecutive blocks of one
+    (na, nb1) up to ``MAX_NA`` with the JIT, any other block alone."""
     n_blocks = block_orders.shape[0]
     firsts = np.empty(n_blocks + 1, dtype=np.int64)
     g = 0
@@ -366,7 +371,7 @@ def simulate_blocks(
 ):  # fmt: skip
     """Serial driver of the vector steps: the runs of blocks of one (na, nb1), each by
     :func:`_simulate_run`, every multiply-add fused. Every block's na is at most ``MAX_NA``
-    (the caller's choice, :func:`hcid.arx.engine.fit_grid`); the plain path is
+    (the caller's choice, ``hcid.arx.engine._vector_blocks``); the plain path is
     :func:`simulate_blocks_plain`, a kernel of its own so that each is compiled only when
     taken (docs/engine.md, "Compile time").
 

@@ -387,9 +387,9 @@ def _fit_unit(
     """Fit and test every candidate of work unit (k1, k2); simulate it if ``simulate``.
 
     With ``simulate`` False a stable candidate gets ``v_out = NaN`` (to be
-    simulated by :func:`hcid.arx._lanes.simulate_blocks`) and ``score_out`` its explained
-    sum of squares on the estimation rows, ``||c[:k]||^2`` (larger = smaller
-    prediction error); unstable and singular ones get ``inf``.
+    simulated by :func:`hcid.arx._blocks.simulate_blocks` or ``simulate_blocks_plain``) and
+    ``score_out`` its explained sum of squares on the estimation rows, ``||c[:k]||^2``
+    (larger = smaller prediction error); unstable and singular ones get ``inf``.
     """
     na_lo, na_hi = bounds[0, 0], bounds[0, 1]
     nb1_lo, nb1_hi = bounds[1, 0], bounds[1, 1]

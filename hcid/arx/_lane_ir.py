@@ -29,8 +29,9 @@ candidates of the direct grid (nk1 1..50) form such groups; stage 1
 (nk1 1..5), the groups with many unstable candidates and the rest take the
 general step (:func:`hcid.arx._blocks._simulate_run`).
 
-Two arithmetics, chosen per call (``fused``; both loops are compiled, the
-flag picks one per chunk). Unfused, every lane does the arithmetic of
+Two arithmetics, chosen per call (``fused``): a literal flag (the block
+walkers pass ``True``) compiles only its loop; a run-time one compiles both
+and picks one per chunk (the tests call the kernels so). Unfused, every lane does the arithmetic of
 :func:`hcid.arx._kernels.simulate_into` (the same IEEE-754 operations in
 the same order: ``fmul`` and ``fadd`` / ``fsub`` without fast-math flags,
 which LLVM may neither reassociate nor fuse), so a lane's V is

@@ -280,14 +280,16 @@ def compile_kernels(part: str) -> None:
     """Compile one part of the kernels :func:`fit_grid` runs, or load it from numba's cache,
     with the argument types of every fit, on a record of 64 samples.
 
-    ``vector``: the vector steps (:func:`hcid.arx._blocks.simulate_blocks`, the largest kernel);
-    ``rest``: every other kernel a fit or :func:`simulate` runs. Does nothing without the JIT.
+    ``vector``: the vector steps (:func:`hcid.arx._blocks.simulate_blocks`, the largest kernel;
+    not on a CPU without FMA units, where the default fit never takes them); ``rest``: every
+    other kernel a single-threaded fit of na up to 12, or :func:`simulate`, runs (a fit of na
+    above 12 and ``threads > 1`` compile theirs when taken). Does nothing without the JIT.
     Compiling ahead changes no result; it lets a caller compile the two parts in two processes
     at once and fork its workers after (:func:`hcid.pipeline.parallel.compile_kernels`).
     """
     if part not in KERNEL_PARTS:
         raise ValueError(f"part: one of {KERNEL_PARTS}, got {part!r}")
-    if not _lanes._WIDE:
+    if not _lanes._WIDE or (part == "vector" and not _kernels.has_fma()):
         return
     x = np.sin(0.3 * np.arange(64.0))
     grid = Grid((1, 1), (1, 1), (1, 1), (1, 1), (1, 1))

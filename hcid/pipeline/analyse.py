@@ -1,4 +1,4 @@
-"""``hcid analyse``: a measured study end to end, W calibrated on each group's own fitted model.
+"""``hcid analyse``: a measured study end to end, W calibrated on twins of each group's fitted model.
 
 1. Identify every run of the data set by every method (:func:`identify_study`).
 2. Fit the parametric HC model (the config's estimator, ``time`` by default) to every run
@@ -41,6 +41,7 @@ import pyarrow as pa
 from hcid import datasets, folders, hcfit, methods, results, selection, tables
 from hcid.calibration import rates_at
 from hcid.config import Config
+from hcid.config.fit import FEEDFORWARD_PARAMETERS
 from hcid.config.parse import default_data
 from hcid.descriptors import fit_remnant
 from hcid.errors import ConfigError, DataError, IdentificationError
@@ -63,8 +64,6 @@ TWINS = 20
 #: fitted feedforward is too weak to tell its twins apart) or ``auto`` (own; study for a group
 #: whose own twins no W separates, for each method without a safe interval on its own twins).
 FF_TWINS = ("auto", "own", "study")
-#: The feedforward path's parameters (what ``study`` twins borrow).
-FF_PATH = ("Kpt", "TI", "tau_pt")
 #: The twins' simulation rate: the smallest multiple of the analysis rate at or above this (Hz).
 TWIN_SIM_RATE = 100.0
 
@@ -213,7 +212,7 @@ def _choose_w(cal) -> tuple[float, str, bool]:
     tie almost everywhere: the smallest W would call everything feedforward). Uncertain when
     either twin's rate there exceeds the target rate.
     """
-    if cal.has_safe_interval and math.isfinite(cal.recommended):
+    if _separates(cal):
         return float(cal.recommended), "safe interval", False
     total = cal.fp_rate + cal.fn_rate
     tied = np.flatnonzero(total <= total.min() + 1e-12)
@@ -260,9 +259,9 @@ def _calibrate_twins(config, run_dir, key, record, model, remnant, twins, kind, 
             twin_config = parse_config(raw, raw["name"])
         except ConfigError as exc:  # e.g. a median model that is unstable with the plant
             raise DataError(
-                f"group {', '.join(key) or 'all runs'}: its twins (the group's fitted model, medians "
-                f"over its runs) cannot be simulated: {exc}; look at its runs' fits, or group them "
-                "otherwise (--by)"
+                f"group {', '.join(key) or 'all runs'}: its twins ({kind}: the group's fitted model, "
+                f"medians over its runs{', with the study feedforward' if kind == 'study' else ''}) "
+                f"cannot be simulated: {exc}; look at its runs' fits, or group them otherwise (--by)"
             ) from None
         try:
             check_run_dir(twin_config, twin_dir, "simulate")
@@ -329,7 +328,7 @@ def _twin_dir_ready(twin_dir: Path, forcing_text: str) -> None:
         folders.remove_owned(twin_dir)
 
 
-def _tables(config, runs, groups, by, used, chosen, finals, twins, medians):
+def _tables(config, runs, groups, by, used, chosen, finals, twins, own):
     factors = [c for c in runs.column_names if c not in tables.RUNS.names]
     factor_of = {int(r["seed"]): r for r in runs.to_pylist()}
     group_rows, run_rows = [], []
@@ -380,7 +379,7 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, medians):
             group_rows.append(
                 {**choice, "n_runs": len(seeds), "n_feedforward": int(n_ff),
                  **{f"twin_{p}": pair.model[p] for p in tables.HC_PARAMETER_NAMES},
-                 **{f"fitted_{p}": medians[key][p] for p in FF_PATH},
+                 **{f"fitted_{p}": own[key][p] for p in FEEDFORWARD_PARAMETERS},
                  "twin_kn": pair.remnant[0], "twin_w_n": pair.remnant[1], "twin_zeta_n": pair.remnant[2],
                  "twins": twins, "twins_folder": pair.folder}
             )  # fmt: skip
@@ -448,7 +447,7 @@ def analyse_study(
     scheduler: str | None = None,
     show_progress: bool = True,
 ) -> AnalysisRun:
-    """Analyse a measured study with W calibrated on each group's own fitted model (module notes).
+    """Analyse a measured study with W calibrated on twins of each group's fitted model (module notes).
 
     Raises
     ------
@@ -535,7 +534,7 @@ def analyse_study(
             raise DataError(f"group {_slug(key)}: no run's remnant could be fitted; cannot build its twins")
         remnant = tuple(float(np.median([getattr(r, a) for r in remnants])) for a in ("kn", "w_n", "zeta_n"))
         _same_forcing(key, seeds, records, config)
-        study_model = {**medians[key], **{p: medians[strongest][p] for p in FF_PATH}}
+        study_model = {**medians[key], **{p: medians[strongest][p] for p in FEEDFORWARD_PARAMETERS}}
         first = "study" if ff_twin == "study" and key != strongest else "own"
         twins_of = {
             first: _calibrate_twins(config, run_dir, key, records[seeds[0]], medians[key] if first == "own"
@@ -590,13 +589,13 @@ def analyse_study(
         )
     }  # fmt: skip
     lap_done("fit selected")
-    group_table, run_table = _tables(config, runs, groups, by, used, chosen, finals, twins, medians)
+    # Each group's own fitted model as its own FF twin simulates it (the tables' one form of it).
+    own = {key: {**m, **twin_values(m, kn_rate)} for key, m in medians.items()}
+    group_table, run_table = _tables(config, runs, groups, by, used, chosen, finals, twins, own)
     fc_rows = []
     for key, seeds in groups.items():
         name = ", ".join(f"{f}={v}" for f, v in zip(by, key, strict=True)) or "all runs"
-        fc_rows += _fc_rows(
-            config, name, seeds, records, {**medians[key], **twin_values(medians[key], kn_rate)}
-        )
+        fc_rows += _fc_rows(config, name, seeds, records, own[key])
     results.write(
         tables.FC_ESTIMATES, pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow), run_dir
     )

@@ -112,38 +112,54 @@ _compiled = False
 def compile_kernels() -> None:
     """The identification engine's kernels compiled, or loaded from numba's cache, in this
     process before it forks its workers, so that they start with them instead of each
-    compiling its own (issue 28). On a cold cache, where compiling takes most of a small
-    study's time, the two parts of :data:`hcid.arx.engine.KERNEL_PARTS` compile at once: the
-    ``rest`` in a forked child that writes them to the cache, the ``vector`` steps here; then
-    this process loads the child's from the cache. Where forking is not safe
-    (:func:`_can_fork`) one part after the other, here. Once per process.
+    compiling its own. The two parts of :data:`hcid.arx.engine.KERNEL_PARTS` compile at once:
+    the ``rest`` in a forked child that writes them to the cache (a worker's safeguards: it
+    leaves Ctrl-C to this process and dies with it), the ``vector`` steps here; then this
+    process loads the child's from the cache (on a warm cache both only load). Where forking
+    is not safe (:func:`_can_fork`) or fails, one part after the other, here. Once per process.
     """
     global _compiled
-    import numba
-
+    from hcid.arx.engine import KERNEL_PARTS
     from hcid.arx.engine import compile_kernels as compile_part
 
     if _compiled:
         return
-    child = 0
-    if _can_fork() and not numba.config.DISABLE_JIT:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        child = os.fork()
-        if child == 0:  # the child: compile, write the cache, and leave without any cleanup
-            code = 1
-            try:
-                compile_part("rest")
-                code = 0
-            finally:
-                os._exit(code)
+    vector, rest = KERNEL_PARTS
+    child = _fork_compiler(compile_part, rest) if _can_fork() else 0
     try:
-        compile_part("vector")
+        compile_part(vector)
+    except BaseException:
+        if child:
+            os.kill(child, signal.SIGKILL)
+        raise
     finally:
         if child:
             os.waitpid(child, 0)  # its part is in the cache now (or, if it failed, compiled below)
-    compile_part("rest")
+    compile_part(rest)
     _compiled = True
+
+
+def _fork_compiler(compile_part: Callable[[str], None], part: str) -> int:
+    """A forked child that compiles ``part`` and exits without any cleanup; its pid, or 0 if
+    the fork failed (the caller then compiles it itself)."""
+    parent = os.getpid()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    with _ctrl_c_deferred(), warnings.catch_warnings():
+        warnings.filterwarnings("ignore", r"This process .* is multi-threaded", DeprecationWarning)
+        try:
+            child = os.fork()
+        except OSError:
+            return 0
+        if child == 0:  # the child never leaves this block (a Ctrl-C deferred here is dropped)
+            code = 1
+            try:
+                _forked_worker_start(parent)
+                compile_part(part)
+                code = 0
+            finally:
+                os._exit(code)
+    return child
 
 
 def _local_stream(func, tasks, jobs, stack: contextlib.ExitStack) -> Iterator:

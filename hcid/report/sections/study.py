@@ -50,7 +50,8 @@ def _model_curves(run, twin: dict, lines: list[float]) -> dict:
 
     top = min(1.5 * max(lines), np.pi * run.config.timing.output_rate)
     omega = np.geomspace(0.5 * min(lines), top, 300)
-    # The group's own fitted model: the FF twin's feedback, its own fitted feedforward path.
+    # The group's own fitted model as fc_estimates.parquet's model columns have it: the twins'
+    # feedback (the group's own) and the group's own feedforward path (fitted_<p>).
     values = {p: twin.get(f"fitted_{p}", twin[f"twin_{p}"]) for p in HC_PARAMETER_NAMES}
     hft, he = hc_response(values, plant(run.config.loop), omega)
     return {"omega": omega, "e": he, "ft": hft if values["Kpt"] > 0 else None}
@@ -103,9 +104,9 @@ def compute(run, done) -> StudyData | None:
         )  # fmt: skip
     calibrations = []
     group_rows = groups.to_pylist()
-    # Each group's twins: its own (always calibrated) and, where they were not separated, the
-    # study's feedforward on its feedback (--ff-twin auto/study); the W marked where it is not a
-    # safe interval's.
+    # Each group's twins: its own (calibrated unless --ff-twin study) and, where they were not
+    # separated or with --ff-twin study, the study's feedforward on its feedback; the W marked
+    # where it is not a safe interval's.
     folders = {(g["group"], g["twins_folder"].removesuffix("-study")): None for g in group_rows}
     folders.update({(g["group"], g["twins_folder"]): None for g in group_rows})
     for name, folder in folders:
