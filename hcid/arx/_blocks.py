@@ -345,7 +345,7 @@ def _runs(block_orders):
     return firsts[: g + 1]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)  # not inlined: a prange body with one call and one exit runs in parallel
 def _simulate_group(
     g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1, tv2,
     pad, o, val_start, val_stop, prune, fused, v_all, counts,
