@@ -184,7 +184,7 @@ def test_the_report_answers_first(analysed, tmp_path):
 def test_every_group_has_its_own_twins_folder():
     # Source: the review's collision, "a b" and "a-b" (and ("x_y", "z") against ("x", "y_z")),
     # once made safe for a path, were one folder: the digest of the values tells them apart.
-    from hcid.pipeline.analyse import _slug
+    from hcid.pipeline.twins import group_slug as _slug
 
     assert _slug(("a b",)) != _slug(("a-b",))
     assert _slug(("x_y", "z")) != _slug(("x", "y_z"))

@@ -27,9 +27,7 @@ group's model-free estimates of both paths, SPEC 10, beside its fitted model).
 
 from __future__ import annotations
 
-import hashlib
 import math
-import re
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -49,10 +47,17 @@ from hcid.fourier import fc_estimate
 from hcid.hcmodel import plant
 from hcid.pipeline.fit import _choices, _records, _stage_choices
 from hcid.pipeline.parallel import parallel_map
-from hcid.pipeline.rundir import check_run_dir, holds_run_dir, using
-from hcid.pipeline.studies import calibrate_study, identify_study
-from hcid.pipeline.sweep import selections
-from hcid.resolve import parse_config
+from hcid.pipeline.rundir import holds_run_dir
+from hcid.pipeline.studies import identify_study
+from hcid.pipeline.twins import (
+    calibrate_twins,
+    check_same_forcing,
+    choose_w,
+    group_slug,
+    separates,
+    twin_rate,
+    twin_values,
+)
 from hcid.selected import SelectedModel, analyse_selected
 
 __all__ = ["AnalysisRun", "analyse_study"]
@@ -64,8 +69,6 @@ TWINS = 20
 #: fitted feedforward is too weak to tell its twins apart) or ``auto`` (own; study for a group
 #: whose own twins no W separates, for each method without a safe interval on its own twins).
 FF_TWINS = ("auto", "own", "study")
-#: The twins' simulation rate: the smallest multiple of the analysis rate at or above this (Hz).
-TWIN_SIM_RATE = 100.0
 
 
 @dataclass(frozen=True)
@@ -84,11 +87,16 @@ class AnalysisRun:
 # --------------------------------------------------------------------------- per-run fits
 
 
-def _tracking(record: dict, config: Config) -> hcfit.TrackingRecord:
+def _fit_windows(config: Config) -> tuple[slice, slice]:
+    """The rows every run's parametric fits use: the direct method's final stage's windows."""
     stage = config.identify.stage(methods.get("direct").final_stage.name)
+    return stage.estimation.rows(), stage.validation.rows()
+
+
+def _tracking(record: dict, config: Config) -> hcfit.TrackingRecord:
     return hcfit.TrackingRecord(
-        record["ft"], record["e"], record["u"], config.timing.output_rate,
-        stage.estimation.rows(), stage.validation.rows(), fd=record["fd"],
+        record["ft"], record["e"], record["u"], config.timing.output_rate, *_fit_windows(config),
+        fd=record["fd"],
     )  # fmt: skip
 
 
@@ -108,191 +116,6 @@ def _fit_run(config: Config, seed: int, record: dict, kn_rate: float):
     except IdentificationError:
         remnant = None
     return seed, fits, remnant
-
-
-# --------------------------------------------------------------------------- the twins
-
-
-def _slug(key: tuple[str, ...]) -> str:
-    """The group's twins folder: its factor values made safe for a path, and a digest of the
-    values themselves, so that two groups never share one folder ("a b" and "a-b")."""
-    text = re.sub(r"[^A-Za-z0-9_.+-]", "-", "_".join(key) or "all")[:48]
-    digest = hashlib.sha256(repr(tuple(key)).encode()).hexdigest()[:8]
-    return f"{text}-{digest}"
-
-
-def _twin_rate(rate: float) -> float:
-    return rate * max(1, math.ceil(TWIN_SIM_RATE / rate - 1e-9))
-
-
-#: The FF twin's smallest Kpt: a group whose fitted Kpt is below it (nobody uses feedforward)
-#: gets twins that nearly coincide, and the calibration says that no W separates them.
-MIN_TWIN_KPT = 1e-3
-
-
-def twin_values(fitted: dict, sim_rate: float) -> dict[str, float]:
-    """The FF twin's HC parameters as simulated: delays in whole samples at ``sim_rate``, an
-    anticipating tau_pt (< 0, which the simulation cannot delay by) at 0, Kpt at least
-    :data:`MIN_TWIN_KPT`."""
-    ff = {k: float(fitted[k]) for k in ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe")}
-    ff["Kpt"] = max(ff["Kpt"], MIN_TWIN_KPT)
-    ff["tau_pt"] = max(ff["tau_pt"], 0.0)
-    for k in ("tau_pt", "tau_pe"):  # the simulation delays by whole samples (SPEC 1)
-        ff[k] = round(ff[k] * sim_rate) / sim_rate
-    return ff
-
-
-def _twin_raw(config: Config, fitted: dict, remnant: tuple, forcing: Path, twins: int, name: str) -> dict:
-    """The twins' config (as YAML would give it): the group's fitted model and its FB twin."""
-    loop_raw = dict(config.raw.get("loop", {}))
-    kn, w_n, zeta_n = remnant
-    rate, window = config.timing.output_rate, config.timing.window
-    sim = _twin_rate(rate)
-    ff = twin_values(fitted, sim)
-    return {
-        "name": name,
-        "models": {"FB": {**ff, "Kpt": 0.0}, "FF": ff},
-        "loop": {
-            "plant": loop_raw["plant"]
-            if "plant" in loop_raw
-            else {"kind": "second_order", "K": loop_raw["Kc"], "wb": loop_raw["wb"]},
-            "disturbance_at": config.loop.disturbance_at,
-            "w_nms": float(fitted["w_nms"]),
-            "zeta_nms": float(fitted["zeta_nms"]),
-            "w_n": float(w_n),
-            "zeta_n": float(zeta_n),
-            "remnant_gain": float(kn),
-        },  # fmt: skip
-        "signals": {
-            "target": {"kind": "file", "path": str(forcing), "column": "ft", "rate": rate, "start": 0.0},
-            "disturbance": {"kind": "file", "path": str(forcing), "column": "fd", "rate": rate, "start": 0.0},
-        },
-        "timing": {
-            "sim_rate": _twin_rate(rate),
-            "output_rate": rate,
-            "run_in": 10.0,
-            "window": window,
-            "periods": 2,
-        },  # fmt: skip
-        "seeds": {"first": 1, "count": twins},
-        "identify": config.raw["identify"],
-        "selection": config.raw["selection"],
-        "fit_hc": config.raw.get("fit_hc") or {},
-    }
-
-
-def _same_forcing(key, seeds: list[int], records: dict, config: Config) -> None:
-    """The twins are driven by the group's first run's ft and fd: every run must share them."""
-    n = round(config.timing.window * config.timing.output_rate)
-    first = records[seeds[0]]
-    for seed in seeds[1:]:
-        for name in ("ft", "fd"):
-            a, b = first[name][:n], records[seed][name][:n]
-            if np.sqrt(np.mean((a - b) ** 2)) > 1e-3 * np.sqrt(np.mean(a**2)):
-                raise DataError(
-                    f"group {', '.join(key) or 'all runs'}: runs {seeds[0]} and {seed} have other "
-                    f"{name} (more than 0.1% RMS apart); the twins need one set of forcing functions: "
-                    "choose --by so that each group's runs share theirs"
-                )
-
-
-def _forcing_text(record: dict, n: int) -> str:
-    """The group's forcing functions over one window, as the twins' file (CSV, full precision)."""
-    lines = ["ft,fd"] + [
-        f"{a:.17g},{b:.17g}" for a, b in zip(record["ft"][:n], record["fd"][:n], strict=True)
-    ]
-    return "\n".join(lines) + "\n"
-
-
-def _choose_w(cal) -> tuple[float, str, bool]:
-    """The group's W and whether its decisions are uncertain.
-
-    The recommended W of a safe interval; else the grid's least total error (FP + FN), the
-    geometric middle of the range of grid points that tie for it (twins that nearly coincide
-    tie almost everywhere: the smallest W would call everything feedforward). Uncertain when
-    either twin's rate there exceeds the target rate.
-    """
-    if _separates(cal):
-        return float(cal.recommended), "safe interval", False
-    total = cal.fp_rate + cal.fn_rate
-    tied = np.flatnonzero(total <= total.min() + 1e-12)
-    i = int(tied[len(tied) // 2])
-    rates = _rates_at(cal, float(cal.w[i]))
-    uncertain = max(rates["fp_rate"], rates["fn_rate"]) > cal.target_rate
-    rule = (
-        "least total error (no safe interval)"
-        if uncertain
-        else "least total error (no contiguous safe interval)"
-    )
-    return float(cal.w[i]), rule, uncertain
-
-
-@dataclass(frozen=True)
-class _Twins:
-    """One calibration of a group: its twins (``kind`` own or study), per method."""
-
-    kind: str
-    model: dict  # the FF twin's parameters as simulated (the FB twin: Kpt = 0)
-    remnant: tuple  # kn, w_n, zeta_n
-    folder: str  # under the run directory
-    calibrations: dict  # method -> Calibration
-    paths: dict  # method -> the twins' selection paths and nb_ft (_twin_paths)
-
-
-def _separates(cal) -> bool:
-    """Whether a calibration has a safe interval (a W that tells its twins apart)."""
-    return bool(cal.has_safe_interval and math.isfinite(cal.recommended))
-
-
-def _calibrate_twins(config, run_dir, key, record, model, remnant, twins, kind, kn_rate, **pool) -> _Twins:
-    """Simulate, identify and calibrate one pair of twins of a group in ``RUN/twins/<group>[-study]``
-    (resumed when its inputs are the same, made anew when not)."""
-    slug = _slug(key) + ("-study" if kind == "study" else "")
-    twin_dir = run_dir / "twins" / slug
-    with using(twin_dir):
-        forcing = twin_dir / "forcing.csv"
-        text = _forcing_text(record, round(config.timing.window * config.timing.output_rate))
-        _twin_dir_ready(twin_dir, text)
-        folders.atomic_write(forcing, lambda tmp: Path(tmp).write_text(text))
-        raw = _twin_raw(config, model, remnant, forcing, twins, f"{config.name}_twins_{slug}")
-        try:
-            twin_config = parse_config(raw, raw["name"])
-        except ConfigError as exc:  # e.g. a median model that is unstable with the plant
-            raise DataError(
-                f"group {', '.join(key) or 'all runs'}: its twins ({kind}: the group's fitted model, "
-                f"medians over its runs{', with the study feedforward' if kind == 'study' else ''}) "
-                f"cannot be simulated: {exc}; look at its runs' fits, or group them otherwise (--by)"
-            ) from None
-        try:
-            check_run_dir(twin_config, twin_dir, "simulate")
-        except DataError:  # the group's fitted model changed (other settings): new twins
-            folders.remove_owned(twin_dir, [n for n in folders.owned_files(twin_dir) if n != "forcing.csv"])
-        run = calibrate_study(twin_config, twin_dir, **pool)
-    return _Twins(
-        kind, {**model, **twin_values(model, kn_rate)}, remnant, f"twins/{slug}",
-        {c.method: c for c in run.calibrations}, _twin_paths(twin_config, twin_dir),
-    )  # fmt: skip
-
-
-def _twin_paths(twin_config: Config, twin_dir: Path) -> dict[str, tuple]:
-    """Per method, the FB and FF twins' selection paths and nb_ft (for rates at any W)."""
-    chosen = selections(results.read(tables.FRONTIER, twin_dir), twin_dir)
-    out = {}
-    for method in methods.METHODS:
-        pair = []
-        for model in ("FB", "FF"):
-            keys = [(model, s, method) for s in twin_config.seeds]
-            pair.append(([chosen[k][0] for k in keys], [chosen[k][1]["nb_ft"] for k in keys]))
-        out[method] = tuple(pair)
-    return out
-
-
-def _rates_at(cal, w: float) -> dict:
-    i = int(np.argmin(np.abs(np.log(cal.w) - math.log(w))))
-    return {
-        "fp_rate": float(cal.fp_rate[i]), "fp_low": float(cal.fp_low[i]), "fp_high": float(cal.fp_high[i]),
-        "fn_rate": float(cal.fn_rate[i]), "fn_low": float(cal.fn_low[i]), "fn_high": float(cal.fn_high[i]),
-    }  # fmt: skip
 
 
 # --------------------------------------------------------------------------- the study
@@ -315,17 +138,9 @@ def _same_fit(config: Config, sel: SelectedModel, fits: dict):
     """The run's own fit (step 2) of the selected structure when it is the one
     :func:`hcid.selected.fit_selected` would make (same windows: the direct method's final
     stage's), else None (fitted again)."""
-    stage = config.identify.stage(methods.get("direct").final_stage.name)  # _tracking's windows
-    if (sel.estimation.rows(), sel.validation.rows()) != (stage.estimation.rows(), stage.validation.rows()):
+    if (sel.estimation.rows(), sel.validation.rows()) != _fit_windows(config):
         return None
     return fits[bool(sel.has_feedforward)]
-
-
-def _twin_dir_ready(twin_dir: Path, forcing_text: str) -> None:
-    """Keep the twins' earlier results only if their forcing functions are these (other data: new twins)."""
-    path = twin_dir / "forcing.csv"
-    if path.is_file() and path.read_text() != forcing_text:
-        folders.remove_owned(twin_dir)
 
 
 def _tables(config, runs, groups, by, used, chosen, finals, twins, own):
@@ -505,7 +320,7 @@ def analyse_study(
     runs = results.read(tables.RUNS, run_dir)
     records = {seed: r for (model, seed), r in _records(run_dir).items() if model == data.name}
     groups = _groups(runs, by)
-    kn_rate = _twin_rate(config.timing.output_rate)
+    kn_rate = twin_rate(config.timing.output_rate)
 
     # 2. Every run fitted with and without feedforward.
     fitted = {
@@ -527,30 +342,32 @@ def analyse_study(
     # fitted Kpt ("would feedforward of the size seen in this study be found here?").
     strongest = max(medians, key=lambda k: medians[k]["Kpt"])
     twin_args = dict(jobs=jobs, backend=backend, scheduler=scheduler, show_progress=show_progress)
-    used = {}  # (group, method) -> _Twins
+    used = {}  # (group, method) -> Twins
     for key, seeds in groups.items():
         remnants = [fitted[s][1] for s in seeds if fitted[s][1] is not None and not fitted[s][1].at_bound]
         if not remnants:
-            raise DataError(f"group {_slug(key)}: no run's remnant could be fitted; cannot build its twins")
+            raise DataError(
+                f"group {group_slug(key)}: no run's remnant could be fitted; cannot build its twins"
+            )
         remnant = tuple(float(np.median([getattr(r, a) for r in remnants])) for a in ("kn", "w_n", "zeta_n"))
-        _same_forcing(key, seeds, records, config)
+        check_same_forcing(key, seeds, records, config)
         study_model = {**medians[key], **{p: medians[strongest][p] for p in FEEDFORWARD_PARAMETERS}}
         first = "study" if ff_twin == "study" and key != strongest else "own"
         twins_of = {
-            first: _calibrate_twins(config, run_dir, key, records[seeds[0]], medians[key] if first == "own"
+            first: calibrate_twins(config, run_dir, key, records[seeds[0]], medians[key] if first == "own"
                                     else study_model, remnant, twins, first, kn_rate, **twin_args)
         }  # fmt: skip
         earlier = twins_of[first]
         if (
             ff_twin == "auto"
             and key != strongest
-            and not all(_separates(c) for c in earlier.calibrations.values())
+            and not all(separates(c) for c in earlier.calibrations.values())
         ):
-            twins_of["study"] = _calibrate_twins(config, run_dir, key, records[seeds[0]], study_model,
+            twins_of["study"] = calibrate_twins(config, run_dir, key, records[seeds[0]], study_model,
                                                  remnant, twins, "study", kn_rate, **twin_args)  # fmt: skip
         for method_name in names:
             # The first twins where they separate; else the last made (study's, or the same).
-            use = first if _separates(earlier.calibrations[method_name]) else next(reversed(twins_of))
+            use = first if separates(earlier.calibrations[method_name]) else next(reversed(twins_of))
             used[(key, method_name)] = twins_of[use]
 
     lap_done("twins")
@@ -562,7 +379,7 @@ def analyse_study(
     chosen, tasks = {}, []
     for key, seeds in groups.items():
         for method_name in names:
-            w, rule, uncertain = _choose_w(used[(key, method_name)].calibrations[method_name])
+            w, rule, uncertain = choose_w(used[(key, method_name)].calibrations[method_name])
             chosen[(key, method_name)] = (w, rule, uncertain)
             stage = config.identify.stage(methods.get(method_name).final_stage.name)
             for seed in seeds:

@@ -1,0 +1,210 @@
+"""The twins of ``hcid analyse`` (SPEC 10): a group's fitted model (FF twin) and the same without
+feedforward (FB twin), simulated, identified and calibrated in a run directory of their own, and
+the W a calibration gives (:mod:`hcid.pipeline.analyse`)."""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hcid import folders, methods, results, tables
+from hcid.config import Config
+from hcid.errors import ConfigError, DataError
+from hcid.pipeline.rundir import check_run_dir, using
+from hcid.pipeline.studies import calibrate_study
+from hcid.pipeline.sweep import selections
+from hcid.resolve import parse_config
+
+__all__ = [
+    "MIN_TWIN_KPT", "TWIN_SIM_RATE", "Twins", "calibrate_twins", "check_same_forcing", "choose_w",
+    "forcing_text", "group_slug", "separates", "twin_config_raw", "twin_dir_ready", "twin_paths",
+    "twin_rate", "twin_values",
+]  # fmt: skip
+
+#: The twins' simulation rate: the smallest multiple of the analysis rate at or above this (Hz).
+TWIN_SIM_RATE = 100.0
+
+
+def group_slug(key: tuple[str, ...]) -> str:
+    """The group's twins folder: its factor values made safe for a path, and a digest of the
+    values themselves, so that two groups never share one folder ("a b" and "a-b")."""
+    text = re.sub(r"[^A-Za-z0-9_.+-]", "-", "_".join(key) or "all")[:48]
+    digest = hashlib.sha256(repr(tuple(key)).encode()).hexdigest()[:8]
+    return f"{text}-{digest}"
+
+
+def twin_rate(rate: float) -> float:
+    return rate * max(1, math.ceil(TWIN_SIM_RATE / rate - 1e-9))
+
+
+#: The FF twin's smallest Kpt: a group whose fitted Kpt is below it (nobody uses feedforward)
+#: gets twins that nearly coincide, and the calibration says that no W separates them.
+MIN_TWIN_KPT = 1e-3
+
+
+def twin_values(fitted: dict, sim_rate: float) -> dict[str, float]:
+    """The FF twin's HC parameters as simulated: delays in whole samples at ``sim_rate``, an
+    anticipating tau_pt (< 0, which the simulation cannot delay by) at 0, Kpt at least
+    :data:`MIN_TWIN_KPT`."""
+    ff = {k: float(fitted[k]) for k in ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe")}
+    ff["Kpt"] = max(ff["Kpt"], MIN_TWIN_KPT)
+    ff["tau_pt"] = max(ff["tau_pt"], 0.0)
+    for k in ("tau_pt", "tau_pe"):  # the simulation delays by whole samples (SPEC 1)
+        ff[k] = round(ff[k] * sim_rate) / sim_rate
+    return ff
+
+
+def twin_config_raw(config: Config, fitted: dict, remnant: tuple, forcing: Path, twins: int, name: str):
+    """The twins' config (as YAML would give it): the group's fitted model and its FB twin."""
+    loop_raw = dict(config.raw.get("loop", {}))
+    kn, w_n, zeta_n = remnant
+    rate, window = config.timing.output_rate, config.timing.window
+    sim = twin_rate(rate)
+    ff = twin_values(fitted, sim)
+    return {
+        "name": name,
+        "models": {"FB": {**ff, "Kpt": 0.0}, "FF": ff},
+        "loop": {
+            "plant": loop_raw["plant"]
+            if "plant" in loop_raw
+            else {"kind": "second_order", "K": loop_raw["Kc"], "wb": loop_raw["wb"]},
+            "disturbance_at": config.loop.disturbance_at,
+            "w_nms": float(fitted["w_nms"]),
+            "zeta_nms": float(fitted["zeta_nms"]),
+            "w_n": float(w_n),
+            "zeta_n": float(zeta_n),
+            "remnant_gain": float(kn),
+        },  # fmt: skip
+        "signals": {
+            "target": {"kind": "file", "path": str(forcing), "column": "ft", "rate": rate, "start": 0.0},
+            "disturbance": {"kind": "file", "path": str(forcing), "column": "fd", "rate": rate, "start": 0.0},
+        },
+        "timing": {
+            "sim_rate": twin_rate(rate),
+            "output_rate": rate,
+            "run_in": 10.0,
+            "window": window,
+            "periods": 2,
+        },  # fmt: skip
+        "seeds": {"first": 1, "count": twins},
+        "identify": config.raw["identify"],
+        "selection": config.raw["selection"],
+        "fit_hc": config.raw.get("fit_hc") or {},
+    }
+
+
+def check_same_forcing(key, seeds: list[int], records: dict, config: Config) -> None:
+    """The twins are driven by the group's first run's ft and fd: every run must share them."""
+    n = round(config.timing.window * config.timing.output_rate)
+    first = records[seeds[0]]
+    for seed in seeds[1:]:
+        for name in ("ft", "fd"):
+            a, b = first[name][:n], records[seed][name][:n]
+            if np.sqrt(np.mean((a - b) ** 2)) > 1e-3 * np.sqrt(np.mean(a**2)):
+                raise DataError(
+                    f"group {', '.join(key) or 'all runs'}: runs {seeds[0]} and {seed} have other "
+                    f"{name} (more than 0.1% RMS apart); the twins need one set of forcing functions: "
+                    "choose --by so that each group's runs share theirs"
+                )
+
+
+def forcing_text(record: dict, n: int) -> str:
+    """The group's forcing functions over one window, as the twins' file (CSV, full precision)."""
+    lines = ["ft,fd"] + [
+        f"{a:.17g},{b:.17g}" for a, b in zip(record["ft"][:n], record["fd"][:n], strict=True)
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def choose_w(cal) -> tuple[float, str, bool]:
+    """The group's W and whether its decisions are uncertain.
+
+    The recommended W of a safe interval; else the grid's least total error (FP + FN), the
+    geometric middle of the range of grid points that tie for it (twins that nearly coincide
+    tie almost everywhere: the smallest W would call everything feedforward). Uncertain when
+    either twin's rate there exceeds the target rate.
+    """
+    if separates(cal):
+        return float(cal.recommended), "safe interval", False
+    total = cal.fp_rate + cal.fn_rate
+    tied = np.flatnonzero(total <= total.min() + 1e-12)
+    i = int(tied[len(tied) // 2])
+    uncertain = max(cal.fp_rate[i], cal.fn_rate[i]) > cal.target_rate
+    rule = (
+        "least total error (no safe interval)"
+        if uncertain
+        else "least total error (no contiguous safe interval)"
+    )
+    return float(cal.w[i]), rule, uncertain
+
+
+@dataclass(frozen=True)
+class Twins:
+    """One calibration of a group: its twins (``kind`` own or study), per method."""
+
+    kind: str
+    model: dict  # the FF twin's parameters as simulated (the FB twin: Kpt = 0)
+    remnant: tuple  # kn, w_n, zeta_n
+    folder: str  # under the run directory
+    calibrations: dict  # method -> Calibration
+    paths: dict  # method -> the twins' selection paths and nb_ft (twin_paths)
+
+
+def separates(cal) -> bool:
+    """Whether a calibration has a safe interval (a W that tells its twins apart)."""
+    return bool(cal.has_safe_interval and math.isfinite(cal.recommended))
+
+
+def calibrate_twins(config, run_dir, key, record, model, remnant, twins, kind, kn_rate, **pool) -> Twins:
+    """Simulate, identify and calibrate one pair of twins of a group in ``RUN/twins/<group>[-study]``
+    (resumed when its inputs are the same, made anew when not)."""
+    slug = group_slug(key) + ("-study" if kind == "study" else "")
+    twin_dir = run_dir / "twins" / slug
+    with using(twin_dir):
+        forcing = twin_dir / "forcing.csv"
+        text = forcing_text(record, round(config.timing.window * config.timing.output_rate))
+        twin_dir_ready(twin_dir, text)
+        folders.atomic_write(forcing, lambda tmp: Path(tmp).write_text(text))
+        raw = twin_config_raw(config, model, remnant, forcing, twins, f"{config.name}_twins_{slug}")
+        try:
+            twin_config = parse_config(raw, raw["name"])
+        except ConfigError as exc:  # e.g. a median model that is unstable with the plant
+            raise DataError(
+                f"group {', '.join(key) or 'all runs'}: its twins ({kind}: the group's fitted model, "
+                f"medians over its runs{', with the study feedforward' if kind == 'study' else ''}) "
+                f"cannot be simulated: {exc}; look at its runs' fits, or group them otherwise (--by)"
+            ) from None
+        try:
+            check_run_dir(twin_config, twin_dir, "simulate")
+        except DataError:  # the group's fitted model changed (other settings): new twins
+            folders.remove_owned(twin_dir, [n for n in folders.owned_files(twin_dir) if n != "forcing.csv"])
+        run = calibrate_study(twin_config, twin_dir, **pool)
+    return Twins(
+        kind, {**model, **twin_values(model, kn_rate)}, remnant, f"twins/{slug}",
+        {c.method: c for c in run.calibrations}, twin_paths(twin_config, twin_dir),
+    )  # fmt: skip
+
+
+def twin_paths(twin_config: Config, twin_dir: Path) -> dict[str, tuple]:
+    """Per method, the FB and FF twins' selection paths and nb_ft (for rates at any W)."""
+    chosen = selections(results.read(tables.FRONTIER, twin_dir), twin_dir)
+    out = {}
+    for method in methods.METHODS:
+        pair = []
+        for model in ("FB", "FF"):
+            keys = [(model, s, method) for s in twin_config.seeds]
+            pair.append(([chosen[k][0] for k in keys], [chosen[k][1]["nb_ft"] for k in keys]))
+        out[method] = tuple(pair)
+    return out
+
+
+def twin_dir_ready(twin_dir: Path, forcing_text: str) -> None:
+    """Keep the twins' earlier results only if their forcing functions are these (other data: new twins)."""
+    path = twin_dir / "forcing.csv"
+    if path.is_file() and path.read_text() != forcing_text:
+        folders.remove_owned(twin_dir)
