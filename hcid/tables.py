@@ -321,7 +321,9 @@ _ANALYSIS_KEY = ("model", "seed", "method", "w")
 #: not; ``true_value`` is the simulated model's (NaN for measured data or an
 #: undefined parameter); ``at_bound`` flags an estimate on its bound; ``se`` is its
 #: standard error and ``ci_low``, ``ci_high`` the 95% interval ``estimate +- 1.96 se``
-#: (NaN on a bound), computed as ``covariance`` says (sandwich or gauss_newton); ``cost``
+#: (NaN on a bound), computed as ``covariance`` says (sandwich or gauss_newton);
+#: ``parameter_status`` is ``determined`` or why not (:func:`hcid.hcfit.determined.parameter_status`);
+#: ``target`` the estimator used (``auto`` resolved); ``cost``
 #: and ``vaf_validation`` (%, the parametric model on the validation rows) repeat per row.
 HC_PARAMETERS = _schema(
     "hc_parameters.parquet",
@@ -330,9 +332,11 @@ HC_PARAMETERS = _schema(
     + [("target", _STR), ("settings", _STR), ("status", _STR), ("parameter", _STR), ("unit", _STR)]
     + [("estimate", _F64), ("se", _F64), ("ci_low", _F64), ("ci_high", _F64), ("covariance", _STR)]
     + [("true_value", _F64), ("lower", _F64), ("upper", _F64), ("at_bound", _BOOL)]
+    + [("parameter_status", _STR)]
     + [("cost", _F64), ("vaf_validation", _F64), ("starts", _INT)],
     (*_ANALYSIS_KEY, "parameter"),
-    optional=("se", "ci_low", "ci_high", "covariance"),  # absent from a fit-hc before issue 26
+    # se..covariance absent from a fit-hc before issue 26, parameter_status before issue 33
+    optional=("se", "ci_low", "ci_high", "covariance", "parameter_status"),
 )
 #: ``hc_loop.parquet`` (``hcid fit-hc``): one row per record, method, W and ``source``
 #: (``arx``: the selected ARX model; ``fitted``: the parametric fit): crossover

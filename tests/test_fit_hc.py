@@ -122,7 +122,7 @@ def test_a_bad_target_is_one_line_and_writes_nothing(fitted, tmp_path):
     result = runner.invoke(app, ["fit-hc", str(config), "--run", str(run), "--target", "ml", "--quiet"])
     assert result.exit_code == 2
     assert result.stderr.strip().splitlines() == [
-        "hcid: error: --target: must be one of time, closed_loop, frequency, got 'ml'"
+        "hcid: error: --target: must be one of auto, lines, time, closed_loop, frequency, got 'ml'"
     ]
     assert {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()} == before
 
@@ -201,7 +201,7 @@ def test_a_fit_on_a_bound_is_flagged_in_the_table(fitted, tmp_path):
         ({"bounds": {"TL": [2, 1]}}, "fit_hc.bounds.TL: lower 2 above upper 1"),
         ({"bounds": {"w_nms": [0, 10]}}, "fit_hc.bounds.w_nms: lower must be > 0 rad/s, got 0"),
         ({"start_ranges": {"Kpe": [0.001, 1]}}, "fit_hc.start_ranges.Kpe: [0.001, 1] outside the bounds"),
-        ({"target": "both"}, "fit_hc.target: must be one of time, closed_loop, frequency"),
+        ({"target": "both"}, "fit_hc.target: must be one of auto, lines, time, closed_loop, frequency"),
     ],
 )
 def test_bad_bounds_give_one_line_and_exit_2(ci_raw, tmp_path, fit_hc, message):

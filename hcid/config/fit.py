@@ -20,6 +20,7 @@ __all__ = [
     "FEEDFORWARD_PARAMETERS",
     "PARAMETERS",
     "COVARIANCES",
+    "NMS_CHOICES",
     "TARGETS",
     "UNITS",
     "FitSettings",
@@ -41,7 +42,12 @@ UNITS = {
     "TI": "s",
     "tau_pt": "s",
 }
-TARGETS = ("time", "closed_loop", "frequency")
+#: The estimators; ``auto`` is ``lines`` where the record's forcing functions are multisines on
+#: disjoint lines over whole periods, else ``time`` (docs/parametric-fit.md: how it was chosen).
+TARGETS = ("auto", "lines", "time", "closed_loop", "frequency")
+#: The neuromuscular pair: ``auto`` (fitted, and held at the literature values where the fit
+#: leaves it undetermined), ``free`` (always fitted) or ``fixed`` (always held).
+NMS_CHOICES = ("auto", "free", "fixed")
 #: How the estimates' standard errors are computed (:mod:`hcid.hcfit.uncertainty`).
 COVARIANCES = ("sandwich", "gauss_newton")
 
@@ -130,8 +136,11 @@ class FitSettings:
     Attributes
     ----------
     target : str
-        ``time`` (the default: lowest RMSE, docs/parametric-fit.md), ``closed_loop``
-        or ``frequency`` (:data:`TARGETS`).
+        ``auto`` (the default: ``lines`` where the forcing functions allow it, else ``time``;
+        docs/parametric-fit.md), ``lines``, ``time``, ``closed_loop`` or ``frequency``
+        (:data:`TARGETS`).
+    nms : str
+        The neuromuscular pair: ``auto``, ``free`` or ``fixed`` (:data:`NMS_CHOICES`).
     starts : int
         Random local starts besides the global-stage result (>= 0).
     seed : int
@@ -160,7 +169,7 @@ class FitSettings:
         One per parameter of :data:`PARAMETERS`, in that order.
     """
 
-    target: str = "time"
+    target: str = "auto"
     starts: int = 4
     seed: int = 0
     band: tuple[float, float] | None = None
@@ -171,10 +180,13 @@ class FitSettings:
     bounds: tuple[ParameterBounds, ...] = field(default=DEFAULT_BOUNDS)
     covariance: str = "sandwich"
     lag: float = 2.0
+    nms: str = "auto"
 
     def __post_init__(self) -> None:
         if self.target not in TARGETS:
             raise ConfigError(f"target: must be one of {', '.join(TARGETS)}, got {fmt(self.target)}")
+        if self.nms not in NMS_CHOICES:
+            raise ConfigError(f"nms: must be one of {', '.join(NMS_CHOICES)}, got {fmt(self.nms)}")
         integer(self.starts, "starts", 0, 100)
         integer(self.seed, "seed", 0, 2**32 - 1)
         integer(self.points, "points", 4, 10_000)
@@ -228,7 +240,7 @@ def parse_fit_settings(
     ----------
     data : dict or None
         E.g. ``{target: frequency, starts: 4, seed: 0, band: [0.23, 17.33],
-        points: 50, oversample: 4, popsize: 8, maxiter: 30, covariance: sandwich, lag: 2.0,
+        points: 50, oversample: 4, popsize: 8, maxiter: 30, covariance: sandwich, lag: 2.0, nms: auto,
         bounds: {Kpe: [0.01, 50], ...}, start_ranges: {Kpe: [0.1, 5], ...}}``;
         every key optional, None gives the defaults. A parameter given bounds
         but no starting range starts from its default range clipped to the new
@@ -264,6 +276,9 @@ def parse_fit_settings(
         )
     lag = s.get("lag", defaults.lag)
     _lag_check(lag, s.key("lag"))
+    nms = s.get("nms", defaults.nms)
+    if nms not in NMS_CHOICES:
+        raise ConfigError(f"{s.key('nms')}: must be one of {', '.join(NMS_CHOICES)}, got {fmt(nms)}")
     band = _pair(s, "band", default_band)
     if band is not None and not 0 < band[0] < band[1]:
         raise ConfigError(f"{s.key('band')}: must be [lo, hi] rad/s with 0 < lo < hi, got {list(band)}")
@@ -295,6 +310,7 @@ def parse_fit_settings(
         bounds=tuple(bounds),
         covariance=covariance,
         lag=float(lag),
+        nms=nms,
     )
 
 

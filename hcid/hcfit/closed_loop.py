@@ -35,7 +35,7 @@ import numpy as np
 from hcid.errors import IdentificationError
 from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials
 
-__all__ = ["PADE_ORDER", "closed_loop_u", "loop_is_stable"]
+__all__ = ["PADE_ORDER", "closed_loop_u", "loop_is_stable", "loop_spectrum"]
 
 #: Order of the Pade approximant of ``exp(-s tau_pe)`` in the stability check: its phase
 #: error is below 1 deg up to ``w tau = 9`` (37 rad/s at tau = 0.24 s), far above a
@@ -109,22 +109,30 @@ class _ClosedLoop:
 
     def u(self, theta: np.ndarray) -> np.ndarray:
         """u_cl (n, n_sets) for parameter columns theta (n_p, n_sets); unstable sets are NaN."""
-        p = dict(zip(self.names, theta, strict=True))
-        s, g = self.s, self.g
-        w, z = p["w_nms"], p["zeta_nms"]
-        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            nms = w**2 / (s**2 + 2.0 * z * w * s + w**2)
-            he = nms * p["Kpe"] * (p["TL"] * s + 1.0) * np.exp(-s * p["tau_pe"])
-            numerator = he * (g * self.ft - self.fd_term)
-            if "Kpt" in p:
-                hft = nms * p["Kpt"] * g / (p["TI"] * s + 1.0) ** 2 * np.exp(-s * p["tau_pt"])
-                numerator = numerator + hft * g * self.ft
-            u = np.fft.irfft(numerator / (g + he), n=self.n, axis=0)
+        spectrum = loop_spectrum(theta, self.names, self.s, self.g, self.ft, self.fd_term)
+        with np.errstate(invalid="ignore"):
+            u = np.fft.irfft(spectrum, n=self.n, axis=0)
         for j in range(theta.shape[1]):
             column = {name: float(v) for name, v in zip(self.names, theta[:, j], strict=True)}
             if not loop_is_stable(column, self.num_c, self.den_c):
                 u[:, j] = np.nan
         return u
+
+
+def loop_spectrum(theta, names, s, g, ft, fd_term) -> np.ndarray:
+    """The loop's U at ``s`` (n_w, 1) for parameter columns ``theta`` (n_p, n_sets), not checked for
+    stability: ``((Hft + He) G Ft - He fd_term) / (G + He)`` with ``g = G = 1/Yc`` and
+    ``fd_term = D Fd`` (module notes), each (n_w, 1)."""
+    p = dict(zip(names, theta, strict=True))
+    w, z = p["w_nms"], p["zeta_nms"]
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        nms = w**2 / (s**2 + 2.0 * z * w * s + w**2)
+        he = nms * p["Kpe"] * (p["TL"] * s + 1.0) * np.exp(-s * p["tau_pe"])
+        numerator = he * (g * ft - fd_term)
+        if "Kpt" in p:
+            hft = nms * p["Kpt"] * g / (p["TI"] * s + 1.0) ** 2 * np.exp(-s * p["tau_pt"])
+            numerator = numerator + hft * g * ft
+        return numerator / (g + he)
 
 
 def closed_loop_u(values: dict, plant, record: TrackingRecord, disturbance_at: str = "output") -> np.ndarray:

@@ -15,10 +15,21 @@ from scipy import optimize
 from hcid.config.fit import UNITS, FitSettings
 from hcid.errors import DataError, IdentificationError
 from hcid.hcfit.closed_loop import _ClosedLoop
+from hcid.hcfit.determined import LITERATURE_NMS, nms_undetermined
+from hcid.hcfit.lines import LinesProblem, line_data
 from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials, _responses, _Simulator, simulate_hc
 from hcid.hcfit.uncertainty import Z95, covariance, jacobian
 
-__all__ = ["BOUND_TOLERANCE", "HCFit", "fit_closed_loop", "fit_frequency", "fit_hc", "fit_time"]
+__all__ = [
+    "BOUND_TOLERANCE",
+    "HCFit",
+    "fit_closed_loop",
+    "fit_frequency",
+    "fit_hc",
+    "fit_lines",
+    "fit_time",
+    "resolve_target",
+]
 
 #: A parameter is flagged ``at_bound`` when it lies within this share of its
 #: bound width of a bound (the local stage lands within ~1e-9 of an active one).
@@ -61,6 +72,13 @@ class HCFit:
         ``gauss_newton``, or ``none`` (the frequency target).
     lag : int
         The sandwich's lag window (samples; 0 for Gauss-Newton).
+    fixed : tuple of str
+        Parameters held at a stated value, not estimated (their se is NaN).
+    partner : tuple of str
+        Per parameter, the other free parameter its estimate is most correlated with
+        ("" when none or no covariance).
+    correlation : tuple of float
+        That correlation (NaN without a covariance).
     """
 
     target: str
@@ -74,10 +92,16 @@ class HCFit:
     se: tuple[float, ...] = field(default=(), compare=False)
     covariance: str = "gauss_newton"
     lag: int = 0
+    fixed: tuple[str, ...] = ()
+    partner: tuple[str, ...] = field(default=(), compare=False)
+    correlation: tuple[float, ...] = field(default=(), compare=False)
 
     def __post_init__(self) -> None:
         if not self.se:
             object.__setattr__(self, "se", tuple(math.nan for _ in self.names))
+        if not self.partner:
+            object.__setattr__(self, "partner", tuple("" for _ in self.names))
+            object.__setattr__(self, "correlation", tuple(math.nan for _ in self.names))
 
     def interval(self, name: str) -> tuple[float, float]:
         """The 95% interval ``estimate +- 1.96 se`` of parameter ``name`` (NaN without an se)."""
@@ -191,25 +215,89 @@ class _ClosedLoopProblem:
         return np.where(np.isfinite(c), c, np.inf)
 
 
-def _uncertainty(problem, x, lower, upper, at_bound, settings: FitSettings, rate: float | None):
-    """``(se, kind, lag)`` at the optimum ``x`` (see :mod:`hcid.hcfit.uncertainty`)."""
-    if rate is None:
-        # The frequency target's residuals are the ARX model's approximation error on a chosen
-        # grid, not noise: a covariance from them shrinks with the grid's size. None is given.
-        return tuple(math.nan for _ in x), "none", 0
+class _Fixed:
+    """A problem with some parameters held at given values: its ``names`` are the free ones."""
+
+    def __init__(self, problem, fixed: dict[str, float]):
+        self.inner = problem
+        self.plant = problem.plant
+        self.fixed = dict(fixed)
+        self.names = tuple(n for n in problem.names if n not in fixed)
+        self._free = np.array([problem.names.index(n) for n in self.names], dtype=np.int64)
+        self._values = np.array([self.fixed.get(n, 0.0) for n in problem.names])
+
+    def _full(self, thetas: np.ndarray) -> np.ndarray:
+        full = np.repeat(self._values[:, None], thetas.shape[1], axis=1)
+        full[self._free] = thetas
+        return full
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        return self.inner.residuals(self._full(x[:, None])[:, 0])
+
+    def costs(self, thetas: np.ndarray) -> np.ndarray:
+        return self.inner.costs(self._full(thetas))
+
+
+def _uncertainty(problem, x, lower, upper, at_bound, kind: str, lag_seconds: float, rate: float):
+    """``(se, kind, lag, partner, correlation)`` at the optimum ``x`` (:mod:`hcid.hcfit.uncertainty`).
+
+    ``kind`` ``none`` gives no standard errors (the frequency target: its residuals are the
+    ARX model's approximation error on a chosen grid, not noise, and a covariance from them
+    shrinks with the grid's size).
+    """
+    nan = tuple(math.nan for _ in x)
+    if kind == "none":
+        return nan, "none", 0, tuple("" for _ in x), nan
     free = ~np.asarray(at_bound)
     r = problem.residuals(x)
     jac = jacobian(problem.residuals, x, lower, upper, free)
-    kind = settings.covariance
-    lag = round(settings.lag * rate) if kind == "sandwich" else 0
+    lag = round(lag_seconds * rate) if kind == "sandwich" else 0
+    cov = covariance(kind, jac, r, lag)
     with np.errstate(invalid="ignore"):
-        se_free = np.sqrt(np.diag(covariance(kind, jac, r, lag)))
+        se_free = np.sqrt(np.diag(cov))
     se = np.full(x.size, np.nan)
     se[free] = se_free
-    return tuple(float(v) for v in se), kind, lag
+    partner, correlation = _strongest_correlations(cov, np.asarray(problem.names)[free], x.size, free)
+    return tuple(float(v) for v in se), kind, lag, partner, correlation
 
 
-def _solve(problem, settings: FitSettings, target: str, record: TrackingRecord | None) -> HCFit:
+def _strongest_correlations(cov: np.ndarray, names: np.ndarray, size: int, free: np.ndarray):
+    """Per parameter, the free parameter its estimate is most correlated with, and the correlation."""
+    partner, correlation = ["" for _ in range(size)], [math.nan for _ in range(size)]
+    d = np.sqrt(np.diag(cov)) if cov.size else np.zeros(0)
+    ok = np.isfinite(d) & (d > 0)
+    if ok.sum() < 2:
+        return tuple(partner), tuple(correlation)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(d, d)
+    corr[~ok, :] = np.nan
+    corr[:, ~ok] = np.nan
+    np.fill_diagonal(corr, np.nan)
+    positions = np.flatnonzero(free)
+    for i in range(corr.shape[0]):
+        if not ok[i]:
+            continue
+        j = int(np.nanargmax(np.abs(corr[i])))
+        partner[positions[i]] = str(names[j])
+        correlation[positions[i]] = float(corr[i, j])
+    return tuple(partner), tuple(correlation)
+
+
+#: How each target's standard errors are computed: the time-domain targets by the settings'
+#: covariance (residuals correlated over time); the ``lines`` target by Gauss-Newton (its
+#: residuals are independent DFT bins, each scaled by its remnant's variance); none for the
+#: ``frequency`` target (above).
+def _covariance_kind(target: str, settings: FitSettings) -> str:
+    return {"frequency": "none", "lines": "gauss_newton"}.get(target, settings.covariance)
+
+
+def _solve(
+    problem, settings: FitSettings, target: str, record: TrackingRecord | None, fixed: dict | None = None
+) -> HCFit:
+    full_names = problem.names
+    fixed = {n: float(v) for n, v in (fixed or {}).items() if n in full_names}
+    if fixed:
+        problem = _Fixed(problem, fixed)
     bounds = [settings.bound(n) for n in problem.names]
     lower = np.array([b.lower for b in bounds])
     upper = np.array([b.upper for b in bounds])
@@ -257,27 +345,38 @@ def _solve(problem, settings: FitSettings, target: str, record: TrackingRecord |
         bool(v - lo <= BOUND_TOLERANCE * w or hi - v <= BOUND_TOLERANCE * w)
         for v, lo, hi, w in zip(x, lower, upper, width, strict=True)
     )
-    values = dict(zip(problem.names, (float(v) for v in x), strict=True))
-    se, kind, lag = _uncertainty(
-        problem, x, lower, upper, at_bound, settings, None if target == "frequency" else record.rate
+    kind = _covariance_kind(target, settings)
+    rate = record.rate if record is not None else 1.0
+    se, kind, lag, partner, correlation = _uncertainty(
+        problem, x, lower, upper, at_bound, kind, settings.lag, rate
     )
+    free = dict(zip(problem.names, (float(v) for v in x), strict=True))
+    values = {n: fixed.get(n, free.get(n)) for n in full_names}
     vaf = math.nan
     if record is not None:
         u_par = simulate_hc(values, problem.plant, record, settings.oversample)
         u = record.u[record.validation]
         vaf = float((1.0 - np.sum((u - u_par[record.validation]) ** 2) / np.sum(u**2)) * 100.0)
+
+    def spread(per_free, default):
+        got = dict(zip(problem.names, per_free, strict=True))
+        return tuple(got.get(n, default) for n in full_names)
+
     return HCFit(
         target=target,
-        names=problem.names,
+        names=full_names,
         estimates=tuple(values.values()),
-        at_bound=at_bound,
+        at_bound=spread(at_bound, False),
         cost=cost,
         starts=len(costs),
         start_costs=tuple(costs),
         vaf_validation=vaf,
-        se=se,
+        se=spread(se, math.nan),
         covariance=kind,
         lag=lag,
+        fixed=tuple(n for n in full_names if n in fixed),
+        partner=spread(partner, ""),
+        correlation=spread(correlation, math.nan),
     )
 
 
@@ -302,6 +401,7 @@ def fit_frequency(
     plant: control.TransferFunction,
     settings: FitSettings = FitSettings(),  # noqa: B008 (frozen)
     record: TrackingRecord | None = None,
+    fixed: dict[str, float] | None = None,
 ) -> HCFit:
     """Fit the parametric paths to the ARX paths' frequency responses.
 
@@ -324,6 +424,8 @@ def fit_frequency(
         Bounds, starts, seed and global-stage size (``target`` is not read).
     record : TrackingRecord, optional
         Measured ft, e, u for the validation VAF; without it the VAF is NaN.
+    fixed : mapping of str to float, optional
+        Parameters held at these values, not fitted.
 
     Returns
     -------
@@ -344,7 +446,7 @@ def fit_frequency(
     he = _response("he", he, omega.size)
     hft = None if hft is None else _response("hft", hft, omega.size)
     problem = _FrequencyProblem(omega, he, hft, plant)
-    return _solve(problem, settings, "frequency", record)
+    return _solve(problem, settings, "frequency", record, fixed)
 
 
 def fit_time(
@@ -418,6 +520,65 @@ def fit_closed_loop(
     return _solve(problem, settings, "closed_loop", record)
 
 
+def fit_lines(
+    record: TrackingRecord,
+    plant: control.TransferFunction,
+    feedforward: bool,
+    settings: FitSettings = FitSettings(),  # noqa: B008 (frozen)
+    disturbance_at: str = "output",
+    fixed: dict[str, float] | None = None,
+) -> HCFit:
+    """Fit the parametric model in closed loop to the record's u at its forcing lines.
+
+    Minimises ``sum_k |U_k - U_cl,k|^2 / sigma_k^2`` over the forcing lines k of the whole
+    record (:mod:`hcid.hcfit.lines`): ``U_cl`` the loop's u driven by the recorded ft and fd,
+    ``sigma_k^2`` the remnant's variance in u beside line k. Standard errors by Gauss-Newton
+    (the bins are independent). The record must be a whole number of its forcing functions'
+    periods (multisines on disjoint lines).
+
+    Parameters
+    ----------
+    record : TrackingRecord
+        ft (unshifted), fd, e, u (rad) at ``record.rate`` (Hz); the validation rows give the VAF.
+    plant : control.TransferFunction
+        ``Yc``.
+    feedforward : bool
+        Whether to fit the feedforward path.
+    settings : FitSettings
+        ``target`` is not read.
+    disturbance_at : str
+        ``output`` or ``input`` (SPEC 7).
+    fixed : mapping of str to float, optional
+        Parameters held at these values (e.g. :data:`hcid.hcfit.determined.LITERATURE_NMS`).
+
+    Raises
+    ------
+    hcid.errors.DataError
+        If the record's forcing functions have no lines (the reason named).
+    """
+    if not isinstance(record, TrackingRecord):
+        raise IdentificationError(f"record: must be a TrackingRecord, got {type(record).__name__}")
+    if disturbance_at not in ("output", "input"):
+        raise IdentificationError(f"disturbance_at: must be output or input, got {disturbance_at!r}")
+    problem = LinesProblem(line_data(record), plant, bool(feedforward), disturbance_at)
+    return _solve(problem, settings, "lines", record, fixed)
+
+
+def resolve_target(target: str, record: TrackingRecord | None) -> str:
+    """The estimator ``auto`` stands for on this record: ``lines`` where its forcing functions are
+    multisines on disjoint lines over whole periods (:func:`hcid.hcfit.lines.line_data`), else
+    ``time``; any other target is itself."""
+    if target != "auto":
+        return target
+    if record is None or record.fd is None:
+        return "time"
+    try:
+        line_data(record)
+    except DataError:
+        return "time"
+    return "lines"
+
+
 def fit_hc(
     settings: FitSettings,
     plant: control.TransferFunction,
@@ -429,24 +590,45 @@ def fit_hc(
     hft: np.ndarray | None = None,
     disturbance_at: str = "output",
 ) -> HCFit:
-    """Fit by ``settings.target``: :func:`fit_frequency`, :func:`fit_time` or
-    :func:`fit_closed_loop`.
+    """Fit by ``settings.target`` (``auto``: :func:`resolve_target`) and ``settings.nms``.
 
-    The frequency target needs ``omega`` and ``he`` (and ``hft`` exactly when
-    ``feedforward``); the time and closed-loop targets need ``record`` (the
-    closed-loop one with its fd), which the frequency target uses for its
-    validation VAF when given.
+    The targets: :func:`fit_lines`, :func:`fit_time`, :func:`fit_closed_loop` or
+    :func:`fit_frequency`. The frequency target needs ``omega`` and ``he`` (and ``hft``
+    exactly when ``feedforward``); the others need ``record`` (with its fd for ``lines`` and
+    ``closed_loop``), which the frequency target uses for its validation VAF when given.
+
+    ``settings.nms``: ``free`` fits the neuromuscular pair; ``fixed`` holds it at
+    :data:`hcid.hcfit.determined.LITERATURE_NMS`; ``auto`` (the default) fits it and, where
+    the fit leaves either of the pair undetermined (:func:`hcid.hcfit.determined.parameter_status`),
+    fits again with the pair held there (``HCFit.fixed`` says so).
     """
-    if settings.target == "closed_loop":
-        if record is None:
-            raise IdentificationError("record: the closed-loop target needs the measured ft, fd and u")
-        return fit_closed_loop(record, plant, feedforward, settings, disturbance_at)
-    if settings.target == "time":
-        if record is None:
-            raise IdentificationError("record: the time target needs the measured ft, e and u")
-        return fit_time(record, plant, feedforward, settings)
+    target = resolve_target(settings.target, record)
+    if settings.nms == "fixed":
+        return _fit_target(target, settings, plant, feedforward, record, omega, he, hft, disturbance_at,
+                           LITERATURE_NMS)  # fmt: skip
+    fit = _fit_target(target, settings, plant, feedforward, record, omega, he, hft, disturbance_at, None)
+    if settings.nms == "auto" and nms_undetermined(fit, settings):
+        return _fit_target(target, settings, plant, feedforward, record, omega, he, hft, disturbance_at,
+                           LITERATURE_NMS)  # fmt: skip
+    return fit
+
+
+def _fit_target(target, settings, plant, feedforward, record, omega, he, hft, disturbance_at, fixed):
+    if target in ("closed_loop", "time", "lines") and record is None:
+        raise IdentificationError(f"record: the {target} target needs the measured record")
+    if target == "lines":
+        return fit_lines(record, plant, feedforward, settings, disturbance_at, fixed)
+    if target == "closed_loop":
+        if disturbance_at not in ("output", "input"):
+            raise IdentificationError(f"disturbance_at: must be output or input, got {disturbance_at!r}")
+        problem = _ClosedLoopProblem(record, plant, bool(feedforward), disturbance_at)
+        return _solve(problem, settings, "closed_loop", record, fixed)
+    if target == "time":
+        if not isinstance(record, TrackingRecord):
+            raise IdentificationError(f"record: must be a TrackingRecord, got {type(record).__name__}")
+        return _solve(_TimeProblem(record, plant, settings, bool(feedforward)), settings, "time", record, fixed)
     if omega is None or he is None or (hft is None) == bool(feedforward):
         raise IdentificationError(
             "omega, he, hft: the frequency target needs omega and he, and hft exactly when feedforward"
         )
-    return fit_frequency(omega, he, hft, plant, settings, record)
+    return fit_frequency(omega, he, hft, plant, settings, record, fixed)

@@ -35,6 +35,7 @@ from hcid import criteria, methods, results, selection, tables
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError, HcidError
 from hcid.hcfit import FEEDBACK_PARAMETERS, TARGETS, UNITS, parse_fit_settings
+from hcid.hcfit.determined import parameter_status
 from hcid.pipeline.parallel import parallel_map
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
 from hcid.selected import (
@@ -203,11 +204,13 @@ def _parameter_rows(base: dict, fit, settings, truths: dict) -> list[dict]:
         fitted = [(n, math.nan, math.nan, (math.nan, math.nan), False) for n in FEEDBACK_PARAMETERS]
         cost = vaf = math.nan
         starts, status, covariance = 0, "no feedback path (nb_e = 0)", ""
+        determined = {n: "not fitted" for n in FEEDBACK_PARAMETERS}
     else:
         fitted = [
             (n, v, se, fit.interval(n), hit)
             for n, v, se, hit in zip(fit.names, fit.estimates, fit.se, fit.at_bound, strict=True)
         ]
+        determined = parameter_status(fit)
         cost, vaf, starts, status, covariance = (
             fit.cost,
             fit.vaf_validation,
@@ -233,6 +236,7 @@ def _parameter_rows(base: dict, fit, settings, truths: dict) -> list[dict]:
                 "lower": bound.lower,
                 "upper": bound.upper,
                 "at_bound": hit,
+                "parameter_status": determined[name],
                 "cost": cost,
                 "vaf_validation": vaf,
                 "starts": starts,
@@ -281,7 +285,10 @@ def _fit_task(config, key, record, selected, sources, choices, truths, true_marg
         analysis = analyse_selected(sel, record, config, method, choices)
         base = _base(key, source, sel)
         out["parameters"] += _parameter_rows(
-            {**base, "target": settings.target, "settings": digest}, analysis.fit, settings, truths
+            {**base, "target": analysis.fit.target if analysis.fit else settings.target, "settings": digest},
+            analysis.fit,
+            settings,
+            truths,
         )
         res = analysis.residuals
         shares = {c.signal: c.share_outside for c in res.correlations}

@@ -1,0 +1,201 @@
+"""Is a fitted model consistent with the data's own frequency response? (SPEC 11)
+
+At every forcing line k of a record (:mod:`hcid.hcfit.lines`) the model's two paths leave
+
+    r_k = U_k - He(w_k) E_k - Hft(w_k) Ft_k
+
+which is the remnant's coefficient there when the model is the person's, whatever the
+noise in E: ``r_k / E_k`` is the Fourier-coefficient estimate of He minus the model's He
+at a disturbance line, ``r_k / Ft_k`` that of Ht (with the model's He) at a target line.
+The remnant's variance at k is the mean of ``|U_j - He(w_j) E_j|^2`` over the
+neighbouring bins without forcing (M of them). Under the model each line's
+``t_k = |r_k|^2 / s_k^2`` is F(2, 2M)-distributed; each is carried to the chi-square(2)
+value of the same tail probability and summed: ``X^2`` with ``2 L`` degrees of freedom
+for L lines, and its p-value. A model with p below :data:`CONTRADICTED` is "contradicted
+by the data".
+
+For a group of runs the same model is set against each run's deviations
+``d_k = r_k / E_k`` or ``r_k / Ft_k`` (invariant to a sign flip of the forcing
+functions): their mean over the n runs against its standard error from their spread,
+``t_k = |mean d_k|^2 / (s_k^2 / n)``, F(2, 2(n - 1)) under the model. This spread holds
+the differences between the group's people, not only their remnant.
+
+The parameters are not counted off the degrees of freedom (the fit is to the same lines
+by the ``lines`` estimator, to other data by the others): the test is lenient by up to the
+number of parameters. Beside the test, the median |error| of the model against the
+Fourier-coefficient estimates themselves (:func:`hcid.fourier.fc_estimate`), in dB and
+degrees, per path.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import control
+import numpy as np
+from scipy import stats
+
+from hcid.errors import DataError
+from hcid.fourier import fc_estimate
+from hcid.hcfit.lines import LineData
+from hcid.hcfit.model import hc_response
+
+__all__ = ["CONTRADICTED", "Consistency", "consistency", "group_consistency"]
+
+#: A model whose consistency p-value lies below this is contradicted by the data (SPEC 11).
+CONTRADICTED = 0.01
+
+
+@dataclass(frozen=True)
+class Consistency:
+    """A fitted model against the data's own frequency response.
+
+    Attributes
+    ----------
+    chi2, dof, p : float, int, float
+        The statistic, its degrees of freedom (2 per line) and its p-value.
+    he_db, he_deg : float
+        Median |error| of the model's He against the Fourier-coefficient estimates at the
+        disturbance lines: magnitude (dB) and phase (deg).
+    ht_db, ht_deg : float
+        The same for Ht at the target lines (NaN without a feedforward path or target lines).
+    lines : int
+        Forcing lines used.
+    spread : str
+        Where the estimates' standard errors came from: ``remnant`` (bins beside the lines)
+        or ``runs`` (the spread across the group's runs).
+    """
+
+    chi2: float
+    dof: int
+    p: float
+    he_db: float
+    he_deg: float
+    ht_db: float
+    ht_deg: float
+    lines: int
+    spread: str
+
+    @property
+    def contradicted(self) -> bool:
+        return bool(self.p < CONTRADICTED)
+
+    @property
+    def verdict(self) -> str:
+        """In words: ``contradicted by the data`` or ``consistent with the data``."""
+        return "contradicted by the data" if self.contradicted else "consistent with the data"
+
+    def describe(self) -> str:
+        """E.g. ``consistent with the data (chi2 25.1, 22 dof, p = 0.29; He 1.2 dB, 9 deg)``."""
+        ht = "" if math.isnan(self.ht_db) else f", Ht {self.ht_db:.1f} dB {self.ht_deg:.0f} deg"
+        return (
+            f"{self.verdict} (chi-square {self.chi2:.1f} on {self.dof} dof, p = {self.p:.2g}; "
+            f"median |error| He {self.he_db:.1f} dB {self.he_deg:.0f} deg{ht})"
+        )
+
+
+def _chi2(t: np.ndarray, dof_noise: int) -> tuple[float, int, float]:
+    """Sum of each line's F(2, dof_noise) statistic carried to chi-square(2), and its p-value."""
+    tail = stats.f.sf(t, 2, dof_noise)
+    z = stats.chi2.isf(np.clip(tail, 1e-300, 1.0), 2)
+    total = float(np.sum(z))
+    dof = 2 * t.size
+    return total, dof, float(stats.chi2.sf(total, dof))
+
+
+def _paths(values: Mapping[str, float], plant, omega: np.ndarray):
+    hft, he = hc_response(values, plant, omega)
+    return (np.zeros_like(he) if hft is None else hft), he
+
+
+def _residuals(values, plant, data: LineData):
+    """r at the lines, r's scale (remnant sd) and the deviation d = r / E or r / Ft."""
+    hft, he = _paths(values, plant, data.omega)
+    r = data.u - he * data.e - hft * data.ft
+    _, he_near = _paths(values, plant, data.near_omega.ravel())
+    near = data.near_u - he_near.reshape(data.near_omega.shape) * data.near_e
+    s2 = np.mean(np.abs(near) ** 2, axis=1)
+    d = r / np.where(data.is_target, data.ft, data.e)
+    return r, s2, d
+
+
+def _errors(values, plant, he_hat, omega_e, ht_hat, omega_t, feedforward: bool):
+    def median_errors(model, estimate):
+        db = np.abs(20.0 * np.log10(np.abs(model) / np.abs(estimate)))
+        deg = np.abs(np.degrees(np.angle(model / estimate)))
+        return float(np.median(db)), float(np.median(deg))
+
+    _, he = _paths(values, plant, omega_e)
+    he_db, he_deg = median_errors(he, he_hat)
+    ht_db = ht_deg = math.nan
+    if feedforward and omega_t.size:
+        hft, _ = _paths(values, plant, omega_t)
+        ht_db, ht_deg = median_errors(hft, ht_hat)
+    return he_db, he_deg, ht_db, ht_deg
+
+
+def _fc(runs: Sequence[dict[str, np.ndarray]], rate: float):
+    """The Fourier-coefficient estimates of the runs together (or, where their forcing functions
+    differ, the mean of each run's)."""
+    n = runs[0]["u"].size
+    try:
+        fc = fc_estimate(runs, rate, slice(0, n))
+        return fc.he, fc.omega_e, fc.ht, fc.omega_t
+    except DataError:
+        each = [fc_estimate([r], rate, slice(0, n)) for r in runs]
+        return (
+            np.mean([f.he for f in each], axis=0),
+            each[0].omega_e,
+            np.mean([f.ht for f in each], axis=0),
+            each[0].omega_t,
+        )
+
+
+def consistency(
+    values: Mapping[str, float],
+    plant: control.TransferFunction,
+    data: LineData,
+    record: Mapping[str, np.ndarray],
+    rate: float,
+) -> Consistency:
+    """One run's consistency with a model (module notes).
+
+    Parameters
+    ----------
+    values : mapping of str to float
+        The model's parameters (feedforward ones only for a feedforward path).
+    plant : control.TransferFunction
+        ``Yc``.
+    data : LineData
+        The run at its forcing lines (:func:`hcid.hcfit.lines.line_data`).
+    record : mapping
+        The run's ``ft``, ``fd``, ``e``, ``u`` (rad), the same window as ``data``.
+    rate : float
+        Its rate (Hz).
+    """
+    r, s2, _ = _residuals(values, plant, data)
+    chi2, dof, p = _chi2(np.abs(r) ** 2 / s2, 2 * data.neighbours)
+    errors = _errors(values, plant, *_fc([record], rate), "Kpt" in values)
+    return Consistency(chi2, dof, p, *errors, lines=int(r.size), spread="remnant")
+
+
+def group_consistency(
+    values: Mapping[str, float],
+    plant: control.TransferFunction,
+    datas: Sequence[LineData],
+    records: Sequence[Mapping[str, np.ndarray]],
+    rate: float,
+) -> Consistency:
+    """A group's consistency with its model: the runs' mean deviation against its spread across
+    runs (module notes); a single run is tested as by :func:`consistency`."""
+    if len(datas) < 2:
+        return consistency(values, plant, datas[0], records[0], rate)
+    d = np.array([_residuals(values, plant, data)[2] for data in datas])
+    n = d.shape[0]
+    mean = d.mean(axis=0)
+    s2 = np.sum(np.abs(d - mean) ** 2, axis=0) / (n - 1)
+    chi2, dof, p = _chi2(np.abs(mean) ** 2 / (s2 / n), 2 * (n - 1))
+    errors = _errors(values, plant, *_fc(list(records), rate), "Kpt" in values)
+    return Consistency(chi2, dof, p, *errors, lines=int(mean.size), spread="runs")

@@ -1,0 +1,112 @@
+"""What a fit determines (SPEC 11): each parameter's status, with its reason.
+
+A parameter is **undetermined** when its estimate lies on a search bound, its 95%
+interval is wider than its plausible range (or its standard error is infinite: the
+record does not see it at all), or its correlation with another parameter exceeds
+:data:`CORRELATED` in magnitude (tau_pe with the neuromuscular pair, TI with tau_pt).
+Its value stays in the tables with the reason; group summaries and answer lines
+leave it out. Two further flags mark a value that is determined but should be read
+with care: outside its plausible range, or not told from 0 (se above |value|).
+A parameter held at a literature value is ``fixed``.
+
+The plausible ranges and their sources are in docs/parametric-fit.md.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from hcid.hcfit.uncertainty import Z95
+
+if TYPE_CHECKING:
+    from hcid.config.fit import FitSettings
+    from hcid.hcfit.fit import HCFit
+
+__all__ = [
+    "CORRELATED",
+    "DETERMINED",
+    "LITERATURE_NMS",
+    "PLAUSIBLE",
+    "is_undetermined",
+    "nms_undetermined",
+    "parameter_status",
+]
+
+#: A correlation above this (in magnitude) leaves both parameters of the pair undetermined.
+CORRELATED = 0.95
+
+#: Ranges within which values of each parameter have been reported for people tracking with
+#: single-, double-integrator and second-order plants (sources in docs/parametric-fit.md).
+PLAUSIBLE = {
+    "Kpe": (0.05, 20.0),
+    "TL": (0.0, 5.0),
+    "tau_pe": (0.1, 0.6),
+    "w_nms": (5.0, 20.0),
+    "zeta_nms": (0.05, 1.0),
+    "Kpt": (0.0, 1.5),
+    "TI": (0.0, 1.0),
+    "tau_pt": (-1.0, 1.0),
+}
+
+#: The neuromuscular system's values where a record does not determine it: those of the
+#: paper's HC model (McRuer et al. 1968; Laurense et al. 2015; SPEC 1).
+LITERATURE_NMS = {"w_nms": 10.1, "zeta_nms": 0.35}
+
+#: The status of a determined parameter.
+DETERMINED = "determined"
+
+# Reasons that make a parameter undetermined (the first that holds is given).
+_AT_BOUND = "at a search bound"
+_INFINITE = "not seen by the data (infinite se)"
+_WIDE = "95% interval wider than its plausible range"
+_FIXED = "fixed at a literature value"
+# Flags on a determined value.
+_OUTSIDE = "outside its plausible range"
+_ZERO = "not told from 0 (se above |value|)"
+_UNDETERMINED_PREFIXES = (_AT_BOUND, _INFINITE, _WIDE, _FIXED, "correlated with")
+
+
+def _correlated(partner: str, r: float) -> str:
+    return f"correlated with {partner} (r = {r:+.2f})"
+
+
+def parameter_status(fit: HCFit, settings: FitSettings | None = None) -> dict[str, str]:
+    """``{parameter: status}``: :data:`DETERMINED`, or the reason it is undetermined or flagged.
+
+    ``settings`` gives no bounds here (the fit's ``at_bound`` already holds them); it is kept
+    for the bounds a caller may want to report beside the reason.
+    """
+    out = {}
+    for i, name in enumerate(fit.names):
+        value, se = fit.estimates[i], fit.se[i]
+        lo, hi = PLAUSIBLE[name]
+        r = fit.correlation[i]
+        if name in fit.fixed:
+            out[name] = _FIXED
+        elif fit.at_bound[i]:
+            out[name] = _AT_BOUND
+        elif math.isinf(se):
+            out[name] = _INFINITE
+        elif math.isfinite(se) and 2.0 * Z95 * se > hi - lo:
+            out[name] = _WIDE
+        elif math.isfinite(r) and abs(r) > CORRELATED:
+            out[name] = _correlated(fit.partner[i], r)
+        elif not lo <= value <= hi:
+            out[name] = _OUTSIDE
+        elif math.isfinite(se) and se > abs(value):
+            out[name] = _ZERO
+        else:
+            out[name] = DETERMINED
+    return out
+
+
+def is_undetermined(status: str) -> bool:
+    """Whether a status (:func:`parameter_status`) leaves the value out of group summaries."""
+    return status.startswith(_UNDETERMINED_PREFIXES)
+
+
+def nms_undetermined(fit: HCFit, settings: FitSettings | None = None) -> bool:
+    """Whether the fit leaves either neuromuscular parameter undetermined (not counting ``fixed``)."""
+    status = parameter_status(fit, settings)
+    return any(is_undetermined(status[n]) and n not in fit.fixed for n in LITERATURE_NMS)

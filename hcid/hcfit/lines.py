@@ -1,0 +1,159 @@
+"""A record's forcing lines: its DFT coefficients there and the remnant's variance beside them.
+
+Where the forcing functions are multisines over whole periods of the record
+(:func:`hcid.fourier.forcing_lines`), everything the forcing functions drive lies
+at their lines, and every other bin holds the remnant's response alone. The
+remnant's variance at a line is then read off its neighbours: the mean of
+``|X_j|^2`` over the :data:`NEIGHBOURS` nearest bins without forcing (a
+nonparametric noise estimate, Pintelon and Schoukens, *System Identification: A
+Frequency Domain Approach*, 2nd ed. 2012, section 2.5: the remnant's spectrum is
+smooth over a few bins). With ``M`` neighbours each estimate has ``2 M`` real
+degrees of freedom, far more than the spread across a run's periods gives (one
+complex degree of freedom per line for two periods).
+
+Two uses:
+
+- the ``lines`` estimator (:func:`lines_problem`): the parametric model in closed
+  loop with the plant, driven by the recorded ft and fd, output error on U at the
+  forcing lines weighted by the remnant's variance there. The inputs are ones the
+  remnant cannot reach (no bias from the remnant in e, which the ``time`` target
+  takes as an input), and the weights make it the maximum-likelihood fit for a
+  Gaussian remnant;
+- the consistency of a fitted model with the record (:mod:`hcid.hcfit.consistency`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hcid.errors import DataError
+from hcid.fourier import ForcingLines, forcing_lines
+from hcid.hcfit.closed_loop import loop_spectrum, loop_is_stable
+from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials
+
+__all__ = ["NEIGHBOURS", "LineData", "line_data"]
+
+#: Bins without forcing beside each line whose mean power is the remnant's variance there:
+#: 6 gives each estimate 12 real degrees of freedom while spanning +-3 bins (0.47 rad/s for a
+#: 40 s record), over which a person's remnant spectrum changes little.
+NEIGHBOURS = 6
+
+
+@dataclass(frozen=True)
+class LineData:
+    """One record at its forcing lines (sorted by frequency).
+
+    Attributes
+    ----------
+    omega : ndarray, shape (L,)
+        Line frequencies (rad/s).
+    is_target : ndarray of bool, shape (L,)
+        A target line (ft has power there); else a disturbance line.
+    u, e, ft, fd : ndarray of complex, shape (L,)
+        DFT coefficients of the record at the lines.
+    near_omega : ndarray, shape (L, M)
+        Frequencies (rad/s) of each line's neighbouring bins without forcing.
+    near_u, near_e : ndarray of complex, shape (L, M)
+        u and e there: the remnant's closed-loop response alone.
+    lines : ForcingLines
+        The bins found.
+    """
+
+    omega: np.ndarray
+    is_target: np.ndarray
+    u: np.ndarray
+    e: np.ndarray
+    ft: np.ndarray
+    fd: np.ndarray
+    near_omega: np.ndarray
+    near_u: np.ndarray
+    near_e: np.ndarray
+    lines: ForcingLines
+
+    @property
+    def neighbours(self) -> int:
+        return self.near_u.shape[1]
+
+    @property
+    def noise_u(self) -> np.ndarray:
+        """The variance (E |.|^2) of u's remnant part at each line, from its neighbours."""
+        return np.mean(np.abs(self.near_u) ** 2, axis=1)
+
+
+def line_data(record: TrackingRecord, neighbours: int = NEIGHBOURS) -> LineData:
+    """The record's forcing lines, their DFT coefficients and their neighbours (whole record).
+
+    Raises
+    ------
+    DataError
+        If the record has no fd, or its forcing functions are not multisines on disjoint
+        lines over whole periods of it (the reason of :func:`hcid.fourier.forcing_lines`),
+        or too few bins without forcing lie beside the lines.
+    """
+    if record.fd is None:
+        raise DataError("record: the forcing lines need the record's fd")
+    lines = forcing_lines(record.ft, record.fd, record.rate)
+    if lines.problem is not None:
+        raise DataError(f"no forcing lines: {lines.problem}")
+    n = record.ft.size
+    spectra = {k: np.fft.rfft(getattr(record, k)) for k in ("u", "e", "ft", "fd")}
+    bins = np.sort(np.concatenate([lines.target, lines.disturbance]))
+    top = n // 2 if n % 2 else n // 2 - 1  # DC and the Nyquist bin are left out
+    free = np.setdiff1d(np.arange(1, top + 1), bins)
+    if free.size < neighbours:
+        raise DataError(f"the record has {free.size} bins without forcing; {neighbours} are needed")
+    # Nearest first, the lower bin first at equal distance.
+    near = np.array([free[np.lexsort((free, np.abs(free - k)))[:neighbours]] for k in bins])
+    omega = lambda b: 2.0 * np.pi * np.asarray(b, dtype=np.float64) * record.rate / n  # noqa: E731
+    return LineData(
+        omega=omega(bins),
+        is_target=np.isin(bins, lines.target),
+        u=spectra["u"][bins],
+        e=spectra["e"][bins],
+        ft=spectra["ft"][bins],
+        fd=spectra["fd"][bins],
+        near_omega=omega(near),
+        near_u=spectra["u"][near],
+        near_e=spectra["e"][near],
+        lines=lines,
+    )
+
+
+class LinesProblem:
+    """The ``lines`` estimator's residuals: ``(U - U_cl(theta)) / sigma_u`` at the forcing lines,
+    real and imaginary parts, with ``U_cl`` the parametric model's closed loop
+    (:func:`hcid.hcfit.closed_loop.loop_spectrum`) and ``sigma_u^2`` the remnant's variance in u
+    beside each line (:attr:`LineData.noise_u`)."""
+
+    def __init__(self, data: LineData, plant, feedforward: bool, disturbance_at: str):
+        self.plant = plant
+        self.num_c, self.den_c = _plant_polynomials(plant)
+        self.names = _names(feedforward)
+        self.s = (1j * data.omega)[:, None]
+        g = np.polyval(self.den_c, self.s) / np.polyval(self.num_c, self.s)  # 1/Yc, lines are > 0
+        self.g = g
+        self.ft = data.ft[:, None]
+        self.fd_term = (g if disturbance_at == "output" else np.ones_like(g)) * data.fd[:, None]
+        self.u = data.u[:, None]
+        self.scale = 1.0 / np.sqrt(data.noise_u)[:, None]
+
+    def _errors(self, thetas: np.ndarray) -> np.ndarray:
+        u = loop_spectrum(thetas, self.names, self.s, self.g, self.ft, self.fd_term)
+        errors = (u - self.u) * self.scale
+        for j in range(thetas.shape[1]):
+            column = {name: float(v) for name, v in zip(self.names, thetas[:, j], strict=True)}
+            if not loop_is_stable(column, self.num_c, self.den_c):
+                errors[:, j] = np.nan
+        return errors
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        r = self._errors(x[:, None])[:, 0]
+        r = np.concatenate([r.real, r.imag])
+        # An unstable loop (never at the bounds' interior optimum) gets a large finite cost.
+        return np.where(np.isfinite(r), r, 1e6)
+
+    def costs(self, thetas: np.ndarray) -> np.ndarray:
+        c = np.sum(np.abs(self._errors(thetas)) ** 2, axis=0)
+        return np.where(np.isfinite(c), c, np.inf)
