@@ -504,22 +504,56 @@ def _print_analysis(result) -> None:
             f"W = {g['w']:.3g} ({safe}; twins' FP {pct(g['fp_rate'], g['fp_low'], g['fp_high'])}, "
             f"FN {pct(g['fn_rate'], g['fn_low'], g['fn_high'])})"
         )
-        parts = []
-        for p in ("Kpe", "TL", "tau_pe", "w_nms", "zeta_nms", "Kpt", "TI", "tau_pt"):
-            x = np.array([r[p] for r in rows], dtype=float)
-            se = np.array([r[f"{p}_se"] for r in rows], dtype=float)
-            if np.isfinite(x).any():
-                se_text = f" ± {np.nanmedian(se):.2g}" if np.isfinite(se).any() else ""
-                parts.append(f"{p} {np.nanmedian(x):.3g}{se_text}")
+        typer.echo(_analysis_parameters(rows))
         wc = np.nanmedian([r["crossover"] for r in rows])
         pm = np.nanmedian([r["phase_margin"] for r in rows])
-        typer.echo(f"    {', '.join(parts)}; crossover {wc:.3g} rad/s, phase margin {pm:.3g} deg")
+        typer.echo(f"    loop: crossover {wc:.3g} rad/s, phase margin {pm:.3g} deg (medians over runs)")
+        contradicted = f"{g['n_contradicted']} of {g['n_runs']} runs' own models are contradicted by the data"
+        if g["fc_dof"] > 0:
+            typer.echo(
+                f"    data check: the group's model is {g['fc_verdict']} (chi-square {g['fc_chi2']:.1f} on "
+                f"{g['fc_dof']} dof, p = {g['fc_p']:.2g}; median |error| He {g['he_error_db']:.1f} dB "
+                f"{g['he_error_deg']:.0f} deg against the Fourier-coefficient estimates); {contradicted} "
+                "(p < 0.01)"
+            )
+        else:
+            typer.echo(f"    data check: {g['fc_verdict']}")
     typer.echo(
         f"analysed in {result.seconds:.1f} s ("
         + ", ".join(f"{name} {sec:.1f}" for name, sec in result.stages.items())
         + f"); wrote {result.run_dir / 'analysis.parquet'} (and .csv: one row "
         f"per run and method, with its factors) and {result.run_dir / 'analysis_groups.parquet'}"
     )
+
+
+def _analysis_parameters(rows: list[dict]) -> str:
+    """The group's parameters from what its runs determine: median over those runs, their sd and
+    count, units; then what no run (or only some) determines, with the reasons."""
+    import numpy as np
+
+    from hcid.hcfit import UNITS
+    from hcid.hcfit.determined import is_undetermined
+
+    parts, left_out = [], []
+    for p in ("Kpe", "TL", "tau_pe", "w_nms", "zeta_nms", "Kpt", "TI", "tau_pt"):
+        fitted = [r for r in rows if r[f"{p}_status"] != "not fitted"]
+        if not fitted:
+            continue
+        kept = np.array([r[p] for r in fitted if not is_undetermined(r[f"{p}_status"])], dtype=float)
+        unit = "" if UNITS[p] == "-" else f" {UNITS[p]}"
+        if kept.size:
+            sd = f", sd {np.std(kept, ddof=1):.2g}" if kept.size > 1 else ""
+            parts.append(f"{p} {np.median(kept):.3g}{unit} ({kept.size} of {len(fitted)} runs{sd})")
+        reasons: dict[str, int] = {}
+        for r in fitted:
+            if is_undetermined(r[f"{p}_status"]):
+                reason = r[f"{p}_status"].split(" (r =")[0]
+                reasons[reason] = reasons.get(reason, 0) + 1
+        left_out += [f"{p} in {n} ({reason})" for reason, n in reasons.items()]
+    text = "    parameters (median over the runs that determine each, sd over them): " + ", ".join(parts)
+    if left_out:
+        text += "\n    not determined, left out: " + "; ".join(left_out)
+    return text
 
 
 def _print_hc_fit(result) -> None:

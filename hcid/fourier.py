@@ -156,6 +156,23 @@ class FCEstimate:
         return np.std(db, axis=0, ddof=1), np.std(phase, axis=0, ddof=1)
 
 
+    def inversion(self, yc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Model inversion ``Ht Yc`` at the target lines (SPEC 11; 1 is the plant's exact inverse),
+        with ``yc`` the plant's response there: magnitude (linear) and phase (deg) of the runs'
+        average, and their sd across runs (phase unwrapped about the average; NaN for one run)."""
+        mean = self.ht * yc
+        runs = self.ht_runs * yc
+        if runs.shape[0] < 2:
+            nan = np.full(mean.size, np.nan)
+            return np.abs(mean), np.degrees(np.angle(mean)), nan, nan
+        return (
+            np.abs(mean),
+            np.degrees(np.angle(mean)),
+            np.std(np.abs(runs), axis=0, ddof=1),
+            np.std(np.degrees(np.angle(runs / mean)), axis=0, ddof=1),
+        )
+
+
 def _interpolate(omega_from: np.ndarray, h: np.ndarray, omega_to: np.ndarray) -> np.ndarray:
     """Linear in log-frequency, on magnitude (dB) and unwrapped phase; held beyond the ends."""
     x = np.log(omega_from)

@@ -397,14 +397,26 @@ _CHOICE_FIELDS = (
     + _RATE_FIELDS
 )
 
+#: A fitted model against the data's own frequency response (SPEC 11,
+#: :mod:`hcid.hcfit.consistency`): the chi-square statistic, its degrees of freedom and
+#: p-value, the verdict in words (``contradicted by the data`` below p = 0.01, ``consistent
+#: with the data``, or why there is no test), and the median |error| of He at the disturbance
+#: lines and of Ht at the target lines against the Fourier-coefficient estimates (dB, deg).
+_CONSISTENCY_FIELDS = [
+    ("fc_chi2", _F64), ("fc_dof", _INT), ("fc_p", _F64), ("fc_verdict", _STR),
+    ("he_error_db", _F64), ("he_error_deg", _F64), ("ht_error_db", _F64), ("ht_error_deg", _F64),
+]  # fmt: skip
+
 #: ``analysis.parquet`` (``hcid analyse``; also written as ``analysis.csv``): one row per
 #: measured run (``model`` the data name, ``seed`` the run id, ``file`` and the file's own
 #: ``file_run``) and method: its group's W
 #: (``w_rule``: ``safe interval``, or ``least total error (...)`` with ``uncertain``
 #: true), the twins' false-positive and false-negative rates there with their exact 95%
 #: bands, the selected structure, ``feedforward`` (nb_ft > 0), the ARX and parametric
-#: models' validation VAF, each parameter with its standard error (``<p>`` and ``<p>_se``;
-#: NaN where not fitted), the fitted loop's crossover (rad/s), phase margin (deg) and
+#: models' validation VAF, the estimator (``target``) and the model's form (``hc_form``:
+#: ``full``, or ``nms fixed`` where the neuromuscular pair was held at its literature values),
+#: each parameter with its standard error and status (``<p>``, ``<p>_se``, ``<p>_status``:
+#: ``determined`` or the reason it is not, SPEC 11; NaN and ``not fitted`` where not fitted), the fitted loop's crossover (rad/s), phase margin (deg) and
 #: remnant share, then one string column per factor of the data set.
 ANALYSIS = _schema(
     "analysis.parquet",
@@ -412,8 +424,10 @@ ANALYSIS = _schema(
     + _CHOICE_FIELDS
     + [(c, _INT) for c in ORDER_COLUMNS]
     + [("feedforward", _BOOL), ("vaf_arx_validation", _F64), ("target", _STR), ("vaf_validation", _F64)]
-    + [f for p in HC_PARAMETER_NAMES for f in ((p, _F64), (f"{p}_se", _F64))]
-    + [("crossover", _F64), ("phase_margin", _F64), ("share_remnant", _F64)],
+    + [("hc_form", _STR)]
+    + [f for p in HC_PARAMETER_NAMES for f in ((p, _F64), (f"{p}_se", _F64), (f"{p}_status", _STR))]
+    + [("crossover", _F64), ("phase_margin", _F64), ("share_remnant", _F64)]
+    + _CONSISTENCY_FIELDS,
     ("model", "seed", "method"),
 )
 #: ``analysis_groups.parquet`` (``hcid analyse``): one row per group of runs (``--by``) and
@@ -422,14 +436,20 @@ ANALYSIS = _schema(
 #: ``twin_<p>``: delays in whole samples, tau_pt at least 0, Kpt at least 0.001; the FB twin has
 #: Kpt = 0) with their remnant filter, number of realizations each and run directory; ``ff_twin``
 #: says whose feedforward they carry (``own`` or the ``study``'s strongest) and ``fitted_<p>`` the
-#: group's own feedforward path, simulated so.
+#: group's own feedforward path, simulated so. ``twin_source`` says how the group's model was
+#: built (medians of the values its runs determine, or a stated fallback), ``twin_undetermined``
+#: names the parameters no run of the group determines (their median over all runs is used);
+#: ``n_contradicted`` counts the runs whose own model the data contradict, and the consistency
+#: columns test the group's model against its runs (SPEC 11).
 ANALYSIS_GROUPS = _schema(
     "analysis_groups.parquet",
     _CHOICE_FIELDS
     + [("n_runs", _INT), ("n_feedforward", _INT)]
     + [(f"twin_{p}", _F64) for p in HC_PARAMETER_NAMES]
     + [(f"fitted_{p}", _F64) for p in ("Kpt", "TI", "tau_pt")]
-    + [("twin_kn", _F64), ("twin_w_n", _F64), ("twin_zeta_n", _F64), ("twins", _INT), ("twins_folder", _STR)],
+    + [("twin_kn", _F64), ("twin_w_n", _F64), ("twin_zeta_n", _F64), ("twins", _INT), ("twins_folder", _STR)]
+    + [("twin_source", _STR), ("twin_undetermined", _STR), ("n_contradicted", _INT)]
+    + _CONSISTENCY_FIELDS,
     ("group", "method"),
 )
 #: ``fc_estimates.parquet`` (``hcid analyse``): the model-free (Fourier-coefficient, SPEC 10)
@@ -437,11 +457,17 @@ ANALYSIS_GROUPS = _schema(
 #: (Ht at a target line, He interpolated there; ``extrapolated`` beyond the disturbance
 #: lines), the group's coefficient average as magnitude (dB) and phase (deg), its spread
 #: across runs (sd, dB and deg), and the group's fitted parametric model there (``model_db``,
-#: ``model_deg``). A group whose design allows no estimate has one row with ``problem`` set.
+#: ``model_deg``). At a target line, the model inversion ``Ht Yc`` (SPEC 11: 1 is the exact
+#: inverse of the plant): ``inversion`` its magnitude (linear) and ``inversion_deg`` its phase
+#: of the group's estimate, ``inversion_sd`` and ``inversion_sd_deg`` their spread across runs
+#: (NaN at a disturbance line). A group whose design allows no estimate has one row with
+#: ``problem`` set.
 FC_ESTIMATES = _schema(
     "fc_estimates.parquet",
     [("group", _STR), ("path", _STR), ("omega", _F64), ("magnitude_db", _F64), ("phase_deg", _F64)]
     + [("sd_db", _F64), ("sd_deg", _F64), ("extrapolated", _BOOL), ("n_runs", _INT)]
-    + [("model_db", _F64), ("model_deg", _F64), ("problem", _STR)],
+    + [("model_db", _F64), ("model_deg", _F64)]
+    + [("inversion", _F64), ("inversion_deg", _F64), ("inversion_sd", _F64), ("inversion_sd_deg", _F64)]
+    + [("problem", _STR)],
     ("group", "path", "omega"),
 )

@@ -42,7 +42,7 @@ from hcid.fourier import fc_estimate
 from hcid.hcfit.lines import LineData
 from hcid.hcfit.model import hc_response
 
-__all__ = ["CONTRADICTED", "Consistency", "consistency", "group_consistency"]
+__all__ = ["CONTRADICTED", "Consistency", "consistency", "group_consistency", "line_test"]
 
 #: A model whose consistency p-value lies below this is contradicted by the data (SPEC 11).
 CONTRADICTED = 0.01
@@ -151,6 +151,12 @@ def _fc(runs: Sequence[dict[str, np.ndarray]], rate: float):
             np.mean([f.ht for f in each], axis=0),
             each[0].omega_t,
         )
+
+
+def line_test(values: Mapping[str, float], plant: control.TransferFunction, data: LineData) -> float:
+    """The p-value of one run's test (module notes) alone, without the dB and degree errors."""
+    r, s2, _ = _residuals(values, plant, data)
+    return _chi2(np.abs(r) ** 2 / s2, 2 * data.neighbours)[2]
 
 
 def consistency(

@@ -15,8 +15,14 @@ The plausible ranges and their sources are in docs/parametric-fit.md.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import numpy as np
+
+from hcid.errors import DataError
+from hcid.hcfit.closed_loop import loop_is_stable
 from hcid.hcfit.uncertainty import Z95
 
 if TYPE_CHECKING:
@@ -26,8 +32,11 @@ if TYPE_CHECKING:
 __all__ = [
     "CORRELATED",
     "DETERMINED",
+    "FROM_MEDIANS",
+    "GroupModel",
     "LITERATURE_NMS",
     "PLAUSIBLE",
+    "group_model",
     "is_undetermined",
     "nms_undetermined",
     "parameter_status",
@@ -110,3 +119,65 @@ def nms_undetermined(fit: HCFit, settings: FitSettings | None = None) -> bool:
     """Whether the fit leaves either neuromuscular parameter undetermined (not counting ``fixed``)."""
     status = parameter_status(fit, settings)
     return any(is_undetermined(status[n]) and n not in fit.fixed for n in LITERATURE_NMS)
+
+
+@dataclass(frozen=True)
+class GroupModel:
+    """A group's model built from what its runs' fits determine (SPEC 11).
+
+    Attributes
+    ----------
+    values : dict of str to float
+        Per parameter, the median over the runs that determine it; where none does, the
+        literature value (neuromuscular pair) or the median over all runs brought into the
+        parameter's plausible range.
+    source : str
+        How it was built: the medians, or the fallback taken where they make an unstable
+        loop with the plant.
+    undetermined : tuple of str
+        The parameters no run determines.
+    """
+
+    values: dict
+    source: str
+    undetermined: tuple[str, ...]
+
+
+#: How a group's model is built when its medians make a stable loop with the plant.
+FROM_MEDIANS = "medians of the values its runs determine"
+
+
+def group_model(fits: Sequence[HCFit], labels: Sequence[str], num_c, den_c) -> GroupModel:
+    """The group's model from its runs' fits (``labels`` name the runs in the fallback's words).
+
+    Each parameter is the median over the runs whose fit determines it
+    (:func:`is_undetermined`). Where that model's loop with the plant (``num_c``, ``den_c``)
+    is unstable, the fallback is the run whose own model makes a stable loop and lies nearest
+    the medians (the sum over parameters of the squared difference over the parameter's
+    plausible range); :class:`hcid.errors.DataError` if no run's model does.
+    """
+    statuses = [parameter_status(f) for f in fits]
+    names = fits[0].names
+    values, none = {}, []
+    for p in names:
+        kept = [f.values[p] for f, st in zip(fits, statuses, strict=True) if not is_undetermined(st[p])]
+        if kept:
+            values[p] = float(np.median(kept))
+            continue
+        none.append(p)
+        if p in LITERATURE_NMS:
+            values[p] = LITERATURE_NMS[p]
+        else:  # the data say little: the median over all runs, brought into its plausible range
+            values[p] = float(np.clip(np.median([f.values[p] for f in fits]), *PLAUSIBLE[p]))
+    if loop_is_stable(values, num_c, den_c):
+        return GroupModel(values, FROM_MEDIANS, tuple(none))
+
+    def distance(fit) -> float:
+        return sum(((fit.values[p] - values[p]) / (PLAUSIBLE[p][1] - PLAUSIBLE[p][0])) ** 2 for p in names)
+
+    stable = [(distance(f), i) for i, f in enumerate(fits) if loop_is_stable(f.values, num_c, den_c)]
+    if not stable:
+        raise DataError("neither the medians of its runs' fits nor any run's own model makes a stable loop")
+    i = min(stable)[1]
+    source = f"{labels[i]}'s own model (the medians make an unstable loop with the plant)"
+    return GroupModel(dict(fits[i].values), source, tuple(none))

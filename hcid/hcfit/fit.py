@@ -15,6 +15,7 @@ from scipy import optimize
 from hcid.config.fit import UNITS, FitSettings
 from hcid.errors import DataError, IdentificationError
 from hcid.hcfit.closed_loop import _ClosedLoop
+from hcid.hcfit.consistency import CONTRADICTED, line_test
 from hcid.hcfit.determined import LITERATURE_NMS, nms_undetermined
 from hcid.hcfit.lines import LinesProblem, line_data
 from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials, _responses, _Simulator, simulate_hc
@@ -600,17 +601,25 @@ def fit_hc(
     ``settings.nms``: ``free`` fits the neuromuscular pair; ``fixed`` holds it at
     :data:`hcid.hcfit.determined.LITERATURE_NMS`; ``auto`` (the default) fits it and, where
     the fit leaves either of the pair undetermined (:func:`hcid.hcfit.determined.parameter_status`),
-    fits again with the pair held there (``HCFit.fixed`` says so).
+    fits again with the pair held there (``HCFit.fixed`` says so) and keeps that reduced model,
+    unless (``lines`` target) the data contradict it and not the full one
+    (:func:`hcid.hcfit.consistency.line_test` below :data:`~hcid.hcfit.consistency.CONTRADICTED`).
     """
     target = resolve_target(settings.target, record)
     if settings.nms == "fixed":
         return _fit_target(target, settings, plant, feedforward, record, omega, he, hft, disturbance_at,
                            LITERATURE_NMS)  # fmt: skip
     fit = _fit_target(target, settings, plant, feedforward, record, omega, he, hft, disturbance_at, None)
-    if settings.nms == "auto" and nms_undetermined(fit, settings):
-        return _fit_target(target, settings, plant, feedforward, record, omega, he, hft, disturbance_at,
-                           LITERATURE_NMS)  # fmt: skip
-    return fit
+    if settings.nms != "auto" or not nms_undetermined(fit, settings):
+        return fit
+    reduced = _fit_target(target, settings, plant, feedforward, record, omega, he, hft, disturbance_at,
+                          LITERATURE_NMS)  # fmt: skip
+    if target == "lines":
+        # The reduced model is kept unless the data contradict it and not the full model.
+        data = line_data(record)
+        if line_test(reduced.values, plant, data) < CONTRADICTED <= line_test(fit.values, plant, data):
+            return fit
+    return reduced
 
 
 def _fit_target(target, settings, plant, feedforward, record, omega, he, hft, disturbance_at, fixed):

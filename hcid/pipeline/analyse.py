@@ -44,6 +44,9 @@ from hcid.config.parse import default_data
 from hcid.descriptors import fit_remnant
 from hcid.errors import ConfigError, DataError, IdentificationError
 from hcid.fourier import fc_estimate
+from hcid.hcfit.consistency import consistency, group_consistency
+from hcid.hcfit.determined import group_model, parameter_status
+from hcid.hcfit.lines import line_data
 from hcid.hcmodel import plant
 from hcid.pipeline.fit import _choices, _records, _stage_choices
 from hcid.pipeline.parallel import parallel_map
@@ -143,7 +146,8 @@ def _same_fit(config: Config, sel: SelectedModel, fits: dict):
     return fits[bool(sel.has_feedforward)]
 
 
-def _tables(config, runs, groups, by, used, chosen, finals, twins, own):
+def _tables(config, runs, groups, by, used, chosen, finals, twins, own, models, checks):
+    group_checks = {key: checks.group(seeds, models[key].values) for key, seeds in groups.items()}
     factors = [c for c in runs.column_names if c not in tables.RUNS.names]
     factor_of = {int(r["seed"]): r for r in runs.to_pylist()}
     group_rows, run_rows = [], []
@@ -165,7 +169,7 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, own):
                 # Exactly at W, from the twins' selection paths (W need not be on the grid).
                 **rates_at(*pair.paths[method_name], w),
             }
-            n_ff = 0
+            n_ff = n_contradicted = 0
             for seed in seeds:
                 a = finals[(seed, method_name)]
                 sel, fit = a.model, a.fit
@@ -179,15 +183,21 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, own):
                     **choice,
                     **dict(zip(tables.ORDER_COLUMNS, sel.orders, strict=True)),
                     "feedforward": bool(sel.nb_ft > 0), "vaf_arx_validation": sel.vaf_validation,
-                    "target": config.fit_hc.target,
                     "vaf_validation": fit.vaf_validation if fit else math.nan,
                 }  # fmt: skip
+                status = parameter_status(fit) if fit else {}
+                row["target"] = fit.target if fit else config.fit_hc.target
+                row["hc_form"] = ("nms fixed" if fit.fixed else "full") if fit else ""
                 for p in tables.HC_PARAMETER_NAMES:
                     row[p] = values.get(p, math.nan)
                     row[f"{p}_se"] = ses.get(p, math.nan)
+                    row[f"{p}_status"] = status.get(p, "not fitted")
                 row["crossover"] = fitted_loop.crossover if fitted_loop else math.nan
                 row["phase_margin"] = fitted_loop.phase_margin if fitted_loop else math.nan
                 row["share_remnant"] = fitted_loop.shares["remnant"] if fitted_loop else math.nan
+                check = checks.run(seed, values) if fit else None
+                n_contradicted += bool(check is not None and check.contradicted)
+                row.update(_consistency_columns(check, checks.problem if fit else "not fitted"))
                 for f in factors:
                     row[f] = str(factor_of[seed][f])
                 run_rows.append(row)
@@ -196,7 +206,10 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, own):
                  **{f"twin_{p}": pair.model[p] for p in tables.HC_PARAMETER_NAMES},
                  **{f"fitted_{p}": own[key][p] for p in FEEDFORWARD_PARAMETERS},
                  "twin_kn": pair.remnant[0], "twin_w_n": pair.remnant[1], "twin_zeta_n": pair.remnant[2],
-                 "twins": twins, "twins_folder": pair.folder}
+                 "twins": twins, "twins_folder": pair.folder,
+                 "twin_source": models[key].source, "twin_undetermined": ", ".join(models[key].undetermined),
+                 "n_contradicted": int(n_contradicted),
+                 **_consistency_columns(group_checks[key], checks.problem)}
             )  # fmt: skip
     schema = tables.ANALYSIS.arrow
     for f in factors:
@@ -205,6 +218,47 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, own):
         pa.Table.from_pylist(group_rows, schema=tables.ANALYSIS_GROUPS.arrow),
         pa.Table.from_pylist(run_rows, schema=schema),
     )
+
+
+class _Checks:
+    """Every run at its forcing lines, once, for the consistency of any model with it (SPEC 11)."""
+
+    def __init__(self, config: Config, records: dict):
+        self.yc = plant(config.loop)
+        self.rate = config.timing.output_rate
+        self.records = records
+        self.lines, self.problem = {}, ""
+        for seed, record in records.items():
+            try:
+                self.lines[seed] = line_data(_tracking(record, config))
+            except DataError as exc:
+                self.problem = f"no test: {exc}"
+                self.lines = {}
+                break
+
+    def run(self, seed: int, values: dict):
+        if seed not in self.lines:
+            return None
+        return consistency(values, self.yc, self.lines[seed], self.records[seed], self.rate)
+
+    def group(self, seeds: list[int], values: dict):
+        if not all(s in self.lines for s in seeds):
+            return None
+        return group_consistency(
+            values, self.yc, [self.lines[s] for s in seeds], [self.records[s] for s in seeds], self.rate
+        )
+
+
+def _consistency_columns(check, problem: str) -> dict:
+    if check is None:
+        nan = math.nan
+        return {"fc_chi2": nan, "fc_dof": 0, "fc_p": nan, "fc_verdict": problem, "he_error_db": nan,
+                "he_error_deg": nan, "ht_error_db": nan, "ht_error_deg": nan}  # fmt: skip
+    return {
+        "fc_chi2": check.chi2, "fc_dof": check.dof, "fc_p": check.p, "fc_verdict": check.verdict,
+        "he_error_db": check.he_db, "he_error_deg": check.he_deg, "ht_error_db": check.ht_db,
+        "ht_error_deg": check.ht_deg,
+    }  # fmt: skip
 
 
 def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median: dict) -> list[dict]:
@@ -218,9 +272,11 @@ def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median:
         nan = math.nan
         return [{**base, "path": "", "omega": nan, "magnitude_db": nan, "phase_deg": nan, "sd_db": nan,
                  "sd_deg": nan, "extrapolated": False, "model_db": nan, "model_deg": nan,
+                 "inversion": nan, "inversion_deg": nan, "inversion_sd": nan, "inversion_sd_deg": nan,
                  "problem": str(exc)}]  # fmt: skip
     yc = plant(config.loop)
     out = []
+    inversion = fc.inversion(np.asarray(yc(1j * fc.omega_t), dtype=complex))
     for path, omega, h, extrapolated in (
         ("e", fc.omega_e, fc.he, np.zeros(fc.omega_e.size, dtype=bool)),
         ("ft", fc.omega_t, fc.ht, fc.extrapolated),
@@ -228,6 +284,7 @@ def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median:
         sd_db, sd_deg = fc.spread(path)
         hft, he = hcfit.hc_response(median, yc, omega)
         model = he if path == "e" else hft
+        inv = inversion if path == "ft" else tuple(np.full(omega.size, math.nan) for _ in range(4))
         for i in range(omega.size):
             out.append(
                 {**base, "path": path, "omega": float(omega[i]),
@@ -236,6 +293,8 @@ def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median:
                  "sd_deg": float(sd_deg[i]), "extrapolated": bool(extrapolated[i]),
                  "model_db": float(20 * np.log10(abs(model[i]))),
                  "model_deg": float(np.degrees(np.angle(model[i] / h[i])) + np.degrees(np.angle(h[i]))),
+                 "inversion": float(inv[0][i]), "inversion_deg": float(inv[1][i]),
+                 "inversion_sd": float(inv[2][i]), "inversion_sd_deg": float(inv[3][i]),
                  "problem": ""}
             )  # fmt: skip
     return out
@@ -333,11 +392,17 @@ def analyse_study(
 
     lap_done("fit runs")
 
-    # 3. Per group: the twins and their calibration.
-    medians = {
-        key: {p: float(np.median([fitted[s][0][True].values[p] for s in seeds])) for p in hcfit.PARAMETERS}
-        for key, seeds in groups.items()
-    }
+    # 3. Per group: its model from what its runs determine, the twins and their calibration.
+    num_c, den_c = np.array(config.loop.plant.num), np.array(config.loop.plant.den)
+    models = {}
+    for key, seeds in groups.items():
+        try:
+            models[key] = group_model([fitted[s][0][True] for s in seeds], [f"run {s}" for s in seeds],
+                                      num_c, den_c)  # fmt: skip
+        except DataError as exc:
+            raise DataError(f"group {group_slug(key)}: {exc}; look at its runs' fits (hc_form, "
+                            "<p>_status in a --by of smaller groups) or group them otherwise (--by)") from None
+    medians = {key: m.values for key, m in models.items()}
     # The study's strongest feedforward (--ff-twin study and auto): the group with the largest
     # fitted Kpt ("would feedforward of the size seen in this study be found here?").
     strongest = max(medians, key=lambda k: medians[k]["Kpt"])
@@ -408,11 +473,12 @@ def analyse_study(
     lap_done("fit selected")
     # Each group's own fitted model as its own FF twin simulates it (the tables' one form of it).
     own = {key: {**m, **twin_values(m, kn_rate)} for key, m in medians.items()}
-    group_table, run_table = _tables(config, runs, groups, by, used, chosen, finals, twins, own)
+    checks = _Checks(config, records)
+    group_table, run_table = _tables(config, runs, groups, by, used, chosen, finals, twins, own, models, checks)
     fc_rows = []
     for key, seeds in groups.items():
         name = ", ".join(f"{f}={v}" for f, v in zip(by, key, strict=True)) or "all runs"
-        fc_rows += _fc_rows(config, name, seeds, records, own[key])
+        fc_rows += _fc_rows(config, name, seeds, records, medians[key])
     results.write(
         tables.FC_ESTIMATES, pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow), run_dir
     )
