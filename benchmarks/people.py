@@ -49,6 +49,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime
+import hashlib
 import math
 import os
 import subprocess
@@ -126,7 +127,18 @@ def _machine() -> str:
 
     head = git("rev-parse", "--short", "HEAD") or "unknown"
     dirty = " + uncommitted changes under hcid/" if git("status", "--porcelain", "--", "hcid") else ""
-    return f"CPU {cpu}, {os.cpu_count()} cores; {datetime.date.today()}; commit {head}{dirty}"
+    return (
+        f"CPU {cpu}, {os.cpu_count()} cores; {datetime.date.today()}; commit {head}{dirty} "
+        f"(hcid/*.py sha256 {_hcid_digest()})"
+    )
+
+
+def _hcid_digest() -> str:
+    """hcid may be edited while this runs: the digest of its sources ties the tables to one state."""
+    digest = hashlib.sha256()
+    for path in sorted((ROOT / "hcid").rglob("*.py")):
+        digest.update(path.relative_to(ROOT).as_posix().encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:12]
 
 
 def _load() -> str:
@@ -329,14 +341,15 @@ def people_tables(runs, keys: list, results: list[dict]) -> None:
             for (_, p, _, v), fit in fits.items():
                 if p != plant or v != variant or fit is None:
                     continue
-                for i, (name, status) in enumerate(parameter_status(fit).items()):
+                status = parameter_status(fit)
+                for name, value, se, hit in zip(fit.names, fit.estimates, fit.se, fit.at_bound, strict=True):
                     total += 1
-                    undetermined += is_undetermined(status)
-                    count["correlated with" if status.startswith("correlated with") else status] += 1
-                    se, value = fit.se[i], fit.estimates[i]
-                    suspicious = fit.at_bound[i] or (math.isfinite(se) and se > abs(value))
-                    assert name == fit.names[i]
-                    unflagged += bool(suspicious and status == DETERMINED)
+                    undetermined += is_undetermined(status[name])
+                    count[
+                        "correlated with" if status[name].startswith("correlated with") else status[name]
+                    ] += 1
+                    suspicious = hit or (math.isfinite(se) and se > abs(value))
+                    unflagged += bool(suspicious and status[name] == DETERMINED)
             unflagged_total += unflagged
             counts = [*(str(count[r]) for r in reasons), *(str(count[f]) for f in flags)]
             rows.append([plant, _name(variant), f"{undetermined} of {total}", *counts, str(unflagged)])
@@ -571,7 +584,7 @@ def main() -> None:
     args = parser.parse_args()
     seeds = 3 if args.quick else args.seeds
     modes = ("ratio", "share") if args.remnant == "both" else (args.remnant,)
-    start = time.perf_counter()
+    start, digest = time.perf_counter(), _hcid_digest()
     print("# Estimators on people (CPHS 2017) and on twins with known truth\n")
     print(f"{_machine()}; load average {_load()}; --jobs {args.jobs}, {seeds} seeds")
 
@@ -595,7 +608,8 @@ def main() -> None:
           f"load average {_load()}")  # fmt: skip
     _report_errors("twin", keys, results)
     twin_tables(keys, results, remnant_rows, problems, seeds)
-    print(f"\ntotal wall {time.perf_counter() - start:.1f} s; load average {_load()}")
+    same = "unchanged" if _hcid_digest() == digest else f"CHANGED during the run (now {_hcid_digest()})"
+    print(f"\ntotal wall {time.perf_counter() - start:.1f} s; load average {_load()}; hcid sources {same}")
 
 
 if __name__ == "__main__":

@@ -155,7 +155,6 @@ class FCEstimate:
         phase = np.degrees(np.angle(runs / mean))
         return np.std(db, axis=0, ddof=1), np.std(phase, axis=0, ddof=1)
 
-
     def inversion(self, yc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Model inversion ``Ht Yc`` at the target lines (SPEC 11; 1 is the plant's exact inverse),
         with ``yc`` the plant's response there: magnitude (linear) and phase (deg) of the runs'

@@ -416,8 +416,9 @@ _CONSISTENCY_FIELDS = [
 #: models' validation VAF, the estimator (``target``) and the model's form (``hc_form``:
 #: ``full``, or ``nms fixed`` where the neuromuscular pair was held at its literature values),
 #: each parameter with its standard error and status (``<p>``, ``<p>_se``, ``<p>_status``:
-#: ``determined`` or the reason it is not, SPEC 11; NaN and ``not fitted`` where not fitted), the fitted loop's crossover (rad/s), phase margin (deg) and
-#: remnant share, then one string column per factor of the data set.
+#: ``determined`` or the reason it is not, SPEC 11; NaN and ``not fitted`` where not fitted),
+#: the fitted loop's crossover (rad/s), phase margin (deg) and remnant share, the run's own
+#: model against its data (the consistency columns), then one string column per factor.
 ANALYSIS = _schema(
     "analysis.parquet",
     [("model", _STR), ("seed", _INT), ("file", _STR), ("file_run", _INT)]
@@ -436,9 +437,10 @@ ANALYSIS = _schema(
 #: ``twin_<p>``: delays in whole samples, tau_pt at least 0, Kpt at least 0.001; the FB twin has
 #: Kpt = 0) with their remnant filter, number of realizations each and run directory; ``ff_twin``
 #: says whose feedforward they carry (``own`` or the ``study``'s strongest) and ``fitted_<p>`` the
-#: group's own feedforward path, simulated so. ``twin_source`` says how the group's model was
-#: built (medians of the values its runs determine, or a stated fallback), ``twin_undetermined``
-#: names the parameters no run of the group determines (their median over all runs is used);
+#: group's own model (the values its runs determine, below), as fitted. ``twin_source`` says how
+#: the group's model was built (medians of the values its runs determine, or a stated fallback),
+#: ``twin_undetermined`` names the parameters no run of the group determines (the literature
+#: NMS, or their median over all runs brought into the plausible range, is used);
 #: ``n_contradicted`` counts the runs whose own model the data contradict, and the consistency
 #: columns test the group's model against its runs (SPEC 11).
 ANALYSIS_GROUPS = _schema(
@@ -446,7 +448,7 @@ ANALYSIS_GROUPS = _schema(
     _CHOICE_FIELDS
     + [("n_runs", _INT), ("n_feedforward", _INT)]
     + [(f"twin_{p}", _F64) for p in HC_PARAMETER_NAMES]
-    + [(f"fitted_{p}", _F64) for p in ("Kpt", "TI", "tau_pt")]
+    + [(f"fitted_{p}", _F64) for p in HC_PARAMETER_NAMES]
     + [("twin_kn", _F64), ("twin_w_n", _F64), ("twin_zeta_n", _F64), ("twins", _INT), ("twins_folder", _STR)]
     + [("twin_source", _STR), ("twin_undetermined", _STR), ("n_contradicted", _INT)]
     + _CONSISTENCY_FIELDS,

@@ -635,7 +635,8 @@ def _fit_target(target, settings, plant, feedforward, record, omega, he, hft, di
     if target == "time":
         if not isinstance(record, TrackingRecord):
             raise IdentificationError(f"record: must be a TrackingRecord, got {type(record).__name__}")
-        return _solve(_TimeProblem(record, plant, settings, bool(feedforward)), settings, "time", record, fixed)
+        problem = _TimeProblem(record, plant, settings, bool(feedforward))
+        return _solve(problem, settings, "time", record, fixed)
     if omega is None or he is None or (hft is None) == bool(feedforward):
         raise IdentificationError(
             "omega, he, hft: the frequency target needs omega and he, and hft exactly when feedforward"

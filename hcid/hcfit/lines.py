@@ -30,7 +30,7 @@ import numpy as np
 
 from hcid.errors import DataError
 from hcid.fourier import ForcingLines, forcing_lines
-from hcid.hcfit.closed_loop import loop_spectrum, loop_is_stable
+from hcid.hcfit.closed_loop import loop_is_stable, loop_spectrum
 from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials
 
 __all__ = ["NEIGHBOURS", "LineData", "line_data"]

@@ -59,7 +59,6 @@ from hcid.pipeline.twins import (
     group_slug,
     separates,
     twin_rate,
-    twin_values,
 )
 from hcid.selected import SelectedModel, analyse_selected
 
@@ -146,7 +145,7 @@ def _same_fit(config: Config, sel: SelectedModel, fits: dict):
     return fits[bool(sel.has_feedforward)]
 
 
-def _tables(config, runs, groups, by, used, chosen, finals, twins, own, models, checks):
+def _tables(config, runs, groups, by, used, chosen, finals, twins, models, checks):
     group_checks = {key: checks.group(seeds, models[key].values) for key, seeds in groups.items()}
     factors = [c for c in runs.column_names if c not in tables.RUNS.names]
     factor_of = {int(r["seed"]): r for r in runs.to_pylist()}
@@ -204,7 +203,7 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, own, models, 
             group_rows.append(
                 {**choice, "n_runs": len(seeds), "n_feedforward": int(n_ff),
                  **{f"twin_{p}": pair.model[p] for p in tables.HC_PARAMETER_NAMES},
-                 **{f"fitted_{p}": own[key][p] for p in FEEDFORWARD_PARAMETERS},
+                 **{f"fitted_{p}": models[key].values[p] for p in tables.HC_PARAMETER_NAMES},
                  "twin_kn": pair.remnant[0], "twin_w_n": pair.remnant[1], "twin_zeta_n": pair.remnant[2],
                  "twins": twins, "twins_folder": pair.folder,
                  "twin_source": models[key].source, "twin_undetermined": ", ".join(models[key].undetermined),
@@ -400,8 +399,9 @@ def analyse_study(
             models[key] = group_model([fitted[s][0][True] for s in seeds], [f"run {s}" for s in seeds],
                                       num_c, den_c)  # fmt: skip
         except DataError as exc:
-            raise DataError(f"group {group_slug(key)}: {exc}; look at its runs' fits (hc_form, "
-                            "<p>_status in a --by of smaller groups) or group them otherwise (--by)") from None
+            raise DataError(
+                f"group {group_slug(key)}: {exc}; look at its runs' fits or group them otherwise (--by)"
+            ) from None
     medians = {key: m.values for key, m in models.items()}
     # The study's strongest feedforward (--ff-twin study and auto): the group with the largest
     # fitted Kpt ("would feedforward of the size seen in this study be found here?").
@@ -472,9 +472,8 @@ def analyse_study(
     }  # fmt: skip
     lap_done("fit selected")
     # Each group's own fitted model as its own FF twin simulates it (the tables' one form of it).
-    own = {key: {**m, **twin_values(m, kn_rate)} for key, m in medians.items()}
     checks = _Checks(config, records)
-    group_table, run_table = _tables(config, runs, groups, by, used, chosen, finals, twins, own, models, checks)
+    group_table, run_table = _tables(config, runs, groups, by, used, chosen, finals, twins, models, checks)
     fc_rows = []
     for key, seeds in groups.items():
         name = ", ".join(f"{f}={v}" for f, v in zip(by, key, strict=True)) or "all runs"

@@ -160,10 +160,12 @@ def plot_fc(paths: dict[str, list[dict]], curves: dict, title: str = "", axes=No
             ph = np.degrees(np.unwrap(np.radians(ph)))
         sd_db = np.array([r["sd_db"] for r in rows])
         sd_deg = np.array([r["sd_deg"] for r in rows])
-        ax_mag.errorbar(w, mag, yerr=np.where(np.isfinite(sd_db), sd_db, 0.0), fmt="o", color=color, ms=4,
-                        capsize=2, label=f"{label}: model-free")  # fmt: skip
-        ax_ph.errorbar(w, ph, yerr=np.where(np.isfinite(sd_deg), sd_deg, 0.0), fmt="o", color=color, ms=4,
-                       capsize=2)  # fmt: skip
+        ax_mag.plot(w, mag, "o", color=color, ms=4, label=f"{label}: model-free")
+        ax_ph.plot(w, ph, "o", color=color, ms=4)
+        if np.isfinite(sd_db).any():  # the estimates' spread across runs as a band
+            ax_mag.fill_between(w, mag - sd_db, mag + sd_db, color=color, alpha=0.2, lw=0,
+                                label=f"{label}: ±1 sd across runs")  # fmt: skip
+            ax_ph.fill_between(w, ph - sd_deg, ph + sd_deg, color=color, alpha=0.2, lw=0)
     ax_mag.set_ylabel("magnitude (dB)")
     ax_ph.set_ylabel("phase (deg)")
     ax_ph.set_xlabel("frequency (rad/s)")
@@ -171,6 +173,37 @@ def plot_fc(paths: dict[str, list[dict]], curves: dict, title: str = "", axes=No
         ax.set_xscale("log")
         ax.grid(True, which="both", alpha=0.3)
     ax_mag.legend(fontsize=7, loc="best")
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def plot_inversion(rows: list[dict], title: str = "", axes=None):
+    """Model inversion ``Ht Yc`` at the target lines (rows of ``fc_estimates.parquet`` with path
+    ``ft``): magnitude (linear, 1 the plant's exact inverse, 0.5 half of it) and phase, points
+    with +-1 sd across runs."""
+    fig, axes = _figure(axes, 2, 1, figsize=(7.5, 5.5), sharex=True)
+    ax_mag, ax_ph = axes[0][0], axes[1][0]
+    w = np.array([r["omega"] for r in rows])
+    mag = np.array([r["inversion"] for r in rows])
+    ph = np.array([r["inversion_deg"] for r in rows])
+    sd = np.array([r["inversion_sd"] for r in rows])
+    sd_deg = np.array([r["inversion_sd_deg"] for r in rows])
+    ax_mag.errorbar(w, mag, yerr=np.where(np.isfinite(sd), sd, 0.0), fmt="o", color="C1", ms=5, capsize=3)
+    ax_ph.errorbar(w, ph, yerr=np.where(np.isfinite(sd_deg), sd_deg, 0.0), fmt="o", color="C1", ms=5,
+                   capsize=3)  # fmt: skip
+    ax_mag.axhline(1.0, color="0.3", lw=1, ls="--")
+    ax_mag.axhline(0.5, color="0.6", lw=1, ls=":")
+    ax_mag.text(w.min(), 1.0, " exact inverse", va="bottom", fontsize=8, color="0.3")
+    ax_mag.text(w.min(), 0.5, " half", va="bottom", fontsize=8, color="0.5")
+    ax_ph.axhline(0.0, color="0.3", lw=1, ls="--")
+    ax_mag.set_ylabel("|Ht Yc| (-)")
+    ax_mag.set_ylim(0, max(1.6, float(np.nanmax(mag + np.nan_to_num(sd))) * 1.1))
+    ax_ph.set_ylabel("phase of Ht Yc (deg)")
+    ax_ph.set_xlabel("frequency (rad/s)")
+    for ax in (ax_mag, ax_ph):
+        ax.set_xscale("log")
+        ax.grid(True, which="both", alpha=0.3)
     fig.suptitle(title)
     fig.tight_layout()
     return fig

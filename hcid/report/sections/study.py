@@ -10,6 +10,7 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import results, tables
+from hcid.hcfit.determined import is_undetermined
 from hcid.report import figures, figures_hcfit
 from hcid.report.document import Doc
 from hcid.tables import HC_PARAMETER_NAMES
@@ -27,6 +28,8 @@ class StudyData:
     calibrations: list[tuple[str, str, str, pa.Table, dict]] = field(default_factory=list)
     fc: list[tuple[str, str, dict, dict]] = field(default_factory=list)
     fc_problems: list[str] = field(default_factory=list)
+    checks: list[list[str]] = field(default_factory=list)
+    contradicted: list[str] = field(default_factory=list)
 
 
 def _num(x, digits: int = 3) -> str:
@@ -50,9 +53,8 @@ def _model_curves(run, twin: dict, lines: list[float]) -> dict:
 
     top = min(1.5 * max(lines), np.pi * run.config.timing.output_rate)
     omega = np.geomspace(0.5 * min(lines), top, 300)
-    # The group's own fitted model as fc_estimates.parquet's model columns have it: the twins'
-    # feedback (the group's own) and the group's own feedforward path (fitted_<p>).
-    values = {p: twin.get(f"fitted_{p}", twin[f"twin_{p}"]) for p in HC_PARAMETER_NAMES}
+    # The group's own model (from what its runs determine), as fc_estimates.parquet's model columns.
+    values = {p: twin[f"fitted_{p}"] for p in HC_PARAMETER_NAMES}
     hft, he = hc_response(values, plant(run.config.loop), omega)
     return {"omega": omega, "e": he, "ft": hft if values["Kpt"] > 0 else None}
 
@@ -75,32 +77,64 @@ def compute(run, done) -> StudyData | None:
             uncertain.append(f"{g['group']} ({g['method']})")
         mine = [r for r in rows if r["group"] == g["group"] and r["method"] == g["method"]]
         for p in HC_PARAMETER_NAMES:
-            x = np.array([r[p] for r in mine], dtype=float)
-            se = np.array([r[f"{p}_se"] for r in mine], dtype=float)
-            if not np.isfinite(x).any():
+            fitted = [r for r in mine if r[f"{p}_status"] != "not fitted"]
+            if not fitted:
                 continue
-            spread = float(np.nanstd(x, ddof=1)) if np.isfinite(x).sum() > 1 else math.nan
+            kept = [r for r in fitted if not is_undetermined(r[f"{p}_status"])]
+            x = np.array([r[p] for r in kept], dtype=float)
+            se = np.array([r[f"{p}_se"] for r in kept], dtype=float)
+            spread = float(np.std(x, ddof=1)) if x.size > 1 else math.nan
+            reasons: dict[str, int] = {}
+            for r in fitted:
+                if is_undetermined(r[f"{p}_status"]):
+                    reason = r[f"{p}_status"].split(" (r =")[0]
+                    reasons[reason] = reasons.get(reason, 0) + 1
+            left_out = "; ".join(f"{n}: {reason}" for reason, n in reasons.items()) or "-"
             parameters.append(
-                [g["group"], g["method"], p, str(int(np.isfinite(x).sum())), _num(float(np.nanmedian(x))),
-                 _num(spread, 2), _num(float(np.nanmedian(se)), 2) if np.isfinite(se).any() else "-"]
+                [g["group"], g["method"], p, f"{x.size} of {len(fitted)}",
+                 _num(float(np.median(x))) if x.size else "-", _num(spread, 2),
+                 _num(float(np.median(se)), 2) if np.isfinite(se).any() else "-", left_out]
             )  # fmt: skip
+    checks, contradicted = [], []
+    for g in groups.to_pylist():
+        if g["method"] != groups.column("method")[0].as_py():
+            continue  # the group's model and its runs' own fits are the same for every method
+        checks.append(
+            [g["group"], g["fc_verdict"], _num(g["fc_chi2"]), str(g["fc_dof"]), _num(g["fc_p"], 2),
+             f"{_num(g['he_error_db'], 2)} dB, {_num(g['he_error_deg'], 2)} deg",
+             f"{_num(g['ht_error_db'], 2)} dB, {_num(g['ht_error_deg'], 2)} deg", g["twin_source"],
+             g["twin_undetermined"] or "-"]
+        )  # fmt: skip
+        if g["fc_dof"] > 0 and g["fc_p"] < 0.01:
+            contradicted.append(g["group"])
     factors = [c for c in runs.column_names if c not in tables.ANALYSIS.names]
-    header = ["seed (run)", *factors, "method", "nb_ft", "feedforward", "Kpt", "Kpe", "tau_pe", "w_nms",
-              "zeta_nms", "wc rad/s", "PM deg", "VAF %"]  # fmt: skip
+    shown = ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
+    header = ["seed (run)", *factors, "method", "nb_ft", "feedforward", *shown, "wc rad/s", "PM deg",
+              "VAF %", "data check (p)"]  # fmt: skip
     table_rows = []
     for r in rows:
 
         def with_se(p, r=r):
-            """The estimate with its se; * where it has none although fitted (on a bound)."""
+            """The estimate with its se; † where the data do not determine it (its reason in
+            analysis.csv's <p>_status), ° where held at a literature value."""
             if not math.isfinite(r[p]):
                 return "-"
-            return _num(r[p]) + (f" ± {_num(r[p + '_se'], 2)}" if math.isfinite(r[p + "_se"]) else "*")
+            status = r[p + "_status"]
+            if status.startswith("fixed"):
+                return _num(r[p]) + "°"
+            se = f" ± {_num(r[p + '_se'], 2)}" if math.isfinite(r[p + "_se"]) else ""
+            return _num(r[p]) + se + ("†" if is_undetermined(status) else "")
 
+        check = (
+            "-"
+            if r["fc_dof"] == 0
+            else f"{_num(r['fc_p'], 2)}" + (" contradicted" if r["fc_p"] < 0.01 else "")
+        )
         table_rows.append(
             [str(r["seed"]), *[str(r[f]) for f in factors], r["method"], str(r["nb_ft"]),
              ("yes" if r["feedforward"] else "no") + (" (uncertain)" if r["uncertain"] else ""),
-             with_se("Kpt"), with_se("Kpe"), with_se("tau_pe"), with_se("w_nms"), with_se("zeta_nms"),
-             _num(r["crossover"]), _num(r["phase_margin"]), _num(r["vaf_validation"])]
+             *[with_se(p) for p in shown], _num(r["crossover"]), _num(r["phase_margin"]),
+             _num(r["vaf_validation"]), check]
         )  # fmt: skip
     calibrations = []
     group_rows = groups.to_pylist()
@@ -133,7 +167,9 @@ def compute(run, done) -> StudyData | None:
             by_path = {path: [r for r in t if r["path"] == path] for path in ("e", "ft")}
             curves = _model_curves(run, twin, [r["omega"] for r in t])
             fc.append((name, twin["twins_folder"].removesuffix("-study"), by_path, curves))
-    return StudyData(answers, uncertain, parameters, header, table_rows, calibrations, fc, problems)
+    return StudyData(
+        answers, uncertain, parameters, header, table_rows, calibrations, fc, problems, checks, contradicted
+    )
 
 
 def render(data: StudyData | None, doc: Doc) -> None:
@@ -172,24 +208,59 @@ def render(data: StudyData | None, doc: Doc) -> None:
             f"{caption}: the twins' FP and FN rates over W (exact 95% bands), {what}.",
             lambda t=table, n=title, u=used: figures.plot_calibration(t, n, used=u),
         )
+    if data.checks:
+        doc.text(
+            "**Do the fitted models agree with the data's own frequency response?** (SPEC 11) Each "
+            "group's model (from the values its runs determine) against its runs' Fourier-coefficient "
+            "estimates at the forcing lines, relative to their spread across runs: a chi-square test "
+            "(p below 0.01: *contradicted by the data*), and the median |error| of He (disturbance "
+            "lines) and Ht (target lines) against the estimates. Each run's own model is tested the "
+            "same way against its remnant (the run table's last column)."
+        )
+        doc.table(
+            ["group", "verdict", "chi-square", "dof", "p", "He error", "Ht error", "model built from",
+             "no run determines"],
+            data.checks,
+        )  # fmt: skip
+        if data.contradicted:
+            doc.text(
+                "**Contradicted by the data:** the model of " + "; ".join(data.contradicted) + ". Its "
+                "parameters describe a model these runs do not support; read them as such."
+            )
     doc.text(
-        "Parameters per group (SPEC 8): median and spread over the runs, and the runs' median standard error."
+        "Parameters per group (SPEC 8, 11): the median and the sd over the runs that determine the "
+        "parameter, and their median standard error; runs whose fit leaves it undetermined (on a "
+        "search bound, a 95% interval wider than its plausible range, or correlated above 0.95 with "
+        "another) are left out, with their reasons."
     )
     doc.table(
-        ["group", "method", "parameter", "runs", "median", "sd over runs", "median se"], data.parameters
-    )
+        ["group", "method", "parameter", "runs determining", "median", "sd over runs", "median se",
+         "left out (runs: reason)"],
+        data.parameters,
+    )  # fmt: skip
     for name, folder, paths, curves in data.fc:
         doc.figure(
             f"fc_{_slug(folder)}.png",
             f"{name}: model-free (Fourier-coefficient) estimates of both paths at the forcing lines, "
-            "the group's coefficient average with its spread across runs (points), and the group's "
-            "fitted parametric model (lines; Ht only where its fitted Kpt is above 0).",
+            "the group's coefficient average (points) with its spread across runs (band: +-1 sd), "
+            "and the group's model (lines; Ht only where its Kpt is above 0).",
             lambda p=paths, n=name, c=curves: figures_hcfit.plot_fc(p, c, title=n),
         )
+        if paths.get("ft"):
+            doc.figure(
+                f"inversion_{_slug(folder)}.png",
+                f"{name}: model inversion, the feedforward path times the plant (Ht Yc) at every "
+                "target line, from the model-free estimates (points: the group's average; bars: "
+                "+-1 sd across runs). 1 is the plant's exact inverse.",
+                lambda p=paths["ft"], n=name: figures_hcfit.plot_inversion(p, title=n),
+            )
     for problem in data.fc_problems:
         doc.text(f"No model-free estimate for {problem}.")
     doc.text(
         "Every run (`analysis.csv` holds all columns, one row per run and method, ready for a "
-        "repeated-measures ANOVA or a mixed model):"
+        "repeated-measures ANOVA or a mixed model). Estimates ± standard error; † a value the run "
+        "does not determine (the reason in `analysis.csv`'s `<p>_status`), ° held at a literature "
+        "value (`hc_form` nms fixed); data check: the p-value of the run's own model against its "
+        "data."
     )
     doc.table(data.runs_header, data.runs)
