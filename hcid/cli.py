@@ -330,8 +330,8 @@ def fit_hc(
         str | None,
         typer.Option(
             "--target",
-            help="Estimator: time, closed_loop or frequency (default: the config's fit_hc.target, "
-            "else time).",
+            help="Estimator: auto, lines, time, closed_loop or frequency (default: the config's "
+            "fit_hc.target, else auto: lines for multisine forcing functions, else time).",
         ),
     ] = None,
     jobs: JobsOpt = 2,

@@ -17,17 +17,12 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from hcid.errors import DataError
 from hcid.hcfit.closed_loop import loop_is_stable
 from hcid.hcfit.uncertainty import Z95
-
-if TYPE_CHECKING:
-    from hcid.config.fit import FitSettings
-    from hcid.hcfit.fit import HCFit
 
 __all__ = [
     "CORRELATED",
@@ -80,12 +75,10 @@ def _correlated(partner: str, r: float) -> str:
     return f"correlated with {partner} (r = {r:+.2f})"
 
 
-def parameter_status(fit: HCFit, settings: FitSettings | None = None) -> dict[str, str]:
-    """``{parameter: status}``: :data:`DETERMINED`, or the reason it is undetermined or flagged.
-
-    ``settings`` gives no bounds here (the fit's ``at_bound`` already holds them); it is kept
-    for the bounds a caller may want to report beside the reason.
-    """
+def parameter_status(fit, settings=None) -> dict[str, str]:
+    """``{parameter: status}`` of an :class:`hcid.hcfit.HCFit`: :data:`DETERMINED`, or the reason
+    it is undetermined or flagged. ``settings`` is not read (the fit's ``at_bound`` holds its
+    bounds)."""
     out = {}
     for i, name in enumerate(fit.names):
         value, se = fit.estimates[i], fit.se[i]
@@ -115,7 +108,7 @@ def is_undetermined(status: str) -> bool:
     return status.startswith(_UNDETERMINED_PREFIXES)
 
 
-def nms_undetermined(fit: HCFit, settings: FitSettings | None = None) -> bool:
+def nms_undetermined(fit, settings=None) -> bool:
     """Whether the fit leaves either neuromuscular parameter undetermined (not counting ``fixed``)."""
     status = parameter_status(fit, settings)
     return any(is_undetermined(status[n]) and n not in fit.fixed for n in LITERATURE_NMS)
@@ -147,8 +140,9 @@ class GroupModel:
 FROM_MEDIANS = "medians of the values its runs determine"
 
 
-def group_model(fits: Sequence[HCFit], labels: Sequence[str], num_c, den_c) -> GroupModel:
-    """The group's model from its runs' fits (``labels`` name the runs in the fallback's words).
+def group_model(fits: Sequence, labels: Sequence[str], num_c, den_c) -> GroupModel:
+    """The group's model from its runs' fits (:class:`hcid.hcfit.HCFit`; ``labels`` name the runs
+    in the fallback's words).
 
     Each parameter is the median over the runs whose fit determines it
     (:func:`is_undetermined`). Where that model's loop with the plant (``num_c``, ``den_c``)
