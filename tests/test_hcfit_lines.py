@@ -1,0 +1,222 @@
+"""The lines estimator, the consistency test and what a fit determines (SPEC 11, issue 33).
+
+The records here are built in the frequency domain from the loop's own equations, so that every
+number has an exact source: with the disturbance at the plant's input,
+
+    U = ((He + Hft) Ft - He Yc Fd + N) / (1 + He Yc),    E = Ft - Yc (U + Fd)
+
+at every DFT bin, N the remnant's coefficient, hence ``U - He E - Hft Ft = N`` exactly.
+"""
+
+import math
+
+import control
+import numpy as np
+import pytest
+from scipy import stats
+
+from hcid import hcfit
+from hcid.errors import DataError
+from hcid.fourier import fc_estimate
+from hcid.hcfit.consistency import consistency, group_consistency, line_test
+from hcid.hcfit.determined import (
+    DETERMINED,
+    FROM_MEDIANS,
+    LITERATURE_NMS,
+    group_model,
+    is_undetermined,
+    parameter_status,
+)
+from hcid.hcfit.fit import HCFit, fit_lines, resolve_target
+from hcid.hcfit.lines import NEIGHBOURS, line_data
+
+N, RATE = 1000, 25.0  # 40 s at 25 Hz: bin k is k * 2 pi / 40 rad/s
+TARGET = np.array([4, 10, 22, 34, 46, 62])
+DISTURBANCE = np.array([6, 14, 26, 38, 58, 74])
+TRUTH = {"Kpe": 2.5, "TL": 0.1, "tau_pe": 0.18, "w_nms": 10.1, "zeta_nms": 0.35,
+         "Kpt": 1.0, "TI": 0.15, "tau_pt": 0.05}  # fmt: skip
+PLANT = control.tf([1.0], [1.0, 0.0])
+
+
+def _record(values=TRUTH, remnant=0.0, at_lines=True, seed=0, sign=1.0, background=1e-4):
+    """A record of the loop above: multisines on TARGET and DISTURBANCE, a white remnant of
+    coefficient sd ``remnant`` (at the lines only when ``at_lines``) plus ``background`` off them."""
+    rng = np.random.default_rng(seed)
+    bins = np.arange(N // 2 + 1)
+    omega = 2 * np.pi * bins * RATE / N
+    ft, fd = np.zeros(bins.size, complex), np.zeros(bins.size, complex)
+    ft[TARGET] = sign * 40.0 * np.exp(1j * np.linspace(0.3, 5.0, TARGET.size)) / np.sqrt(TARGET)
+    fd[DISTURBANCE] = (
+        sign * 20.0 * np.exp(1j * np.linspace(1.0, 4.0, DISTURBANCE.size)) / np.sqrt(DISTURBANCE)
+    )
+    noise = (rng.standard_normal(bins.size) + 1j * rng.standard_normal(bins.size)) / np.sqrt(2)
+    lines = np.isin(bins, np.concatenate([TARGET, DISTURBANCE]))
+    n_coef = noise * np.where(lines, remnant if at_lines else 0.0, max(remnant, background))
+    n_coef[0] = n_coef[-1] = 0.0
+    s = 1j * omega[1:]
+    hft, he = hcfit.hc_response(values, PLANT, omega[1:])
+    yc = 1.0 / s
+    u, e = np.zeros(bins.size, complex), np.zeros(bins.size, complex)
+    u[1:] = ((he + hft) * ft[1:] - he * yc * fd[1:] + n_coef[1:]) / (1.0 + he * yc)
+    e[1:] = ft[1:] - yc * (u[1:] + fd[1:])
+    signals = {k: np.fft.irfft(x, N) for k, x in (("ft", ft), ("fd", fd), ("e", e), ("u", u))}
+    record = hcfit.TrackingRecord(signals["ft"], signals["e"], signals["u"], RATE, slice(63, 531),
+                                  slice(531, N), fd=signals["fd"])  # fmt: skip
+    return record, signals
+
+
+def test_line_data_finds_the_lines_and_their_neighbours():
+    # Source: the bins the record was built on; the 6 nearest bins without forcing beside bin 4
+    # are 3, 5, 2, 7, 1, 8 (bin 6 is a disturbance line, 0 is DC).
+    data = line_data(_record()[0])
+    assert data.omega.tolist() == pytest.approx(
+        (2 * np.pi * np.sort(np.r_[TARGET, DISTURBANCE]) / 40).tolist()
+    )
+    assert data.is_target.tolist() == [True, False] * 6
+    assert sorted(np.round(data.near_omega[0] * 40 / (2 * np.pi)).astype(int).tolist()) == [1, 2, 3, 5, 7, 8]
+    assert data.neighbours == NEIGHBOURS
+
+
+def test_a_record_without_lines_is_refused_and_auto_falls_back_to_time():
+    record, signals = _record()
+    broadband = np.random.default_rng(1).standard_normal(N)
+    other = hcfit.TrackingRecord(broadband, signals["e"], signals["u"], RATE, slice(63, 531), slice(531, N),
+                                 fd=signals["fd"])  # fmt: skip
+    with pytest.raises(DataError, match="no forcing lines: the target is not a sum of sines"):
+        line_data(other)
+    assert resolve_target("auto", other) == "time"
+    assert resolve_target("auto", record) == "lines"
+    assert resolve_target("closed_loop", record) == "closed_loop"
+
+
+def test_noise_free_lines_give_the_true_parameters():
+    # Source: no remnant at the lines, so the true parameters make every residual 0 (the remnant
+    # beside them only sets the weights).
+    record, _ = _record(remnant=1e-3, at_lines=False)
+    fit = fit_lines(record, PLANT, True, hcfit.FitSettings(), "input")
+    assert fit.target == "lines" and fit.covariance == "gauss_newton"
+    assert fit.values == pytest.approx(TRUTH, rel=1e-5)
+
+
+def test_held_parameters_are_kept_and_not_estimated():
+    record, _ = _record(remnant=1e-3, at_lines=False)
+    fit = fit_lines(record, PLANT, True, hcfit.FitSettings(), "input", fixed=LITERATURE_NMS)
+    assert fit.fixed == ("w_nms", "zeta_nms")
+    assert fit.values["w_nms"] == 10.1 and fit.values["zeta_nms"] == 0.35
+    assert math.isnan(fit.se[fit.names.index("w_nms")])
+    # The truth's NMS is the literature one: the other six come back exactly.
+    assert fit.values == pytest.approx(TRUTH, rel=1e-5)
+    assert parameter_status(fit)["w_nms"] == "fixed at a literature value"
+
+
+def test_the_consistency_test_holds_its_level_under_the_model():
+    # Source: under the model each line's |r|^2 / s^2 is F(2, 12) and the sum of the carried
+    # chi-square(2) values is chi-square(24) (hcid.hcfit.consistency): p is uniform, so
+    # p < 0.05 in 5% of 400 records, within the binomial's 99.9% interval.
+    p = np.array([line_test(TRUTH, PLANT, line_data(_record(remnant=3.0, seed=s)[0])) for s in range(400)])
+    low, high = stats.binom.interval(0.999, 400, 0.05)
+    assert low <= np.sum(p < 0.05) <= high
+    assert low <= np.sum(p > 0.95) <= high
+
+
+def test_a_wrong_model_is_contradicted_and_said_so():
+    record, signals = _record(remnant=0.3, seed=3)
+    wrong = {**TRUTH, "Kpe": 1.5 * TRUTH["Kpe"]}
+    check = consistency(wrong, PLANT, line_data(record), signals, RATE)
+    assert check.contradicted and check.p < 1e-6
+    assert check.describe().startswith("contradicted by the data (chi-square")
+    assert check.dof == 24 and check.lines == 12 and check.spread == "remnant"
+    right = consistency(TRUTH, PLANT, line_data(record), signals, RATE)
+    assert not right.contradicted
+    # The model without feedforward misses every target line.
+    no_ff = {p: v for p, v in TRUTH.items() if p not in ("Kpt", "TI", "tau_pt")}
+    assert consistency(no_ff, PLANT, line_data(record), signals, RATE).p < 1e-6
+
+
+def test_the_errors_against_the_estimates_are_zero_for_the_true_model_without_noise():
+    # Source: noise-free at the lines, U/E is He exactly at the disturbance lines.
+    record, signals = _record(remnant=1e-3, at_lines=False)
+    check = consistency(TRUTH, PLANT, line_data(record), signals, RATE)
+    assert check.he_db == pytest.approx(0.0, abs=1e-9) and check.he_deg == pytest.approx(0.0, abs=1e-7)
+
+
+def test_a_group_is_tested_against_its_spread_across_runs_whatever_the_sign_of_its_forcing():
+    runs = [_record(remnant=0.5, seed=10 + i, sign=(-1.0) ** i) for i in range(4)]
+    datas, records = [line_data(r) for r, _ in runs], [s for _, s in runs]
+    right = group_consistency(TRUTH, PLANT, datas, records, RATE)
+    assert right.spread == "runs" and right.dof == 24 and not right.contradicted
+    wrong = group_consistency({**TRUTH, "tau_pe": 0.35}, PLANT, datas, records, RATE)
+    assert wrong.contradicted
+
+
+def _fit(values, at_bound=(), se=None, partner=None, correlation=None, fixed=()):
+    names = tuple(values)
+    se = se or {}
+    return HCFit(
+        target="lines", names=names, estimates=tuple(values.values()),
+        at_bound=tuple(n in at_bound for n in names), cost=1.0, starts=1, start_costs=(1.0,),
+        vaf_validation=50.0, se=tuple(se.get(n, 0.01) for n in names), fixed=fixed,
+        partner=tuple((partner or {}).get(n, "") for n in names),
+        correlation=tuple((correlation or {}).get(n, 0.1) for n in names),
+    )  # fmt: skip
+
+
+def test_each_reason_for_an_undetermined_parameter():
+    # Source: SPEC 11's three reasons and the two flags, hcid.hcfit.determined.PLAUSIBLE.
+    fit = _fit(
+        TRUTH,
+        at_bound=("TL",),
+        se={"tau_pe": 0.2, "w_nms": math.inf, "TI": 0.2, "tau_pt": 0.06},
+        partner={"Kpe": "zeta_nms", "zeta_nms": "Kpe"},
+        correlation={"Kpe": -0.97, "zeta_nms": -0.97},
+    )
+    status = parameter_status(fit)
+    assert status["TL"] == "at a search bound"
+    assert status["tau_pe"] == "95% interval wider than its plausible range"  # 3.92 * 0.2 > 0.5
+    assert status["w_nms"] == "not seen by the data (infinite se)"
+    assert status["Kpe"] == "correlated with zeta_nms (r = -0.97)"
+    assert status["Kpt"] == DETERMINED
+    assert status["TI"] == "not told from 0 (se above |value|)"  # 0.2 > 0.15, 0.78 < 1 wide
+    assert status["tau_pt"] == "not told from 0 (se above |value|)"
+    assert [is_undetermined(status[p]) for p in TRUTH] == [True, True, True, True, True, False, False, False]
+    assert parameter_status(_fit({**TRUTH, "tau_pe": 0.02}))["tau_pe"] == "outside its plausible range"
+
+
+def test_a_group_model_uses_only_what_its_runs_determine():
+    plant = (np.array([1.0]), np.array([1.0, 0.0]))
+    fits = [
+        _fit({**TRUTH, "tau_pe": 0.0}, at_bound=("tau_pe",)),
+        _fit({**TRUTH, "tau_pe": 0.2, "Kpe": 2.0}),
+        _fit({**TRUTH, "tau_pe": 0.3, "Kpe": 3.0}),
+    ]
+    model = group_model(fits, ["run 1", "run 2", "run 3"], *plant)
+    assert model.source == FROM_MEDIANS
+    assert model.values["tau_pe"] == pytest.approx(0.25)  # the bound's 0 left out
+    assert model.values["Kpe"] == pytest.approx(2.5)
+    # No run determines tau_pe: the median over all runs, brought into its plausible range.
+    model = group_model([_fit({**TRUTH, "tau_pe": 0.0}, at_bound=("tau_pe",))] * 2, ["a", "b"], *plant)
+    assert model.undetermined == ("tau_pe",) and model.values["tau_pe"] == 0.1
+
+
+def test_an_unstable_group_median_falls_back_to_the_nearest_stable_run():
+    # Source: Kpe 15 with tau_pe 0.3 s around 1/s crosses over near 15 rad/s with ~260 deg of
+    # delay lag: unstable (hcid.hcfit.loop_is_stable); Kpe 2.5 is the truth's stable loop.
+    plant = (np.array([1.0]), np.array([1.0, 0.0]))
+    fits = [_fit({**TRUTH, "Kpe": 15.0, "tau_pe": 0.3}), _fit({**TRUTH, "Kpe": 14.0, "tau_pe": 0.3}),
+            _fit(TRUTH)]  # fmt: skip
+    model = group_model(fits, ["run 1", "run 2", "run 3"], *plant)
+    assert model.source.startswith("run 3's own model (the medians make an unstable loop")
+    assert model.values == TRUTH
+    with pytest.raises(DataError, match="neither the medians"):
+        group_model(fits[:2], ["run 1", "run 2"], *plant)
+
+
+def test_model_inversion_is_ht_times_the_plant():
+    runs = [_record(remnant=0.2, seed=20 + i)[1] for i in range(3)]
+    fc = fc_estimate(runs, RATE, slice(0, N))
+    yc = 1.0 / (1j * fc.omega_t)
+    mag, deg, sd, sd_deg = fc.inversion(yc)
+    assert mag == pytest.approx(np.abs(fc.ht * yc))
+    assert deg == pytest.approx(np.degrees(np.angle(fc.ht * yc)))
+    assert sd == pytest.approx(np.std(np.abs(fc.ht_runs * yc), axis=0, ddof=1))
+    assert np.all(sd_deg > 0)
