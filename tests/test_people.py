@@ -1,0 +1,70 @@
+"""hcid analyse on real recordings (../shared/data/cphs2017/, issue 33): both plants answer with
+--by trial, every model is checked against the data, and nothing undetermined reads as a finding.
+
+Skipped where the shared data are absent (a user's clone)."""
+
+import math
+
+import pyarrow.parquet as pq
+import pytest
+
+from hcid import tables
+from hcid.hcfit.determined import is_undetermined
+from hcid.pipeline.analyse import analyse_study
+from hcid.resolve import load_config
+
+from .conftest import ROOT
+
+DATA = ROOT.parent / "shared" / "data" / "cphs2017"
+
+pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"no recordings at {DATA}")
+
+
+@pytest.fixture(scope="module", params=["fo", "so"])
+def analysed(request, tmp_path_factory):
+    plant = request.param
+    config = load_config(ROOT / "configs" / f"cphs2017_{plant}.yaml")
+    run = tmp_path_factory.mktemp(f"cphs_{plant}") / "run"
+    result = analyse_study(config, run, [str(DATA / f"*_{plant}_*.csv")], by=["trial"], twins=2,
+                           jobs=2, show_progress=False)  # fmt: skip
+    return plant, result
+
+
+def test_both_plants_answer_with_by_trial(analysed):
+    plant, result = analysed
+    groups = result.groups.to_pylist()
+    assert sorted({g["group"] for g in groups}) == ["trial=+1", "trial=-1"]
+    assert len(result.runs) == 12  # 6 files x 2 methods
+    # The forcing functions are multisines: the default estimator is the lines one everywhere.
+    assert set(result.runs.column("target").to_pylist()) == {"lines"}
+
+
+def test_every_model_is_checked_against_the_data(analysed):
+    _, result = analysed
+    for row in result.runs.to_pylist() + result.groups.to_pylist():
+        assert row["fc_verdict"] in ("consistent with the data", "contradicted by the data")
+        assert row["fc_dof"] > 0 and 0.0 <= row["fc_p"] <= 1.0
+        assert (row["fc_verdict"] == "contradicted by the data") == (row["fc_p"] < 0.01)
+    # Source: the CPHS README's target lines (fo: k = 2, 5, 11, 17, 23, 31; so: 2, 5, 11, 17 of 20 s).
+    fc = pq.read_table(result.run_dir / tables.FC_ESTIMATES.file).to_pylist()
+    target = [r for r in fc if r["path"] == "ft" and r["group"] == "trial=+1"]
+    k = [round(r["omega"] * 20 / (2 * math.pi)) for r in target]
+    assert k in ([2, 5, 11, 17, 23, 31], [2, 5, 11, 17])
+    assert all(math.isfinite(r["inversion"]) and math.isfinite(r["inversion_sd"]) for r in target)
+
+
+def test_nothing_undetermined_reads_as_a_finding(analysed):
+    # SPEC 11: a parameter on a bound (no se), with se above |value| or an interval wider than its
+    # plausible range never has the status "determined".
+    _, result = analysed
+    for row in result.runs.to_pylist():
+        for p in tables.HC_PARAMETER_NAMES:
+            status, value, se = row[f"{p}_status"], row[p], row[f"{p}_se"]
+            if status == "not fitted":
+                assert math.isnan(value)
+                continue
+            if status == "determined":
+                assert math.isfinite(se) and se <= abs(value), (row["file"], p, value, se)
+            if status.startswith("fixed"):
+                assert row["hc_form"] == "nms fixed"
+            assert not (is_undetermined(status) and status == "determined")
