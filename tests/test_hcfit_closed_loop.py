@@ -219,3 +219,26 @@ def test_remnant_filter_is_recovered_from_a_simulated_remnant(paper_config):
     assert mean[0] == pytest.approx(kn, rel=0.03)
     assert mean[1] == pytest.approx(paper_config.loop.w_n, rel=0.03)
     assert mean[2] == pytest.approx(paper_config.loop.zeta_n, rel=0.08)
+
+
+@pytest.mark.parametrize(
+    "num, den",
+    [([1.0], [1.0, 0.0]), ([1.0], [1.0, 1.0, 0.0]), ([5.5], [1.0, 2.0, 0.0]), ([1.5], [1.0, 0.0, 0.0])],
+)
+def test_the_batched_stability_check_equals_the_one_by_one_reference(num, den):
+    # Source: loop_is_stable (numpy.roots of each characteristic polynomial) is the slow reference
+    # of loops_are_stable (companion matrices' eigenvalues in one call), on random sets spanning
+    # the default bounds, delays at and near 0 included.
+    from hcid.hcfit.closed_loop import loop_is_stable, loops_are_stable
+
+    rng = np.random.default_rng(7)
+    names = ("Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
+    n = 2000
+    theta = np.vstack([rng.uniform(0.01, 20, n), rng.uniform(0, 3, n), rng.uniform(0, 1, n),
+                       rng.uniform(2, 50, n), rng.uniform(0.05, 2, n)])  # fmt: skip
+    theta[2, :40], theta[2, 40:80] = 0.0, 1e-5
+    num, den = np.array(num), np.array(den)
+    fast = loops_are_stable(theta, names, num, den)
+    slow = [loop_is_stable(dict(zip(names, theta[:, j], strict=True)), num, den) for j in range(n)]
+    assert fast.tolist() == slow
+    assert 0 < fast.sum() < n  # both kinds of loop are in the sample

@@ -35,7 +35,7 @@ import numpy as np
 from hcid.errors import IdentificationError
 from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials
 
-__all__ = ["PADE_ORDER", "closed_loop_u", "loop_is_stable", "loop_spectrum"]
+__all__ = ["PADE_ORDER", "closed_loop_u", "loop_is_stable", "loop_spectrum", "loops_are_stable"]
 
 #: Order of the Pade approximant of ``exp(-s tau_pe)`` in the stability check: its phase
 #: error is below 1 deg up to ``w tau = 9`` (37 rad/s at tau = 0.24 s), far above a
@@ -86,6 +86,59 @@ def loop_is_stable(values: dict, num_c: np.ndarray, den_c: np.ndarray) -> bool:
     return bool(np.all(np.isfinite(roots)) and np.all(roots.real < 0))
 
 
+#: Below this delay (s) the Pade polynomial's leading coefficients (tau^8) are too small for a
+#: companion matrix: such sets are checked one by one (:func:`loop_is_stable`).
+_BATCH_MIN_TAU = 1e-3
+
+
+def loops_are_stable(theta: np.ndarray, names, num_c: np.ndarray, den_c: np.ndarray) -> np.ndarray:
+    """:func:`loop_is_stable` for every column of ``theta`` (n_p, n_sets) at once (bool, n_sets).
+
+    The characteristic polynomials of the sets share their degree; their roots are the
+    eigenvalues of a stack of companion matrices, computed in one call. Sets with a delay
+    below :data:`_BATCH_MIN_TAU` or a non-positive NMS pair go through :func:`loop_is_stable`.
+    """
+    p = dict(zip(names, theta, strict=True))
+    w, z, tau = p["w_nms"], p["zeta_nms"], p["tau_pe"]
+    batch = (tau >= _BATCH_MIN_TAU) & (w > 0) & (z > 0) & np.isfinite(theta).all(axis=0)
+    out = np.zeros(theta.shape[1], dtype=bool)
+    for j in np.flatnonzero(~batch):
+        column = {name: float(v) for name, v in zip(names, theta[:, j], strict=True)}
+        out[j] = loop_is_stable(column, num_c, den_c)
+    if not batch.any():
+        return out
+    w, z, tau = w[batch], z[batch], tau[batch]
+    k = np.arange(PADE_ORDER + 1)
+    c = np.array([math.factorial(2 * PADE_ORDER - i) * math.factorial(PADE_ORDER)
+                  / (math.factorial(2 * PADE_ORDER) * math.factorial(i) * math.factorial(PADE_ORDER - i))
+                  for i in k])  # fmt: skip
+    powers = c * tau[:, None] ** k  # (n, order + 1), ascending powers of s
+    q = powers[:, ::-1]
+    pp = (powers * (-1.0) ** k)[:, ::-1]
+    nms_den = np.stack([np.ones_like(w), 2.0 * z * w, w * w], axis=1)
+    lead = (w * w * p["Kpe"][batch])[:, None] * np.stack([p["TL"][batch], np.ones_like(w)], axis=1)
+
+    def conv(a, b):  # row-wise polynomial products
+        out = np.zeros((a.shape[0], a.shape[1] + b.shape[1] - 1))
+        for i in range(a.shape[1]):
+            out[:, i : i + b.shape[1]] += a[:, i : i + 1] * b
+        return out
+
+    left = conv(conv(nms_den, np.broadcast_to(den_c, (w.size, den_c.size))), q)
+    right = conv(conv(lead, np.broadcast_to(num_c, (w.size, num_c.size))), pp)
+    closed = np.zeros((w.size, max(left.shape[1], right.shape[1])))
+    closed[:, closed.shape[1] - left.shape[1] :] += left
+    closed[:, closed.shape[1] - right.shape[1] :] += right
+    degree = closed.shape[1] - 1
+    companion = np.zeros((w.size, degree, degree))
+    companion[:, 0, :] = -closed[:, 1:] / closed[:, :1]
+    companion[:, np.arange(1, degree), np.arange(degree - 1)] = 1.0
+    with np.errstate(all="ignore"):
+        roots = np.linalg.eigvals(companion)
+    out[batch] = np.all(np.isfinite(roots), axis=1) & np.all(roots.real < 0, axis=1)
+    return out
+
+
 class _ClosedLoop:
     """The loop's DFT quantities on one record, computed once per fit."""
 
@@ -112,10 +165,7 @@ class _ClosedLoop:
         spectrum = loop_spectrum(theta, self.names, self.s, self.g, self.ft, self.fd_term)
         with np.errstate(invalid="ignore"):
             u = np.fft.irfft(spectrum, n=self.n, axis=0)
-        for j in range(theta.shape[1]):
-            column = {name: float(v) for name, v in zip(self.names, theta[:, j], strict=True)}
-            if not loop_is_stable(column, self.num_c, self.den_c):
-                u[:, j] = np.nan
+        u[:, ~loops_are_stable(theta, self.names, self.num_c, self.den_c)] = np.nan
         return u
 
 

@@ -30,7 +30,7 @@ import numpy as np
 
 from hcid.errors import DataError
 from hcid.fourier import ForcingLines, forcing_lines
-from hcid.hcfit.closed_loop import loop_is_stable, loop_spectrum
+from hcid.hcfit.closed_loop import loop_spectrum, loops_are_stable
 from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials
 
 __all__ = ["NEIGHBOURS", "LineData", "line_data"]
@@ -142,10 +142,7 @@ class LinesProblem:
     def _errors(self, thetas: np.ndarray) -> np.ndarray:
         u = loop_spectrum(thetas, self.names, self.s, self.g, self.ft, self.fd_term)
         errors = (u - self.u) * self.scale
-        for j in range(thetas.shape[1]):
-            column = {name: float(v) for name, v in zip(self.names, thetas[:, j], strict=True)}
-            if not loop_is_stable(column, self.num_c, self.den_c):
-                errors[:, j] = np.nan
+        errors[:, ~loops_are_stable(thetas, self.names, self.num_c, self.den_c)] = np.nan
         return errors
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
