@@ -26,6 +26,7 @@ from scipy import signal as sps
 
 from hcid import signals
 from hcid.config import Config, HCModel, Multisine, Segments
+from hcid.errors import ConfigError
 from hcid.hcmodel import DiscreteLoop
 from hcid.tables import CHANNELS
 
@@ -284,6 +285,12 @@ def remnant_gain(config: Config) -> float:
     sens = 1.0 / (1.0 + dloop.response("plant", w) * dloop.response("feedback", w))
     var_n1 = float(np.mean(np.abs(n1) ** 2))
     var_un = float(np.mean(np.abs(n1 * sens) ** 2))
+    if var_n1 - ratio * var_un <= 0.0:
+        # var(n)/var(u) tends to var(n1)/var(S n1) as Kn grows: the loop cannot have more.
+        raise ConfigError(
+            f"loop.remnant_ratio: {ratio:g} is more than this loop can show (var(n)/var(u) stays below "
+            f"{var_n1 / var_un:.3g} however strong the remnant); give a smaller ratio or loop.remnant_gain"
+        )
     return float(np.sqrt(ratio * var_u_fd / (var_n1 - ratio * var_un)))
 
 

@@ -251,3 +251,22 @@ def test_cached_forcing_and_loop_are_not_shared_for_writing(paper_config):
     dloop = _discrete_loop(paper_config.model("FF"), paper_config.loop, paper_config.timing.sim_dt)
     with pytest.raises(ValueError, match="read-only"):
         dloop.feedback[0][0] = 0.0
+
+
+def test_a_remnant_ratio_the_loop_cannot_show_is_refused_in_one_line():
+    # Source: var(n)/var(u) = Kn^2 var(n1) / (var(u_fd) + Kn^2 var(S n1)) tends to
+    # var(n1)/var(S n1) as Kn grows: 0.472 for the integrator example's loop (found by a benchmark:
+    # before, remnant_gain returned NaN with a RuntimeWarning and the records were all NaN).
+    import yaml
+
+    from hcid.errors import ConfigError
+    from hcid.resolve import parse_config
+
+    raw = yaml.safe_load(open("configs/integrator_example.yaml"))
+    raw["loop"]["remnant_ratio"] = 0.45
+    assert remnant_gain(parse_config(raw, "x")) > 0
+    raw["loop"]["remnant_ratio"] = 0.5
+    with pytest.raises(
+        ConfigError, match=r"^loop.remnant_ratio: 0.5 is more than this loop can show .*0.472"
+    ):
+        remnant_gain(parse_config(raw, "x"))
