@@ -3,6 +3,8 @@
 import dataclasses
 
 import numpy as np
+from pathlib import Path
+
 import pytest
 
 from hcid.hcmodel import plant, true_response
@@ -262,7 +264,7 @@ def test_a_remnant_ratio_the_loop_cannot_show_is_refused_in_one_line():
     from hcid.errors import ConfigError
     from hcid.resolve import parse_config
 
-    raw = yaml.safe_load(open("configs/integrator_example.yaml"))
+    raw = yaml.safe_load(Path("configs/integrator_example.yaml").read_text())
     raw["loop"]["remnant_ratio"] = 0.45
     assert remnant_gain(parse_config(raw, "x")) > 0
     raw["loop"]["remnant_ratio"] = 0.5
