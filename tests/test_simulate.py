@@ -1,10 +1,9 @@
 """Closed-loop simulation against independent computations and SPEC figures."""
 
 import dataclasses
-
-import numpy as np
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from hcid.hcmodel import plant, true_response
