@@ -85,7 +85,12 @@ def test_a_record_without_lines_is_refused_and_auto_falls_back_to_time():
     with pytest.raises(DataError, match="no forcing lines: the target is not a sum of sines"):
         line_data(other)
     assert resolve_target("auto", other) == "time"
-    assert resolve_target("auto", record) == "lines"
+    assert resolve_target("auto", record) == "lines"  # 6 disturbance lines, 5 feedback parameters
+    # Four disturbance lines: fewer than the feedback path's parameters, so auto takes time.
+    fewer = hcfit.TrackingRecord(signals["ft"], signals["e"], signals["u"], RATE, slice(63, 531),
+                                 slice(531, N), fd=np.fft.irfft(np.where(np.isin(np.arange(N // 2 + 1),
+                                 DISTURBANCE[:4]), np.fft.rfft(signals["fd"]), 0), N))  # fmt: skip
+    assert resolve_target("auto", fewer) == "time"
     assert resolve_target("closed_loop", record) == "closed_loop"
 
 

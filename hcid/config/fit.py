@@ -43,7 +43,8 @@ UNITS = {
     "tau_pt": "s",
 }
 #: The estimators; ``auto`` is ``lines`` where the record's forcing functions are multisines on
-#: disjoint lines over whole periods, else ``time`` (docs/parametric-fit.md: how it was chosen).
+#: disjoint lines over whole periods with at least one disturbance line per feedback parameter,
+#: else ``time`` (docs/parametric-fit.md: how it was chosen).
 TARGETS = ("auto", "lines", "time", "closed_loop", "frequency")
 #: The neuromuscular pair: ``auto`` (fitted, and held at the literature values where the fit
 #: leaves it undetermined), ``free`` (always fitted) or ``fixed`` (always held).
@@ -136,8 +137,8 @@ class FitSettings:
     Attributes
     ----------
     target : str
-        ``auto`` (the default: ``lines`` where the forcing functions allow it, else ``time``;
-        docs/parametric-fit.md), ``lines``, ``time``, ``closed_loop`` or ``frequency``
+        ``auto`` (the default: ``lines`` where the forcing functions allow it, with at least 5
+        disturbance lines, else ``time``; docs/parametric-fit.md), ``lines``, ``time``, ``closed_loop`` or ``frequency``
         (:data:`TARGETS`).
     nms : str
         The neuromuscular pair: ``auto``, ``free`` or ``fixed`` (:data:`NMS_CHOICES`).

@@ -12,7 +12,7 @@ import numpy as np
 import pyarrow as pa
 from scipy import optimize
 
-from hcid.config.fit import UNITS, FitSettings
+from hcid.config.fit import FEEDBACK_PARAMETERS, UNITS, FitSettings
 from hcid.errors import DataError, IdentificationError
 from hcid.hcfit.closed_loop import _ClosedLoop
 from hcid.hcfit.consistency import CONTRADICTED, line_test
@@ -24,6 +24,7 @@ from hcid.hcfit.uncertainty import Z95, covariance, jacobian
 __all__ = [
     "BOUND_TOLERANCE",
     "HCFit",
+    "MIN_DISTURBANCE_LINES",
     "fit_closed_loop",
     "fit_frequency",
     "fit_hc",
@@ -565,19 +566,27 @@ def fit_lines(
     return _solve(problem, settings, "lines", record, fixed)
 
 
+#: ``auto`` takes the ``lines`` estimator only where the disturbance has at least one line per
+#: feedback parameter: each line gives He at one frequency (two numbers), and with fewer lines the
+#: feedback path is barely determined by them (the CPHS second-order plant's 3 lines: twins with
+#: a person's remnant were fitted better by ``time``; docs/parametric-fit.md).
+MIN_DISTURBANCE_LINES = len(FEEDBACK_PARAMETERS)
+
+
 def resolve_target(target: str, record: TrackingRecord | None) -> str:
     """The estimator ``auto`` stands for on this record: ``lines`` where its forcing functions are
-    multisines on disjoint lines over whole periods (:func:`hcid.hcfit.lines.line_data`), else
-    ``time``; any other target is itself."""
+    multisines on disjoint lines over whole periods (:func:`hcid.hcfit.lines.line_data`) and the
+    disturbance has at least :data:`MIN_DISTURBANCE_LINES` lines, else ``time``; any other target
+    is itself."""
     if target != "auto":
         return target
     if record is None or record.fd is None:
         return "time"
     try:
-        line_data(record)
+        data = line_data(record)
     except DataError:
         return "time"
-    return "lines"
+    return "lines" if np.count_nonzero(~data.is_target) >= MIN_DISTURBANCE_LINES else "time"
 
 
 def fit_hc(
