@@ -1,10 +1,11 @@
 """Which parametric-fit estimator to make the default: evidence from people and from twins with known truth.
 
-Six estimator variants (``hcid.hcfit.FitSettings``): targets ``time``, ``closed_loop`` and ``lines``,
-each with ``nms`` ``free`` (the neuromuscular pair always fitted) and ``auto`` (held at 10.1 rad/s,
-0.35 where the fit leaves it undetermined). Every fit is ``hcid.hcfit.fit_hc`` with feedforward,
-the disturbance at the plant's input, estimation rows 63..531 and validation rows 531..1000 of a
-1000-sample record (40 s at 25 Hz: two 20 s periods of the forcing functions).
+Seven estimator variants (``hcid.hcfit.FitSettings``): the default (``auto``, ``nms`` ``auto``) and
+the targets ``time``, ``closed_loop`` and ``lines``, each with ``nms`` ``free`` (the neuromuscular
+pair always fitted) and ``auto`` (held at 10.1 rad/s, 0.35 where the fit leaves it undetermined).
+Every fit is ``hcid.hcfit.fit_hc`` with feedforward, the disturbance at the plant's input,
+estimation rows 63..531 and validation rows 531..1000 of a 1000-sample record (40 s at 25 Hz:
+two 20 s periods of the forcing functions).
 
 (b) People: the 12 CPHS 2017 recordings (SPEC 11; the data's README), subjects dp, ef, gy, plants
 ``fo`` (1/s) and ``so`` (1/(s (s + 1))), a ``+1`` and a ``-1`` trial each (forcing functions of
@@ -99,7 +100,9 @@ HE_MAX = 6.0  # rad/s: the disturbance lines the He agreement is read at
 PLANTS = {"fo": ([1.0], [1.0, 0.0]), "so": ([1.0], [1.0, 1.0, 0.0])}
 SUBJECTS = ("dp", "ef", "gy")
 SIGNS = (1, -1)
-VARIANTS = tuple((target, nms) for target in ("time", "closed_loop", "lines") for nms in ("free", "auto"))
+VARIANTS = (("auto", "auto"),) + tuple(
+    (target, nms) for target in ("time", "closed_loop", "lines") for nms in ("free", "auto")
+)  # the default first: auto is lines for fo (5 disturbance lines), time for so (3)
 #: The twins' neuromuscular system: not the literature values ``nms auto`` holds a pair at
 #: (10.1 rad/s, 0.35), so that holding it is not right by construction.
 NMS = {"w_nms": 13.0, "zeta_nms": 0.5}
@@ -159,6 +162,8 @@ def _table(header: list[str], rows: list[list[str]]) -> None:
 
 
 def _name(variant: tuple[str, str]) -> str:
+    if variant == ("auto", "auto"):
+        return "default (auto, nms auto)"
     return f"{variant[0]}, nms {variant[1]}"
 
 
