@@ -475,8 +475,10 @@ def _print_thresholds(sweep, is_paper: bool) -> None:
 
 def _print_analysis(result) -> None:
     """Per group and method: the answer first (feedforward in k of N runs at W, how sure), then
-    the parameters and the loop (medians over the group's runs, median standard error)."""
+    the parameters the runs determine, the loop, and the data check (SPEC 11)."""
     import numpy as np
+
+    from hcid.hcfit.consistency import CONTRADICTED, format_p
 
     def pct(k: float, lo: float, hi: float) -> str:
         return f"{100 * k:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}]"
@@ -508,13 +510,17 @@ def _print_analysis(result) -> None:
         wc = np.nanmedian([r["crossover"] for r in rows])
         pm = np.nanmedian([r["phase_margin"] for r in rows])
         typer.echo(f"    loop: crossover {wc:.3g} rad/s, phase margin {pm:.3g} deg (medians over runs)")
-        contradicted = f"{g['n_contradicted']} of {g['n_runs']} runs' own models are contradicted by the data"
+        contradicted = (
+            f"{g['n_contradicted']} of {g['n_runs']} runs' own fits at W are contradicted by the data"
+        )
         if g["fc_dof"] > 0:
+            ht = "" if g["ht_error_db"] != g["ht_error_db"] else (
+                f", Ht {g['ht_error_db']:.1f} dB {g['ht_error_deg']:.0f} deg")  # fmt: skip
             typer.echo(
                 f"    data check: the group's model is {g['fc_verdict']} (chi-square {g['fc_chi2']:.1f} on "
-                f"{g['fc_dof']} dof, p = {g['fc_p']:.2g}; median |error| He {g['he_error_db']:.1f} dB "
-                f"{g['he_error_deg']:.0f} deg against the Fourier-coefficient estimates); {contradicted} "
-                "(p < 0.01)"
+                f"{g['fc_dof']} dof, p = {format_p(g['fc_p'])}, spread {g['fc_spread']}; median |error| "
+                f"against the Fourier-coefficient estimates He {g['he_error_db']:.1f} dB "
+                f"{g['he_error_deg']:.0f} deg{ht}); {contradicted} (p < {CONTRADICTED:g})"
             )
         else:
             typer.echo(f"    data check: {g['fc_verdict']}")
@@ -527,30 +533,18 @@ def _print_analysis(result) -> None:
 
 
 def _analysis_parameters(rows: list[dict]) -> str:
-    """The group's parameters from what its runs determine: median over those runs, their sd and
-    count, units; then what no run (or only some) determines, with the reasons."""
-    import numpy as np
-
-    from hcid.hcfit import UNITS
-    from hcid.hcfit.determined import is_undetermined
+    """The runs' fits at W (hcid.pipeline.analyse.summarise_parameters): median over the runs that
+    determine each, their sd and count, units; then what some runs leave undetermined, and why."""
+    from hcid.pipeline.analyse import summarise_parameters
 
     parts, left_out = [], []
-    for p in ("Kpe", "TL", "tau_pe", "w_nms", "zeta_nms", "Kpt", "TI", "tau_pt"):
-        fitted = [r for r in rows if r[f"{p}_status"] != "not fitted"]
-        if not fitted:
-            continue
-        kept = np.array([r[p] for r in fitted if not is_undetermined(r[f"{p}_status"])], dtype=float)
-        unit = "" if UNITS[p] == "-" else f" {UNITS[p]}"
-        if kept.size:
-            sd = f", sd {np.std(kept, ddof=1):.2g}" if kept.size > 1 else ""
-            parts.append(f"{p} {np.median(kept):.3g}{unit} ({kept.size} of {len(fitted)} runs{sd})")
-        reasons: dict[str, int] = {}
-        for r in fitted:
-            if is_undetermined(r[f"{p}_status"]):
-                reason = r[f"{p}_status"].split(" (r =")[0]
-                reasons[reason] = reasons.get(reason, 0) + 1
-        left_out += [f"{p} in {n} ({reason})" for reason, n in reasons.items()]
-    text = "    parameters (median over the runs that determine each, sd over them): " + ", ".join(parts)
+    for s in summarise_parameters(rows):
+        unit = "" if s.unit == "-" else f" {s.unit}"
+        if s.kept:
+            sd = f", sd {s.sd:.2g}" if s.kept > 1 else ""
+            parts.append(f"{s.name} {s.median:.3g}{unit} ({s.kept} of {s.fitted} runs{sd})")
+        left_out += [f"{s.name} in {n} of {s.fitted} runs ({why})" for why, n in s.left_out.items()]
+    text = "    runs' fits at W (median over the runs that determine each; sd over them): " + ", ".join(parts)
     if left_out:
         text += "\n    not determined, left out: " + "; ".join(left_out)
     return text

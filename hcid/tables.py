@@ -400,10 +400,11 @@ _CHOICE_FIELDS = (
 #: A fitted model against the data's own frequency response (SPEC 11,
 #: :mod:`hcid.hcfit.consistency`): the chi-square statistic, its degrees of freedom and
 #: p-value, the verdict in words (``contradicted by the data`` below p = 0.01, ``consistent
-#: with the data``, or why there is no test), and the median |error| of He at the disturbance
+#: with the data``, or why there is no test), where its standard errors came from (``remnant``
+#: beside the lines, or ``across n runs``), and the median |error| of He at the disturbance
 #: lines and of Ht at the target lines against the Fourier-coefficient estimates (dB, deg).
 _CONSISTENCY_FIELDS = [
-    ("fc_chi2", _F64), ("fc_dof", _INT), ("fc_p", _F64), ("fc_verdict", _STR),
+    ("fc_chi2", _F64), ("fc_dof", _INT), ("fc_p", _F64), ("fc_verdict", _STR), ("fc_spread", _STR),
     ("he_error_db", _F64), ("he_error_deg", _F64), ("ht_error_db", _F64), ("ht_error_deg", _F64),
 ]  # fmt: skip
 

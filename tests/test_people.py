@@ -1,7 +1,7 @@
 """hcid analyse on real recordings (../shared/data/cphs2017/, issue 33): both plants answer with
 --by trial, every model is checked against the data, and nothing undetermined reads as a finding.
 
-Skipped where the shared data are absent (a user's clone)."""
+Skipped where the shared data are absent (a user's clone); the second-order plant's run is slow."""
 
 import math
 
@@ -20,7 +20,7 @@ DATA = ROOT.parent / "shared" / "data" / "cphs2017"
 pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"no recordings at {DATA}")
 
 
-@pytest.fixture(scope="module", params=["fo", "so"])
+@pytest.fixture(scope="module", params=["fo", pytest.param("so", marks=pytest.mark.slow)])
 def analysed(request, tmp_path_factory):
     plant = request.param
     config = load_config(ROOT / "configs" / f"cphs2017_{plant}.yaml")
@@ -64,8 +64,8 @@ def test_nothing_undetermined_reads_as_a_finding(analysed):
             if status == "not fitted":
                 assert math.isnan(value)
                 continue
-            if status == "determined":
-                assert math.isfinite(se) and se <= abs(value), (row["file"], p, value, se)
+            if not math.isfinite(se) or se > abs(value):
+                # No se (a bound), an infinite one, or se above |value|: never a plain finding.
+                assert status != "determined", (row["file"], p, value, se)
             if status.startswith("fixed"):
-                assert row["hc_form"] == "nms fixed"
-            assert not (is_undetermined(status) and status == "determined")
+                assert row["hc_form"] == "nms fixed" and is_undetermined(status)

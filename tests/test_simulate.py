@@ -256,14 +256,16 @@ def test_cached_forcing_and_loop_are_not_shared_for_writing(paper_config):
 
 def test_a_remnant_ratio_the_loop_cannot_show_is_refused_in_one_line():
     # Source: var(n)/var(u) = Kn^2 var(n1) / (var(u_fd) + Kn^2 var(S n1)) tends to
-    # var(n1)/var(S n1) as Kn grows: 0.472 for the integrator example's loop (found by a benchmark:
-    # before, remnant_gain returned NaN with a RuntimeWarning and the records were all NaN).
+    # var(n1)/var(S n1) as Kn grows: 0.472 for the integrator example's loop (computed by the same
+    # frequency integrals; before, remnant_gain returned NaN with a RuntimeWarning).
     import yaml
 
     from hcid.errors import ConfigError
     from hcid.resolve import parse_config
 
-    raw = yaml.safe_load(Path("configs/integrator_example.yaml").read_text())
+    raw = yaml.safe_load(
+        (Path(__file__).resolve().parents[1] / "configs/integrator_example.yaml").read_text()
+    )
     raw["loop"]["remnant_ratio"] = 0.45
     assert remnant_gain(parse_config(raw, "x")) > 0
     raw["loop"]["remnant_ratio"] = 0.5

@@ -138,8 +138,8 @@ class FitSettings:
     ----------
     target : str
         ``auto`` (the default: ``lines`` where the forcing functions allow it, with at least 5
-        disturbance lines, else ``time``; docs/parametric-fit.md), ``lines``, ``time``, ``closed_loop`` or ``frequency``
-        (:data:`TARGETS`).
+        disturbance lines, else ``time``; docs/parametric-fit.md), ``lines``, ``time``,
+        ``closed_loop`` or ``frequency`` (:data:`TARGETS`).
     nms : str
         The neuromuscular pair: ``auto``, ``free`` or ``fixed`` (:data:`NMS_CHOICES`).
     starts : int

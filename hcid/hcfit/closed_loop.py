@@ -43,9 +43,9 @@ __all__ = ["PADE_ORDER", "closed_loop_u", "loop_is_stable", "loop_spectrum", "lo
 PADE_ORDER = 8
 
 
-def _pade(tau: float, order: int = PADE_ORDER) -> tuple[np.ndarray, np.ndarray]:
-    """``(p, q)`` descending, ``exp(-s tau) ~ p(s)/q(s)`` (diagonal Pade, closed form)."""
-    c = np.array(
+def _pade_coefficients(order: int = PADE_ORDER) -> np.ndarray:
+    """The diagonal Pade approximant's coefficients c_k (ascending powers of s tau), closed form."""
+    return np.array(
         [
             math.factorial(2 * order - k)
             * math.factorial(order)
@@ -53,6 +53,11 @@ def _pade(tau: float, order: int = PADE_ORDER) -> tuple[np.ndarray, np.ndarray]:
             for k in range(order + 1)
         ]
     )
+
+
+def _pade(tau: float, order: int = PADE_ORDER) -> tuple[np.ndarray, np.ndarray]:
+    """``(p, q)`` descending, ``exp(-s tau) ~ p(s)/q(s)`` (diagonal Pade, closed form)."""
+    c = _pade_coefficients(order)
     powers = tau ** np.arange(order + 1)
     q = (c * powers)[::-1]
     p = (c * powers * (-1.0) ** np.arange(order + 1))[::-1]
@@ -73,7 +78,7 @@ def loop_is_stable(values: dict, num_c: np.ndarray, den_c: np.ndarray) -> bool:
     (True, False)
     """
     w, z = values["w_nms"], values["zeta_nms"]
-    if not (w > 0 and z > 0):
+    if not (w > 0 and z > 0) or not all(math.isfinite(float(v)) for v in values.values()):
         return False
     p, q = _pade(values["tau_pe"])
     nms_den = np.array([1.0, 2.0 * z * w, w * w])
@@ -109,9 +114,7 @@ def loops_are_stable(theta: np.ndarray, names, num_c: np.ndarray, den_c: np.ndar
         return out
     w, z, tau = w[batch], z[batch], tau[batch]
     k = np.arange(PADE_ORDER + 1)
-    c = np.array([math.factorial(2 * PADE_ORDER - i) * math.factorial(PADE_ORDER)
-                  / (math.factorial(2 * PADE_ORDER) * math.factorial(i) * math.factorial(PADE_ORDER - i))
-                  for i in k])  # fmt: skip
+    c = _pade_coefficients()
     powers = c * tau[:, None] ** k  # (n, order + 1), ascending powers of s
     q = powers[:, ::-1]
     pp = (powers * (-1.0) ** k)[:, ::-1]

@@ -14,17 +14,19 @@ value of the same tail probability and summed: ``X^2`` with ``2 L`` degrees of f
 for L lines, and its p-value. A model with p below :data:`CONTRADICTED` is "contradicted
 by the data".
 
-For a group of runs the same model is set against each run's deviations
-``d_k = r_k / E_k`` or ``r_k / Ft_k`` (invariant to a sign flip of the forcing
-functions): their mean over the n runs against its standard error from their spread,
-``t_k = |mean d_k|^2 / (s_k^2 / n)``, F(2, 2(n - 1)) under the model. This spread holds
-the differences between the group's people, not only their remnant.
+For a group of runs the same model is set against each run's deviations ``d_k = r_k / F_k``,
+``F_k`` the forcing function's own coefficient at the line (Fd at a disturbance line, Ft at a
+target line): noise-free, so ``d`` is the remnant's coefficient scaled, zero-mean under the model
+(a ratio with the noisy E would be biased towards -1/Yc where the remnant is large), and invariant
+to a sign flip of the forcing functions. Their mean over the n runs is set against its standard
+error from their spread, ``t_k = |mean d_k|^2 / (s_k^2 / n)``, F(2, 2(n - 1)) under the model.
+That spread holds the differences between the group's people, not only their remnant.
 
-The parameters are not counted off the degrees of freedom (the fit is to the same lines
-by the ``lines`` estimator, to other data by the others): the test is lenient by up to the
-number of parameters. Beside the test, the median |error| of the model against the
+A model fitted to these same lines (the ``lines`` estimator) has ``fitted`` parameters taken off
+the degrees of freedom (its cost is nearly this statistic); a model fitted to other data, or the
+group's medians, keeps ``2 L``. Beside the test, the median |error| of the model against the
 Fourier-coefficient estimates themselves (:func:`hcid.fourier.fc_estimate`), in dB and
-degrees, per path.
+degrees, per path: a description, not a test (a run's U/E is biased where the remnant is large).
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ from hcid.fourier import fc_estimate
 from hcid.hcfit.lines import LineData
 from hcid.hcfit.model import hc_response
 
-__all__ = ["CONTRADICTED", "Consistency", "consistency", "group_consistency", "line_test"]
+__all__ = ["CONTRADICTED", "Consistency", "consistency", "format_p", "group_consistency", "line_test"]
 
 #: A model whose consistency p-value lies below this is contradicted by the data (SPEC 11).
 CONTRADICTED = 0.01
@@ -65,7 +67,7 @@ class Consistency:
         Forcing lines used.
     spread : str
         Where the estimates' standard errors came from: ``remnant`` (bins beside the lines)
-        or ``runs`` (the spread across the group's runs).
+        or ``across n runs`` (the spread across the group's runs).
     """
 
     chi2: float
@@ -84,24 +86,38 @@ class Consistency:
 
     @property
     def verdict(self) -> str:
-        """In words: ``contradicted by the data`` or ``consistent with the data``."""
+        """In words: ``contradicted by the data``, ``consistent with the data``, or ``no test``
+        (a p-value that is not a number, e.g. from a model with a NaN parameter)."""
+        if not math.isfinite(self.p):
+            return "no test (the model's responses are not finite)"
         return "contradicted by the data" if self.contradicted else "consistent with the data"
 
     def describe(self) -> str:
-        """E.g. ``consistent with the data (chi2 25.1, 22 dof, p = 0.29; He 1.2 dB, 9 deg)``."""
+        """E.g. ``consistent with the data (chi-square 19.5 on 22 dof, p = 0.62, spread: remnant;
+        median |error| He 3.0 dB 18 deg, Ht 1.4 dB 9 deg)``."""
         ht = "" if math.isnan(self.ht_db) else f", Ht {self.ht_db:.1f} dB {self.ht_deg:.0f} deg"
         return (
-            f"{self.verdict} (chi-square {self.chi2:.1f} on {self.dof} dof, p = {self.p:.2g}; "
-            f"median |error| He {self.he_db:.1f} dB {self.he_deg:.0f} deg{ht})"
+            f"{self.verdict} (chi-square {self.chi2:.1f} on {self.dof} dof, p = {format_p(self.p)}, "
+            f"spread: {self.spread}; median |error| He {self.he_db:.1f} dB {self.he_deg:.0f} deg{ht})"
         )
 
 
-def _chi2(t: np.ndarray, dof_noise: int) -> tuple[float, int, float]:
-    """Sum of each line's F(2, dof_noise) statistic carried to chi-square(2), and its p-value."""
+def format_p(p: float) -> str:
+    """A p-value for a reader: two digits, ``< 1e-15`` below what double precision resolves."""
+    if not math.isfinite(p):
+        return "n/a"
+    return "< 1e-15" if p < 1e-15 else f"{p:.2g}"
+
+
+def _chi2(t: np.ndarray, dof_noise: int, fitted: int = 0) -> tuple[float, int, float]:
+    """Each line's F(2, dof_noise) statistic carried to chi-square(2) (Fisher's ``-2 ln p``),
+    summed, on ``2 L - fitted`` degrees of freedom, and its p-value."""
+    if t.size == 0 or not np.all(np.isfinite(t)):
+        return math.nan, 0, math.nan
     tail = stats.f.sf(t, 2, dof_noise)
     z = stats.chi2.isf(np.clip(tail, 1e-300, 1.0), 2)
     total = float(np.sum(z))
-    dof = 2 * t.size
+    dof = max(1, 2 * t.size - fitted)
     return total, dof, float(stats.chi2.sf(total, dof))
 
 
@@ -111,17 +127,22 @@ def _paths(values: Mapping[str, float], plant, omega: np.ndarray):
 
 
 def _residuals(values, plant, data: LineData):
-    """r at the lines, r's scale (remnant sd) and the deviation d = r / E or r / Ft."""
+    """r at the lines, the remnant's variance beside them, and d = r / Fd or r / Ft."""
     hft, he = _paths(values, plant, data.omega)
     r = data.u - he * data.e - hft * data.ft
     _, he_near = _paths(values, plant, data.near_omega.ravel())
     near = data.near_u - he_near.reshape(data.near_omega.shape) * data.near_e
     s2 = np.mean(np.abs(near) ** 2, axis=1)
-    d = r / np.where(data.is_target, data.ft, data.e)
+    d = r / np.where(data.is_target, data.ft, data.fd)
     return r, s2, d
 
 
-def _errors(values, plant, he_hat, omega_e, ht_hat, omega_t, feedforward: bool):
+def _errors(values, plant, fc, feedforward: bool):
+    """Median |error| (dB, deg) of He and Ht against the estimates ``fc`` (NaN without them)."""
+    if fc is None:
+        return math.nan, math.nan, math.nan, math.nan
+    he_hat, omega_e, ht_hat, omega_t = fc
+
     def median_errors(model, estimate):
         db = np.abs(20.0 * np.log10(np.abs(model) / np.abs(estimate)))
         deg = np.abs(np.degrees(np.angle(model / estimate)))
@@ -138,25 +159,36 @@ def _errors(values, plant, he_hat, omega_e, ht_hat, omega_t, feedforward: bool):
 
 def _fc(runs: Sequence[dict[str, np.ndarray]], rate: float):
     """The Fourier-coefficient estimates of the runs together (or, where their forcing functions
-    differ, the mean of each run's)."""
+    differ, the mean of each run's); None where there is none (e.g. e without power at a line)."""
     n = runs[0]["u"].size
     try:
         fc = fc_estimate(runs, rate, slice(0, n))
         return fc.he, fc.omega_e, fc.ht, fc.omega_t
     except DataError:
+        pass
+    try:
         each = [fc_estimate([r], rate, slice(0, n)) for r in runs]
-        return (
-            np.mean([f.he for f in each], axis=0),
-            each[0].omega_e,
-            np.mean([f.ht for f in each], axis=0),
-            each[0].omega_t,
-        )
+    except DataError:
+        return None
+    if any(
+        f.omega_e.shape != each[0].omega_e.shape or f.omega_t.shape != each[0].omega_t.shape for f in each
+    ):
+        return None
+    return (
+        np.mean([f.he for f in each], axis=0),
+        each[0].omega_e,
+        np.mean([f.ht for f in each], axis=0),
+        each[0].omega_t,
+    )
 
 
-def line_test(values: Mapping[str, float], plant: control.TransferFunction, data: LineData) -> float:
-    """The p-value of one run's test (module notes) alone, without the dB and degree errors."""
+def line_test(
+    values: Mapping[str, float], plant: control.TransferFunction, data: LineData, fitted: int = 0
+) -> tuple[float, int, float]:
+    """One run's test (module notes) alone: chi-square, degrees of freedom and p-value."""
     r, s2, _ = _residuals(values, plant, data)
-    return _chi2(np.abs(r) ** 2 / s2, 2 * data.neighbours)[2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return _chi2(np.abs(r) ** 2 / s2, 2 * data.neighbours, fitted)
 
 
 def consistency(
@@ -165,6 +197,7 @@ def consistency(
     data: LineData,
     record: Mapping[str, np.ndarray],
     rate: float,
+    fitted: int = 0,
 ) -> Consistency:
     """One run's consistency with a model (module notes).
 
@@ -180,11 +213,13 @@ def consistency(
         The run's ``ft``, ``fd``, ``e``, ``u`` (rad), the same window as ``data``.
     rate : float
         Its rate (Hz).
+    fitted : int
+        Parameters fitted to these same lines (the ``lines`` estimator's free ones), taken off
+        the degrees of freedom; 0 for a model fitted to other data.
     """
-    r, s2, _ = _residuals(values, plant, data)
-    chi2, dof, p = _chi2(np.abs(r) ** 2 / s2, 2 * data.neighbours)
-    errors = _errors(values, plant, *_fc([record], rate), "Kpt" in values)
-    return Consistency(chi2, dof, p, *errors, lines=int(r.size), spread="remnant")
+    chi2, dof, p = line_test(values, plant, data, fitted)
+    errors = _errors(values, plant, _fc([record], rate), "Kpt" in values)
+    return Consistency(chi2, dof, p, *errors, lines=int(data.omega.size), spread="remnant")
 
 
 def group_consistency(
@@ -195,13 +230,23 @@ def group_consistency(
     rate: float,
 ) -> Consistency:
     """A group's consistency with its model: the runs' mean deviation against its spread across
-    runs (module notes); a single run is tested as by :func:`consistency`."""
+    runs (module notes); a single run is tested as by :func:`consistency`.
+
+    Raises
+    ------
+    DataError
+        If the runs' forcing lines differ (the deviations cannot be averaged line by line).
+    """
     if len(datas) < 2:
         return consistency(values, plant, datas[0], records[0], rate)
+    if any(d.omega.shape != datas[0].omega.shape or not np.allclose(d.omega, datas[0].omega) for d in datas):
+        raise DataError("the group's runs have other forcing lines: their deviations cannot be averaged")
     d = np.array([_residuals(values, plant, data)[2] for data in datas])
     n = d.shape[0]
     mean = d.mean(axis=0)
     s2 = np.sum(np.abs(d - mean) ** 2, axis=0) / (n - 1)
-    chi2, dof, p = _chi2(np.abs(mean) ** 2 / (s2 / n), 2 * (n - 1))
-    errors = _errors(values, plant, *_fc(list(records), rate), "Kpt" in values)
-    return Consistency(chi2, dof, p, *errors, lines=int(mean.size), spread="runs")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(s2 > 0, np.abs(mean) ** 2 / (s2 / n), np.nan)
+    chi2, dof, p = _chi2(t, 2 * (n - 1))
+    errors = _errors(values, plant, _fc(list(records), rate), "Kpt" in values)
+    return Consistency(chi2, dof, p, *errors, lines=int(mean.size), spread=f"across {n} runs")

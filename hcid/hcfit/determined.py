@@ -35,6 +35,7 @@ __all__ = [
     "is_undetermined",
     "nms_undetermined",
     "parameter_status",
+    "reason",
 ]
 
 #: A correlation above this (in magnitude) leaves both parameters of the pair undetermined.
@@ -65,20 +66,20 @@ _AT_BOUND = "at a search bound"
 _INFINITE = "not seen by the data (infinite se)"
 _WIDE = "95% interval wider than its plausible range"
 _FIXED = "fixed at a literature value"
+_NO_SE = "no standard error (its quadratic approximation fails or the estimator gives none)"
 # Flags on a determined value.
 _OUTSIDE = "outside its plausible range"
 _ZERO = "not told from 0 (se above |value|)"
-_UNDETERMINED_PREFIXES = (_AT_BOUND, _INFINITE, _WIDE, _FIXED, "correlated with")
+_UNDETERMINED_PREFIXES = (_AT_BOUND, _INFINITE, _WIDE, _FIXED, _NO_SE, "correlated with")
 
 
 def _correlated(partner: str, r: float) -> str:
     return f"correlated with {partner} (r = {r:+.2f})"
 
 
-def parameter_status(fit, settings=None) -> dict[str, str]:
+def parameter_status(fit) -> dict[str, str]:
     """``{parameter: status}`` of an :class:`hcid.hcfit.HCFit`: :data:`DETERMINED`, or the reason
-    it is undetermined or flagged. ``settings`` is not read (the fit's ``at_bound`` holds its
-    bounds)."""
+    it is undetermined or flagged (the first that holds, in the module notes' order)."""
     out = {}
     for i, name in enumerate(fit.names):
         value, se = fit.estimates[i], fit.se[i]
@@ -90,13 +91,15 @@ def parameter_status(fit, settings=None) -> dict[str, str]:
             out[name] = _AT_BOUND
         elif math.isinf(se):
             out[name] = _INFINITE
-        elif math.isfinite(se) and 2.0 * Z95 * se > hi - lo:
+        elif math.isnan(se):
+            out[name] = _NO_SE
+        elif 2.0 * Z95 * se > hi - lo:
             out[name] = _WIDE
         elif math.isfinite(r) and abs(r) > CORRELATED:
             out[name] = _correlated(fit.partner[i], r)
         elif not lo <= value <= hi:
             out[name] = _OUTSIDE
-        elif math.isfinite(se) and se > abs(value):
+        elif se > abs(value):
             out[name] = _ZERO
         else:
             out[name] = DETERMINED
@@ -108,9 +111,14 @@ def is_undetermined(status: str) -> bool:
     return status.startswith(_UNDETERMINED_PREFIXES)
 
 
-def nms_undetermined(fit, settings=None) -> bool:
+def reason(status: str) -> str:
+    """A status without its figures, to count runs by reason: ``correlated with TL``."""
+    return status.split(" (r =")[0]
+
+
+def nms_undetermined(fit) -> bool:
     """Whether the fit leaves either neuromuscular parameter undetermined (not counting ``fixed``)."""
-    status = parameter_status(fit, settings)
+    status = parameter_status(fit)
     return any(is_undetermined(status[n]) and n not in fit.fixed for n in LITERATURE_NMS)
 
 
@@ -128,7 +136,7 @@ class GroupModel:
         How it was built: the medians, or the fallback taken where they make an unstable
         loop with the plant.
     undetermined : tuple of str
-        The parameters no run determines.
+        The parameters no run determines (in the fallback: those the run taken does not).
     """
 
     values: dict
@@ -174,4 +182,5 @@ def group_model(fits: Sequence, labels: Sequence[str], num_c, den_c) -> GroupMod
         raise DataError("neither the medians of its runs' fits nor any run's own model makes a stable loop")
     i = min(stable)[1]
     source = f"{labels[i]}'s own model (the medians make an unstable loop with the plant)"
-    return GroupModel(dict(fits[i].values), source, tuple(none))
+    its_own = tuple(p for p in names if is_undetermined(statuses[i][p]))
+    return GroupModel(dict(fits[i].values), source, its_own)

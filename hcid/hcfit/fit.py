@@ -10,16 +10,16 @@ from typing import Any
 import control
 import numpy as np
 import pyarrow as pa
-from scipy import optimize
+from scipy import optimize, stats
 
 from hcid.config.fit import FEEDBACK_PARAMETERS, UNITS, FitSettings
 from hcid.errors import DataError, IdentificationError
-from hcid.hcfit.closed_loop import _ClosedLoop
-from hcid.hcfit.consistency import CONTRADICTED, line_test
+from hcid.hcfit.consistency import CONTRADICTED
 from hcid.hcfit.determined import LITERATURE_NMS, nms_undetermined
-from hcid.hcfit.lines import LinesProblem, line_data
-from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials, _responses, _Simulator, simulate_hc
-from hcid.hcfit.uncertainty import Z95, covariance, jacobian
+from hcid.hcfit.lines import LineData, LinesProblem, line_data
+from hcid.hcfit.model import TrackingRecord, simulate_hc
+from hcid.hcfit.problems import ClosedLoopProblem, Fixed, FrequencyProblem, TimeProblem
+from hcid.hcfit.uncertainty import Z95, covariance, jacobian, strongest_correlations
 
 __all__ = [
     "BOUND_TOLERANCE",
@@ -30,6 +30,7 @@ __all__ = [
     "fit_hc",
     "fit_lines",
     "fit_time",
+    "nested_test",
     "resolve_target",
 ]
 
@@ -148,98 +149,6 @@ class HCFit:
 # --------------------------------------------------------------------------- problems
 
 
-class _FrequencyProblem:
-    def __init__(self, omega, he, hft, plant):
-        _plant_polynomials(plant)
-        self.plant = plant
-        self.s = (1j * omega)[:, None]
-        self.yc = np.asarray(plant(1j * omega), dtype=complex)[:, None]
-        self.names = _names(hft is not None)
-        self.he = he[:, None]
-        self.hft = None if hft is None else hft[:, None]
-
-    def _relative_errors(self, theta: np.ndarray) -> np.ndarray:
-        hft, he = _responses(theta, self.names, self.s, self.yc)
-        errors = [(he - self.he) / np.abs(self.he)]
-        if hft is not None:
-            errors.append((hft - self.hft) / np.abs(self.hft))
-        return np.concatenate(errors)  # (n_paths * n_w, n_sets)
-
-    def residuals(self, x: np.ndarray) -> np.ndarray:
-        r = self._relative_errors(x[:, None])[:, 0]
-        return np.concatenate([r.real, r.imag])
-
-    def costs(self, thetas: np.ndarray) -> np.ndarray:
-        with np.errstate(over="ignore", invalid="ignore"):
-            c = np.sum(np.abs(self._relative_errors(thetas)) ** 2, axis=0)
-        return np.where(np.isfinite(c), c, np.inf)
-
-
-class _TimeProblem:
-    def __init__(self, record: TrackingRecord, plant, settings: FitSettings, feedforward: bool):
-        self.plant = plant
-        self.names = _names(feedforward)
-        delay_bounds = [settings.bound(name) for name in ("tau_pe", "tau_pt") if name in self.names]
-        delays = (min(b.lower for b in delay_bounds), max(b.upper for b in delay_bounds))
-        stop = record.estimation.stop  # the cost needs u_par up to the estimation rows' end only
-        self.simulate = _Simulator(record, plant, settings.oversample, feedforward, delays, stop)
-        self.u = record.u[record.estimation]
-        self.rows = record.estimation
-
-    def residuals(self, x: np.ndarray) -> np.ndarray:
-        with np.errstate(over="ignore", invalid="ignore"):
-            r = self.simulate(dict(zip(self.names, x, strict=True)))[self.rows] - self.u
-        # An unstable trial (never at the bounds' interior optimum) gets a large finite cost.
-        return np.where(np.isfinite(r), r, 1e6)
-
-    def costs(self, thetas: np.ndarray) -> np.ndarray:
-        return np.array([np.sum(self.residuals(thetas[:, i]) ** 2) for i in range(thetas.shape[1])])
-
-
-class _ClosedLoopProblem:
-    def __init__(self, record: TrackingRecord, plant, feedforward: bool, disturbance_at: str):
-        self.plant = plant
-        self.loop = _ClosedLoop(record, plant, feedforward, disturbance_at)
-        self.names = self.loop.names
-        self.u = record.u[record.estimation][:, None]
-        self.rows = record.estimation
-
-    def _errors(self, thetas: np.ndarray) -> np.ndarray:
-        return self.loop.u(thetas)[self.rows] - self.u
-
-    def residuals(self, x: np.ndarray) -> np.ndarray:
-        r = self._errors(x[:, None])[:, 0]
-        # An unstable loop (never at the bounds' interior optimum) gets a large finite cost.
-        return np.where(np.isfinite(r), r, 1e6)
-
-    def costs(self, thetas: np.ndarray) -> np.ndarray:
-        c = np.sum(self._errors(thetas) ** 2, axis=0)
-        return np.where(np.isfinite(c), c, np.inf)
-
-
-class _Fixed:
-    """A problem with some parameters held at given values: its ``names`` are the free ones."""
-
-    def __init__(self, problem, fixed: dict[str, float]):
-        self.inner = problem
-        self.plant = problem.plant
-        self.fixed = dict(fixed)
-        self.names = tuple(n for n in problem.names if n not in fixed)
-        self._free = np.array([problem.names.index(n) for n in self.names], dtype=np.int64)
-        self._values = np.array([self.fixed.get(n, 0.0) for n in problem.names])
-
-    def _full(self, thetas: np.ndarray) -> np.ndarray:
-        full = np.repeat(self._values[:, None], thetas.shape[1], axis=1)
-        full[self._free] = thetas
-        return full
-
-    def residuals(self, x: np.ndarray) -> np.ndarray:
-        return self.inner.residuals(self._full(x[:, None])[:, 0])
-
-    def costs(self, thetas: np.ndarray) -> np.ndarray:
-        return self.inner.costs(self._full(thetas))
-
-
 def _uncertainty(problem, x, lower, upper, at_bound, kind: str, lag_seconds: float, rate: float):
     """``(se, kind, lag, partner, correlation)`` at the optimum ``x`` (:mod:`hcid.hcfit.uncertainty`).
 
@@ -259,30 +168,8 @@ def _uncertainty(problem, x, lower, upper, at_bound, kind: str, lag_seconds: flo
         se_free = np.sqrt(np.diag(cov))
     se = np.full(x.size, np.nan)
     se[free] = se_free
-    partner, correlation = _strongest_correlations(cov, np.asarray(problem.names)[free], x.size, free)
+    partner, correlation = strongest_correlations(cov, np.asarray(problem.names)[free], x.size, free)
     return tuple(float(v) for v in se), kind, lag, partner, correlation
-
-
-def _strongest_correlations(cov: np.ndarray, names: np.ndarray, size: int, free: np.ndarray):
-    """Per parameter, the free parameter its estimate is most correlated with, and the correlation."""
-    partner, correlation = ["" for _ in range(size)], [math.nan for _ in range(size)]
-    d = np.sqrt(np.diag(cov)) if cov.size else np.zeros(0)
-    ok = np.isfinite(d) & (d > 0)
-    if ok.sum() < 2:
-        return tuple(partner), tuple(correlation)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = cov / np.outer(d, d)
-    corr[~ok, :] = np.nan
-    corr[:, ~ok] = np.nan
-    np.fill_diagonal(corr, np.nan)
-    positions = np.flatnonzero(free)
-    for i in range(corr.shape[0]):
-        if not ok[i]:
-            continue
-        j = int(np.nanargmax(np.abs(corr[i])))
-        partner[positions[i]] = str(names[j])
-        correlation[positions[i]] = float(corr[i, j])
-    return tuple(partner), tuple(correlation)
 
 
 #: How each target's standard errors are computed: the time-domain targets by the settings'
@@ -299,7 +186,7 @@ def _solve(
     full_names = problem.names
     fixed = {n: float(v) for n, v in (fixed or {}).items() if n in full_names}
     if fixed:
-        problem = _Fixed(problem, fixed)
+        problem = Fixed(problem, fixed)
     bounds = [settings.bound(n) for n in problem.names]
     lower = np.array([b.lower for b in bounds])
     upper = np.array([b.upper for b in bounds])
@@ -447,7 +334,7 @@ def fit_frequency(
         )
     he = _response("he", he, omega.size)
     hft = None if hft is None else _response("hft", hft, omega.size)
-    problem = _FrequencyProblem(omega, he, hft, plant)
+    problem = FrequencyProblem(omega, he, hft, plant)
     return _solve(problem, settings, "frequency", record, fixed)
 
 
@@ -456,6 +343,7 @@ def fit_time(
     plant: control.TransferFunction,
     feedforward: bool,
     settings: FitSettings = FitSettings(),  # noqa: B008 (frozen)
+    fixed: dict[str, float] | None = None,
 ) -> HCFit:
     """Fit the parametric model to the measured u over the estimation rows.
 
@@ -473,6 +361,8 @@ def fit_time(
         Whether the selected model has a feedforward path (``nb_ft > 0``).
     settings : FitSettings
         ``target`` is not read.
+    fixed : mapping of str to float, optional
+        Parameters held at these values, not fitted.
 
     Returns
     -------
@@ -480,8 +370,8 @@ def fit_time(
     """
     if not isinstance(record, TrackingRecord):
         raise IdentificationError(f"record: must be a TrackingRecord, got {type(record).__name__}")
-    problem = _TimeProblem(record, plant, settings, bool(feedforward))
-    return _solve(problem, settings, "time", record)
+    problem = TimeProblem(record, plant, settings, bool(feedforward))
+    return _solve(problem, settings, "time", record, fixed)
 
 
 def fit_closed_loop(
@@ -490,6 +380,7 @@ def fit_closed_loop(
     feedforward: bool,
     settings: FitSettings = FitSettings(),  # noqa: B008 (frozen)
     disturbance_at: str = "output",
+    fixed: dict[str, float] | None = None,
 ) -> HCFit:
     """Fit the parametric model in closed loop with the plant to the measured u.
 
@@ -510,6 +401,8 @@ def fit_closed_loop(
         ``target`` is not read.
     disturbance_at : str
         Where fd enters the loop: ``output`` (the paper) or ``input`` (SPEC 7).
+    fixed : mapping of str to float, optional
+        Parameters held at these values, not fitted.
 
     Returns
     -------
@@ -518,8 +411,8 @@ def fit_closed_loop(
     if not isinstance(record, TrackingRecord):
         raise IdentificationError(f"record: must be a TrackingRecord, got {type(record).__name__}")
     # _ClosedLoop refuses a record without fd and an unknown disturbance point.
-    problem = _ClosedLoopProblem(record, plant, bool(feedforward), disturbance_at)
-    return _solve(problem, settings, "closed_loop", record)
+    problem = ClosedLoopProblem(record, plant, bool(feedforward), disturbance_at)
+    return _solve(problem, settings, "closed_loop", record, fixed)
 
 
 def fit_lines(
@@ -529,6 +422,7 @@ def fit_lines(
     settings: FitSettings = FitSettings(),  # noqa: B008 (frozen)
     disturbance_at: str = "output",
     fixed: dict[str, float] | None = None,
+    data: LineData | None = None,
 ) -> HCFit:
     """Fit the parametric model in closed loop to the record's u at its forcing lines.
 
@@ -552,6 +446,8 @@ def fit_lines(
         ``output`` or ``input`` (SPEC 7).
     fixed : mapping of str to float, optional
         Parameters held at these values (e.g. :data:`hcid.hcfit.determined.LITERATURE_NMS`).
+    data : LineData, optional
+        The record at its lines, where already read (:func:`hcid.hcfit.lines.line_data`).
 
     Raises
     ------
@@ -562,7 +458,8 @@ def fit_lines(
         raise IdentificationError(f"record: must be a TrackingRecord, got {type(record).__name__}")
     if disturbance_at not in ("output", "input"):
         raise IdentificationError(f"disturbance_at: must be output or input, got {disturbance_at!r}")
-    problem = LinesProblem(line_data(record), plant, bool(feedforward), disturbance_at)
+    data = line_data(record) if data is None else data
+    problem = LinesProblem(data, plant, bool(feedforward), disturbance_at)
     return _solve(problem, settings, "lines", record, fixed)
 
 
@@ -578,15 +475,22 @@ def resolve_target(target: str, record: TrackingRecord | None) -> str:
     multisines on disjoint lines over whole periods (:func:`hcid.hcfit.lines.line_data`) and the
     disturbance has at least :data:`MIN_DISTURBANCE_LINES` lines, else ``time``; any other target
     is itself."""
-    if target != "auto":
-        return target
-    if record is None or record.fd is None:
-        return "time"
+    return _resolve(target, record)[0]
+
+
+def _resolve(target: str, record: TrackingRecord | None) -> tuple[str, LineData | None]:
+    """The target and, where read, the record's lines."""
+    if target not in ("auto", "lines") or record is None or record.fd is None:
+        return ("time" if target == "auto" else target), None
     try:
         data = line_data(record)
     except DataError:
-        return "time"
-    return "lines" if np.count_nonzero(~data.is_target) >= MIN_DISTURBANCE_LINES else "time"
+        if target == "lines":
+            raise
+        return "time", None
+    if target == "auto" and np.count_nonzero(~data.is_target) < MIN_DISTURBANCE_LINES:
+        return "time", data
+    return "lines", data
 
 
 def fit_hc(
@@ -611,43 +515,47 @@ def fit_hc(
     :data:`hcid.hcfit.determined.LITERATURE_NMS`; ``auto`` (the default) fits it and, where
     the fit leaves either of the pair undetermined (:func:`hcid.hcfit.determined.parameter_status`),
     fits again with the pair held there (``HCFit.fixed`` says so) and keeps that reduced model,
-    unless (``lines`` target) the data contradict it and not the full one
-    (:func:`hcid.hcfit.consistency.line_test` below :data:`~hcid.hcfit.consistency.CONTRADICTED`).
+    unless (``lines`` target, whose residuals allow the test) the nested F test
+    (:func:`nested_test`) rejects the held values at
+    :data:`~hcid.hcfit.consistency.CONTRADICTED`. For the time-domain targets, whose residuals
+    are correlated, no such test is made: an undetermined pair is held.
     """
-    target = resolve_target(settings.target, record)
+    target, data = _resolve(settings.target, record)
+
+    def fit(fixed):
+        if target in ("closed_loop", "time", "lines") and record is None:
+            raise IdentificationError(f"record: the {target} target needs the measured record")
+        if target == "lines":
+            return fit_lines(record, plant, feedforward, settings, disturbance_at, fixed, data)
+        if target == "closed_loop":
+            return fit_closed_loop(record, plant, feedforward, settings, disturbance_at, fixed)
+        if target == "time":
+            return fit_time(record, plant, feedforward, settings, fixed)
+        if omega is None or he is None or (hft is None) == bool(feedforward):
+            raise IdentificationError(
+                "omega, he, hft: the frequency target needs omega and he, and hft exactly when feedforward"
+            )
+        return fit_frequency(omega, he, hft, plant, settings, record, fixed)
+
     if settings.nms == "fixed":
-        return _fit_target(target, settings, plant, feedforward, record, omega, he, hft, disturbance_at,
-                           LITERATURE_NMS)  # fmt: skip
-    fit = _fit_target(target, settings, plant, feedforward, record, omega, he, hft, disturbance_at, None)
-    if settings.nms != "auto" or not nms_undetermined(fit, settings):
-        return fit
-    reduced = _fit_target(target, settings, plant, feedforward, record, omega, he, hft, disturbance_at,
-                          LITERATURE_NMS)  # fmt: skip
-    if target == "lines":
-        # The reduced model is kept unless the data contradict it and not the full model.
-        data = line_data(record)
-        if line_test(reduced.values, plant, data) < CONTRADICTED <= line_test(fit.values, plant, data):
-            return fit
+        return fit(LITERATURE_NMS)
+    full = fit(None)
+    if settings.nms != "auto" or not nms_undetermined(full):
+        return full
+    reduced = fit(LITERATURE_NMS)
+    if target == "lines" and nested_test(full, reduced, 2 * data.omega.size) < CONTRADICTED:
+        return full  # the data reject the literature pair
     return reduced
 
 
-def _fit_target(target, settings, plant, feedforward, record, omega, he, hft, disturbance_at, fixed):
-    if target in ("closed_loop", "time", "lines") and record is None:
-        raise IdentificationError(f"record: the {target} target needs the measured record")
-    if target == "lines":
-        return fit_lines(record, plant, feedforward, settings, disturbance_at, fixed)
-    if target == "closed_loop":
-        if disturbance_at not in ("output", "input"):
-            raise IdentificationError(f"disturbance_at: must be output or input, got {disturbance_at!r}")
-        problem = _ClosedLoopProblem(record, plant, bool(feedforward), disturbance_at)
-        return _solve(problem, settings, "closed_loop", record, fixed)
-    if target == "time":
-        if not isinstance(record, TrackingRecord):
-            raise IdentificationError(f"record: must be a TrackingRecord, got {type(record).__name__}")
-        problem = _TimeProblem(record, plant, settings, bool(feedforward))
-        return _solve(problem, settings, "time", record, fixed)
-    if omega is None or he is None or (hft is None) == bool(feedforward):
-        raise IdentificationError(
-            "omega, he, hft: the frequency target needs omega and he, and hft exactly when feedforward"
-        )
-    return fit_frequency(omega, he, hft, plant, settings, record, fixed)
+def nested_test(full: HCFit, reduced: HCFit, n: int) -> float:
+    """p-value of the F test of ``reduced`` (some parameters held) against ``full`` on the same
+    ``n`` independent residuals: ``((C_r - C_f) / q) / (C_f / (n - p))``, F(q, n - p) when the held
+    values are right (q held parameters, p fitted in ``full``). Valid for the ``lines`` target,
+    whose residuals are independent DFT bins; NaN without residual degrees of freedom."""
+    q = len(reduced.fixed) - len(full.fixed)
+    p = len(full.names) - len(full.fixed)
+    if q <= 0 or n <= p or full.cost <= 0:
+        return math.nan
+    f = max(reduced.cost - full.cost, 0.0) / q / (full.cost / (n - p))
+    return float(stats.f.sf(f, q, n - p))

@@ -17,13 +17,14 @@ residuals cannot tell apart get an infinite standard error (see :func:`covarianc
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
 
 from hcid.errors import IdentificationError
 
-__all__ = ["COVARIANCES", "Z95", "covariance", "jacobian"]
+__all__ = ["COVARIANCES", "Z95", "covariance", "jacobian", "strongest_correlations"]
 
 COVARIANCES = ("sandwich", "gauss_newton")
 #: The standard normal's 97.5% quantile: a 95% interval is ``estimate +- Z95 se``.
@@ -100,3 +101,25 @@ def covariance(kind: str, jac: np.ndarray, r: np.ndarray, lag: int = 0) -> np.nd
     cov[:, lost] = np.nan
     cov[lost, lost] = np.inf
     return cov
+
+
+def strongest_correlations(cov: np.ndarray, names: np.ndarray, size: int, free: np.ndarray):
+    """Per parameter, the free parameter its estimate is most correlated with, and the correlation."""
+    partner, correlation = ["" for _ in range(size)], [math.nan for _ in range(size)]
+    d = np.sqrt(np.diag(cov)) if cov.size else np.zeros(0)
+    ok = np.isfinite(d) & (d > 0)
+    if ok.sum() < 2:
+        return tuple(partner), tuple(correlation)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(d, d)
+    corr[~ok, :] = np.nan
+    corr[:, ~ok] = np.nan
+    np.fill_diagonal(corr, np.nan)
+    positions = np.flatnonzero(free)
+    for i in range(corr.shape[0]):
+        if not ok[i]:
+            continue
+        j = int(np.nanargmax(np.abs(corr[i])))
+        partner[positions[i]] = str(names[j])
+        correlation[positions[i]] = float(corr[i, j])
+    return tuple(partner), tuple(correlation)

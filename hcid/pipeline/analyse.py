@@ -45,7 +45,7 @@ from hcid.descriptors import fit_remnant
 from hcid.errors import ConfigError, DataError, IdentificationError
 from hcid.fourier import fc_estimate
 from hcid.hcfit.consistency import consistency, group_consistency
-from hcid.hcfit.determined import group_model, parameter_status
+from hcid.hcfit.determined import group_model, is_undetermined, parameter_status, reason
 from hcid.hcfit.lines import line_data
 from hcid.hcmodel import plant
 from hcid.pipeline.fit import _choices, _records, _stage_choices
@@ -62,7 +62,7 @@ from hcid.pipeline.twins import (
 )
 from hcid.selected import SelectedModel, analyse_selected
 
-__all__ = ["AnalysisRun", "analyse_study"]
+__all__ = ["AnalysisRun", "ParameterSummary", "analyse_study", "summarise_parameters"]
 
 #: Realizations of each twin (FB and FF) per group.
 TWINS = 20
@@ -84,6 +84,48 @@ class AnalysisRun:
     run_dir: Path
     #: Wall seconds per stage: identify, fit runs, twins, fit selected, tables.
     stages: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ParameterSummary:
+    """One parameter over a group's runs (rows of ``analysis.parquet``), from the runs that
+    determine it (SPEC 11): ``median``, ``sd`` (over those runs) and ``median_se`` (NaN where
+    none or one), ``kept`` of ``fitted`` runs, and ``left_out``: ``{reason: runs}``."""
+
+    name: str
+    unit: str
+    fitted: int
+    kept: int
+    median: float
+    sd: float
+    median_se: float
+    left_out: dict
+
+
+def summarise_parameters(rows: Sequence[dict]) -> list[ParameterSummary]:
+    """The group's parameters as the answer lines and the report give them (one home for both)."""
+    out = []
+    for p in tables.HC_PARAMETER_NAMES:
+        fitted = [r for r in rows if r[f"{p}_status"] != "not fitted"]
+        if not fitted:
+            continue
+        kept = [r for r in fitted if not is_undetermined(r[f"{p}_status"])]
+        x = np.array([r[p] for r in kept], dtype=float)
+        se = np.array([r[f"{p}_se"] for r in kept], dtype=float)
+        left: dict[str, int] = {}
+        for r in fitted:
+            if is_undetermined(r[f"{p}_status"]):
+                left[reason(r[f"{p}_status"])] = left.get(reason(r[f"{p}_status"]), 0) + 1
+        out.append(
+            ParameterSummary(
+                name=p, unit=hcfit.UNITS[p], fitted=len(fitted), kept=int(x.size),
+                median=float(np.median(x)) if x.size else math.nan,
+                sd=float(np.std(x, ddof=1)) if x.size > 1 else math.nan,
+                median_se=float(np.median(se[np.isfinite(se)])) if np.isfinite(se).any() else math.nan,
+                left_out=left,
+            )
+        )  # fmt: skip
+    return out
 
 
 # --------------------------------------------------------------------------- per-run fits
@@ -194,9 +236,9 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, models, check
                 row["crossover"] = fitted_loop.crossover if fitted_loop else math.nan
                 row["phase_margin"] = fitted_loop.phase_margin if fitted_loop else math.nan
                 row["share_remnant"] = fitted_loop.shares["remnant"] if fitted_loop else math.nan
-                check = checks.run(seed, values) if fit else None
+                check = checks.run(seed, fit) if fit else None
                 n_contradicted += bool(check is not None and check.contradicted)
-                row.update(_consistency_columns(check, checks.problem if fit else "not fitted"))
+                row.update(_consistency_columns(check, checks.problem([seed]) if fit else "not fitted"))
                 for f in factors:
                     row[f] = str(factor_of[seed][f])
                 run_rows.append(row)
@@ -208,7 +250,7 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, models, check
                  "twins": twins, "twins_folder": pair.folder,
                  "twin_source": models[key].source, "twin_undetermined": ", ".join(models[key].undetermined),
                  "n_contradicted": int(n_contradicted),
-                 **_consistency_columns(group_checks[key], checks.problem)}
+                 **_consistency_columns(group_checks[key], checks.problem(seeds))}
             )  # fmt: skip
     schema = tables.ANALYSIS.arrow
     for f in factors:
@@ -220,41 +262,51 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, models, check
 
 
 class _Checks:
-    """Every run at its forcing lines, once, for the consistency of any model with it (SPEC 11)."""
+    """Every run at its forcing lines, read once, for the consistency of any model with it (SPEC
+    11); ``problem(seeds)`` says why some run (or the group) has no test."""
 
     def __init__(self, config: Config, records: dict):
         self.yc = plant(config.loop)
         self.rate = config.timing.output_rate
         self.records = records
-        self.lines, self.problem = {}, ""
+        self.lines, self.problems = {}, {}
         for seed, record in records.items():
             try:
                 self.lines[seed] = line_data(_tracking(record, config))
             except DataError as exc:
-                self.problem = f"no test: {exc}"
-                self.lines = {}
-                break
+                self.problems[seed] = f"no test: {exc}"
 
-    def run(self, seed: int, values: dict):
+    def problem(self, seeds) -> str:
+        return next((self.problems[s] for s in seeds if s in self.problems), "")
+
+    def run(self, seed: int, fit):
+        """The run's own fit against its data; the lines estimator's free parameters, fitted to
+        these lines, are taken off the degrees of freedom."""
         if seed not in self.lines:
             return None
-        return consistency(values, self.yc, self.lines[seed], self.records[seed], self.rate)
+        fitted = len(fit.names) - len(fit.fixed) if fit.target == "lines" else 0
+        return consistency(fit.values, self.yc, self.lines[seed], self.records[seed], self.rate, fitted)
 
     def group(self, seeds: list[int], values: dict):
         if not all(s in self.lines for s in seeds):
             return None
-        return group_consistency(
-            values, self.yc, [self.lines[s] for s in seeds], [self.records[s] for s in seeds], self.rate
-        )
+        try:
+            return group_consistency(
+                values, self.yc, [self.lines[s] for s in seeds], [self.records[s] for s in seeds], self.rate
+            )
+        except DataError as exc:
+            self.problems[seeds[0]] = f"no test: {exc}"
+            return None
 
 
 def _consistency_columns(check, problem: str) -> dict:
     if check is None:
         nan = math.nan
-        return {"fc_chi2": nan, "fc_dof": 0, "fc_p": nan, "fc_verdict": problem, "he_error_db": nan,
-                "he_error_deg": nan, "ht_error_db": nan, "ht_error_deg": nan}  # fmt: skip
+        return {"fc_chi2": nan, "fc_dof": 0, "fc_p": nan, "fc_verdict": problem, "fc_spread": "",
+                "he_error_db": nan, "he_error_deg": nan, "ht_error_db": nan, "ht_error_deg": nan}  # fmt: skip
     return {
         "fc_chi2": check.chi2, "fc_dof": check.dof, "fc_p": check.p, "fc_verdict": check.verdict,
+        "fc_spread": check.spread,
         "he_error_db": check.he_db, "he_error_deg": check.he_deg, "ht_error_db": check.ht_db,
         "ht_error_deg": check.ht_deg,
     }  # fmt: skip

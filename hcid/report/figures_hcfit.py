@@ -181,7 +181,7 @@ def plot_fc(paths: dict[str, list[dict]], curves: dict, title: str = "", axes=No
 def plot_inversion(rows: list[dict], title: str = "", axes=None):
     """Model inversion ``Ht Yc`` at the target lines (rows of ``fc_estimates.parquet`` with path
     ``ft``): magnitude (linear, 1 the plant's exact inverse, 0.5 half of it) and phase, points
-    with +-1 sd across runs."""
+    with +-1 sd across runs; open points where He was held beyond the disturbance lines."""
     fig, axes = _figure(axes, 2, 1, figsize=(7.5, 5.5), sharex=True)
     ax_mag, ax_ph = axes[0][0], axes[1][0]
     w = np.array([r["omega"] for r in rows])
@@ -189,16 +189,24 @@ def plot_inversion(rows: list[dict], title: str = "", axes=None):
     ph = np.array([r["inversion_deg"] for r in rows])
     sd = np.array([r["inversion_sd"] for r in rows])
     sd_deg = np.array([r["inversion_sd_deg"] for r in rows])
-    ax_mag.errorbar(w, mag, yerr=np.where(np.isfinite(sd), sd, 0.0), fmt="o", color="C1", ms=5, capsize=3)
-    ax_ph.errorbar(w, ph, yerr=np.where(np.isfinite(sd_deg), sd_deg, 0.0), fmt="o", color="C1", ms=5,
-                   capsize=3)  # fmt: skip
+    held = np.array([bool(r["extrapolated"]) for r in rows])
+    kinds = ((~held, "C1", "He interpolated between disturbance lines"),
+             (held, "white", "He held beyond the disturbance lines (less sure)"))  # fmt: skip
+    for mask, face, label in kinds:
+        if not mask.any():
+            continue
+        ax_mag.errorbar(w[mask], mag[mask], yerr=np.where(np.isfinite(sd), sd, 0.0)[mask], fmt="o",
+                        color="C1", mfc=face, ms=6, capsize=3, label=label)  # fmt: skip
+        ax_ph.errorbar(w[mask], ph[mask], yerr=np.where(np.isfinite(sd_deg), sd_deg, 0.0)[mask], fmt="o",
+                       color="C1", mfc=face, ms=6, capsize=3)  # fmt: skip
+    ax_mag.legend(fontsize=8, loc="upper right")
     ax_mag.axhline(1.0, color="0.3", lw=1, ls="--")
     ax_mag.axhline(0.5, color="0.6", lw=1, ls=":")
     ax_mag.text(w.min(), 1.0, " exact inverse", va="bottom", fontsize=8, color="0.3")
     ax_mag.text(w.min(), 0.5, " half", va="bottom", fontsize=8, color="0.5")
     ax_ph.axhline(0.0, color="0.3", lw=1, ls="--")
     ax_mag.set_ylabel("|Ht Yc| (-)")
-    ax_mag.set_ylim(0, max(1.6, float(np.nanmax(mag + np.nan_to_num(sd))) * 1.1))
+    ax_mag.set_ylim(0, max(1.9, float(np.nanmax(mag + np.nan_to_num(sd))) * 1.25))
     ax_ph.set_ylabel("phase of Ht Yc (deg)")
     ax_ph.set_xlabel("frequency (rad/s)")
     for ax in (ax_mag, ax_ph):

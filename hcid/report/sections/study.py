@@ -10,7 +10,9 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import results, tables
+from hcid.hcfit.consistency import CONTRADICTED, format_p
 from hcid.hcfit.determined import is_undetermined
+from hcid.pipeline.analyse import summarise_parameters
 from hcid.report import figures, figures_hcfit
 from hcid.report.document import Doc
 from hcid.tables import HC_PARAMETER_NAMES
@@ -76,36 +78,24 @@ def compute(run, done) -> StudyData | None:
         if g["uncertain"]:
             uncertain.append(f"{g['group']} ({g['method']})")
         mine = [r for r in rows if r["group"] == g["group"] and r["method"] == g["method"]]
-        for p in HC_PARAMETER_NAMES:
-            fitted = [r for r in mine if r[f"{p}_status"] != "not fitted"]
-            if not fitted:
-                continue
-            kept = [r for r in fitted if not is_undetermined(r[f"{p}_status"])]
-            x = np.array([r[p] for r in kept], dtype=float)
-            se = np.array([r[f"{p}_se"] for r in kept], dtype=float)
-            spread = float(np.std(x, ddof=1)) if x.size > 1 else math.nan
-            reasons: dict[str, int] = {}
-            for r in fitted:
-                if is_undetermined(r[f"{p}_status"]):
-                    reason = r[f"{p}_status"].split(" (r =")[0]
-                    reasons[reason] = reasons.get(reason, 0) + 1
-            left_out = "; ".join(f"{n}: {reason}" for reason, n in reasons.items()) or "-"
+        for summary in summarise_parameters(mine):
+            left_out = "; ".join(f"{n}: {why}" for why, n in summary.left_out.items()) or "-"
             parameters.append(
-                [g["group"], g["method"], p, f"{x.size} of {len(fitted)}",
-                 _num(float(np.median(x))) if x.size else "-", _num(spread, 2),
-                 _num(float(np.median(se)), 2) if np.isfinite(se).any() else "-", left_out]
+                [g["group"], g["method"], summary.name, f"{summary.kept} of {summary.fitted}",
+                 _num(summary.median), _num(summary.sd, 2), _num(summary.median_se, 2), left_out]
             )  # fmt: skip
     checks, contradicted = [], []
     for g in groups.to_pylist():
         if g["method"] != groups.column("method")[0].as_py():
             continue  # the group's model and its runs' own fits are the same for every method
         checks.append(
-            [g["group"], g["fc_verdict"], _num(g["fc_chi2"]), str(g["fc_dof"]), _num(g["fc_p"], 2),
+            [g["group"], g["fc_verdict"], _num(g["fc_chi2"]), str(g["fc_dof"]), format_p(g["fc_p"]),
+             g["fc_spread"],
              f"{_num(g['he_error_db'], 2)} dB, {_num(g['he_error_deg'], 2)} deg",
              f"{_num(g['ht_error_db'], 2)} dB, {_num(g['ht_error_deg'], 2)} deg", g["twin_source"],
              g["twin_undetermined"] or "-"]
         )  # fmt: skip
-        if g["fc_dof"] > 0 and g["fc_p"] < 0.01:
+        if g["fc_dof"] > 0 and g["fc_p"] < CONTRADICTED:
             contradicted.append(g["group"])
     factors = [c for c in runs.column_names if c not in tables.ANALYSIS.names]
     shown = ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
@@ -128,7 +118,7 @@ def compute(run, done) -> StudyData | None:
         check = (
             "-"
             if r["fc_dof"] == 0
-            else f"{_num(r['fc_p'], 2)}" + (" contradicted" if r["fc_p"] < 0.01 else "")
+            else format_p(r["fc_p"]) + (" contradicted" if r["fc_p"] < CONTRADICTED else "")
         )
         table_rows.append(
             [str(r["seed"]), *[str(r[f]) for f in factors], r["method"], str(r["nb_ft"]),
@@ -211,15 +201,16 @@ def render(data: StudyData | None, doc: Doc) -> None:
     if data.checks:
         doc.text(
             "**Do the fitted models agree with the data's own frequency response?** (SPEC 11) Each "
-            "group's model (from the values its runs determine) against its runs' Fourier-coefficient "
-            "estimates at the forcing lines, relative to their spread across runs: a chi-square test "
-            "(p below 0.01: *contradicted by the data*), and the median |error| of He (disturbance "
-            "lines) and Ht (target lines) against the estimates. Each run's own model is tested the "
-            "same way against its remnant (the run table's last column)."
+            "group's model (from the values its runs determine) against its runs at the forcing "
+            "lines, relative to the spread across runs (spread column; a one-run group: the remnant "
+            f"beside the lines): a chi-square test (p below {CONTRADICTED:g}: *contradicted by the "
+            "data*), and the median |error| of He (disturbance lines) and Ht (target lines) against "
+            "the Fourier-coefficient estimates. Each run's own model is tested against its remnant "
+            "beside the lines (the run table's last column)."
         )
         doc.table(
-            ["group", "verdict", "chi-square", "dof", "p", "He error", "Ht error", "model built from",
-             "no run determines"],
+            ["group", "verdict", "chi-square", "dof", "p", "spread", "He error", "Ht error",
+             "model built from", "no run determines"],
             data.checks,
         )  # fmt: skip
         if data.contradicted:
@@ -228,8 +219,9 @@ def render(data: StudyData | None, doc: Doc) -> None:
                 "parameters describe a model these runs do not support; read them as such."
             )
     doc.text(
-        "Parameters per group (SPEC 8, 11): the median and the sd over the runs that determine the "
-        "parameter, and their median standard error; runs whose fit leaves it undetermined (on a "
+        "Parameters per group and method (SPEC 8, 11), from each run's fit at the group's W: the "
+        "median and the sd over the runs that determine the parameter, and their median standard "
+        "error; runs whose fit leaves it undetermined (on a "
         "search bound, a 95% interval wider than its plausible range, or correlated above 0.95 with "
         "another) are left out, with their reasons."
     )
