@@ -117,9 +117,13 @@ def reason(status: str) -> str:
 
 
 def nms_undetermined(fit) -> bool:
-    """Whether the fit leaves either neuromuscular parameter undetermined (not counting ``fixed``)."""
+    """Whether the fit leaves either neuromuscular parameter undetermined (not counting ``fixed``,
+    nor "no standard error": an estimator without standard errors, the frequency target, says
+    nothing either way)."""
     status = parameter_status(fit)
-    return any(is_undetermined(status[n]) and n not in fit.fixed for n in LITERATURE_NMS)
+    return any(
+        is_undetermined(status[n]) and status[n] != _NO_SE and n not in fit.fixed for n in LITERATURE_NMS
+    )
 
 
 @dataclass(frozen=True)
