@@ -331,7 +331,8 @@ def fit_hc(
         typer.Option(
             "--target",
             help="Estimator: auto, lines, time, closed_loop or frequency (default: the config's "
-            "fit_hc.target, else auto: lines for multisine forcing functions, else time).",
+            "fit_hc.target, else auto: lines for multisine forcing functions with at least 5 "
+            "disturbance lines, else time).",
         ),
     ] = None,
     jobs: JobsOpt = 2,
