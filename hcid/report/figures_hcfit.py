@@ -136,7 +136,7 @@ def plot_fc(paths: dict[str, list[dict]], curves: dict, title: str = "", axes=No
     ``paths`` maps ``e`` and ``ft`` to rows of ``fc_estimates.parquet``; ``curves`` holds
     ``omega`` and the model's ``e`` and ``ft`` responses (``ft`` None without feedforward).
     """
-    fig, axes = _figure(axes, 2, 1, figsize=(7.5, 6.5), sharex=True)
+    fig, axes = _figure(axes, 2, 1, figsize=(7.5, 7.5), sharex=True)
     ax_mag, ax_ph = axes[0][0], axes[1][0]
     labels = {"e": "He (u per e), disturbance lines", "ft": "Ht (u per ft), target lines"}
     for (path, rows), color in zip(paths.items(), ("C0", "C1"), strict=False):
@@ -172,9 +172,10 @@ def plot_fc(paths: dict[str, list[dict]], curves: dict, title: str = "", axes=No
     for ax in (ax_mag, ax_ph):
         ax.set_xscale("log")
         ax.grid(True, which="both", alpha=0.3)
-    ax_mag.legend(fontsize=7, loc="best")
+    # Below the axes, so that no label covers a point or a band.
+    fig.legend(*ax_mag.get_legend_handles_labels(), fontsize=7, loc="lower center", ncol=2)
     fig.suptitle(title)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.1, 1, 1))
     return fig
 
 
