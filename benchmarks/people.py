@@ -317,7 +317,9 @@ def people_tables(runs, keys: list, results: list[dict]) -> None:
                     unstable += int(not np.all(np.isfinite(u_cl)))
                     closed.append(_vaf(other.u, u_cl) if np.all(np.isfinite(u_cl)) else math.nan)
                     mine = runs[subject, plant, sign]
-                    c = consistency(fit.values, _plant(plant), line_data(_record(mine)), mine, RATE)
+                    # A lines fit saw these same lines: its free parameters come off the dof.
+                    fitted = len(fit.names) - len(fit.fixed) if fit.target == "lines" else 0
+                    c = consistency(fit.values, _plant(plant), line_data(_record(mine)), mine, RATE, fitted)
                     contradicted += int(c.contradicted)
                     ps.append(c.p)
                     he_db.append(c.he_db)
@@ -633,6 +635,7 @@ def main() -> None:
     parser.add_argument("--data", type=Path, default=DATA)
     levels = "the twins' remnant levels as loop.remnant_ratio, as share of var(u), or both"
     parser.add_argument("--remnant", choices=("ratio", "share", "both"), default="share", help=levels)
+    parser.add_argument("--people-only", action="store_true", help="part (b) alone, no twins")
     args = parser.parse_args()
     seeds = 3 if args.quick else args.seeds
     modes = ("ratio", "share") if args.remnant == "both" else (args.remnant,)
@@ -650,6 +653,9 @@ def main() -> None:
     people_tables(runs, keys, results)
     inversion_table(runs)
 
+    if args.people_only:
+        print(f"\ntotal wall {time.perf_counter() - start:.1f} s; load average {_load()}")
+        return
     print(f"\n## (a) Twins: known truth, forcing functions of dp's +1 trial, {seeds} seeds per level")
     made = time.perf_counter()
     twins, remnant_rows, problems = simulate_twins(runs, seeds, modes)
