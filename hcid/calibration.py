@@ -20,9 +20,22 @@ import pyarrow as pa
 from scipy import stats
 
 from hcid import tables
-from hcid.selection import SelectionPath
+from hcid.selection import SelectionPath, false_positive_extent
 
-__all__ = ["rates_at", "ERRORS", "Calibration", "RateCurve", "calibrate", "clopper_pearson", "error_rates"]
+__all__ = [
+    "ERRORS",
+    "Calibration",
+    "RateCurve",
+    "benjamini_hochberg",
+    "binomial_summary",
+    "calibrate",
+    "clopper_pearson",
+    "error_rates",
+    "evidence_p_value",
+    "evidence_power",
+    "feedforward_threshold",
+    "rates_at",
+]
 
 #: The two errors of SPEC 4 and 9, by name: which selected nb_ft counts as wrong.
 #: FB realizations (no feedforward) are judged for false positives, FF ones for false negatives.
@@ -108,7 +121,7 @@ def error_rates(
 
     Examples
     --------
-    >>> from hcid.selection import SelectionPath
+    >>> from hcid.selection import SelectionPath, false_positive_extent
     >>> seg = SelectionPath(np.array([0, 1]), np.array([0.0, 0.01]), np.array([0.01, np.inf]))
     >>> c = error_rates("direct", "FB", "false_positive", [seg, seg], [np.array([2, 0])] * 2, [0.005, 0.02])
     >>> c.rate.tolist(), np.round(c.high, 4).tolist()  # k = 0 of 2: 1 - 0.025^(1/2)
@@ -237,3 +250,86 @@ def calibrate(
         safe_high=safe_high,
         recommended=recommended,
     )
+
+
+# --------------------------------------------------------------------------- per-run evidence (SPEC 11)
+
+
+def feedforward_threshold(path: SelectionPath, nb_ft: np.ndarray, w_min: float, w_max: float) -> float:
+    """A run's W*: the largest W of the grid's range ``[w_min, w_max]`` at which its selection
+    keeps ``nb_ft > 0`` (SPEC 11), exact from its selection path (:func:`false_positive_extent`):
+    ``w_min`` when it never does, ``w_max`` when it always does.
+
+    Examples
+    --------
+    >>> seg = SelectionPath(np.array([0, 1, 2]), np.array([0.0, 0.01, 0.2]), np.array([0.01, 0.2, np.inf]))
+    >>> feedforward_threshold(seg, np.array([3, 1, 0]), 1e-4, 2.0)
+    0.2
+    >>> never, always = np.array([0, 0, 0]), np.array([1, 1, 1])
+    >>> feedforward_threshold(seg, never, 1e-4, 2.0), feedforward_threshold(seg, always, 1e-4, 2.0)
+    (0.0001, 2.0)
+    """
+    return float(np.clip(false_positive_extent(path, nb_ft), w_min, w_max))
+
+
+def evidence_p_value(w_star: float, fb_thresholds: np.ndarray) -> float:
+    """How often a person without feedforward (the FB twins) shows at least as much:
+    ``(1 + #{FB twins with W* >= w_star}) / (1 + N)`` (SPEC 11; a Monte Carlo p-value, never 0).
+
+    Examples
+    --------
+    >>> evidence_p_value(0.3, np.array([0.001, 0.01, 0.3, 0.5]))  # two of four at or above
+    0.6
+    >>> evidence_p_value(1.0, np.zeros(19))
+    0.05
+    """
+    fb = np.asarray(fb_thresholds, dtype=np.float64)
+    return float((1 + np.count_nonzero(fb >= w_star)) / (1 + fb.size))
+
+
+def evidence_power(ff_thresholds: np.ndarray, fb_thresholds: np.ndarray, alpha: float) -> float:
+    """The share of FF twins that the run's own rule calls feedforward at level ``alpha``: their
+    :func:`evidence_p_value` against the FB twins at most ``alpha`` (SPEC 11's power: FF twins
+    above the FB twins' (1 - alpha) quantile, with the p-value's own count).
+
+    Examples
+    --------
+    >>> evidence_power(np.array([2.0, 2.0, 0.2, 0.001]), np.full(19, 0.1), 0.05)
+    0.75
+    """
+    ff = np.asarray(ff_thresholds, dtype=np.float64)
+    return float(np.mean([evidence_p_value(w, fb_thresholds) <= alpha for w in ff]))
+
+
+def binomial_summary(p_values: np.ndarray, alpha: float) -> tuple[int, int, float]:
+    """A group's summary test: ``k`` of its ``n`` runs with ``p <= alpha``, and the chance of at
+    least ``k`` if no run had feedforward (each then at most alpha: Binomial(n, alpha)).
+
+    Examples
+    --------
+    >>> binomial_summary(np.array([0.01, 0.5, 0.03, 0.9]), 0.05)[:2]
+    (2, 4)
+    """
+    p = np.asarray(p_values, dtype=np.float64)
+    k, n = int(np.count_nonzero(p <= alpha)), int(p.size)
+    return k, n, float(stats.binom.sf(k - 1, n, alpha)) if n else float("nan")
+
+
+def benjamini_hochberg(p_values: np.ndarray, q: float) -> np.ndarray:
+    """Which p-values are discoveries with the false discovery rate controlled at ``q`` over them
+    (Benjamini and Hochberg 1995).
+
+    Examples
+    --------
+    >>> benjamini_hochberg(np.array([0.01, 0.03, 0.02, 0.5]), 0.05).tolist()  # 0.03 <= 3/4 of 0.05
+    [True, True, True, False]
+    >>> benjamini_hochberg(np.array([0.01, 0.04, 0.03, 0.5]), 0.05).tolist()  # 0.03 > 2/4 of 0.05
+    [True, False, False, False]
+    """
+    p = np.asarray(p_values, dtype=np.float64)
+    order = np.argsort(p, kind="stable")
+    passed = p[order] <= q * np.arange(1, p.size + 1) / p.size
+    out = np.zeros(p.size, dtype=bool)
+    if passed.any():
+        out[order[: np.flatnonzero(passed)[-1] + 1]] = True
+    return out

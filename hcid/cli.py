@@ -286,6 +286,21 @@ def analyse(
             "default: own, and study where no W separates a group's own twins).",
         ),
     ] = "auto",
+    alpha: Annotated[
+        float,
+        typer.Option(
+            "--alpha",
+            help="Level of each run's feedforward test (its W* against its FB twins'; SPEC 11).",
+        ),
+    ] = 0.05,
+    fdr: Annotated[
+        bool,
+        typer.Option(
+            "--fdr",
+            help="Control the false discovery rate at --alpha over the study's runs (Benjamini-Hochberg) "
+            "instead of testing each run at --alpha.",
+        ),
+    ] = False,
     jobs: JobsOpt = 2,
     backend: BackendOpt = "loky",
     scheduler: SchedulerOpt = None,
@@ -305,6 +320,8 @@ def analyse(
         by=None if by is None else [b.strip() for b in by.split(",") if b.strip()],
         twins=twins,
         ff_twin=ff_twin,
+        alpha=alpha,
+        fdr=fdr,
         jobs=jobs,
         force=force,
         backend=backend,
@@ -502,8 +519,15 @@ def _print_analysis(result) -> None:
                 "no contiguous safe interval; W of least total error, where the twins' rates are "
                 "within the target"
             )
+        power = [r["power"] for r in rows]
         typer.echo(
-            f"{g['group']}, {g['method']}: feedforward in {g['n_feedforward']} of {g['n_runs']} runs at "
+            f"{g['group']}, {g['method']}: {g['verdict']}: {g['n_evidence']} of {g['n_runs']} runs show "
+            f"feedforward at p <= {g['alpha']:g} (their W* against their own forcing set's FB twins; "
+            f"binomial p = {g['binomial_p']:.2g}; power {min(power):.2f} to {max(power):.2f}, "
+            f"{g['forcing_sets']} forcing set{'s' if g['forcing_sets'] > 1 else ''})"
+        )
+        typer.echo(
+            f"    calibrated W (SPEC 10): feedforward in {g['n_feedforward']} of {g['n_runs']} runs at "
             f"W = {g['w']:.3g} ({safe}; twins' FP {pct(g['fp_rate'], g['fp_low'], g['fp_high'])}, "
             f"FN {pct(g['fn_rate'], g['fn_low'], g['fn_high'])})"
         )

@@ -426,6 +426,8 @@ ANALYSIS = _schema(
     + _CHOICE_FIELDS
     + [(c, _INT) for c in ORDER_COLUMNS]
     + [("feedforward", _BOOL), ("vaf_arx_validation", _F64), ("target", _STR), ("vaf_validation", _F64)]
+    + [("forcing_set", _INT), ("w_star", _F64), ("p_value", _F64), ("power", _F64), ("evidence", _STR)]
+    + [("evidence_uncertain", _BOOL)]
     + [("hc_form", _STR)]
     + [f for p in HC_PARAMETER_NAMES for f in ((p, _F64), (f"{p}_se", _F64), (f"{p}_status", _STR))]
     + [("crossover", _F64), ("phase_margin", _F64), ("share_remnant", _F64)]
@@ -448,6 +450,8 @@ ANALYSIS_GROUPS = _schema(
     "analysis_groups.parquet",
     _CHOICE_FIELDS
     + [("n_runs", _INT), ("n_feedforward", _INT)]
+    + [("verdict", _STR), ("n_evidence", _INT), ("binomial_p", _F64), ("median_power", _F64)]
+    + [("alpha", _F64), ("forcing_sets", _INT)]
     + [(f"twin_{p}", _F64) for p in HC_PARAMETER_NAMES]
     + [(f"fitted_{p}", _F64) for p in HC_PARAMETER_NAMES]
     + [("twin_kn", _F64), ("twin_w_n", _F64), ("twin_zeta_n", _F64), ("twins", _INT), ("twins_folder", _STR)]

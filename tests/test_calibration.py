@@ -85,3 +85,60 @@ def test_error_rates_count_realizations_exactly_with_exact_bands():
     assert (low[0], high[0]) == pytest.approx((1 - 0.975**0.5, 0.975**0.5), rel=1e-9)
     table = fp.to_arrow()
     assert table.column_names == ["method", "model", "error", "w", "k", "n", "rate", "low", "high"]
+
+
+# --------------------------------------------------------------------------- per-run evidence (SPEC 11)
+
+
+def test_a_runs_p_value_and_power_follow_spec_11():
+    # Source: SPEC 11's formulas. 19 FB twins with W* 0.01, 0.02, ..., 0.19: a run at W* 0.185 has
+    # one FB twin at or above (0.19): p = (1 + 1) / 20 = 0.1; at 0.2, none: p = 1/20 = 0.05.
+    from hcid.calibration import evidence_p_value, evidence_power
+
+    fb = np.arange(1, 20) / 100.0
+    assert evidence_p_value(0.185, fb) == pytest.approx(0.1)
+    assert evidence_p_value(0.2, fb) == pytest.approx(0.05)
+    assert evidence_p_value(0.0, fb) == 1.0
+    # FF twins: 3 of 4 above every FB twin (p = 0.05 <= 0.05), one among them.
+    assert evidence_power(np.array([0.3, 0.5, 1.0, 0.1]), fb, 0.05) == 0.75
+    assert evidence_power(np.array([0.3, 0.5, 1.0, 0.1]), fb, 0.01) == 0.0  # 20 twins: p >= 1/20
+
+
+def test_the_threshold_is_the_selection_paths_last_feedforward_w_clipped_to_the_grid():
+    from hcid.calibration import feedforward_threshold
+
+    path = SelectionPath(
+        np.array([0, 1, 2, 3]), np.array([0.0, 1e-3, 0.05, 0.3]), np.array([1e-3, 0.05, 0.3, np.inf])
+    )
+    # Rows 0 and 2 keep feedforward: the last such interval ends at 0.3.
+    assert feedforward_threshold(path, np.array([2, 0, 1, 0]), 1e-4, 2.0) == 0.3
+    assert feedforward_threshold(path, np.array([0, 0, 0, 1]), 1e-4, 2.0) == 2.0  # always: the grid's top
+    assert feedforward_threshold(path, np.array([0, 0, 0, 0]), 1e-4, 2.0) == 1e-4  # never: its bottom
+
+
+def test_the_binomial_summary_and_the_false_discovery_rate():
+    # Source: P(X >= 2) for X ~ Binomial(4, 0.05) = 1 - 0.95^4 - 4 * 0.05 * 0.95^3 = 0.014019.
+    from hcid.calibration import benjamini_hochberg, binomial_summary
+
+    k, n, p = binomial_summary(np.array([0.01, 0.5, 0.03, 0.9]), 0.05)
+    assert (k, n) == (2, 4) and p == pytest.approx(1 - 0.95**4 - 4 * 0.05 * 0.95**3)
+    assert binomial_summary(np.array([0.5, 0.9]), 0.05)[2] == 1.0
+    # Benjamini-Hochberg: sorted p 0.001, 0.012, 0.02, 0.04, 0.9 against 0.01, 0.02, 0.03, 0.04, 0.05.
+    found = benjamini_hochberg(np.array([0.9, 0.012, 0.04, 0.001, 0.02]), 0.05)
+    assert found.tolist() == [False, True, True, True, True]
+
+
+def test_runs_share_a_forcing_set_when_their_forcing_functions_agree():
+    # Source: SPEC 11: within 0.1% RMS over the window. Runs 1 and 3 share theirs, run 2 has the
+    # sign flipped, run 4 differs from run 1 by 0.05% RMS (same set), run 5 by 0.2% (a set of its own).
+    from types import SimpleNamespace
+
+    from hcid.pipeline.twins import forcing_sets
+
+    t = np.arange(400) / 10.0
+    ft, fd = np.sin(0.5 * t), np.cos(0.7 * t)
+    bump = np.sin(3.0 * t)  # RMS 1/sqrt(2), as ft's
+    records = {1: {"ft": ft, "fd": fd}, 2: {"ft": -ft, "fd": -fd}, 3: {"ft": ft.copy(), "fd": fd.copy()},
+               4: {"ft": ft + 0.0005 * bump, "fd": fd}, 5: {"ft": ft + 0.002 * bump, "fd": fd}}  # fmt: skip
+    config = SimpleNamespace(timing=SimpleNamespace(window=40.0, output_rate=10.0))
+    assert forcing_sets([1, 2, 3, 4, 5], records, config) == [[1, 3, 4], [2], [5]]

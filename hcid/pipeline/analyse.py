@@ -37,7 +37,14 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import datasets, folders, hcfit, methods, results, selection, tables
-from hcid.calibration import rates_at
+from hcid.calibration import (
+    benjamini_hochberg,
+    binomial_summary,
+    evidence_p_value,
+    evidence_power,
+    feedforward_threshold,
+    rates_at,
+)
 from hcid.config import Config
 from hcid.config.fit import FEEDFORWARD_PARAMETERS
 from hcid.config.parse import default_data
@@ -54,9 +61,10 @@ from hcid.pipeline.rundir import holds_run_dir
 from hcid.pipeline.studies import identify_study
 from hcid.pipeline.twins import (
     calibrate_twins,
-    check_same_forcing,
     choose_w,
+    forcing_sets,
     group_slug,
+    pool_twins,
     separates,
     twin_rate,
 )
@@ -187,7 +195,7 @@ def _same_fit(config: Config, sel: SelectedModel, fits: dict):
     return fits[bool(sel.has_feedforward)]
 
 
-def _tables(config, runs, groups, by, used, chosen, finals, twins, models, checks):
+def _tables(config, runs, groups, by, used, chosen, finals, twins, models, checks, evidence, alpha):
     group_checks = {key: checks.group(seeds, models[key].values) for key, seeds in groups.items()}
     factors = [c for c in runs.column_names if c not in tables.RUNS.names]
     factor_of = {int(r["seed"]): r for r in runs.to_pylist()}
@@ -236,14 +244,18 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, models, check
                 row["crossover"] = fitted_loop.crossover if fitted_loop else math.nan
                 row["phase_margin"] = fitted_loop.phase_margin if fitted_loop else math.nan
                 row["share_remnant"] = fitted_loop.shares["remnant"] if fitted_loop else math.nan
+                row.update(evidence[(seed, method_name)])
+                row["evidence_uncertain"] = bool(row["power"] < MIN_POWER)
                 check = checks.run(seed, fit) if fit else None
                 n_contradicted += bool(check is not None and check.contradicted)
                 row.update(_consistency_columns(check, checks.problem([seed]) if fit else "not fitted"))
                 for f in factors:
                     row[f] = str(factor_of[seed][f])
                 run_rows.append(row)
+            mine = [evidence[(seed, method_name)] for seed in seeds]
             group_rows.append(
-                {**choice, "n_runs": len(seeds), "n_feedforward": int(n_ff),
+                {**choice, "n_runs": len(seeds), "n_feedforward": int(n_ff), **_group_verdict(mine, alpha),
+                 "forcing_sets": len(pair.sets),
                  **{f"twin_{p}": pair.model[p] for p in tables.HC_PARAMETER_NAMES},
                  **{f"fitted_{p}": models[key].values[p] for p in tables.HC_PARAMETER_NAMES},
                  "twin_kn": pair.remnant[0], "twin_w_n": pair.remnant[1], "twin_zeta_n": pair.remnant[2],
@@ -297,6 +309,44 @@ class _Checks:
         except DataError as exc:
             self.problems[seeds[0]] = f"no test: {exc}"
             return None
+
+
+#: Below this power the twins cannot tell a run's feedforward from none (SPEC 11).
+MIN_POWER = 0.8
+
+
+def _run_evidence(path, nb_ft, pair, seed: int, method_name: str, config: Config, alpha: float) -> dict:
+    """The run's W*, its p-value against its own forcing set's FB twins and their power (SPEC 11)."""
+    grid = config.selection.w_grid
+    lo, hi = float(min(grid)), float(max(grid))
+    own = pair.of_run(seed)
+    (fb_paths, fb_nb), (ff_paths, ff_nb) = own.paths[method_name]
+    fb = np.array([feedforward_threshold(p, n, lo, hi) for p, n in zip(fb_paths, fb_nb, strict=True)])
+    ff = np.array([feedforward_threshold(p, n, lo, hi) for p, n in zip(ff_paths, ff_nb, strict=True)])
+    w_star = feedforward_threshold(path, nb_ft, lo, hi)
+    p = evidence_p_value(w_star, fb)
+    power = evidence_power(ff, fb, alpha)
+    return {
+        "forcing_set": pair.sets.index(own) + 1,
+        "w_star": w_star,
+        "p_value": p,
+        "power": power,
+        "evidence": "feedforward" if p <= alpha else "none shown",
+    }
+
+
+def _group_verdict(rows: list[dict], alpha: float) -> dict:
+    """A group's (or subject's) summary over its runs: k of n with p <= alpha against the binomial,
+    the median power, and the verdict word."""
+    k, n, p = binomial_summary(np.array([r["p_value"] for r in rows]), alpha)
+    power = float(np.median([r["power"] for r in rows]))
+    if p <= alpha:
+        verdict = "FEEDFORWARD"
+    elif power < MIN_POWER:
+        verdict = "UNCERTAIN"
+    else:
+        verdict = "NO FEEDFORWARD SHOWN"
+    return {"verdict": verdict, "n_evidence": k, "binomial_p": p, "median_power": power, "alpha": alpha}
 
 
 def _consistency_columns(check, problem: str) -> dict:
@@ -366,6 +416,8 @@ def analyse_study(
     by: Sequence[str] | None = None,
     twins: int = TWINS,
     ff_twin: str = "auto",
+    alpha: float = 0.05,
+    fdr: bool = False,
     jobs: int = 2,
     force: bool = False,
     backend: str = "loky",
@@ -388,6 +440,8 @@ def analyse_study(
         )
     if not 2 <= twins <= 1000:
         raise ConfigError(f"--twins: must be an integer in [2, 1000], got {twins}")
+    if not (isinstance(alpha, float | int) and 0.0 < alpha < 1.0):
+        raise ConfigError(f"--alpha: must be a level in (0, 1), got {alpha!r}")
     if ff_twin not in FF_TWINS:
         raise ConfigError(f"--ff-twin: must be one of {', '.join(FF_TWINS)}, got {ff_twin!r}")
     if config.fit_hc.target == "frequency":
@@ -459,7 +513,7 @@ def analyse_study(
     # fitted Kpt ("would feedforward of the size seen in this study be found here?").
     strongest = max(medians, key=lambda k: medians[k]["Kpt"])
     twin_args = dict(jobs=jobs, backend=backend, scheduler=scheduler, show_progress=show_progress)
-    used = {}  # (group, method) -> Twins
+    used = {}  # (group, method) -> TwinSets
     for key, seeds in groups.items():
         remnants = [fitted[s][1] for s in seeds if fitted[s][1] is not None and not fitted[s][1].at_bound]
         if not remnants:
@@ -467,21 +521,26 @@ def analyse_study(
                 f"group {group_slug(key)}: no run's remnant could be fitted; cannot build its twins"
             )
         remnant = tuple(float(np.median([getattr(r, a) for r in remnants])) for a in ("kn", "w_n", "zeta_n"))
-        check_same_forcing(key, seeds, records, config)
+        runs_of_set = forcing_sets(seeds, records, config)  # each set gets twins of its own
         study_model = {**medians[key], **{p: medians[strongest][p] for p in FEEDFORWARD_PARAMETERS}}
+
+        def twins_for(kind, model, key=key, runs_of_set=runs_of_set, remnant=remnant):
+            made = [
+                calibrate_twins(config, run_dir, key, records[members[0]], model, remnant, twins, kind,
+                                kn_rate, i + 1 if len(runs_of_set) > 1 else 0, **twin_args)
+                for i, members in enumerate(runs_of_set)
+            ]  # fmt: skip
+            return pool_twins(kind, made, runs_of_set, config)
+
         first = "study" if ff_twin == "study" and key != strongest else "own"
-        twins_of = {
-            first: calibrate_twins(config, run_dir, key, records[seeds[0]], medians[key] if first == "own"
-                                    else study_model, remnant, twins, first, kn_rate, **twin_args)
-        }  # fmt: skip
+        twins_of = {first: twins_for(first, medians[key] if first == "own" else study_model)}
         earlier = twins_of[first]
         if (
             ff_twin == "auto"
             and key != strongest
             and not all(separates(c) for c in earlier.calibrations.values())
         ):
-            twins_of["study"] = calibrate_twins(config, run_dir, key, records[seeds[0]], study_model,
-                                                 remnant, twins, "study", kn_rate, **twin_args)  # fmt: skip
+            twins_of["study"] = twins_for("study", study_model)
         for method_name in names:
             # The first twins where they separate; else the last made (study's, or the same).
             use = first if separates(earlier.calibrations[method_name]) else next(reversed(twins_of))
@@ -493,7 +552,7 @@ def analyse_study(
     frontier = results.read(tables.FRONTIER, run_dir)
     by_key = tables.split_by_key(frontier, tables.FRONTIER.key)
     stored = _choices(run_dir)
-    chosen, tasks = {}, []
+    chosen, tasks, evidence = {}, [], {}
     for key, seeds in groups.items():
         for method_name in names:
             w, rule, uncertain = choose_w(used[(key, method_name)].calibrations[method_name])
@@ -502,8 +561,12 @@ def analyse_study(
             for seed in seeds:
                 t = by_key[(data.name, seed, method_name)]
                 orders = np.column_stack([t.column(c).to_numpy() for c in tables.ORDER_COLUMNS])
-                row = selection.select_at(t.column("d").to_numpy(), t.column("v").to_numpy(), orders,
-                                          np.array([w]))[0]  # fmt: skip
+                path = selection.breakpoints(t.column("d").to_numpy(), t.column("v").to_numpy(), orders)
+                row = path.at(np.array([w]))[0]
+                evidence[(seed, method_name)] = _run_evidence(
+                    path, t.column("nb_ft").to_numpy(), used[(key, method_name)], seed, method_name,
+                    config, alpha,
+                )  # fmt: skip
                 sel = SelectedModel.from_frontier(
                     t,
                     int(row),
@@ -525,7 +588,15 @@ def analyse_study(
     lap_done("fit selected")
     # Each group's own fitted model as its own FF twin simulates it (the tables' one form of it).
     checks = _Checks(config, records)
-    group_table, run_table = _tables(config, runs, groups, by, used, chosen, finals, twins, models, checks)
+    if fdr:  # Benjamini-Hochberg over the study's runs, per method
+        for method_name in names:
+            keys = [k for k in evidence if k[1] == method_name]
+            found = benjamini_hochberg(np.array([evidence[k]["p_value"] for k in keys]), alpha)
+            for k, hit in zip(keys, found, strict=True):
+                evidence[k] = {**evidence[k], "evidence": "feedforward" if hit else "none shown"}
+    group_table, run_table = _tables(
+        config, runs, groups, by, used, chosen, finals, twins, models, checks, evidence, alpha
+    )
     fc_rows = []
     for key, seeds in groups.items():
         name = ", ".join(f"{f}={v}" for f, v in zip(by, key, strict=True)) or "all runs"

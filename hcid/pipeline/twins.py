@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from hcid import folders, methods, results, tables
+from hcid.calibration import calibrate
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError
 from hcid.pipeline.rundir import check_run_dir, using
@@ -21,9 +22,9 @@ from hcid.pipeline.sweep import selections
 from hcid.resolve import parse_config
 
 __all__ = [
-    "MIN_TWIN_KPT", "TWIN_SIM_RATE", "Twins", "calibrate_twins", "check_same_forcing", "choose_w",
-    "forcing_text", "group_slug", "separates", "twin_config_raw", "twin_dir_ready", "twin_paths",
-    "twin_rate", "twin_values",
+    "MIN_TWIN_KPT", "TWIN_SIM_RATE", "TwinSets", "Twins", "calibrate_twins", "choose_w", "forcing_sets",
+    "forcing_text", "group_slug", "pool_twins", "separates", "twin_config_raw", "twin_dir_ready",
+    "twin_paths", "twin_rate", "twin_values",
 ]  # fmt: skip
 
 #: The twins' simulation rate: the smallest multiple of the analysis rate at or above this (Hz).
@@ -98,19 +99,75 @@ def twin_config_raw(config: Config, fitted: dict, remnant: tuple, forcing: Path,
     }
 
 
-def check_same_forcing(key, seeds: list[int], records: dict, config: Config) -> None:
-    """The twins are driven by the group's first run's ft and fd: every run must share them."""
+def forcing_sets(seeds: list[int], records: dict, config: Config) -> list[list[int]]:
+    """The group's runs by their forcing functions (SPEC 11): runs whose ft and fd both agree
+    within 0.1% RMS over the window share a set (each set gets twins of its own), in the order of
+    their first run."""
     n = round(config.timing.window * config.timing.output_rate)
-    first = records[seeds[0]]
-    for seed in seeds[1:]:
-        for name in ("ft", "fd"):
-            a, b = first[name][:n], records[seed][name][:n]
-            if np.sqrt(np.mean((a - b) ** 2)) > 1e-3 * np.sqrt(np.mean(a**2)):
-                raise DataError(
-                    f"group {', '.join(key) or 'all runs'}: runs {seeds[0]} and {seed} have other "
-                    f"{name} (more than 0.1% RMS apart); the twins need one set of forcing functions: "
-                    "choose --by so that each group's runs share theirs"
-                )
+    sets: list[list[int]] = []
+    for seed in seeds:
+        for members in sets:
+            first = records[members[0]]
+            if all(
+                np.sqrt(np.mean((first[k][:n] - records[seed][k][:n]) ** 2))
+                <= 1e-3 * np.sqrt(np.mean(first[k][:n] ** 2))
+                for k in ("ft", "fd")
+            ):
+                members.append(seed)
+                break
+        else:
+            sets.append([seed])
+    return sets
+
+
+@dataclass(frozen=True)
+class TwinSets:
+    """A group's twins for every forcing set of its runs, and their calibration pooled over the
+    sets (one set: exactly that set's). ``runs[i]`` are the runs driven like ``sets[i]``."""
+
+    kind: str
+    sets: tuple
+    runs: tuple
+    calibrations: dict  # method -> Calibration over all sets' twins
+    paths: dict  # method -> ((fb paths, fb nb_ft), (ff paths, ff nb_ft)) over all sets
+
+    @property
+    def model(self) -> dict:
+        return self.sets[0].model
+
+    @property
+    def remnant(self) -> tuple:
+        return self.sets[0].remnant
+
+    @property
+    def folder(self) -> str:
+        return self.sets[0].folder
+
+    def of_run(self, seed: int):
+        """The twins driven by the run's own forcing functions."""
+        return next(t for t, runs in zip(self.sets, self.runs, strict=True) if seed in runs)
+
+
+def pool_twins(kind: str, sets: list, runs: list[list[int]], config: Config) -> TwinSets:
+    """:class:`TwinSets` of the sets' twins; several sets are calibrated together (their FB twins'
+    and FF twins' selection paths pooled, :func:`hcid.calibration.calibrate`)."""
+    if len(sets) == 1:
+        only = sets[0]
+        return TwinSets(kind, (only,), (tuple(runs[0]),), only.calibrations, only.paths)
+    w = np.asarray(config.selection.w_grid, dtype=np.float64)
+    calibrations, paths = {}, {}
+    for method in methods.METHODS:
+        fb = (
+            [p for t in sets for p in t.paths[method][0][0]],
+            [n for t in sets for n in t.paths[method][0][1]],
+        )
+        ff = (
+            [p for t in sets for p in t.paths[method][1][0]],
+            [n for t in sets for n in t.paths[method][1][1]],
+        )
+        paths[method] = (fb, ff)
+        calibrations[method] = calibrate(method, fb, ff, w, config.selection.target_rate)
+    return TwinSets(kind, tuple(sets), tuple(tuple(r) for r in runs), calibrations, paths)
 
 
 def forcing_text(record: dict, n: int) -> str:
@@ -160,10 +217,14 @@ def separates(cal) -> bool:
     return bool(cal.has_safe_interval and math.isfinite(cal.recommended))
 
 
-def calibrate_twins(config, run_dir, key, record, model, remnant, twins, kind, kn_rate, **pool) -> Twins:
-    """Simulate, identify and calibrate one pair of twins of a group in ``RUN/twins/<group>[-study]``
-    (resumed when its inputs are the same, made anew when not)."""
-    slug = group_slug(key) + ("-study" if kind == "study" else "")
+def calibrate_twins(config, run_dir, key, record, model, remnant, twins, kind, kn_rate, forcing_set=0,
+                    **pool) -> Twins:  # fmt: skip
+    """Simulate, identify and calibrate one pair of twins of a group in
+    ``RUN/twins/<group>[-f<set>][-study]`` (``forcing_set`` 0 for a group of one forcing set;
+    resumed when its inputs are the same, made anew when not)."""
+    slug = (
+        group_slug(key) + (f"-f{forcing_set}" if forcing_set else "") + ("-study" if kind == "study" else "")
+    )
     twin_dir = run_dir / "twins" / slug
     with using(twin_dir):
         forcing = twin_dir / "forcing.csv"

@@ -203,8 +203,8 @@ def render(data: StudyData | None, doc: Doc) -> None:
             "**Do the fitted models agree with the data's own frequency response?** (SPEC 11) Each "
             "group's model (from the values its runs determine) against its runs at the forcing "
             "lines, relative to the spread across runs (spread column; a one-run group: the remnant "
-            f"beside the lines): a chi-square test (p below {CONTRADICTED:g}: \"contradicted by the "
-            "data\"), and the median |error| of He (disturbance lines) and Ht (target lines) against "
+            f'beside the lines): a chi-square test (p below {CONTRADICTED:g}: "contradicted by the '
+            'data"), and the median |error| of He (disturbance lines) and Ht (target lines) against '
             "the Fourier-coefficient estimates. Each run's own model is tested against its remnant "
             "beside the lines (the run table's last column)."
         )
