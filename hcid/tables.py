@@ -414,7 +414,10 @@ _CONSISTENCY_FIELDS = [
 #: (``w_rule``: ``safe interval``, or ``least total error (...)`` with ``uncertain``
 #: true), the twins' false-positive and false-negative rates there with their exact 95%
 #: bands, the selected structure, ``feedforward`` (nb_ft > 0), the ARX and parametric
-#: models' validation VAF, the estimator (``target``) and the model's form (``hc_form``:
+#: models' validation VAF, the run's evidence (SPEC 11: its ``forcing_set`` of the group, its
+#: feedforward threshold ``w_star``, ``p_value`` against its set's FB twins, their ``power`` at
+#: the group's level, ``evidence`` ``feedforward`` or ``none shown``, ``evidence_uncertain`` where
+#: the power is below 0.8), the estimator (``target``) and the model's form (``hc_form``:
 #: ``full``, or ``nms fixed`` where the neuromuscular pair was held at its literature values),
 #: each parameter with its standard error and status (``<p>``, ``<p>_se``, ``<p>_status``:
 #: ``determined`` or the reason it is not, SPEC 11; NaN and ``not fitted`` where not fitted),
