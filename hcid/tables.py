@@ -56,6 +56,7 @@ __all__ = [
     "ANALYSIS",
     "ANALYSIS_GROUPS",
     "BREAKPOINTS",
+    "EVIDENCE_TWINS",
     "FC_ESTIMATES",
     "CALIBRATION",
     "FRONTIER",
@@ -472,6 +473,15 @@ ANALYSIS_GROUPS = _schema(
 #: of the group's estimate, ``inversion_sd`` and ``inversion_sd_deg`` their spread across runs
 #: (NaN at a disturbance line). A group whose design allows no estimate has one row with
 #: ``problem`` set.
+#: ``evidence_twins.parquet`` (``hcid analyse``): the twins each run's p-value is judged against
+#: (SPEC 11): per group, method, forcing set, twin (``FB`` or ``FF``) and realization, its
+#: feedforward threshold ``w_star``.
+EVIDENCE_TWINS = _schema(
+    "evidence_twins.parquet",
+    [("group", _STR), ("method", _STR), ("forcing_set", _INT), ("twin", _STR), ("seed", _INT)]
+    + [("w_star", _F64)],
+    ("group", "method", "forcing_set", "twin", "seed"),
+)
 FC_ESTIMATES = _schema(
     "fc_estimates.parquet",
     [("group", _STR), ("path", _STR), ("omega", _F64), ("magnitude_db", _F64), ("phase_deg", _F64)]

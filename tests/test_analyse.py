@@ -171,11 +171,13 @@ def test_the_report_answers_first(analysed, tmp_path):
     shutil.copytree(out[1][0], run)
     report = build_report(run)
     text = report.markdown.read_text()
-    assert text.index("## The study's answer") < text.index("feedforward in")
+    assert text.index("## The study's answer") < text.index("| verdict |") < text.index("feedforward at W")
     assert "Missing stages" not in text and "Fig." not in text
     names = sorted(p.name for p in report.figures)
     for stem in ("calibration_pursuit-", "calibration_compensatory-", "fc_pursuit-", "fc_compensatory-"):
         assert sum(n.startswith(stem) and "-study" not in n for n in names) == 1, (stem, names)
+    # Each group's runs drawn on their twins' W* (SPEC 11), per method.
+    assert sum(n.startswith("evidence_") for n in names) == 4
     # The compensatory condition's study twins (the test above) have their figure too.
     assert sum(n.startswith("calibration_compensatory-") and n.endswith("-study.png") for n in names) == 1
     assert "study's FF (Kpt" in text

@@ -244,7 +244,7 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, models, check
                 row["crossover"] = fitted_loop.crossover if fitted_loop else math.nan
                 row["phase_margin"] = fitted_loop.phase_margin if fitted_loop else math.nan
                 row["share_remnant"] = fitted_loop.shares["remnant"] if fitted_loop else math.nan
-                row.update(evidence[(seed, method_name)])
+                row.update({k: v for k, v in evidence[(seed, method_name)].items() if k != "twins"})
                 row["evidence_uncertain"] = bool(row["power"] < MIN_POWER)
                 check = checks.run(seed, fit) if fit else None
                 n_contradicted += bool(check is not None and check.contradicted)
@@ -327,12 +327,28 @@ def _run_evidence(path, nb_ft, pair, seed: int, method_name: str, config: Config
     p = evidence_p_value(w_star, fb)
     power = evidence_power(ff, fb, alpha)
     return {
+        "twins": {"FB": fb, "FF": ff},
         "forcing_set": pair.sets.index(own) + 1,
         "w_star": w_star,
         "p_value": p,
         "power": power,
         "evidence": "feedforward" if p <= alpha else "none shown",
     }
+
+
+def _evidence_twins(groups: dict, by, evidence: dict) -> pa.Table:
+    """The twins' W* each group's runs were judged against, once per group, method and forcing set."""
+    rows, done = [], set()
+    for key, seeds in groups.items():
+        name = ", ".join(f"{f}={v}" for f, v in zip(by, key, strict=True)) or "all runs"
+        for (seed, method_name), e in sorted(evidence.items()):
+            if seed not in seeds or (name, method_name, e["forcing_set"]) in done:
+                continue
+            done.add((name, method_name, e["forcing_set"]))
+            for twin, values in e["twins"].items():
+                rows += [{"group": name, "method": method_name, "forcing_set": e["forcing_set"], "twin": twin,
+                          "seed": i + 1, "w_star": float(w)} for i, w in enumerate(values)]  # fmt: skip
+    return pa.Table.from_pylist(rows, schema=tables.EVIDENCE_TWINS.arrow)
 
 
 def _group_verdict(rows: list[dict], alpha: float) -> dict:
@@ -604,6 +620,7 @@ def analyse_study(
     results.write(
         tables.FC_ESTIMATES, pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow), run_dir
     )
+    results.write(tables.EVIDENCE_TWINS, _evidence_twins(groups, by, evidence), run_dir)
     results.write(tables.ANALYSIS_GROUPS, group_table, run_dir)
     results.write(tables.ANALYSIS, run_table, run_dir)
     folders.atomic_write(run_dir / "analysis.csv", lambda tmp: _write_csv(run_table, tmp))

@@ -29,6 +29,7 @@ _READS = {
     "analysis": (tables.ANALYSIS, None),
     "analysis_groups": (tables.ANALYSIS_GROUPS, None),
     "fc_estimates": (tables.FC_ESTIMATES, None),
+    "evidence_twins": (tables.EVIDENCE_TWINS, None),
     "remnant_spectrum": (tables.REMNANT_SPECTRUM, None),
     "rates": (tables.RATES, None),
     "handoff": (tables.HANDOFF, None),
@@ -62,6 +63,7 @@ class RunTables:
     analysis: pa.Table | None = None
     analysis_groups: pa.Table | None = None
     fc_estimates: pa.Table | None = None
+    evidence_twins: pa.Table | None = None
 
     def simulations(self) -> dict | None:
         """The simulated records by (model, seed), or None without simulations."""

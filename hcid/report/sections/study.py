@@ -32,6 +32,7 @@ class StudyData:
     fc_problems: list[str] = field(default_factory=list)
     checks: list[list[str]] = field(default_factory=list)
     contradicted: list[str] = field(default_factory=list)
+    evidence: list[tuple[str, str, list, list, float, str]] = field(default_factory=list)
 
 
 def _num(x, digits: int = 3) -> str:
@@ -70,7 +71,9 @@ def compute(run, done) -> StudyData | None:
     for g in groups.to_pylist():
         safe = f"[{_num(g['safe_low'])}, {_num(g['safe_high'])})" if not g["uncertain"] else "none"
         answers.append(
-            [g["group"], g["method"], f"{g['n_feedforward']} of {g['n_runs']}", _num(g["w"]), g["w_rule"],
+            [g["group"], g["method"], g["verdict"], f"{g['n_evidence']} of {g['n_runs']}",
+             _num(g["binomial_p"], 2), _num(g["median_power"], 2),
+             f"{g['n_feedforward']} of {g['n_runs']}", _num(g["w"]), g["w_rule"],
              "own" if g["ff_twin"] == "own" else f"study's FF (Kpt {_num(g['twin_Kpt'], 2)})",
              safe, _pct(g["fp_rate"], g["fp_low"], g["fp_high"]),
              _pct(g["fn_rate"], g["fn_low"], g["fn_high"]), "UNCERTAIN" if g["uncertain"] else "yes"]
@@ -157,8 +160,27 @@ def compute(run, done) -> StudyData | None:
             by_path = {path: [r for r in t if r["path"] == path] for path in ("e", "ft")}
             curves = _model_curves(run, twin, [r["omega"] for r in t])
             fc.append((name, twin["twins_folder"].removesuffix("-study"), by_path, curves))
+    evidence = []
+    if run.evidence_twins is not None:
+        twins = run.evidence_twins.to_pylist()
+        for g in groups.to_pylist():
+            mine = [r for r in rows if r["group"] == g["group"] and r["method"] == g["method"]]
+            theirs = [t for t in twins if t["group"] == g["group"] and t["method"] == g["method"]]
+            if mine and theirs:
+                folder = _slug(g["twins_folder"].removesuffix("-study"))
+                evidence.append((g["group"], g["method"], theirs, mine, g["alpha"], folder))
     return StudyData(
-        answers, uncertain, parameters, header, table_rows, calibrations, fc, problems, checks, contradicted
+        answers,
+        uncertain,
+        parameters,
+        header,
+        table_rows,
+        calibrations,
+        fc,
+        problems,
+        checks,
+        contradicted,
+        evidence,
     )
 
 
@@ -167,7 +189,11 @@ def render(data: StudyData | None, doc: Doc) -> None:
         return
     doc.text(f"## {TITLE}")
     doc.text(
-        "Per group of runs and method: feedforward (nb_ft > 0) in how many runs at the group's W, "
+        "Per group of runs and method, first the runs' own evidence (SPEC 11): each run's W* against "
+        "its forcing set's FB twins gives a p-value; the verdict is FEEDFORWARD where the number of runs "
+        "at p <= alpha is itself unlikely without feedforward (binomial p), UNCERTAIN where the twins' "
+        "power is below 0.8. Then SPEC 10's calibrated W: feedforward (nb_ft > 0) in how many runs "
+        "at the group's W, "
         "calibrated on twins of the group's own fitted model (FF twin) and the same without "
         "feedforward (FB twin), with the twins' false-positive and false-negative rates there and "
         "their exact 95% bands. Where no W separates a group's own twins (nobody there uses "
@@ -177,8 +203,9 @@ def render(data: StudyData | None, doc: Doc) -> None:
         "**uncertain**."
     )
     doc.table(
-        ["group", "method", "feedforward in", "W", "rule", "FF twin", "safe interval", "twins' FP at W",
-         "twins' FN at W", "decided"],
+        ["group", "method", "verdict", "runs at p <= alpha", "binomial p", "median power",
+         "feedforward at W", "W", "rule", "FF twin", "safe interval", "twins' FP at W", "twins' FN at W",
+         "decided"],
         data.answers,
     )  # fmt: skip
     if data.uncertain:
@@ -186,6 +213,15 @@ def render(data: StudyData | None, doc: Doc) -> None:
             "**No W separates the twins of** " + "; ".join(data.uncertain) + ": the feedforward decisions "
             "there cannot be trusted at any W (the group's fitted feedforward is too weak, or its "
             "feedback twin finds feedforward too often)."
+        )
+    for group, method, twins, runs, alpha, folder in data.evidence:
+        doc.figure(
+            f"evidence_{folder}_{method}.png",
+            f"{group}, {method} method: each run's W* (the largest W at which its selection keeps "
+            "feedforward) on its own forcing set's twins: a run shows feedforward where its p-value, "
+            f"the share of FB twins at or above it (with one added to both counts), is at most {alpha:g} "
+            "(filled); the FF twins show how often such a run would be found (the power).",
+            lambda t=twins, r=runs, n=f"{group}, {method}", a=alpha: figures_hcfit.plot_evidence(t, r, n, a),
         )
     for title, caption, folder, table, used in data.calibrations:
         what = (
