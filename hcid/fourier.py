@@ -25,7 +25,7 @@ import numpy as np
 
 from hcid.errors import DataError
 
-__all__ = ["FCEstimate", "ForcingLines", "fc_estimate", "forcing_lines"]
+__all__ = ["FCEstimate", "ForcingLines", "fc_estimate", "forcing_lines", "interpolate"]
 
 #: A forcing function is a line spectrum over the window when its bins, sorted by power, fall
 #: into lines and the rest with a gap of at least :data:`LINE_GAP` (power ratio) between them,
@@ -172,8 +172,9 @@ class FCEstimate:
         )
 
 
-def _interpolate(omega_from: np.ndarray, h: np.ndarray, omega_to: np.ndarray) -> np.ndarray:
-    """Linear in log-frequency, on magnitude (dB) and unwrapped phase; held beyond the ends."""
+def interpolate(omega_from: np.ndarray, h: np.ndarray, omega_to: np.ndarray) -> np.ndarray:
+    """He between the disturbance lines (SPEC 10): linear in log-frequency, on magnitude (dB) and
+    unwrapped phase; held beyond the ends."""
     x = np.log(omega_from)
     db = np.interp(np.log(omega_to), x, 20.0 * np.log10(np.abs(h)))
     phase = np.interp(np.log(omega_to), x, np.unwrap(np.angle(h)))
@@ -184,7 +185,7 @@ def _paths(lines: ForcingLines, u, e, ft) -> tuple[np.ndarray, np.ndarray, np.nd
     """(He at W_d, Ht at W_t, He at W_t) from DFT coefficients (arrays over all bins)."""
     he = u[lines.disturbance] / e[lines.disturbance]
     omega_e, omega_t = lines.omega(lines.disturbance), lines.omega(lines.target)
-    he_t = _interpolate(omega_e, he, omega_t)
+    he_t = interpolate(omega_e, he, omega_t)
     ht = (u[lines.target] - he_t * e[lines.target]) / ft[lines.target]
     return he, ht, he_t
 

@@ -416,9 +416,11 @@ _CONSISTENCY_FIELDS = [
 #: true), the twins' false-positive and false-negative rates there with their exact 95%
 #: bands, the selected structure, ``feedforward`` (nb_ft > 0), the ARX and parametric
 #: models' validation VAF, the run's evidence (SPEC 11: its ``forcing_set`` of the group, its
-#: feedforward threshold ``w_star``, ``p_value`` against its set's FB twins, their ``power`` at
-#: the group's level, ``evidence`` ``feedforward`` or ``none shown``, ``evidence_uncertain`` where
-#: the power is below 0.8), the estimator (``target``) and the model's form (``hc_form``:
+#: feedforward threshold ``w_star`` and model-free ``fourier_size``, each with its p-value against
+#: its set's FB twins and their power at the group's level, ``decided_by`` the statistic whose
+#: twins' power is higher, whose ``p_value`` and ``power`` decide ``evidence``
+#: (``feedforward`` or ``none shown``); ``evidence_uncertain`` where that power is below 0.8),
+#: the estimator (``target``) and the model's form (``hc_form``:
 #: ``full``, or ``nms fixed`` where the neuromuscular pair was held at its literature values),
 #: each parameter with its standard error and status (``<p>``, ``<p>_se``, ``<p>_status``:
 #: ``determined`` or the reason it is not, SPEC 11; NaN and ``not fitted`` where not fitted),
@@ -430,8 +432,9 @@ ANALYSIS = _schema(
     + _CHOICE_FIELDS
     + [(c, _INT) for c in ORDER_COLUMNS]
     + [("feedforward", _BOOL), ("vaf_arx_validation", _F64), ("target", _STR), ("vaf_validation", _F64)]
-    + [("forcing_set", _INT), ("w_star", _F64), ("p_value", _F64), ("power", _F64), ("evidence", _STR)]
-    + [("evidence_uncertain", _BOOL)]
+    + [("forcing_set", _INT), ("w_star", _F64), ("p_w_star", _F64), ("power_w_star", _F64)]
+    + [("fourier_size", _F64), ("p_fourier", _F64), ("power_fourier", _F64), ("decided_by", _STR)]
+    + [("p_value", _F64), ("power", _F64), ("evidence", _STR), ("evidence_uncertain", _BOOL)]
     + [("hc_form", _STR)]
     + [f for p in HC_PARAMETER_NAMES for f in ((p, _F64), (f"{p}_se", _F64), (f"{p}_status", _STR))]
     + [("crossover", _F64), ("phase_margin", _F64), ("share_remnant", _F64)]
@@ -455,7 +458,7 @@ ANALYSIS_GROUPS = _schema(
     _CHOICE_FIELDS
     + [("n_runs", _INT), ("n_feedforward", _INT)]
     + [("verdict", _STR), ("n_evidence", _INT), ("binomial_p", _F64), ("median_power", _F64)]
-    + [("alpha", _F64), ("forcing_sets", _INT)]
+    + [("alpha", _F64), ("forcing_sets", _INT), ("decided_by", _STR)]
     + [(f"twin_{p}", _F64) for p in HC_PARAMETER_NAMES]
     + [(f"fitted_{p}", _F64) for p in HC_PARAMETER_NAMES]
     + [("twin_kn", _F64), ("twin_w_n", _F64), ("twin_zeta_n", _F64), ("twins", _INT), ("twins_folder", _STR)]

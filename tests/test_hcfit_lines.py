@@ -55,6 +55,7 @@ def _record(values=TRUTH, remnant=0.0, at_lines=True, seed=0, sign=1.0, backgrou
     n_coef[0] = n_coef[-1] = 0.0
     s = 1j * omega[1:]
     hft, he = hcfit.hc_response(values, PLANT, omega[1:])
+    hft = np.zeros_like(he) if hft is None else hft  # a model without feedforward
     yc = 1.0 / s
     u, e = np.zeros(bins.size, complex), np.zeros(bins.size, complex)
     u[1:] = ((he + hft) * ft[1:] - he * yc * fd[1:] + n_coef[1:]) / (1.0 + he * yc)
@@ -290,3 +291,21 @@ def test_nms_auto_holds_an_undetermined_pair_unless_the_data_reject_it():
     full, reduced = fit(record, "free"), fit(record, "fixed")
     assert nested_test(full, reduced, 24) < 1e-6
     assert hcfit.fit_hc(settings, PLANT, True, record=record, disturbance_at="input").fixed == ()
+
+
+def test_the_model_free_feedforward_size_grows_with_the_feedforward_gain():
+    # Source: without remnant at the lines, U - He E at a target line is Hft Ft plus only the
+    # He interpolation's leak: the size grows with Kpt and is smallest without feedforward.
+    from hcid.hcfit.lines import feedforward_size
+
+    sizes = []
+    for kpt in (0.0, 0.3, 1.0):
+        values = (
+            {**TRUTH, "Kpt": kpt}
+            if kpt
+            else {p: v for p, v in TRUTH.items() if p not in ("Kpt", "TI", "tau_pt")}
+        )
+        record, _ = _record(values=values, remnant=0.05, at_lines=True, seed=9)
+        sizes.append(feedforward_size(line_data(record)))
+    assert sizes[0] < sizes[1] < sizes[2]
+    assert sizes[2] > 10 * sizes[0]  # the leak without feedforward is not small: twins give its null

@@ -29,11 +29,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from hcid.errors import DataError
-from hcid.fourier import ForcingLines, forcing_lines
+from hcid.fourier import ForcingLines, forcing_lines, interpolate
 from hcid.hcfit.closed_loop import loop_spectrum, loops_are_stable
 from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials
 
-__all__ = ["NEIGHBOURS", "LineData", "line_data"]
+__all__ = ["NEIGHBOURS", "LineData", "feedforward_size", "line_data"]
 
 #: Bins without forcing beside each line whose mean power is the remnant's variance there:
 #: 6 gives each estimate 12 real degrees of freedom while spanning +-3 bins (0.47 rad/s for a
@@ -119,6 +119,27 @@ def line_data(record: TrackingRecord, neighbours: int = NEIGHBOURS) -> LineData:
         near_e=spectra["e"][near],
         lines=lines,
     )
+
+
+def feedforward_size(data: LineData) -> float:
+    """A model-free size of the feedforward path (issue 34): ``sum |U - He E|^2 / s^2`` over the
+    target lines, i.e. ``|Ht|^2 / se(Ht)^2`` summed, with He interpolated from the disturbance
+    lines' ``U / E`` (SPEC 10) at the target lines and at their neighbours, and ``s^2`` the mean of
+    ``|U_j - He E_j|^2`` over the neighbours without forcing. The interpolation leaks He's error
+    into Ht even without feedforward, so its null distribution comes from twins, not a formula
+    (tests/test_hcfit_lines.py: it grows with the feedforward gain of a synthetic loop).
+    """
+    dist = ~data.is_target
+    he_lines = data.u[dist] / data.e[dist]
+    omega_d = data.omega[dist]
+    he_t = interpolate(omega_d, he_lines, data.omega[data.is_target])
+    he_near = interpolate(omega_d, he_lines, data.near_omega[data.is_target].ravel()).reshape(
+        data.near_omega[data.is_target].shape
+    )
+    r = data.u[data.is_target] - he_t * data.e[data.is_target]
+    near = data.near_u[data.is_target] - he_near * data.near_e[data.is_target]
+    s2 = np.mean(np.abs(near) ** 2, axis=1)
+    return float(np.sum(np.abs(r) ** 2 / s2))
 
 
 class LinesProblem:

@@ -53,7 +53,7 @@ from hcid.errors import ConfigError, DataError, IdentificationError
 from hcid.fourier import fc_estimate
 from hcid.hcfit.consistency import consistency, group_consistency
 from hcid.hcfit.determined import group_model, is_undetermined, parameter_status, reason
-from hcid.hcfit.lines import line_data
+from hcid.hcfit.lines import feedforward_size, line_data
 from hcid.hcmodel import plant
 from hcid.pipeline.fit import _choices, _records, _stage_choices
 from hcid.pipeline.parallel import parallel_map
@@ -67,6 +67,7 @@ from hcid.pipeline.twins import (
     pool_twins,
     separates,
     twin_rate,
+    twin_sizes,
 )
 from hcid.selected import SelectedModel, analyse_selected
 
@@ -255,7 +256,7 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, models, check
             mine = [evidence[(seed, method_name)] for seed in seeds]
             group_rows.append(
                 {**choice, "n_runs": len(seeds), "n_feedforward": int(n_ff), **_group_verdict(mine, alpha),
-                 "forcing_sets": len(pair.sets),
+                 "forcing_sets": len(pair.sets), "decided_by": mine[0]["decided_by"],
                  **{f"twin_{p}": pair.model[p] for p in tables.HC_PARAMETER_NAMES},
                  **{f"fitted_{p}": models[key].values[p] for p in tables.HC_PARAMETER_NAMES},
                  "twin_kn": pair.remnant[0], "twin_w_n": pair.remnant[1], "twin_zeta_n": pair.remnant[2],
@@ -315,8 +316,10 @@ class _Checks:
 MIN_POWER = 0.8
 
 
-def _run_evidence(path, nb_ft, pair, seed: int, method_name: str, config: Config, alpha: float) -> dict:
-    """The run's W*, its p-value against its own forcing set's FB twins and their power (SPEC 11)."""
+def _run_evidence(path, nb_ft, pair, seed, method_name, config, alpha, run_size, sizes) -> dict:
+    """The run's two statistics against its own forcing set's twins (SPEC 11, issue 34): its W*
+    and its model-free feedforward size (``run_size``; ``sizes`` the set's twins' by FB and FF,
+    None without forcing lines), each with its p-value and its twins' power."""
     grid = config.selection.w_grid
     lo, hi = float(min(grid)), float(max(grid))
     own = pair.of_run(seed)
@@ -324,16 +327,43 @@ def _run_evidence(path, nb_ft, pair, seed: int, method_name: str, config: Config
     fb = np.array([feedforward_threshold(p, n, lo, hi) for p, n in zip(fb_paths, fb_nb, strict=True)])
     ff = np.array([feedforward_threshold(p, n, lo, hi) for p, n in zip(ff_paths, ff_nb, strict=True)])
     w_star = feedforward_threshold(path, nb_ft, lo, hi)
-    p = evidence_p_value(w_star, fb)
-    power = evidence_power(ff, fb, alpha)
+    nan = math.nan
+    fourier = (nan, nan, nan)
+    if sizes is not None and run_size is not None:
+        fourier = (
+            run_size,
+            evidence_p_value(run_size, sizes["FB"]),
+            evidence_power(sizes["FF"], sizes["FB"], alpha),
+        )
     return {
         "twins": {"FB": fb, "FF": ff},
         "forcing_set": pair.sets.index(own) + 1,
         "w_star": w_star,
-        "p_value": p,
-        "power": power,
-        "evidence": "feedforward" if p <= alpha else "none shown",
+        "p_w_star": evidence_p_value(w_star, fb),
+        "power_w_star": evidence_power(ff, fb, alpha),
+        "fourier_size": fourier[0],
+        "p_fourier": fourier[1],
+        "power_fourier": fourier[2],
     }
+
+
+#: The two statistics of a run's evidence, by name in the tables.
+STATISTICS = {"W*": ("p_w_star", "power_w_star"), "Fourier coefficients": ("p_fourier", "power_fourier")}
+
+
+def _decide(rows: list[dict], alpha: float) -> None:
+    """Which statistic decides for a group and method: the one whose twins give the higher median
+    power (from the twins alone, before the runs' values are read); each row gets its
+    ``decided_by``, ``p_value``, ``power`` and ``evidence``."""
+    powers = {
+        name: float(np.median([r[pw] for r in rows])) for name, (_, pw) in STATISTICS.items()
+        if all(math.isfinite(r[pw]) for r in rows)
+    }  # fmt: skip
+    chosen = max(powers, key=lambda name: (powers[name], name == "W*"))
+    p_col, power_col = STATISTICS[chosen]
+    for r in rows:
+        r.update(decided_by=chosen, p_value=r[p_col], power=r[power_col],
+                 evidence="feedforward" if r[p_col] <= alpha else "none shown")  # fmt: skip
 
 
 def _evidence_twins(groups: dict, by, evidence: dict) -> pa.Table:
@@ -569,6 +599,15 @@ def analyse_study(
     by_key = tables.split_by_key(frontier, tables.FRONTIER.key)
     stored = _choices(run_dir)
     chosen, tasks, evidence = {}, [], {}
+    checks = _Checks(config, records)
+    run_sizes = {seed: feedforward_size(data) for seed, data in checks.lines.items()}
+    size_cache: dict[str, dict | None] = {}
+
+    def _sizes_of(twin):
+        if twin.folder not in size_cache:
+            size_cache[twin.folder] = twin_sizes(twin, run_dir, config)
+        return size_cache[twin.folder]
+
     for key, seeds in groups.items():
         for method_name in names:
             w, rule, uncertain = choose_w(used[(key, method_name)].calibrations[method_name])
@@ -579,9 +618,10 @@ def analyse_study(
                 orders = np.column_stack([t.column(c).to_numpy() for c in tables.ORDER_COLUMNS])
                 path = selection.breakpoints(t.column("d").to_numpy(), t.column("v").to_numpy(), orders)
                 row = path.at(np.array([w]))[0]
+                pair = used[(key, method_name)]
                 evidence[(seed, method_name)] = _run_evidence(
-                    path, t.column("nb_ft").to_numpy(), used[(key, method_name)], seed, method_name,
-                    config, alpha,
+                    path, t.column("nb_ft").to_numpy(), pair, seed, method_name, config, alpha,
+                    run_sizes.get(seed), _sizes_of(pair.of_run(seed)),
                 )  # fmt: skip
                 sel = SelectedModel.from_frontier(
                     t,
@@ -594,6 +634,7 @@ def analyse_study(
                 choices = _stage_choices(run_dir, stored, method_name, data.name, seed)
                 own = _same_fit(config, sel, fitted[seed][0])  # shared, not fitted twice
                 tasks.append((config, seed, records[seed], method_name, sel, choices, own))
+            _decide([evidence[(seed, method_name)] for seed in seeds], alpha)
     finals = {
         (seed, method_name): analysis
         for seed, method_name, analysis in parallel_map(
@@ -602,8 +643,6 @@ def analyse_study(
         )
     }  # fmt: skip
     lap_done("fit selected")
-    # Each group's own fitted model as its own FF twin simulates it (the tables' one form of it).
-    checks = _Checks(config, records)
     if fdr:  # Benjamini-Hochberg over the study's runs, per method
         for method_name in names:
             keys = [k for k in evidence if k[1] == method_name]

@@ -16,6 +16,8 @@ from hcid import folders, methods, results, tables
 from hcid.calibration import calibrate
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError
+from hcid.hcfit import TrackingRecord
+from hcid.hcfit.lines import feedforward_size, line_data
 from hcid.pipeline.rundir import check_run_dir, using
 from hcid.pipeline.studies import calibrate_study
 from hcid.pipeline.sweep import selections
@@ -24,7 +26,7 @@ from hcid.resolve import parse_config
 __all__ = [
     "MIN_TWIN_KPT", "TWIN_SIM_RATE", "TwinSets", "Twins", "calibrate_twins", "choose_w", "forcing_sets",
     "forcing_text", "group_slug", "pool_twins", "separates", "twin_config_raw", "twin_dir_ready",
-    "twin_paths", "twin_rate", "twin_values",
+    "twin_paths", "twin_rate", "twin_sizes", "twin_values",
 ]  # fmt: skip
 
 #: The twins' simulation rate: the smallest multiple of the analysis rate at or above this (Hz).
@@ -210,6 +212,23 @@ class Twins:
     folder: str  # under the run directory
     calibrations: dict  # method -> Calibration
     paths: dict  # method -> the twins' selection paths and nb_ft (twin_paths)
+
+
+def twin_sizes(twin: Twins, run_dir: Path, config: Config) -> dict[str, np.ndarray] | None:
+    """Each FB and FF twin realization's model-free feedforward size
+    (:func:`hcid.hcfit.lines.feedforward_size`), by twin; None where the forcing has no lines."""
+    folder = run_dir / twin.folder
+    records = results.records(results.read(tables.SIMULATIONS, folder), folder / tables.SIMULATIONS.file)
+    rate = config.timing.output_rate
+    out: dict[str, list[float]] = {"FB": [], "FF": []}
+    try:
+        for (model, _), r in sorted(records.items()):
+            n = r["u"].size
+            record = TrackingRecord(r["ft"], r["e"], r["u"], rate, slice(0, n), slice(0, n), fd=r["fd"])
+            out[model].append(feedforward_size(line_data(record)))
+    except DataError:
+        return None
+    return {k: np.array(v) for k, v in out.items()}
 
 
 def separates(cal) -> bool:
