@@ -133,6 +133,8 @@ def _expand(source: str | Path) -> list[DataFile]:
         return [DataFile(p) for p in found]
     if not path.exists():
         raise DataError(f"{path}: no such file or folder")
+    if not path.is_file():  # read before anything is written: a pipe would block, a device never end
+        raise DataError(f"{path}: not a regular file (a pipe, socket or device); give a data file")
     if _is_manifest(path):
         return _manifest(path)
     return [DataFile(path)]

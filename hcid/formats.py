@@ -38,7 +38,8 @@ _BLOCK = 1 << 20
 def _check_size(path: Path) -> None:
     try:
         if not path.is_file():
-            raise DataError(f"{path}: missing")
+            kind = "not a regular file (a pipe, socket or device)" if path.exists() else "missing"
+            raise DataError(f"{path}: {kind}")
         size = path.stat().st_size
     except OSError as exc:
         raise DataError(f"{path}: cannot read ({exc.strerror or exc})") from exc

@@ -101,8 +101,8 @@ def run_blocks(ids: np.ndarray, where: str, column: str) -> dict[int, slice]:
     Raises
     ------
     DataError
-        If an id is not an integer, or a run's rows are split (the same id in two
-        places: two trials given one id must not be merged).
+        If there are no rows, an id is not an integer, or a run's rows are split (the same id
+        in two places: two trials given one id must not be merged).
 
     Examples
     --------
@@ -110,12 +110,14 @@ def run_blocks(ids: np.ndarray, where: str, column: str) -> dict[int, slice]:
     {11: slice(0, 2, None), 12: slice(2, 5, None)}
     """
     ids = np.ravel(ids)
-    if ids.size and not (
+    if not ids.size:
+        raise DataError(f"{where}: no data rows (column {quote(column)} is empty)")
+    if not (
         np.all(np.isfinite(ids)) and np.all(ids == np.round(ids)) and np.all(np.abs(ids) < 2**53)
     ):
         k = int(np.argmax(~np.isfinite(ids) | (ids != np.round(ids)) | ~(np.abs(ids) < 2**53)))
         raise DataError(f"{where}: {quote(column)} holds {ids[k]:.6g} at row {k}; run ids must be integers")
-    starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]]) if ids.size else np.array([], dtype=int)
+    starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
     ends = np.r_[starts[1:], ids.size]
     blocks: dict[int, slice] = {}
     for a, b in zip(starts, ends, strict=True):

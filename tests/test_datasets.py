@@ -3,6 +3,7 @@ line for every bad set."""
 
 import csv
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -316,3 +317,30 @@ def test_a_corrupt_parquet_file_is_one_line(tmp_path):
             datasets.data_files([bad]),
             parse_config(yaml.safe_load(_config(tmp_path).read_text()), "lab").data,
         )
+
+
+def test_a_pipe_or_a_csv_without_rows_is_one_line_and_nothing_is_written(tmp_path):
+    # Found by the hostile battery (issue 35): a named pipe given to --data blocked hcid after it
+    # had marked the run directory; a CSV with its header and a run column but no data rows ended
+    # in a traceback (run_blocks' zip).
+    import os
+
+    import hcid
+
+    pipe = tmp_path / "S1_pursuit_trial1.csv"
+    os.mkfifo(pipe)
+    with pytest.raises(DataError, match="not a regular file"):
+        datasets.data_files([pipe])
+    with pytest.raises(DataError, match="not a regular file"):
+        hcid.read_records(pipe)
+    empty = tmp_path / "S1_pursuit_trial2.csv"
+    empty.write_text("run,time,target,disturbance,error,stick\n")
+    runner = CliRunner()
+    for source in (pipe, empty):
+        run = tmp_path / f"run_{source.stem}"
+        config = str(Path(__file__).resolve().parents[1] / "configs" / "lab_example.yaml")
+        result = runner.invoke(app, ["analyse", config, "--data", str(source), "--run", str(run), "--quiet"])
+        assert result.exit_code == 2, result.output
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and str(source) in lines[0], lines
+        assert not run.exists()
