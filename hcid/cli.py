@@ -26,8 +26,23 @@ app = typer.Typer(
 )
 
 
+def _show_version(value: bool) -> None:
+    if value:
+        from hcid import __version__
+
+        typer.echo(f"hcid {__version__}")
+        raise typer.Exit()
+
+
 @app.callback()
-def _root() -> None:
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", help="Print hcid's version and exit.", callback=_show_version, is_eager=True
+        ),
+    ] = False,
+) -> None:
     """hcid: identify human-controller models from closed-loop manual-control data."""
 
 

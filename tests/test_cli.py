@@ -172,3 +172,15 @@ def test_commands_do_not_silence_warnings():
 
     with pytest.warns(RuntimeWarning, match="reaches the user"):
         _user_errors(lambda: warnings.warn("reaches the user", RuntimeWarning, stacklevel=1))()
+
+
+def test_version_prints_the_installed_version():
+    # Source: the package's own metadata (pyproject.toml's version, as installed).
+    from importlib.metadata import version
+
+    from typer.testing import CliRunner
+
+    from hcid.cli import app
+
+    result = CliRunner().invoke(app, ["--version"])
+    assert result.exit_code == 0 and result.output.strip() == f"hcid {version('hcid')}"
