@@ -324,7 +324,7 @@ def analyse(
 ):
     """Analyse a measured study end to end: identify every run, calibrate W per condition on twins of
     the condition's own fitted model, select every run there and fit its parameters; writes
-    RUN/analysis.parquet, analysis.csv and analysis_groups.parquet."""
+    RUN/analysis.parquet, analysis.csv, analysis_groups.parquet and the report RUN/report/report.html."""
     from hcid.pipeline.analyse import analyse_study
 
     cfg, run_dir = _load(config, run, backend, scheduler, data=data)
@@ -344,6 +344,9 @@ def analyse(
         show_progress=not quiet,
     )
     _print_analysis(result)
+    from hcid.report import build_report
+
+    typer.echo(f"report: {build_report(run_dir).html}")
 
 
 @app.command("fit-hc")
