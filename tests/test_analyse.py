@@ -72,6 +72,10 @@ def test_every_run_and_group_is_answered_with_its_factors(analysed):
         .startswith('"model","seed","file","file_run","group"')
     )
     assert "feedforward in 4 of 4 runs" in output
+    # The answer line leads with the verdict; the command ends with the report it wrote.
+    assert "condition=pursuit, direct: " in output
+    assert output.strip().splitlines()[-1] == f"report: {run / 'report' / 'report.html'}"
+    assert (run / "report" / "report.html").is_file()
 
 
 def test_a_group_whose_own_twins_no_w_separates_is_calibrated_on_the_studys_feedforward(analysed):
