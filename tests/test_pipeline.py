@@ -258,7 +258,8 @@ def test_corrupt_simulations_exit_2(tmp_path, ci_runs, damage, message):
 def test_sweep_without_frontier_exit_2(tmp_path):
     result = runner.invoke(app, ["sweep-w", str(CI_CONFIG), "--run", str(tmp_path / "empty")])
     assert result.exit_code == 2
-    assert "empty: missing; run `hcid run CONFIG` (or simulate / identify) first" in result.stderr
+    assert "empty: missing; make it first with `hcid run CONFIG` (a simulated study) or" in result.stderr
+    assert "`hcid analyse CONFIG --data DATA` (measured data)" in result.stderr
     assert not (tmp_path / "empty").exists()
     (tmp_path / "empty").mkdir()
     result = runner.invoke(app, ["sweep-w", str(CI_CONFIG), "--run", str(tmp_path / "empty")])

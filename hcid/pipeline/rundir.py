@@ -99,7 +99,10 @@ def using(run_dir: Path, *, create: bool = True) -> Iterator[Path]:
     """
     resolved = folders.check_output_path(run_dir, "run directory")
     if not create and not run_dir.is_dir():
-        raise DataError(f"{run_dir}: missing; run `hcid run CONFIG` (or simulate / identify) first")
+        raise DataError(
+            f"{run_dir}: missing; make it first with `hcid run CONFIG` (a simulated study) or "
+            "`hcid analyse CONFIG --data DATA` (measured data)"
+        )
     held = _HELD.get(resolved)
     created = not run_dir.exists()
     if held is not None:
