@@ -112,9 +112,7 @@ def run_blocks(ids: np.ndarray, where: str, column: str) -> dict[int, slice]:
     ids = np.ravel(ids)
     if not ids.size:
         raise DataError(f"{where}: no data rows (column {quote(column)} is empty)")
-    if not (
-        np.all(np.isfinite(ids)) and np.all(ids == np.round(ids)) and np.all(np.abs(ids) < 2**53)
-    ):
+    if not (np.all(np.isfinite(ids)) and np.all(ids == np.round(ids)) and np.all(np.abs(ids) < 2**53)):
         k = int(np.argmax(~np.isfinite(ids) | (ids != np.round(ids)) | ~(np.abs(ids) < 2**53)))
         raise DataError(f"{where}: {quote(column)} holds {ids[k]:.6g} at row {k}; run ids must be integers")
     starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])

@@ -221,7 +221,7 @@ def test_without_identification_one_line_and_exit_2(ci_raw, tmp_path):
     config.write_text(yaml.safe_dump(ci_raw))
     result = runner.invoke(app, ["fit-hc", str(config), "--run", str(tmp_path / "run"), "--quiet"])
     assert result.exit_code == 2
-    assert "run: missing; run `hcid run CONFIG`" in result.stderr
+    assert "run: missing; make it first with `hcid run CONFIG`" in result.stderr
     (tmp_path / "run").mkdir()
     result = runner.invoke(app, ["fit-hc", str(config), "--run", str(tmp_path / "run"), "--quiet"])
     assert result.exit_code == 2

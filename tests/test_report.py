@@ -138,7 +138,7 @@ def test_partial_run_reports_what_is_there(tmp_path):
 def test_report_of_non_run_dir_exit_2(tmp_path):
     result = runner.invoke(app, ["report", str(tmp_path / "nothing")])
     assert result.exit_code == 2
-    assert "nothing: missing; run `hcid run CONFIG`" in result.stderr
+    assert "nothing: missing; make it first with `hcid run CONFIG`" in result.stderr
     (tmp_path / "nothing").mkdir()
     result = runner.invoke(app, ["report", str(tmp_path / "nothing")])
     assert result.exit_code == 2
