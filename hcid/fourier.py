@@ -10,10 +10,11 @@ With multisine forcing functions on disjoint frequency sets ``W_t`` (target) and
   phase; held at the ends), then ``Ht(w) = (U - He E) / Ft`` (van Paassen and
   Mulder's two-loop method).
 
-Across runs that share the forcing functions, the coefficients are averaged
-before dividing (the remnant's, uncorrelated with the forcing functions, averages
-out); a DFT over a window of P whole periods is already the average over its
-periods. Per-run estimates give the spread.
+Across runs that share the forcing functions (or have them with the sign flipped,
+whose coefficients are flipped back first), the coefficients are averaged before
+dividing (the remnant's, uncorrelated with the forcing functions, averages out); a
+DFT over a window of P whole periods is already the average over its periods.
+Per-run estimates give the spread.
 """
 
 from __future__ import annotations
@@ -210,7 +211,7 @@ def fc_estimate(
     ------
     DataError
         If the design allows no estimate (``lines.problem``), the runs' forcing functions
-        differ over the window, or e has no power at a disturbance line.
+        differ over the window (other than by their sign), or e has no power at a disturbance line.
     """
     if not runs:
         raise DataError("no runs for a Fourier-coefficient estimate")
@@ -221,15 +222,27 @@ def fc_estimate(
         raise DataError(f"no Fourier-coefficient estimate: {lines.problem}")
     spectra = [{k: np.fft.rfft(w[k]) for k in w} for w in window]
     reference = spectra[0]
+
+    def same(s, sign) -> bool:
+        return all(
+            np.allclose(
+                sign * s[k][bins], reference[k][bins], rtol=1e-6, atol=1e-12 * np.abs(reference[k]).max()
+            )
+            for k, bins in (("ft", lines.target), ("fd", lines.disturbance))
+        )
+
     for i, s in enumerate(spectra[1:], start=2):
-        for k, bins in (("ft", lines.target), ("fd", lines.disturbance)):
-            if not np.allclose(
-                s[k][bins], reference[k][bins], rtol=1e-6, atol=1e-12 * np.abs(reference[k]).max()
-            ):
-                raise DataError(
-                    f"run {i} of the set has other forcing functions ({k}) than run 1: the runs' "
-                    "coefficients cannot be averaged"
-                )
+        if same(s, 1.0):
+            continue
+        if not same(s, -1.0):
+            raise DataError(
+                f"run {i} of the set has other forcing functions than run 1 (nor the same with their "
+                "sign flipped): the runs' coefficients cannot be averaged"
+            )
+        # The same forcing functions with their sign flipped (a common design): a linear loop's
+        # coefficients flip with them, so the run's are flipped back before averaging.
+        for k in s:
+            s[k] = -s[k]
     if any(np.any(np.abs(s["e"][lines.disturbance]) == 0) for s in spectra):
         raise DataError("e has no power at a disturbance frequency: He cannot be estimated there")
     per_run = [_paths(lines, s["u"], s["e"], s["ft"]) for s in spectra]

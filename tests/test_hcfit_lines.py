@@ -309,3 +309,17 @@ def test_the_model_free_feedforward_size_grows_with_the_feedforward_gain():
         sizes.append(feedforward_size(line_data(record)))
     assert sizes[0] < sizes[1] < sizes[2]
     assert sizes[2] > 10 * sizes[0]  # the leak without feedforward is not small: twins give its null
+
+
+def test_runs_whose_forcing_is_flipped_in_sign_are_averaged_with_it_flipped_back():
+    # Source: a linear loop driven by -ft, -fd answers with -u, -e: flipped back, its coefficients
+    # equal the first run's, so the average equals the first run's estimate exactly (a common
+    # design: the CPHS recordings' -1 trials). Other forcing functions are still refused.
+    first = _record(remnant=0.0, at_lines=False, background=0.0)[1]
+    flipped = _record(remnant=0.0, at_lines=False, background=0.0, sign=-1.0)[1]
+    both = fc_estimate([first, flipped], RATE, slice(0, N))
+    alone = fc_estimate([first], RATE, slice(0, N))
+    assert both.he == pytest.approx(alone.he) and both.ht == pytest.approx(alone.ht)
+    other = {**flipped, "fd": 0.5 * flipped["fd"]}
+    with pytest.raises(DataError, match="nor the same with their sign flipped"):
+        fc_estimate([first, other], RATE, slice(0, N))
