@@ -13,12 +13,12 @@ complex degree of freedom per line for two periods).
 
 Two uses:
 
-- the ``lines`` estimator (:func:`lines_problem`): the parametric model in closed
-  loop with the plant, driven by the recorded ft and fd, output error on U at the
-  forcing lines weighted by the remnant's variance there. The inputs are ones the
-  remnant cannot reach (no bias from the remnant in e, which the ``time`` target
-  takes as an input), and the weights make it the maximum-likelihood fit for a
-  Gaussian remnant;
+- the ``lines`` estimator (:class:`LinesProblem`, :func:`hcid.hcfit.fit.fit_lines`): the
+  parametric model in closed loop with the plant, driven by the recorded ft and fd, output
+  error on U at the forcing lines weighted by the remnant's variance there. The inputs are ones
+  the remnant cannot reach (no bias from the remnant in e, which the ``time`` target takes as an
+  input), and the weights, estimated beside each line, bring it close to the maximum-likelihood
+  fit for a Gaussian remnant;
 - the consistency of a fitted model with the record (:mod:`hcid.hcfit.consistency`).
 """
 
@@ -33,7 +33,7 @@ from hcid.fourier import ForcingLines, forcing_lines, interpolate
 from hcid.hcfit.closed_loop import loop_spectrum, loops_are_stable
 from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials
 
-__all__ = ["NEIGHBOURS", "LineData", "feedforward_size", "line_data"]
+__all__ = ["NEIGHBOURS", "LineData", "feedforward_size", "line_data", "record_lines"]
 
 #: Bins without forcing beside each line whose mean power is the remnant's variance there:
 #: 6 gives each estimate 12 real degrees of freedom while spanning +-3 bins (0.47 rad/s for a
@@ -140,6 +140,15 @@ def feedforward_size(data: LineData) -> float:
     near = data.near_u[data.is_target] - he_near * data.near_e[data.is_target]
     s2 = np.mean(np.abs(near) ** 2, axis=1)
     return float(np.sum(np.abs(r) ** 2 / s2))
+
+
+def record_lines(signals, rate: float, neighbours: int = NEIGHBOURS) -> LineData:
+    """:func:`line_data` of a whole record given as its ``ft``, ``fd``, ``e``, ``u`` arrays (rad)
+    at ``rate`` Hz (a run's or a twin's)."""
+    n = np.asarray(signals["u"]).size
+    rows = slice(0, n)
+    record = TrackingRecord(signals["ft"], signals["e"], signals["u"], rate, rows, rows, fd=signals["fd"])
+    return line_data(record, neighbours)
 
 
 class LinesProblem:

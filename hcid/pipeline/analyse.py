@@ -37,24 +37,24 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import datasets, folders, hcfit, methods, results, selection, tables
-from hcid.calibration import (
-    benjamini_hochberg,
-    binomial_summary,
-    evidence_p_value,
-    evidence_power,
-    feedforward_threshold,
-    rates_at,
-)
+from hcid.calibration import benjamini_hochberg, rates_at
 from hcid.config import Config
 from hcid.config.fit import FEEDFORWARD_PARAMETERS
 from hcid.config.parse import default_data
 from hcid.descriptors import fit_remnant
 from hcid.errors import ConfigError, DataError, IdentificationError
 from hcid.fourier import fc_estimate
-from hcid.hcfit.consistency import consistency, group_consistency
-from hcid.hcfit.determined import group_model, is_undetermined, parameter_status, reason
-from hcid.hcfit.lines import feedforward_size, line_data
+from hcid.hcfit.determined import group_model, parameter_status
 from hcid.hcmodel import plant
+from hcid.pipeline.evidence import (
+    MIN_POWER,
+    Checks,
+    Evidence,
+    consistency_columns,
+    decide,
+    group_name,
+    group_verdict,
+)
 from hcid.pipeline.fit import _choices, _records, _stage_choices
 from hcid.pipeline.parallel import parallel_map
 from hcid.pipeline.rundir import holds_run_dir
@@ -67,11 +67,10 @@ from hcid.pipeline.twins import (
     pool_twins,
     separates,
     twin_rate,
-    twin_sizes,
 )
 from hcid.selected import SelectedModel, analyse_selected
 
-__all__ = ["AnalysisRun", "ParameterSummary", "analyse_study", "summarise_parameters"]
+__all__ = ["AnalysisRun", "analyse_study"]
 
 #: Realizations of each twin (FB and FF) per group.
 TWINS = 20
@@ -93,48 +92,6 @@ class AnalysisRun:
     run_dir: Path
     #: Wall seconds per stage: identify, fit runs, twins, fit selected, tables.
     stages: dict[str, float] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class ParameterSummary:
-    """One parameter over a group's runs (rows of ``analysis.parquet``), from the runs that
-    determine it (SPEC 11): ``median``, ``sd`` (over those runs) and ``median_se`` (NaN where
-    none or one), ``kept`` of ``fitted`` runs, and ``left_out``: ``{reason: runs}``."""
-
-    name: str
-    unit: str
-    fitted: int
-    kept: int
-    median: float
-    sd: float
-    median_se: float
-    left_out: dict
-
-
-def summarise_parameters(rows: Sequence[dict]) -> list[ParameterSummary]:
-    """The group's parameters as the answer lines and the report give them (one home for both)."""
-    out = []
-    for p in tables.HC_PARAMETER_NAMES:
-        fitted = [r for r in rows if r[f"{p}_status"] != "not fitted"]
-        if not fitted:
-            continue
-        kept = [r for r in fitted if not is_undetermined(r[f"{p}_status"])]
-        x = np.array([r[p] for r in kept], dtype=float)
-        se = np.array([r[f"{p}_se"] for r in kept], dtype=float)
-        left: dict[str, int] = {}
-        for r in fitted:
-            if is_undetermined(r[f"{p}_status"]):
-                left[reason(r[f"{p}_status"])] = left.get(reason(r[f"{p}_status"]), 0) + 1
-        out.append(
-            ParameterSummary(
-                name=p, unit=hcfit.UNITS[p], fitted=len(fitted), kept=int(x.size),
-                median=float(np.median(x)) if x.size else math.nan,
-                sd=float(np.std(x, ddof=1)) if x.size > 1 else math.nan,
-                median_se=float(np.median(se[np.isfinite(se)])) if np.isfinite(se).any() else math.nan,
-                left_out=left,
-            )
-        )  # fmt: skip
-    return out
 
 
 # --------------------------------------------------------------------------- per-run fits
@@ -202,7 +159,7 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, models, check
     factor_of = {int(r["seed"]): r for r in runs.to_pylist()}
     group_rows, run_rows = [], []
     for key, seeds in groups.items():
-        name = ", ".join(f"{f}={v}" for f, v in zip(by, key, strict=True)) or "all runs"
+        name = group_name(by, key)
         for method_name in methods.METHODS:
             pair = used[(key, method_name)]
             cal = pair.calibrations[method_name]
@@ -245,17 +202,17 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, models, check
                 row["crossover"] = fitted_loop.crossover if fitted_loop else math.nan
                 row["phase_margin"] = fitted_loop.phase_margin if fitted_loop else math.nan
                 row["share_remnant"] = fitted_loop.shares["remnant"] if fitted_loop else math.nan
-                row.update({k: v for k, v in evidence[(seed, method_name)].items() if k != "twins"})
+                row.update(evidence[(seed, method_name)])
                 row["evidence_uncertain"] = bool(row["power"] < MIN_POWER)
                 check = checks.run(seed, fit) if fit else None
                 n_contradicted += bool(check is not None and check.contradicted)
-                row.update(_consistency_columns(check, checks.problem([seed]) if fit else "not fitted"))
+                row.update(consistency_columns(check, checks.problem([seed]) if fit else "not fitted"))
                 for f in factors:
                     row[f] = str(factor_of[seed][f])
                 run_rows.append(row)
             mine = [evidence[(seed, method_name)] for seed in seeds]
             group_rows.append(
-                {**choice, "n_runs": len(seeds), "n_feedforward": int(n_ff), **_group_verdict(mine, alpha),
+                {**choice, "n_runs": len(seeds), "n_feedforward": int(n_ff), **group_verdict(mine, alpha),
                  "forcing_sets": len(pair.sets), "decided_by": mine[0]["decided_by"],
                  **{f"twin_{p}": pair.model[p] for p in tables.HC_PARAMETER_NAMES},
                  **{f"fitted_{p}": models[key].values[p] for p in tables.HC_PARAMETER_NAMES},
@@ -263,7 +220,7 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, models, check
                  "twins": twins, "twins_folder": pair.folder,
                  "twin_source": models[key].source, "twin_undetermined": ", ".join(models[key].undetermined),
                  "n_contradicted": int(n_contradicted),
-                 **_consistency_columns(group_checks[key], checks.problem(seeds))}
+                 **consistency_columns(group_checks[key], checks.problem(seeds))}
             )  # fmt: skip
     schema = tables.ANALYSIS.arrow
     for f in factors:
@@ -272,140 +229,6 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, models, check
         pa.Table.from_pylist(group_rows, schema=tables.ANALYSIS_GROUPS.arrow),
         pa.Table.from_pylist(run_rows, schema=schema),
     )
-
-
-class _Checks:
-    """Every run at its forcing lines, read once, for the consistency of any model with it (SPEC
-    11); ``problem(seeds)`` says why some run (or the group) has no test."""
-
-    def __init__(self, config: Config, records: dict):
-        self.yc = plant(config.loop)
-        self.rate = config.timing.output_rate
-        self.records = records
-        self.lines, self.problems = {}, {}
-        for seed, record in records.items():
-            try:
-                self.lines[seed] = line_data(_tracking(record, config))
-            except DataError as exc:
-                self.problems[seed] = f"no test: {exc}"
-
-    def problem(self, seeds) -> str:
-        return next((self.problems[s] for s in seeds if s in self.problems), "")
-
-    def run(self, seed: int, fit):
-        """The run's own fit against its data; the lines estimator's free parameters, fitted to
-        these lines, are taken off the degrees of freedom."""
-        if seed not in self.lines:
-            return None
-        fitted = len(fit.names) - len(fit.fixed) if fit.target == "lines" else 0
-        return consistency(fit.values, self.yc, self.lines[seed], self.records[seed], self.rate, fitted)
-
-    def group(self, seeds: list[int], values: dict):
-        if not all(s in self.lines for s in seeds):
-            return None
-        try:
-            return group_consistency(
-                values, self.yc, [self.lines[s] for s in seeds], [self.records[s] for s in seeds], self.rate
-            )
-        except DataError as exc:
-            self.problems[seeds[0]] = f"no test: {exc}"
-            return None
-
-
-#: Below this power the twins cannot tell a run's feedforward from none (SPEC 11).
-MIN_POWER = 0.8
-
-
-def _run_evidence(path, nb_ft, pair, seed, method_name, config, alpha, run_size, sizes) -> dict:
-    """The run's two statistics against its own forcing set's twins (SPEC 11, issue 34): its W*
-    and its model-free feedforward size (``run_size``; ``sizes`` the set's twins' by FB and FF,
-    None without forcing lines), each with its p-value and its twins' power."""
-    grid = config.selection.w_grid
-    lo, hi = float(min(grid)), float(max(grid))
-    own = pair.of_run(seed)
-    (fb_paths, fb_nb), (ff_paths, ff_nb) = own.paths[method_name]
-    fb = np.array([feedforward_threshold(p, n, lo, hi) for p, n in zip(fb_paths, fb_nb, strict=True)])
-    ff = np.array([feedforward_threshold(p, n, lo, hi) for p, n in zip(ff_paths, ff_nb, strict=True)])
-    w_star = feedforward_threshold(path, nb_ft, lo, hi)
-    nan = math.nan
-    fourier = (nan, nan, nan)
-    if sizes is not None and run_size is not None:
-        fourier = (
-            run_size,
-            evidence_p_value(run_size, sizes["FB"]),
-            evidence_power(sizes["FF"], sizes["FB"], alpha),
-        )
-    return {
-        "twins": {"FB": fb, "FF": ff},
-        "forcing_set": pair.sets.index(own) + 1,
-        "w_star": w_star,
-        "p_w_star": evidence_p_value(w_star, fb),
-        "power_w_star": evidence_power(ff, fb, alpha),
-        "fourier_size": fourier[0],
-        "p_fourier": fourier[1],
-        "power_fourier": fourier[2],
-    }
-
-
-#: The two statistics of a run's evidence, by name in the tables.
-STATISTICS = {"W*": ("p_w_star", "power_w_star"), "Fourier coefficients": ("p_fourier", "power_fourier")}
-
-
-def _decide(rows: list[dict], alpha: float) -> None:
-    """Which statistic decides for a group and method: the one whose twins give the higher median
-    power (from the twins alone, before the runs' values are read); each row gets its
-    ``decided_by``, ``p_value``, ``power`` and ``evidence``."""
-    powers = {
-        name: float(np.median([r[pw] for r in rows])) for name, (_, pw) in STATISTICS.items()
-        if all(math.isfinite(r[pw]) for r in rows)
-    }  # fmt: skip
-    chosen = max(powers, key=lambda name: (powers[name], name == "W*"))
-    p_col, power_col = STATISTICS[chosen]
-    for r in rows:
-        r.update(decided_by=chosen, p_value=r[p_col], power=r[power_col],
-                 evidence="feedforward" if r[p_col] <= alpha else "none shown")  # fmt: skip
-
-
-def _evidence_twins(groups: dict, by, evidence: dict) -> pa.Table:
-    """The twins' W* each group's runs were judged against, once per group, method and forcing set."""
-    rows, done = [], set()
-    for key, seeds in groups.items():
-        name = ", ".join(f"{f}={v}" for f, v in zip(by, key, strict=True)) or "all runs"
-        for (seed, method_name), e in sorted(evidence.items()):
-            if seed not in seeds or (name, method_name, e["forcing_set"]) in done:
-                continue
-            done.add((name, method_name, e["forcing_set"]))
-            for twin, values in e["twins"].items():
-                rows += [{"group": name, "method": method_name, "forcing_set": e["forcing_set"], "twin": twin,
-                          "seed": i + 1, "w_star": float(w)} for i, w in enumerate(values)]  # fmt: skip
-    return pa.Table.from_pylist(rows, schema=tables.EVIDENCE_TWINS.arrow)
-
-
-def _group_verdict(rows: list[dict], alpha: float) -> dict:
-    """A group's (or subject's) summary over its runs: k of n with p <= alpha against the binomial,
-    the median power, and the verdict word."""
-    k, n, p = binomial_summary(np.array([r["p_value"] for r in rows]), alpha)
-    power = float(np.median([r["power"] for r in rows]))
-    if p <= alpha:
-        verdict = "FEEDFORWARD"
-    elif power < MIN_POWER:
-        verdict = "UNCERTAIN"
-    else:
-        verdict = "NO FEEDFORWARD SHOWN"
-    return {"verdict": verdict, "n_evidence": k, "binomial_p": p, "median_power": power, "alpha": alpha}
-
-
-def _consistency_columns(check, problem: str) -> dict:
-    if check is None:
-        nan = math.nan
-        return {"fc_chi2": nan, "fc_dof": 0, "fc_p": nan, "fc_verdict": problem, "fc_spread": "",
-                "he_error_db": nan, "he_error_deg": nan, "ht_error_db": nan, "ht_error_deg": nan}  # fmt: skip
-    return {
-        "fc_chi2": check.chi2, "fc_dof": check.dof, "fc_p": check.p, "fc_verdict": check.verdict,
-        "fc_spread": check.spread,
-        "he_error_db": check.he_db, "he_error_deg": check.he_deg, "ht_error_db": check.ht_db,
-        "ht_error_deg": check.ht_deg,
-    }  # fmt: skip
 
 
 def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median: dict) -> list[dict]:
@@ -599,14 +422,9 @@ def analyse_study(
     by_key = tables.split_by_key(frontier, tables.FRONTIER.key)
     stored = _choices(run_dir)
     chosen, tasks, evidence = {}, [], {}
-    checks = _Checks(config, records)
-    run_sizes = {seed: feedforward_size(data) for seed, data in checks.lines.items()}
-    size_cache: dict[str, dict | None] = {}
-
-    def _sizes_of(twin):
-        if twin.folder not in size_cache:
-            size_cache[twin.folder] = twin_sizes(twin, run_dir, config)
-        return size_cache[twin.folder]
+    checks = Checks(config, records)
+    run_sizes = checks.sizes()
+    judge = Evidence(config, run_dir, alpha)
 
     for key, seeds in groups.items():
         for method_name in names:
@@ -618,10 +436,9 @@ def analyse_study(
                 orders = np.column_stack([t.column(c).to_numpy() for c in tables.ORDER_COLUMNS])
                 path = selection.breakpoints(t.column("d").to_numpy(), t.column("v").to_numpy(), orders)
                 row = path.at(np.array([w]))[0]
-                pair = used[(key, method_name)]
-                evidence[(seed, method_name)] = _run_evidence(
-                    path, t.column("nb_ft").to_numpy(), pair, seed, method_name, config, alpha,
-                    run_sizes.get(seed), _sizes_of(pair.of_run(seed)),
+                evidence[(seed, method_name)] = judge.run(
+                    group_name(by, key), path, t.column("nb_ft").to_numpy(), used[(key, method_name)], seed,
+                    method_name, run_sizes.get(seed),
                 )  # fmt: skip
                 sel = SelectedModel.from_frontier(
                     t,
@@ -634,7 +451,7 @@ def analyse_study(
                 choices = _stage_choices(run_dir, stored, method_name, data.name, seed)
                 own = _same_fit(config, sel, fitted[seed][0])  # shared, not fitted twice
                 tasks.append((config, seed, records[seed], method_name, sel, choices, own))
-            _decide([evidence[(seed, method_name)] for seed in seeds], alpha)
+            decide([evidence[(seed, method_name)] for seed in seeds], alpha)
     finals = {
         (seed, method_name): analysis
         for seed, method_name, analysis in parallel_map(
@@ -654,12 +471,12 @@ def analyse_study(
     )
     fc_rows = []
     for key, seeds in groups.items():
-        name = ", ".join(f"{f}={v}" for f, v in zip(by, key, strict=True)) or "all runs"
+        name = group_name(by, key)
         fc_rows += _fc_rows(config, name, seeds, records, medians[key])
     results.write(
         tables.FC_ESTIMATES, pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow), run_dir
     )
-    results.write(tables.EVIDENCE_TWINS, _evidence_twins(groups, by, evidence), run_dir)
+    results.write(tables.EVIDENCE_TWINS, judge.twins_table(groups, by, evidence), run_dir)
     results.write(tables.ANALYSIS_GROUPS, group_table, run_dir)
     results.write(tables.ANALYSIS, run_table, run_dir)
     folders.atomic_write(run_dir / "analysis.csv", lambda tmp: _write_csv(run_table, tmp))

@@ -16,8 +16,7 @@ from hcid import folders, methods, results, tables
 from hcid.calibration import calibrate
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError
-from hcid.hcfit import TrackingRecord
-from hcid.hcfit.lines import feedforward_size, line_data
+from hcid.hcfit.lines import feedforward_size, record_lines
 from hcid.pipeline.rundir import check_run_dir, using
 from hcid.pipeline.studies import calibrate_study
 from hcid.pipeline.sweep import selections
@@ -219,13 +218,10 @@ def twin_sizes(twin: Twins, run_dir: Path, config: Config) -> dict[str, np.ndarr
     (:func:`hcid.hcfit.lines.feedforward_size`), by twin; None where the forcing has no lines."""
     folder = run_dir / twin.folder
     records = results.records(results.read(tables.SIMULATIONS, folder), folder / tables.SIMULATIONS.file)
-    rate = config.timing.output_rate
     out: dict[str, list[float]] = {"FB": [], "FF": []}
     try:
         for (model, _), r in sorted(records.items()):
-            n = r["u"].size
-            record = TrackingRecord(r["ft"], r["e"], r["u"], rate, slice(0, n), slice(0, n), fd=r["fd"])
-            out[model].append(feedforward_size(line_data(record)))
+            out[model].append(feedforward_size(record_lines(r, config.timing.output_rate)))
     except DataError:
         return None
     return {k: np.array(v) for k, v in out.items()}

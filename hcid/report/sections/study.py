@@ -12,7 +12,7 @@ import pyarrow as pa
 from hcid import results, tables
 from hcid.hcfit.consistency import CONTRADICTED, format_p
 from hcid.hcfit.determined import is_undetermined
-from hcid.pipeline.analyse import summarise_parameters
+from hcid.pipeline.evidence import summarise_parameters
 from hcid.report import figures, figures_hcfit
 from hcid.report.document import Doc
 from hcid.tables import HC_PARAMETER_NAMES

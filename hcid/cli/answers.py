@@ -1,0 +1,232 @@
+"""What the commands print: a short summary of each result, the answer first (the library computes;
+this module only words and lays out)."""
+
+from __future__ import annotations
+
+import typer
+
+
+def is_paper(cfg) -> bool:
+    """Whether the paper's figures are printed beside this run's (its experiment only)."""
+    from hcid import paper
+
+    return paper.is_paper_experiment(cfg)
+
+
+def print_simulation(result, is_paper: bool) -> None:
+    import numpy as np
+
+    from hcid import paper
+
+    summary = result.summary.to_pydict()
+    models = list(dict.fromkeys(summary["model"]))
+    typer.echo(f"Kn = {result.kn:.6g} (remnant gain, from var(n)/var(u) in the disturbance-only task)")
+    typer.echo(
+        f"{'model':<8}{'seeds':>6}{'RMS(e) deg mean +- sd':>24}{'paper':>8}{'var(n)/var(u) dist-only':>26}"
+    )
+    for m in models:
+        rows = [i for i, name in enumerate(summary["model"]) if name == m]
+        rms = np.array([summary["rms_e_deg"][i] for i in rows])
+        ratio = np.array([summary["noise_ratio_disturbance_only"][i] for i in rows])
+        ref = paper.RMS_E_DEG.get(m) if is_paper else None
+        ref_text = f"{ref:.2f}" if ref is not None else "-"
+        typer.echo(
+            f"{m:<8}{len(rows):>6}{rms.mean():>15.3f} +- {rms.std(ddof=1) if len(rows) > 1 else 0.0:.3f}"
+            f"{ref_text:>8}{ratio.mean():>26.4f}"
+        )
+    typer.echo(f"wrote {result.run_dir / 'simulations.parquet'}")
+
+
+def print_identification(result, is_paper: bool) -> None:
+    if result.simulation is not None:
+        print_simulation(result.simulation, is_paper)
+    if result.imported:
+        typer.echo(f"read {result.imported} measured run(s)")
+    log = result.log.to_pydict()
+    typer.echo(
+        f"identified {result.computed} realization-methods, reused {result.reused}; "
+        f"{sum(log['n_candidates']) + sum(log['stage1_candidates']):,} candidates in the tables, "
+        f"{sum(log['n_unstable']) + sum(log['stage1_unstable']):,} unstable"
+    )
+    typer.echo(f"wrote {result.run_dir / 'frontier.parquet'}")
+
+
+def print_thresholds(sweep, is_paper: bool) -> None:
+    from hcid import paper
+
+    rows = sweep.thresholds.to_pylist()
+    typer.echo(f"{'method':<10}{'model':<8}{'threshold':<11}{'this run':>12}{'paper':>10}")
+    for row in rows:
+        for name in ("w_fp", "w_fn"):
+            if row[name] is None:
+                continue
+            ref = paper.W_FP.get(row["method"]) if name == "w_fp" else paper.W_FN
+            ref = ref if is_paper else None
+            ref_text = f"{ref:.2g}" if ref is not None else "-"
+            typer.echo(
+                f"{row['method']:<10}{row['model']:<8}{name.upper():<11}{row[name]:>12.4g}{ref_text:>10}"
+            )
+    by_nf: dict[int, list[str]] = {}
+    for row in rows:
+        by_nf.setdefault(row["nf"], [])
+        if row["method"] not in by_nf[row["nf"]]:
+            by_nf[row["nf"]].append(row["method"])
+    for nf, names in by_nf.items():
+        marks = ", ".join(f"{c.label} = {c.w(nf):.4g}" for c in sweep.criteria)
+        typer.echo(f"{marks} (Nf = {nf}: {', '.join(names)})")
+
+
+def print_analysis(result) -> None:
+    """Per group and method: the answer first (feedforward in k of N runs at W, how sure), then
+    the parameters the runs determine, the loop, and the data check (SPEC 11)."""
+    import numpy as np
+
+    from hcid.hcfit.consistency import CONTRADICTED, format_p
+
+    def pct(k: float, lo: float, hi: float) -> str:
+        return f"{100 * k:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}]"
+
+    runs = result.runs.to_pylist()
+    for g in result.groups.to_pylist():
+        rows = [r for r in runs if r["group"] == g["group"] and r["method"] == g["method"]]
+        if g["w_rule"] == "safe interval":
+            safe = f"safe interval [{g['safe_low']:.3g}, {g['safe_high']:.3g})"
+            if g["ff_twin"] == "study":
+                safe += (
+                    f" for the study's feedforward (Kpt {g['twin_Kpt']:.2g}; this group's own fitted "
+                    f"Kpt is {g['fitted_Kpt']:.2g})"
+                )
+        elif g["uncertain"]:
+            whose = " (with the study's feedforward)" if g["ff_twin"] == "study" else ""
+            safe = f"NO W separates the twins{whose}: W of least total error, every decision UNCERTAIN"
+        else:
+            safe = (
+                "no contiguous safe interval; W of least total error, where the twins' rates are "
+                "within the target"
+            )
+        power = [r["power"] for r in rows]
+        typer.echo(
+            f"{g['group']}, {g['method']}: {g['verdict']}: {g['n_evidence']} of {g['n_runs']} runs show "
+            f"feedforward at p <= {g['alpha']:g} (decided by their {g['decided_by']} against their own "
+            "forcing set's FB twins: the statistic with the higher power; "
+            f"binomial p = {g['binomial_p']:.2g}; power {min(power):.2f} to {max(power):.2f}, "
+            f"{g['forcing_sets']} forcing set{'s' if g['forcing_sets'] > 1 else ''})"
+        )
+        typer.echo(
+            f"    calibrated W (SPEC 10): feedforward in {g['n_feedforward']} of {g['n_runs']} runs at "
+            f"W = {g['w']:.3g} ({safe}; twins' FP {pct(g['fp_rate'], g['fp_low'], g['fp_high'])}, "
+            f"FN {pct(g['fn_rate'], g['fn_low'], g['fn_high'])})"
+        )
+        typer.echo(_analysis_parameters(rows))
+        wc = np.nanmedian([r["crossover"] for r in rows])
+        pm = np.nanmedian([r["phase_margin"] for r in rows])
+        typer.echo(f"    loop: crossover {wc:.3g} rad/s, phase margin {pm:.3g} deg (medians over runs)")
+        contradicted = (
+            f"{g['n_contradicted']} of {g['n_runs']} runs' own fits at W are contradicted by the data"
+        )
+        if g["fc_dof"] > 0:
+            ht = "" if g["ht_error_db"] != g["ht_error_db"] else (
+                f", Ht {g['ht_error_db']:.1f} dB {g['ht_error_deg']:.0f} deg")  # fmt: skip
+            typer.echo(
+                f"    data check: the group's model is {g['fc_verdict']} (chi-square {g['fc_chi2']:.1f} on "
+                f"{g['fc_dof']} dof, p = {format_p(g['fc_p'])}, spread {g['fc_spread']}; median |error| "
+                f"against the Fourier-coefficient estimates He {g['he_error_db']:.1f} dB "
+                f"{g['he_error_deg']:.0f} deg{ht}); {contradicted} (p < {CONTRADICTED:g})"
+            )
+        else:
+            typer.echo(f"    data check: {g['fc_verdict']}")
+    typer.echo(
+        f"analysed in {result.seconds:.1f} s ("
+        + ", ".join(f"{name} {sec:.1f}" for name, sec in result.stages.items())
+        + f"); wrote {result.run_dir / 'analysis.parquet'} (and .csv: one row "
+        f"per run and method, with its factors) and {result.run_dir / 'analysis_groups.parquet'}"
+    )
+
+
+def _analysis_parameters(rows: list[dict]) -> str:
+    """The runs' fits at W (hcid.pipeline.evidence.summarise_parameters): median over the runs that
+    determine each, their sd and count, units; then what some runs leave undetermined, and why."""
+    from hcid.pipeline.evidence import summarise_parameters
+
+    parts, left_out = [], []
+    for s in summarise_parameters(rows):
+        unit = "" if s.unit == "-" else f" {s.unit}"
+        if s.kept:
+            sd = f", sd {s.sd:.2g}" if s.kept > 1 else ""
+            parts.append(f"{s.name} {s.median:.3g}{unit} ({s.kept} of {s.fitted} runs{sd})")
+        left_out += [f"{s.name} in {n} of {s.fitted} runs ({why})" for why, n in s.left_out.items()]
+    text = "    runs' fits at W (median over the runs that determine each; sd over them): " + ", ".join(parts)
+    if left_out:
+        text += "\n    not determined, left out: " + "; ".join(left_out)
+    return text
+
+
+def print_hc_fit(result) -> None:
+    import numpy as np
+
+    from hcid import tables
+
+    def num(x: float) -> str:
+        return "-" if x is None or not np.isfinite(x) else f"{x:.4g}"
+
+    for method, pairs in result.w_of.items():
+        typer.echo(f"{method:<9} W = " + ", ".join(f"{w:.4g} ({source})" for w, source in pairs))
+    rows = result.parameters.to_pylist()
+    # The model column fits the longest name (a measured file's data name is often long).
+    m = max([10, *(len(r["model"]) + 1 for r in rows)])
+    if rows:
+        typer.echo(f"target {rows[0]['target']}, standard errors {rows[0]['covariance'] or '-'}")
+    # One record: its estimate with se and 95% interval; several: medians, the spread across
+    # records beside the median se, and how many 95% intervals hold the true value.
+    header = f"{'model':<{m}}{'method':<10}{'W':>9} {'parameter':<10}{'estimate':>10} {'se':>9}"
+    header += f" {'sd':>9} {'95% interval':>21} {'true':>9}{'n':>5}{'covers':>7}{'bound':>6}"
+    typer.echo(header)
+    groups: dict[tuple, list[dict]] = {}
+    for row in rows:
+        groups.setdefault((row["model"], row["method"], row["w"], row["parameter"]), []).append(row)
+    for (model, method, w, name), group in groups.items():
+        column = {
+            c: np.array([r[c] for r in group], dtype=float) for c in ("estimate", "se", "ci_low", "ci_high")
+        }
+        est, se = column["estimate"], column["se"]
+        true = group[0]["true_value"]
+        one = len(group) == 1
+        median = num(est[0]) if one else num(np.nanmedian(est)) if np.isfinite(est).any() else "-"
+        se_text = num(se[0]) if one else num(np.nanmedian(se)) if np.isfinite(se).any() else "-"
+        sd = "-" if one or np.isfinite(est).sum() < 2 else num(np.nanstd(est, ddof=1))
+        interval = f"[{num(column['ci_low'][0])}, {num(column['ci_high'][0])}]" if one else "-"
+        covers = "-"
+        if true is not None and np.isfinite(true):
+            given = np.isfinite(column["se"])  # rows with an interval (none on a bound)
+            held = given & (column["ci_low"] <= true) & (true <= column["ci_high"])
+            covers = f"{int(held.sum())}/{int(given.sum())}"
+        hits = sum(bool(r["at_bound"]) for r in group)
+        typer.echo(
+            f"{model:<{m}}{method:<10}{w:>9.4g} {name:<10}{median:>10} {se_text:>9} {sd:>9} {interval:>21}"
+            f" {num(true):>9}{len(group):>5}{covers:>7}{hits:>6}"
+        )
+    loop = result.loop.to_pylist()
+    if loop:
+        typer.echo(
+            f"{'model':<{m}}{'method':<10}{'W':>9} {'source':<8}{'wc rad/s':>9} {'PM deg':>7}"
+            f" {'true wc':>8} {'true PM':>7} {'remnant':>7} {'w_n':>6} {'zeta_n':>6}  (medians)"
+        )
+        by: dict[tuple, list[dict]] = {}
+        for row in loop:
+            by.setdefault((row["model"], row["method"], row["w"], row["source"]), []).append(row)
+        for (model, method, w, source), group in by.items():
+
+            def med(c, group=group):
+                x = np.array([r[c] for r in group], dtype=float)
+                return num(np.nanmedian(x)) if np.isfinite(x).any() else "-"
+
+            typer.echo(
+                f"{model:<{m}}{method:<10}{w:>9.4g} {source:<8}{med('crossover'):>9} {med('phase_margin'):>7}"
+                f" {med('true_crossover'):>8} {med('true_phase_margin'):>7} {med('share_remnant'):>7}"
+                f" {med('remnant_w_n'):>6} {med('remnant_zeta_n'):>6}"
+            )
+    written = ", ".join(str(result.run_dir / t.file) for t in (tables.HC_PARAMETERS, tables.HC_LOOP))
+    typer.echo(
+        f"fitted {result.computed} record-methods, reused {result.reused}, in {result.seconds:.1f} s; "
+        f"wrote {written} (and residuals, remnant spectra)"
+    )

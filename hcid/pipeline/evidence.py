@@ -1,0 +1,252 @@
+"""What ``hcid analyse`` says of each run and group beside the calibrated W (SPEC 11): the data
+check of every fitted model, each run's feedforward evidence against its own forcing set's twins,
+the group's verdict, and the group's parameters from the runs that determine them."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+
+from hcid import hcfit, tables
+from hcid.calibration import binomial_summary, evidence_p_value, evidence_power, feedforward_threshold
+from hcid.config import Config
+from hcid.errors import DataError
+from hcid.hcfit.consistency import consistency, group_consistency
+from hcid.hcfit.determined import is_undetermined, reason
+from hcid.hcfit.lines import feedforward_size, record_lines
+from hcid.hcmodel import plant
+from hcid.pipeline.twins import twin_sizes
+
+__all__ = [
+    "MIN_POWER",
+    "STATISTICS",
+    "Checks",
+    "Evidence",
+    "ParameterSummary",
+    "consistency_columns",
+    "decide",
+    "group_name",
+    "group_verdict",
+    "summarise_parameters",
+]
+
+#: Below this power the twins cannot tell a run's feedforward from none (SPEC 11).
+MIN_POWER = 0.8
+#: The two statistics of a run's evidence, by name in the tables: (p-value, power) columns.
+STATISTICS = {"W*": ("p_w_star", "power_w_star"), "Fourier coefficients": ("p_fourier", "power_fourier")}
+
+
+def group_name(by: Sequence[str], key: tuple[str, ...]) -> str:
+    """A group's name in the tables: ``condition=pursuit``, or ``all runs`` without ``--by``."""
+    return ", ".join(f"{f}={v}" for f, v in zip(by, key, strict=True)) or "all runs"
+
+
+# --------------------------------------------------------------------------- the data check
+
+
+class Checks:
+    """Every run at its forcing lines, read once, for the consistency of any model with it (SPEC
+    11); ``problem(seeds)`` says why some run (or the group) has no test."""
+
+    def __init__(self, config: Config, records: dict):
+        self.yc = plant(config.loop)
+        self.rate = config.timing.output_rate
+        self.records = records
+        self.lines, self.problems = {}, {}
+        for seed, record in records.items():
+            try:
+                self.lines[seed] = record_lines(record, self.rate)
+            except DataError as exc:
+                self.problems[seed] = f"no test: {exc}"
+
+    def problem(self, seeds) -> str:
+        return next((self.problems[s] for s in seeds if s in self.problems), "")
+
+    def run(self, seed: int, fit):
+        """The run's own fit against its data; the lines estimator's free parameters, fitted to
+        these lines, are taken off the degrees of freedom."""
+        if seed not in self.lines:
+            return None
+        fitted = len(fit.names) - len(fit.fixed) if fit.target == "lines" else 0
+        return consistency(fit.values, self.yc, self.lines[seed], self.records[seed], self.rate, fitted)
+
+    def group(self, seeds: list[int], values: dict):
+        if not all(s in self.lines for s in seeds):
+            return None
+        try:
+            return group_consistency(
+                values, self.yc, [self.lines[s] for s in seeds], [self.records[s] for s in seeds], self.rate
+            )
+        except DataError as exc:
+            self.problems[seeds[0]] = f"no test: {exc}"
+            return None
+
+    def sizes(self) -> dict[int, float]:
+        """Each run's model-free feedforward size (:func:`hcid.hcfit.lines.feedforward_size`)."""
+        return {seed: feedforward_size(data) for seed, data in self.lines.items()}
+
+
+def consistency_columns(check, problem: str) -> dict:
+    """The tables' consistency columns of a check (:class:`hcid.hcfit.consistency.Consistency`),
+    or of none, with the reason as its verdict."""
+    if check is None:
+        nan = math.nan
+        return {"fc_chi2": nan, "fc_dof": 0, "fc_p": nan, "fc_verdict": problem, "fc_spread": "",
+                "he_error_db": nan, "he_error_deg": nan, "ht_error_db": nan, "ht_error_deg": nan}  # fmt: skip
+    return {
+        "fc_chi2": check.chi2, "fc_dof": check.dof, "fc_p": check.p, "fc_verdict": check.verdict,
+        "fc_spread": check.spread,
+        "he_error_db": check.he_db, "he_error_deg": check.he_deg, "ht_error_db": check.ht_db,
+        "ht_error_deg": check.ht_deg,
+    }  # fmt: skip
+
+
+# --------------------------------------------------------------------------- each run's evidence
+
+
+class Evidence:
+    """Each run's two statistics against its own forcing set's twins (SPEC 11): its W* and its
+    model-free feedforward size, each with its p-value and its twins' power. The twins' values
+    are computed once per twin folder (and method) whatever the number of runs they judge."""
+
+    def __init__(self, config: Config, run_dir: Path, alpha: float):
+        grid = config.selection.w_grid
+        self.lo, self.hi = float(min(grid)), float(max(grid))
+        self.config, self.run_dir, self.alpha = config, run_dir, alpha
+        self._thresholds: dict[tuple[str, str], dict[str, np.ndarray]] = {}
+        self._sizes: dict[str, dict | None] = {}
+        self._judged: dict[tuple[str, str, int], str] = {}  # (group, method, forcing set) -> folder
+
+    def thresholds(self, twin, method: str) -> dict[str, np.ndarray]:
+        """The FB and FF twins' W* of one twin folder under one method."""
+        key = (twin.folder, method)
+        if key not in self._thresholds:
+            w = {}
+            for name, (paths, nb_ft) in zip(("FB", "FF"), twin.paths[method], strict=True):
+                w[name] = np.array(
+                    [feedforward_threshold(p, n, self.lo, self.hi) for p, n in zip(paths, nb_ft, strict=True)]
+                )
+            self._thresholds[key] = w
+        return self._thresholds[key]
+
+    def sizes(self, twin) -> dict[str, np.ndarray] | None:
+        if twin.folder not in self._sizes:
+            self._sizes[twin.folder] = twin_sizes(twin, self.run_dir, self.config)
+        return self._sizes[twin.folder]
+
+    def run(self, group: str, path, nb_ft, pair, seed: int, method: str, run_size: float | None) -> dict:
+        """The run's evidence columns (``decide`` adds the deciding ones)."""
+        own = pair.of_run(seed)
+        forcing_set = pair.sets.index(own) + 1
+        self._judged[(group, method, forcing_set)] = own
+        twins = self.thresholds(own, method)
+        w_star = feedforward_threshold(path, nb_ft, self.lo, self.hi)
+        sizes = self.sizes(own)
+        fourier = (math.nan, math.nan, math.nan)
+        if sizes is not None and run_size is not None:
+            fourier = (run_size, evidence_p_value(run_size, sizes["FB"]),
+                       evidence_power(sizes["FF"], sizes["FB"], self.alpha))  # fmt: skip
+        return {
+            "forcing_set": forcing_set,
+            "w_star": w_star,
+            "p_w_star": evidence_p_value(w_star, twins["FB"]),
+            "power_w_star": evidence_power(twins["FF"], twins["FB"], self.alpha),
+            "fourier_size": fourier[0],
+            "p_fourier": fourier[1],
+            "power_fourier": fourier[2],
+        }
+
+    def twins_table(self, groups: dict, by: Sequence[str], evidence: dict) -> pa.Table:
+        """``evidence_twins.parquet``: the twins' W* each group's runs were judged against, once
+        per group, method and forcing set (in the order of the groups and their runs)."""
+        rows, done = [], set()
+        for key, seeds in groups.items():
+            name = group_name(by, key)
+            for (seed, method), e in sorted(evidence.items()):
+                judged = (name, method, e["forcing_set"])
+                if seed not in seeds or judged in done:
+                    continue
+                done.add(judged)
+                for twin, values in self.thresholds(self._judged[judged], method).items():
+                    rows += [{"group": name, "method": method, "forcing_set": e["forcing_set"], "twin": twin,
+                              "seed": i + 1, "w_star": float(w)} for i, w in enumerate(values)]  # fmt: skip
+        return pa.Table.from_pylist(rows, schema=tables.EVIDENCE_TWINS.arrow)
+
+
+def decide(rows: list[dict], alpha: float) -> None:
+    """Which statistic decides for a group and method: the one whose twins give the higher median
+    power (from the twins alone, before the runs' values are read); each row gets its
+    ``decided_by``, ``p_value``, ``power`` and ``evidence``."""
+    powers = {
+        name: float(np.median([r[pw] for r in rows])) for name, (_, pw) in STATISTICS.items()
+        if all(math.isfinite(r[pw]) for r in rows)
+    }  # fmt: skip
+    chosen = max(powers, key=lambda name: (powers[name], name == "W*"))
+    p_col, power_col = STATISTICS[chosen]
+    for r in rows:
+        r.update(decided_by=chosen, p_value=r[p_col], power=r[power_col],
+                 evidence="feedforward" if r[p_col] <= alpha else "none shown")  # fmt: skip
+
+
+def group_verdict(rows: list[dict], alpha: float) -> dict:
+    """A group's (or subject's) summary over its runs: k of n with p <= alpha against the binomial,
+    the median power, and the verdict word."""
+    k, n, p = binomial_summary(np.array([r["p_value"] for r in rows]), alpha)
+    power = float(np.median([r["power"] for r in rows]))
+    if p <= alpha:
+        verdict = "FEEDFORWARD"
+    elif power < MIN_POWER:
+        verdict = "UNCERTAIN"
+    else:
+        verdict = "NO FEEDFORWARD SHOWN"
+    return {"verdict": verdict, "n_evidence": k, "binomial_p": p, "median_power": power, "alpha": alpha}
+
+
+# --------------------------------------------------------------------------- the group's parameters
+
+
+@dataclass(frozen=True)
+class ParameterSummary:
+    """One parameter over a group's runs (rows of ``analysis.parquet``), from the runs that
+    determine it (SPEC 11): ``median``, ``sd`` (over those runs) and ``median_se`` (NaN where
+    none or one), ``kept`` of ``fitted`` runs, and ``left_out``: ``{reason: runs}``."""
+
+    name: str
+    unit: str
+    fitted: int
+    kept: int
+    median: float
+    sd: float
+    median_se: float
+    left_out: dict
+
+
+def summarise_parameters(rows: Sequence[dict]) -> list[ParameterSummary]:
+    """The group's parameters as the answer lines and the report give them (one home for both)."""
+    out = []
+    for p in tables.HC_PARAMETER_NAMES:
+        fitted = [r for r in rows if r[f"{p}_status"] != "not fitted"]
+        if not fitted:
+            continue
+        kept = [r for r in fitted if not is_undetermined(r[f"{p}_status"])]
+        x = np.array([r[p] for r in kept], dtype=float)
+        se = np.array([r[f"{p}_se"] for r in kept], dtype=float)
+        left: dict[str, int] = {}
+        for r in fitted:
+            if is_undetermined(r[f"{p}_status"]):
+                left[reason(r[f"{p}_status"])] = left.get(reason(r[f"{p}_status"]), 0) + 1
+        out.append(
+            ParameterSummary(
+                name=p, unit=hcfit.UNITS[p], fitted=len(fitted), kept=int(x.size),
+                median=float(np.median(x)) if x.size else math.nan,
+                sd=float(np.std(x, ddof=1)) if x.size > 1 else math.nan,
+                median_se=float(np.median(se[np.isfinite(se)])) if np.isfinite(se).any() else math.nan,
+                left_out=left,
+            )
+        )  # fmt: skip
+    return out
