@@ -12,10 +12,14 @@ response and its numerator and denominator polynomials. The feedforward
 parameters are fitted only when the selected model has a feedforward path
 (``nb_ft > 0``).
 
-Three targets (:data:`TARGETS`):
+Four targets (:data:`TARGETS`), and ``auto``, the default: ``lines`` where the record's
+forcing functions are multisines with at least one disturbance line per feedback parameter, else
+``time`` (:func:`resolve_target`; how it was chosen: docs/parametric-fit.md):
 
-- ``time`` (the default, the lowest RMSE measured: docs/parametric-fit.md):
-  minimise ``sum (u - u_par)^2`` over the estimation rows, where
+- ``lines``: the parametric model in closed loop with the plant, driven by the recorded ft and
+  fd, output error on U at the forcing lines weighted by the remnant beside each
+  (:func:`fit_lines`, :mod:`hcid.hcfit.lines`).
+- ``time``: minimise ``sum (u - u_par)^2`` over the estimation rows, where
   ``u_par = Hft_par ft + He_par e`` is simulated from the measured, unshifted ft
   and e (:func:`simulate_hc`).
 - ``closed_loop``: the parametric model in closed loop with the plant, driven
@@ -26,6 +30,9 @@ Three targets (:data:`TARGETS`):
   ``sum_w |H_arx - H_par|^2 / |H_arx|^2`` over both paths on a log grid of the
   disturbance band (:func:`band_grid`; the config's
   :attr:`hcid.config.Config.disturbance_band`), the relative complex error.
+
+The neuromuscular pair is held at literature values where a fit leaves it undetermined
+(``FitSettings.nms``, :mod:`hcid.hcfit.determined`, which also gives each parameter's status).
 
 All run a seeded global stage (``scipy.optimize.differential_evolution`` over
 the starting ranges) and then a bounded local stage
@@ -49,7 +56,16 @@ from hcid.config.fit import (
     parse_fit_settings,
 )
 from hcid.hcfit.closed_loop import closed_loop_u, loop_is_stable
-from hcid.hcfit.fit import BOUND_TOLERANCE, HCFit, fit_closed_loop, fit_frequency, fit_hc, fit_time
+from hcid.hcfit.fit import (
+    BOUND_TOLERANCE,
+    HCFit,
+    fit_closed_loop,
+    fit_frequency,
+    fit_hc,
+    fit_lines,
+    fit_time,
+    resolve_target,
+)
 from hcid.hcfit.model import TrackingRecord, hc_response, simulate_hc
 
 __all__ = [
@@ -69,9 +85,11 @@ __all__ = [
     "fit_closed_loop",
     "fit_frequency",
     "fit_hc",
+    "fit_lines",
     "fit_time",
     "hc_response",
     "loop_is_stable",
     "parse_fit_settings",
+    "resolve_target",
     "simulate_hc",
 ]
