@@ -35,6 +35,8 @@ __all__ = [
     "evidence_power",
     "feedforward_threshold",
     "rates_at",
+    "sequential_p_value",
+    "sequential_settled",
 ]
 
 #: The two errors of SPEC 4 and 9, by name: which selected nb_ft counts as wrong.
@@ -299,6 +301,42 @@ def evidence_power(ff_thresholds: np.ndarray, fb_thresholds: np.ndarray, alpha: 
     """
     ff = np.asarray(ff_thresholds, dtype=np.float64)
     return float(np.mean([evidence_p_value(w, fb_thresholds) <= alpha for w in ff]))
+
+
+def sequential_p_value(value: float, fb_in_order: np.ndarray, h: int) -> tuple[float, int]:
+    """A run's p-value from FB twins drawn one after another until ``h`` of them show at least
+    ``value`` (Besag and Clifford 1991): ``h / m`` at the ``m``-th draw that makes ``h``; else,
+    every draw made (``n``) with ``k < h`` at or above, :func:`evidence_p_value`'s
+    ``(1 + k) / (1 + n)``. Returns the p-value and the draws it used. Twins drawn after the
+    run's own stop do not change it, so runs that share twins each keep their own stop.
+
+    Examples
+    --------
+    >>> fb = np.array([0.5, 0.1, 0.4, 0.3, 0.2, 0.6])
+    >>> sequential_p_value(0.25, fb, 2)  # the second at or above 0.25 is the 3rd draw
+    (0.6666666666666666, 3)
+    >>> sequential_p_value(0.55, fb, 2)  # one of six: (1 + 1) / (1 + 6)
+    (0.2857142857142857, 6)
+    """
+    at_or_above = np.asarray(fb_in_order, dtype=np.float64) >= value
+    seen = np.cumsum(at_or_above)
+    if seen.size and seen[-1] >= h:
+        m = int(np.searchsorted(seen, h)) + 1
+        return h / m, m
+    return float((1 + (seen[-1] if seen.size else 0)) / (1 + seen.size)), int(seen.size)
+
+
+def sequential_settled(value: float, fb_in_order: np.ndarray, h: int, n_max: int) -> bool:
+    """Whether more FB twins could change :func:`sequential_p_value` of ``value``: not once
+    ``h`` are at or above it, nor once ``n_max`` are drawn.
+
+    Examples
+    --------
+    >>> sequential_settled(0.25, np.array([0.5, 0.1]), 2, 99), sequential_settled(0.25, np.array([0.5, 0.3]), 2, 99)
+    (False, True)
+    """
+    fb = np.asarray(fb_in_order, dtype=np.float64)
+    return bool(fb.size >= n_max or np.count_nonzero(fb >= value) >= h)
 
 
 def binomial_summary(p_values: np.ndarray, alpha: float) -> tuple[int, int, float]:

@@ -416,8 +416,10 @@ _CONSISTENCY_FIELDS = [
 #: true), the twins' false-positive and false-negative rates there with their exact 95%
 #: bands, the selected structure, ``feedforward`` (nb_ft > 0), the ARX and parametric
 #: models' validation VAF, the run's evidence (SPEC 11: its ``forcing_set`` of the group, its
-#: feedforward threshold ``w_star`` and model-free ``fourier_size``, each with its p-value against
-#: its set's FB twins and their power at the group's level, ``decided_by`` the statistic whose
+#: feedforward threshold ``w_star`` and model-free ``fourier_size``, each with its sequential
+#: p-value against its set's FB twins, the FB twins that p-value used (``fb_twins_*``: FB twins are
+#: drawn until 5 show at least the run's value, at most ``--max-fb-twins``) and the twins' power at
+#: the group's level, ``decided_by`` the statistic whose
 #: twins' power is higher, whose ``p_value`` and ``power`` decide ``evidence``
 #: (``feedforward`` or ``none shown``); ``evidence_uncertain`` where that power is below 0.8),
 #: the estimator (``target``) and the model's form (``hc_form``:
@@ -433,7 +435,9 @@ ANALYSIS = _schema(
     + [(c, _INT) for c in ORDER_COLUMNS]
     + [("feedforward", _BOOL), ("vaf_arx_validation", _F64), ("target", _STR), ("vaf_validation", _F64)]
     + [("forcing_set", _INT), ("w_star", _F64), ("p_w_star", _F64), ("power_w_star", _F64)]
-    + [("fourier_size", _F64), ("p_fourier", _F64), ("power_fourier", _F64), ("decided_by", _STR)]
+    + [("fb_twins_w_star", _INT)]
+    + [("fourier_size", _F64), ("p_fourier", _F64), ("power_fourier", _F64), ("fb_twins_fourier", _INT)]
+    + [("decided_by", _STR)]
     + [("p_value", _F64), ("power", _F64), ("evidence", _STR), ("evidence_uncertain", _BOOL)]
     + [("hc_form", _STR)]
     + [f for p in HC_PARAMETER_NAMES for f in ((p, _F64), (f"{p}_se", _F64), (f"{p}_status", _STR))]
@@ -445,7 +449,9 @@ ANALYSIS = _schema(
 #: method: the W used and why, the safe interval, the twins' rates at W, the runs and how
 #: many of them have feedforward there, and the twins (the group's fitted model as simulated,
 #: ``twin_<p>``: delays in whole samples, tau_pt at least 0, Kpt at least 0.001; the FB twin has
-#: Kpt = 0) with their remnant filter, number of realizations each and run directory; ``ff_twin``
+#: Kpt = 0) with their remnant filter, number of realizations each (``twins``: the calibration's;
+#: ``fb_twins``: the FB twins drawn for the runs' p-values, the most over the forcing sets) and
+#: run directory; ``ff_twin``
 #: says whose feedforward they carry (``own`` or the ``study``'s strongest) and ``fitted_<p>`` the
 #: group's own model (the values its runs determine, below), as fitted. ``twin_source`` says how
 #: the group's model was built (medians of the values its runs determine, or a stated fallback),
@@ -461,7 +467,8 @@ ANALYSIS_GROUPS = _schema(
     + [("alpha", _F64), ("forcing_sets", _INT), ("decided_by", _STR)]
     + [(f"twin_{p}", _F64) for p in HC_PARAMETER_NAMES]
     + [(f"fitted_{p}", _F64) for p in HC_PARAMETER_NAMES]
-    + [("twin_kn", _F64), ("twin_w_n", _F64), ("twin_zeta_n", _F64), ("twins", _INT), ("twins_folder", _STR)]
+    + [("twin_kn", _F64), ("twin_w_n", _F64), ("twin_zeta_n", _F64), ("twins", _INT), ("fb_twins", _INT)]
+    + [("twins_folder", _STR)]
     + [("twin_source", _STR), ("twin_undetermined", _STR), ("n_contradicted", _INT)]
     + _CONSISTENCY_FIELDS,
     ("group", "method"),
@@ -477,12 +484,13 @@ ANALYSIS_GROUPS = _schema(
 #: (NaN at a disturbance line). A group whose design allows no estimate has one row with
 #: ``problem`` set.
 #: ``evidence_twins.parquet`` (``hcid analyse``): the twins each run's p-value is judged against
-#: (SPEC 11): per group, method, forcing set, twin (``FB`` or ``FF``) and realization, its
-#: feedforward threshold ``w_star``.
+#: (SPEC 11): per group, method, forcing set, twin (``FB`` or ``FF``) and realization in the
+#: order drawn, its feedforward threshold ``w_star`` (NaN for an FB twin drawn for the
+#: Fourier statistic only) and its model-free ``fourier_size`` (NaN where the forcing has no lines).
 EVIDENCE_TWINS = _schema(
     "evidence_twins.parquet",
     [("group", _STR), ("method", _STR), ("forcing_set", _INT), ("twin", _STR), ("seed", _INT)]
-    + [("w_star", _F64)],
+    + [("w_star", _F64), ("fourier_size", _F64)],
     ("group", "method", "forcing_set", "twin", "seed"),
 )
 FC_ESTIMATES = _schema(

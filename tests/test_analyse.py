@@ -18,7 +18,8 @@ CONFIG = LAB.parent / "lab_example.yaml"
 
 @pytest.fixture(scope="module")
 def analysed(tmp_path_factory):
-    """Subjects S1 and S2, trials 1 and 2 of both conditions (8 files), 4 twins each, --jobs 1 and 2."""
+    """Subjects S1 and S2, trials 1 and 2 of both conditions (8 files), 4 twins each and at most 12 FB
+    twins for the p-values, --jobs 1 and 2."""
     base = tmp_path_factory.mktemp("lab")
     data = base / "data"
     data.mkdir()
@@ -28,7 +29,7 @@ def analysed(tmp_path_factory):
     for jobs in (1, 2):
         run = base / f"run{jobs}"
         args = ["analyse", str(CONFIG), "--data", str(data), "--run", str(run), "--twins", "4", "--quiet",
-                "--jobs", str(jobs)]  # fmt: skip
+                "--max-fb-twins", "12", "--jobs", str(jobs)]  # fmt: skip
         result = runner.invoke(app, args)
         assert result.exit_code == 0, result.output
         out[jobs] = (run, result.output)
@@ -76,6 +77,38 @@ def test_every_run_and_group_is_answered_with_its_factors(analysed):
     assert "condition=pursuit, direct: " in output
     assert output.strip().splitlines()[-1] == f"report: {run / 'report' / 'report.html'}"
     assert (run / "report" / "report.html").is_file()
+
+
+def test_each_runs_p_value_is_sequential_over_its_fb_twins_in_the_order_drawn(analysed):
+    # Source: Besag and Clifford (1991) as SPEC 11 states it here: FB twins are drawn (4 at a time, at
+    # most 12) until 5 show at least the run's statistic; p = 5/m at the m-th draw that makes 5, else
+    # (1 + k)/(1 + n) over the n drawn. Recomputed by hand from evidence_twins.parquet.
+    _, out = analysed
+    run = out[1][0]
+    rows = pq.read_table(run / tables.ANALYSIS.file).to_pylist()
+    twins = pq.read_table(run / tables.EVIDENCE_TWINS.file).to_pylist()
+    for r in rows:
+        fb = [t for t in twins if (t["group"], t["method"], t["forcing_set"], t["twin"])
+              == (r["group"], r["method"], r["forcing_set"], "FB")]  # fmt: skip
+        fb.sort(key=lambda t: t["seed"])
+        assert [t["seed"] for t in fb] == list(range(1, len(fb) + 1)) and len(fb) in (4, 8, 12)
+        w = [t["w_star"] for t in fb if not np.isnan(t["w_star"])]
+        hits = np.cumsum(np.array(w) >= r["w_star"])
+        if hits.size and hits[-1] >= 5:
+            m = int(np.argmax(hits >= 5)) + 1
+            assert (r["p_w_star"], r["fb_twins_w_star"]) == (5 / m, m)
+        else:  # never 5: every twin drawn for this method was needed, up to the most
+            assert r["p_w_star"] == (1 + (hits[-1] if hits.size else 0)) / (1 + len(w))
+            assert r["fb_twins_w_star"] == len(w)
+            if r["decided_by"] == "W*":
+                assert len(w) == 12
+    # The pursuit runs' feedforward is above every FB twin: their p-values needed all 12.
+    pursuit = [r for r in rows if r["condition"] == "pursuit" and r["method"] == "direct"]
+    assert {(r["p_w_star"], r["fb_twins_w_star"]) for r in pursuit} == {(1 / 13, 12)}
+    groups = pq.read_table(run / tables.ANALYSIS_GROUPS.file).to_pylist()
+    assert {
+        g["fb_twins"] for g in groups if g["group"] == "condition=pursuit" and g["method"] == "direct"
+    } == {12}
 
 
 def test_a_group_whose_own_twins_no_w_separates_is_calibrated_on_the_studys_feedforward(analysed):

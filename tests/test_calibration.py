@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hcid.calibration import calibrate, clopper_pearson
+from hcid.calibration import calibrate, clopper_pearson, sequential_p_value, sequential_settled
 from hcid.selection import SelectionPath
 
 INF = np.inf
@@ -142,3 +142,24 @@ def test_runs_share_a_forcing_set_when_their_forcing_functions_agree():
                4: {"ft": ft + 0.0005 * bump, "fd": fd}, 5: {"ft": ft + 0.002 * bump, "fd": fd}}  # fmt: skip
     config = SimpleNamespace(timing=SimpleNamespace(window=40.0, output_rate=10.0))
     assert forcing_sets([1, 2, 3, 4, 5], records, config) == [[1, 3, 4], [2], [5]]
+
+
+def test_sequential_p_value_has_its_level_under_the_null():
+    # Source: Besag and Clifford (1991): with the run and its FB twins exchangeable (here i.i.d.
+    # uniform), P(p <= a) = a at every level the rule can give; at h = 5 and 99 twins the levels
+    # 0.01 and 0.05 are both attainable (1/100 and 5/100). 20000 draws: binomial 99.9% bands.
+    rng = np.random.default_rng(2016)
+    n = 20000
+    p = np.array([sequential_p_value(x, rng.random(99), 5)[0] for x in rng.random(n)])
+    for level in (0.01, 0.05):
+        band = 3.3 * np.sqrt(level * (1 - level) / n)
+        assert abs(np.mean(p <= level + 1e-12) - level) < band
+    # And it stops early where it can: a run in the middle of its twins needs about 10 draws.
+    used = [sequential_p_value(0.5, rng.random(99), 5)[1] for _ in range(2000)]
+    assert 9.0 < np.mean(used) < 11.0  # negative binomial: 5 / 0.5 draws on average
+
+
+def test_sequential_settled_needs_h_at_or_above_or_the_most_drawn():
+    assert not sequential_settled(0.9, np.linspace(0, 1, 20), 5, 99)  # 2 at or above 0.9
+    assert sequential_settled(0.5, np.linspace(0, 1, 20), 5, 99)  # 10 at or above
+    assert sequential_settled(0.99, np.linspace(0, 1, 99), 5, 99)  # the most drawn

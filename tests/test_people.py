@@ -75,10 +75,11 @@ def test_nothing_undetermined_reads_as_a_finding(analysed):
 def test_by_plant_puts_both_signs_in_one_group_with_a_forcing_set_each(tmp_path):
     # Source: the data's README: each -1 trial's forcing functions are the +1 trial's with the sign
     # flipped, so --by plant gives one group of two forcing sets, each with twins of its own, and
-    # every run a p-value (1 + k) / (1 + N) with N its set's FB twins (SPEC 11).
+    # every run a p-value (1 + k) / (1 + N) with N its set's FB twins (SPEC 11; 4 at most, so that
+    # no run reaches the 5 at or above that would stop it early).
     config = load_config(ROOT / "configs" / "cphs2017_fo.yaml")
     result = analyse_study(config, tmp_path / "run", [str(DATA / "*_fo_*.csv")], by=["plant"], twins=4,
-                           jobs=2, show_progress=False)  # fmt: skip
+                           max_fb_twins=4, jobs=2, show_progress=False)  # fmt: skip
     assert set(result.groups.column("forcing_sets").to_pylist()) == {2}
     rows = result.runs.to_pylist()
     assert {r["forcing_set"] for r in rows if r["trial"] == "+1"} == {1}

@@ -292,8 +292,21 @@ def analyse(
         ),
     ] = None,
     twins: Annotated[
-        int, typer.Option("--twins", help="Realizations of each twin (FB and FF) per group.")
+        int,
+        typer.Option(
+            "--twins",
+            help="Realizations of each twin (FB and FF) per group and forcing set for W's calibration "
+            "(SPEC 10) and the power; also the batch in which more FB twins are drawn.",
+        ),
     ] = 20,
+    max_fb_twins: Annotated[
+        int,
+        typer.Option(
+            "--max-fb-twins",
+            help="The most FB twins per forcing set for the runs' p-values: drawn in batches until 5 show "
+            "at least each run's statistic (Besag-Clifford), so p reaches 1/(1 + this).",
+        ),
+    ] = 99,
     ff_twin: Annotated[
         str,
         typer.Option(
@@ -336,6 +349,7 @@ def analyse(
         data,
         by=None if by is None else [b.strip() for b in by.split(",") if b.strip()],
         twins=twins,
+        max_fb_twins=max_fb_twins,
         ff_twin=ff_twin,
         alpha=alpha,
         fdr=fdr,

@@ -47,6 +47,7 @@ from hcid.fourier import fc_estimate
 from hcid.hcfit.determined import group_model, parameter_status
 from hcid.hcmodel import plant
 from hcid.pipeline.evidence import (
+    MAX_FB_TWINS,
     MIN_POWER,
     Checks,
     Evidence,
@@ -62,6 +63,7 @@ from hcid.pipeline.studies import identify_study
 from hcid.pipeline.twins import (
     calibrate_twins,
     choose_w,
+    draw_fb_twins,
     forcing_sets,
     group_slug,
     pool_twins,
@@ -90,7 +92,7 @@ class AnalysisRun:
     runs: pa.Table
     seconds: float
     run_dir: Path
-    #: Wall seconds per stage: identify, fit runs, twins, fit selected, tables.
+    #: Wall seconds per stage: identify, fit runs, twins, more FB twins, fit selected, tables.
     stages: dict[str, float] = field(default_factory=dict)
 
 
@@ -153,7 +155,8 @@ def _same_fit(config: Config, sel: SelectedModel, fits: dict):
     return fits[bool(sel.has_feedforward)]
 
 
-def _tables(config, runs, groups, by, used, chosen, finals, twins, models, checks, evidence, alpha):
+def _tables(config, runs, groups, by, used, chosen, finals, drawn, models, checks, evidence, alpha):
+    twins, fb_drawn = drawn
     group_checks = {key: checks.group(seeds, models[key].values) for key, seeds in groups.items()}
     factors = [c for c in runs.column_names if c not in tables.RUNS.names]
     factor_of = {int(r["seed"]): r for r in runs.to_pylist()}
@@ -217,7 +220,7 @@ def _tables(config, runs, groups, by, used, chosen, finals, twins, models, check
                  **{f"twin_{p}": pair.model[p] for p in tables.HC_PARAMETER_NAMES},
                  **{f"fitted_{p}": models[key].values[p] for p in tables.HC_PARAMETER_NAMES},
                  "twin_kn": pair.remnant[0], "twin_w_n": pair.remnant[1], "twin_zeta_n": pair.remnant[2],
-                 "twins": twins, "twins_folder": pair.folder,
+                 "twins": twins, "fb_twins": fb_drawn[(key, method_name)], "twins_folder": pair.folder,
                  "twin_source": models[key].source, "twin_undetermined": ", ".join(models[key].undetermined),
                  "n_contradicted": int(n_contradicted),
                  **consistency_columns(group_checks[key], checks.problem(seeds))}
@@ -284,6 +287,7 @@ def analyse_study(
     *,
     by: Sequence[str] | None = None,
     twins: int = TWINS,
+    max_fb_twins: int = MAX_FB_TWINS,
     ff_twin: str = "auto",
     alpha: float = 0.05,
     fdr: bool = False,
@@ -309,6 +313,10 @@ def analyse_study(
         )
     if not 2 <= twins <= 1000:
         raise ConfigError(f"--twins: must be an integer in [2, 1000], got {twins}")
+    if not twins <= max_fb_twins <= 10000:
+        raise ConfigError(
+            f"--max-fb-twins: must be an integer in [--twins ({twins}), 10000], got {max_fb_twins}"
+        )
     if not (isinstance(alpha, float | int) and 0.0 < alpha < 1.0):
         raise ConfigError(f"--alpha: must be a level in (0, 1), got {alpha!r}")
     if ff_twin not in FF_TWINS:
@@ -382,7 +390,7 @@ def analyse_study(
     # fitted Kpt ("would feedforward of the size seen in this study be found here?").
     strongest = max(medians, key=lambda k: medians[k]["Kpt"])
     twin_args = dict(jobs=jobs, backend=backend, scheduler=scheduler, show_progress=show_progress)
-    used = {}  # (group, method) -> TwinSets
+    used, remnants_of = {}, {}  # (group, method) -> TwinSets; group -> its twins' remnant filter
     for key, seeds in groups.items():
         remnants = [fitted[s][1] for s in seeds if fitted[s][1] is not None and not fitted[s][1].at_bound]
         if not remnants:
@@ -390,6 +398,7 @@ def analyse_study(
                 f"group {group_slug(key)}: no run's remnant could be fitted; cannot build its twins"
             )
         remnant = tuple(float(np.median([getattr(r, a) for r in remnants])) for a in ("kn", "w_n", "zeta_n"))
+        remnants_of[key] = remnant
         runs_of_set = forcing_sets(seeds, records, config)  # each set gets twins of its own
         study_model = {**medians[key], **{p: medians[strongest][p] for p in FEEDFORWARD_PARAMETERS}}
 
@@ -417,28 +426,56 @@ def analyse_study(
 
     lap_done("twins")
 
-    # 4. Every run selected at its group's W and its selected structure fitted.
+    # 4. More FB twins wherever a run's p-value is not settled (sequential, Besag and Clifford).
     frontier = results.read(tables.FRONTIER, run_dir)
     by_key = tables.split_by_key(frontier, tables.FRONTIER.key)
-    stored = _choices(run_dir)
-    chosen, tasks, evidence = {}, [], {}
+    paths = {}  # (seed, method) -> (its frontier, selection path, nb_ft)
+    for seed in records:
+        for method_name in names:
+            t = by_key[(data.name, seed, method_name)]
+            orders = np.column_stack([t.column(c).to_numpy() for c in tables.ORDER_COLUMNS])
+            path = selection.breakpoints(t.column("d").to_numpy(), t.column("v").to_numpy(), orders)
+            paths[(seed, method_name)] = (t, path, t.column("nb_ft").to_numpy())
     checks = Checks(config, records)
     run_sizes = checks.sizes()
-    judge = Evidence(config, run_dir, alpha)
+    judge = Evidence(config, run_dir, alpha, max_fb_twins)
+    fb_drawn, deciding = {}, {}
+    for key, seeds in groups.items():
+        name, sets = group_name(by, key), used[(key, names[0])].runs
+        deciding[key] = {m: judge.statistic(used[(key, m)], m) for m in names}
+        for i, members in enumerate(sets):
+            twin_of = {m: used[(key, m)].sets[i] for m in names}
+            values = [
+                ({m: judge.w_star(*paths[(s, m)][1:]) for m in names}, run_sizes.get(s)) for s in members
+            ]
+            while (drawn := judge.drawn(name, i + 1, twin_of[names[0]])) < max_fb_twins:
+                open_methods, fourier_open = judge.unsettled(name, i + 1, twin_of, deciding[key], values)
+                if not (open_methods or fourier_open):
+                    break
+                judge.add(name, i + 1, draw_fb_twins(
+                    config, run_dir, key, records[members[0]], medians[key], remnants_of[key], kn_rate,
+                    i + 1 if len(sets) > 1 else 0, drawn + 1, min(twins, max_fb_twins - drawn), open_methods,
+                    **twin_args,
+                ))  # fmt: skip
+            for m in names:
+                n = judge.fb_thresholds(name, i + 1, twin_of[m], m).size
+                fb_drawn[(key, m)] = max(fb_drawn.get((key, m), 0), n)
+    lap_done("more FB twins")
 
+    # 5. Every run selected at its group's W and its selected structure fitted.
+    stored = _choices(run_dir)
+    chosen, tasks, evidence = {}, [], {}
     for key, seeds in groups.items():
         for method_name in names:
             w, rule, uncertain = choose_w(used[(key, method_name)].calibrations[method_name])
             chosen[(key, method_name)] = (w, rule, uncertain)
             stage = config.identify.stage(methods.get(method_name).final_stage.name)
             for seed in seeds:
-                t = by_key[(data.name, seed, method_name)]
-                orders = np.column_stack([t.column(c).to_numpy() for c in tables.ORDER_COLUMNS])
-                path = selection.breakpoints(t.column("d").to_numpy(), t.column("v").to_numpy(), orders)
+                t, path, nb_ft = paths[(seed, method_name)]
                 row = path.at(np.array([w]))[0]
                 evidence[(seed, method_name)] = judge.run(
-                    group_name(by, key), path, t.column("nb_ft").to_numpy(), used[(key, method_name)], seed,
-                    method_name, run_sizes.get(seed),
+                    group_name(by, key), path, nb_ft, used[(key, method_name)], seed, method_name,
+                    run_sizes.get(seed),
                 )  # fmt: skip
                 sel = SelectedModel.from_frontier(
                     t,
@@ -451,7 +488,7 @@ def analyse_study(
                 choices = _stage_choices(run_dir, stored, method_name, data.name, seed)
                 own = _same_fit(config, sel, fitted[seed][0])  # shared, not fitted twice
                 tasks.append((config, seed, records[seed], method_name, sel, choices, own))
-            decide([evidence[(seed, method_name)] for seed in seeds], alpha)
+            decide([evidence[(seed, method_name)] for seed in seeds], alpha, deciding[key][method_name])
     finals = {
         (seed, method_name): analysis
         for seed, method_name, analysis in parallel_map(
@@ -467,7 +504,7 @@ def analyse_study(
             for k, hit in zip(keys, found, strict=True):
                 evidence[k] = {**evidence[k], "evidence": "feedforward" if hit else "none shown"}
     group_table, run_table = _tables(
-        config, runs, groups, by, used, chosen, finals, twins, models, checks, evidence, alpha
+        config, runs, groups, by, used, chosen, finals, (twins, fb_drawn), models, checks, evidence, alpha
     )
     fc_rows = []
     for key, seeds in groups.items():

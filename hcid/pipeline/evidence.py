@@ -13,7 +13,13 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import hcfit, tables
-from hcid.calibration import binomial_summary, evidence_p_value, evidence_power, feedforward_threshold
+from hcid.calibration import (
+    binomial_summary,
+    evidence_power,
+    feedforward_threshold,
+    sequential_p_value,
+    sequential_settled,
+)
 from hcid.config import Config
 from hcid.errors import DataError
 from hcid.hcfit.consistency import consistency, group_consistency
@@ -23,6 +29,8 @@ from hcid.hcmodel import plant
 from hcid.pipeline.twins import twin_sizes
 
 __all__ = [
+    "EXCEEDANCES",
+    "MAX_FB_TWINS",
     "MIN_POWER",
     "STATISTICS",
     "Checks",
@@ -37,6 +45,12 @@ __all__ = [
 
 #: Below this power the twins cannot tell a run's feedforward from none (SPEC 11).
 MIN_POWER = 0.8
+#: FB twins are drawn until this many show at least a run's statistic (Besag and Clifford 1991;
+#: then p = EXCEEDANCES / draws) or the most are drawn. 5 at the most draws' 99 decides every run
+#: at alpha = 0.05 as a p-value of all 99 would: one stopped early has p >= 5/98 > 0.05.
+EXCEEDANCES = 5
+#: The most FB twins per forcing set by default: p-values down to 1/100, so that 0.01 is told from 0.05.
+MAX_FB_TWINS = 99
 #: The two statistics of a run's evidence, by name in the tables: (p-value, power) columns.
 STATISTICS = {"W*": ("p_w_star", "power_w_star"), "Fourier coefficients": ("p_fourier", "power_fourier")}
 
@@ -111,27 +125,32 @@ def consistency_columns(check, problem: str) -> dict:
 
 class Evidence:
     """Each run's two statistics against its own forcing set's twins (SPEC 11): its W* and its
-    model-free feedforward size, each with its p-value and its twins' power. The twins' values
-    are computed once per twin folder (and method) whatever the number of runs they judge."""
+    model-free feedforward size, each with its sequential p-value (:data:`EXCEEDANCES`, at most
+    ``max_fb`` FB twins) and its twins' power. The twins' values are computed once per twin
+    folder (and method) whatever the number of runs they judge; FB twins drawn beyond the
+    calibration's (:meth:`add`) are kept per group and forcing set, shared by the group's own
+    and study twins (whose FB twin is the same loop)."""
 
-    def __init__(self, config: Config, run_dir: Path, alpha: float):
+    def __init__(self, config: Config, run_dir: Path, alpha: float, max_fb: int):
         grid = config.selection.w_grid
         self.lo, self.hi = float(min(grid)), float(max(grid))
-        self.config, self.run_dir, self.alpha = config, run_dir, alpha
+        self.config, self.run_dir, self.alpha, self.max_fb = config, run_dir, alpha, max_fb
         self._thresholds: dict[tuple[str, str], dict[str, np.ndarray]] = {}
         self._sizes: dict[str, dict | None] = {}
+        self._more: dict[tuple[str, int], list] = {}  # (group, forcing set) -> [FbDraws]
         self._judged: dict[tuple[str, str, int], str] = {}  # (group, method, forcing set) -> folder
+
+    def w_star(self, path, nb_ft) -> float:
+        return feedforward_threshold(path, nb_ft, self.lo, self.hi)
 
     def thresholds(self, twin, method: str) -> dict[str, np.ndarray]:
         """The FB and FF twins' W* of one twin folder under one method."""
         key = (twin.folder, method)
         if key not in self._thresholds:
-            w = {}
-            for name, (paths, nb_ft) in zip(("FB", "FF"), twin.paths[method], strict=True):
-                w[name] = np.array(
-                    [feedforward_threshold(p, n, self.lo, self.hi) for p, n in zip(paths, nb_ft, strict=True)]
-                )
-            self._thresholds[key] = w
+            self._thresholds[key] = {
+                name: np.array([self.w_star(p, n) for p, n in zip(paths, nb_ft, strict=True)])
+                for name, (paths, nb_ft) in zip(("FB", "FF"), twin.paths[method], strict=True)
+            }
         return self._thresholds[key]
 
     def sizes(self, twin) -> dict[str, np.ndarray] | None:
@@ -139,26 +158,90 @@ class Evidence:
             self._sizes[twin.folder] = twin_sizes(twin, self.run_dir, self.config)
         return self._sizes[twin.folder]
 
+    def add(self, group: str, forcing_set: int, draws) -> None:
+        """More FB twins of a group's forcing set (:class:`hcid.pipeline.twins.FbDraws`), in order."""
+        self._more.setdefault((group, forcing_set), []).append(draws)
+
+    def drawn(self, group: str, forcing_set: int, twin) -> int:
+        """FB twins simulated so far for a group's forcing set (the next draw's first seed - 1)."""
+        return len(twin.paths[next(iter(twin.paths))][0][0]) + sum(
+            d.count for d in self._more.get((group, forcing_set), [])
+        )
+
+    def fb_thresholds(self, group: str, forcing_set: int, twin, method: str) -> np.ndarray:
+        """Every FB twin's W* under ``method`` in the order drawn: the calibration's, then the
+        draws that identified ``method`` (up to the first that did not: it was settled there)."""
+        out = [self.thresholds(twin, method)["FB"]]
+        for d in self._more.get((group, forcing_set), []):
+            if method not in d.paths:
+                break
+            out.append(np.array([self.w_star(p, n) for p, n in zip(*d.paths[method], strict=True)]))
+        return np.concatenate(out)
+
+    def fb_sizes(self, group: str, forcing_set: int, twin) -> np.ndarray | None:
+        base = self.sizes(twin)
+        if base is None:
+            return None
+        more = [d.sizes for d in self._more.get((group, forcing_set), [])]
+        return np.concatenate([base["FB"], *[m for m in more if m is not None]])
+
+    def statistic(self, pair, method: str) -> str:
+        """Which statistic decides for a group and method (a name of :data:`STATISTICS`): the one
+        whose calibration twins give the higher median power over the group's runs (each run its
+        forcing set's), W* on a tie or where the forcing has no lines. From the twins alone, before
+        any run's value is read and before more FB twins are drawn (only its p-values are drawn for)."""
+        powers: dict[str, list[float]] = {name: [] for name in STATISTICS}
+        for twin, runs in zip(pair.sets, pair.runs, strict=True):
+            w, sizes = self.thresholds(twin, method), self.sizes(twin)
+            powers["W*"] += [evidence_power(w["FF"], w["FB"], self.alpha)] * len(runs)
+            fourier = evidence_power(sizes["FF"], sizes["FB"], self.alpha) if sizes else math.nan
+            powers["Fourier coefficients"] += [fourier] * len(runs)
+        median = {name: float(np.median(v)) for name, v in powers.items() if np.isfinite(v).all()}
+        return max(median, key=lambda name: (median[name], name == "W*"))
+
+    def unsettled(self, group: str, forcing_set: int, twin_of: dict, deciding: dict, runs: list):
+        """What more FB twins of a group's forcing set are drawn for: the methods (``twin_of``:
+        method -> twins) that W* decides (``deciding``: method -> statistic) and under which some
+        run (``runs``: (W* by method, feedforward size)) has a p-value more twins could change;
+        and whether the feedforward size decides somewhere and has such a run."""
+        methods_open = [
+            m for m, twin in twin_of.items()
+            if deciding[m] == "W*" and any(
+                not sequential_settled(w[m], self.fb_thresholds(group, forcing_set, twin, m), EXCEEDANCES,
+                                       self.max_fb) for w, _ in runs)
+        ]  # fmt: skip
+        sizes = self.fb_sizes(group, forcing_set, next(iter(twin_of.values())))
+        fourier_open = (
+            "Fourier coefficients" in deciding.values()
+            and sizes is not None
+            and any(size is not None and not sequential_settled(size, sizes, EXCEEDANCES, self.max_fb)
+                    for _, size in runs)
+        )  # fmt: skip
+        return methods_open, fourier_open
+
     def run(self, group: str, path, nb_ft, pair, seed: int, method: str, run_size: float | None) -> dict:
         """The run's evidence columns (``decide`` adds the deciding ones)."""
         own = pair.of_run(seed)
         forcing_set = pair.sets.index(own) + 1
         self._judged[(group, method, forcing_set)] = own
-        twins = self.thresholds(own, method)
-        w_star = feedforward_threshold(path, nb_ft, self.lo, self.hi)
-        sizes = self.sizes(own)
-        fourier = (math.nan, math.nan, math.nan)
+        fb = self.fb_thresholds(group, forcing_set, own, method)
+        w_star = self.w_star(path, nb_ft)
+        p_w, n_w = sequential_p_value(w_star, fb, EXCEEDANCES)
+        sizes, fb_sizes = self.sizes(own), self.fb_sizes(group, forcing_set, own)
+        fourier = (math.nan, math.nan, math.nan, 0)
         if sizes is not None and run_size is not None:
-            fourier = (run_size, evidence_p_value(run_size, sizes["FB"]),
-                       evidence_power(sizes["FF"], sizes["FB"], self.alpha))  # fmt: skip
+            p_f, n_f = sequential_p_value(run_size, fb_sizes, EXCEEDANCES)
+            fourier = (run_size, p_f, evidence_power(sizes["FF"], fb_sizes, self.alpha), n_f)
         return {
             "forcing_set": forcing_set,
             "w_star": w_star,
-            "p_w_star": evidence_p_value(w_star, twins["FB"]),
-            "power_w_star": evidence_power(twins["FF"], twins["FB"], self.alpha),
+            "p_w_star": p_w,
+            "power_w_star": evidence_power(self.thresholds(own, method)["FF"], fb, self.alpha),
+            "fb_twins_w_star": n_w,
             "fourier_size": fourier[0],
             "p_fourier": fourier[1],
             "power_fourier": fourier[2],
+            "fb_twins_fourier": fourier[3],
         }
 
     def twins_table(self, groups: dict, by: Sequence[str], evidence: dict) -> pa.Table:
@@ -172,24 +255,30 @@ class Evidence:
                 if seed not in seeds or judged in done:
                     continue
                 done.add(judged)
-                for twin, values in self.thresholds(self._judged[judged], method).items():
-                    rows += [{"group": name, "method": method, "forcing_set": e["forcing_set"], "twin": twin,
-                              "seed": i + 1, "w_star": float(w)} for i, w in enumerate(values)]  # fmt: skip
+                twin, forcing_set = self._judged[judged], e["forcing_set"]
+                sizes = self.sizes(twin) or {}
+                fb_sizes = self.fb_sizes(name, forcing_set, twin)
+                drawn = {
+                    "FB": (self.fb_thresholds(name, forcing_set, twin, method), fb_sizes),
+                    "FF": (self.thresholds(twin, method)["FF"], sizes.get("FF")),
+                }
+                for kind, (w_stars, fourier) in drawn.items():
+                    n = max(w_stars.size, 0 if fourier is None else fourier.size)
+                    rows += [
+                        {"group": name, "method": method, "forcing_set": forcing_set, "twin": kind, "seed": i + 1,
+                         "w_star": float(w_stars[i]) if i < w_stars.size else math.nan,
+                         "fourier_size": float(fourier[i]) if fourier is not None and i < fourier.size else math.nan}
+                        for i in range(n)
+                    ]  # fmt: skip
         return pa.Table.from_pylist(rows, schema=tables.EVIDENCE_TWINS.arrow)
 
 
-def decide(rows: list[dict], alpha: float) -> None:
-    """Which statistic decides for a group and method: the one whose twins give the higher median
-    power (from the twins alone, before the runs' values are read); each row gets its
+def decide(rows: list[dict], alpha: float, statistic: str) -> None:
+    """Each row of a group and method gets the deciding ``statistic``'s (:meth:`Evidence.statistic`)
     ``decided_by``, ``p_value``, ``power`` and ``evidence``."""
-    powers = {
-        name: float(np.median([r[pw] for r in rows])) for name, (_, pw) in STATISTICS.items()
-        if all(math.isfinite(r[pw]) for r in rows)
-    }  # fmt: skip
-    chosen = max(powers, key=lambda name: (powers[name], name == "W*"))
-    p_col, power_col = STATISTICS[chosen]
+    p_col, power_col = STATISTICS[statistic]
     for r in rows:
-        r.update(decided_by=chosen, p_value=r[p_col], power=r[power_col],
+        r.update(decided_by=statistic, p_value=r[p_col], power=r[power_col],
                  evidence="feedforward" if r[p_col] <= alpha else "none shown")  # fmt: skip
 
 

@@ -18,12 +18,13 @@ from hcid.config import Config
 from hcid.errors import ConfigError, DataError
 from hcid.hcfit.lines import feedforward_size, record_lines
 from hcid.pipeline.rundir import check_run_dir, using
-from hcid.pipeline.studies import calibrate_study
+from hcid.pipeline.studies import calibrate_study, identify_study, simulate_study
 from hcid.pipeline.sweep import selections
 from hcid.resolve import parse_config
 
 __all__ = [
-    "MIN_TWIN_KPT", "TWIN_SIM_RATE", "TwinSets", "Twins", "calibrate_twins", "choose_w", "forcing_sets",
+    "MIN_TWIN_KPT", "TWIN_SIM_RATE", "FbDraws", "TwinSets", "Twins", "calibrate_twins", "choose_w", "draw_fb_twins",
+    "forcing_sets",
     "forcing_text", "group_slug", "pool_twins", "separates", "twin_config_raw", "twin_dir_ready",
     "twin_paths", "twin_rate", "twin_sizes", "twin_values",
 ]  # fmt: skip
@@ -216,15 +217,7 @@ class Twins:
 def twin_sizes(twin: Twins, run_dir: Path, config: Config) -> dict[str, np.ndarray] | None:
     """Each FB and FF twin realization's model-free feedforward size
     (:func:`hcid.hcfit.lines.feedforward_size`), by twin; None where the forcing has no lines."""
-    folder = run_dir / twin.folder
-    records = results.records(results.read(tables.SIMULATIONS, folder), folder / tables.SIMULATIONS.file)
-    out: dict[str, list[float]] = {"FB": [], "FF": []}
-    try:
-        for (model, _), r in sorted(records.items()):
-            out[model].append(feedforward_size(record_lines(r, config.timing.output_rate)))
-    except DataError:
-        return None
-    return {k: np.array(v) for k, v in out.items()}
+    return _sizes(run_dir / twin.folder, config.timing.output_rate) or None
 
 
 def separates(cal) -> bool:
@@ -264,6 +257,67 @@ def calibrate_twins(config, run_dir, key, record, model, remnant, twins, kind, k
         kind, {**model, **twin_values(model, kn_rate)}, remnant, f"twins/{slug}",
         {c.method: c for c in run.calibrations}, twin_paths(twin_config, twin_dir),
     )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class FbDraws:
+    """More FB twins of one group and forcing set (seeds ``first`` on): per identified method
+    their selection paths and nb_ft, and every twin's model-free feedforward size (None where
+    the forcing has no lines)."""
+
+    first: int
+    count: int
+    paths: dict  # method -> (paths, nb_ft)
+    sizes: np.ndarray | None
+
+
+def draw_fb_twins(config, run_dir, key, record, model, remnant, kn_rate, forcing_set, first, count,
+                  method_names, **pool) -> FbDraws:  # fmt: skip
+    """FB twins ``first .. first + count - 1`` of a group (its fitted model without feedforward,
+    driven by the forcing set's functions), simulated and identified by ``method_names`` only,
+    in ``RUN/twins/<group>[-f<set>]-fb<first>`` (resumed; a method asked for later is added).
+    The FB twin of ``--ff-twin study`` is the same loop, so one draw serves both."""
+    slug = group_slug(key) + (f"-f{forcing_set}" if forcing_set else "") + f"-fb{first}"
+    twin_dir = run_dir / "twins" / slug
+    with using(twin_dir):
+        forcing = twin_dir / "forcing.csv"
+        text = forcing_text(record, round(config.timing.window * config.timing.output_rate))
+        twin_dir_ready(twin_dir, text)
+        folders.atomic_write(forcing, lambda tmp: Path(tmp).write_text(text))
+        raw = twin_config_raw(config, model, remnant, forcing, count, f"{config.name}_twins_{slug}")
+        raw["models"] = {"FB": raw["models"]["FB"]}
+        raw["seeds"] = {"first": first, "count": count}
+        twin_config = parse_config(raw, raw["name"])
+        try:
+            check_run_dir(twin_config, twin_dir, "simulate")
+        except DataError:  # the group's fitted model changed (other settings): new twins
+            folders.remove_owned(twin_dir, [n for n in folders.owned_files(twin_dir) if n != "forcing.csv"])
+        if method_names:
+            identify_study(twin_config, twin_dir, method_names, **pool)
+        elif not (twin_dir / tables.SIMULATIONS.file).exists():
+            simulate_study(
+                twin_config, twin_dir, jobs=pool.get("jobs", 2), show_progress=pool.get("show_progress", True)
+            )
+    paths = {}
+    if method_names:
+        chosen = selections(results.read(tables.FRONTIER, twin_dir), twin_dir)
+        for method in method_names:
+            keys = [("FB", s, method) for s in twin_config.seeds]
+            paths[method] = ([chosen[k][0] for k in keys], [chosen[k][1]["nb_ft"] for k in keys])
+    return FbDraws(first, count, paths, _sizes(twin_dir, config.timing.output_rate).get("FB"))
+
+
+def _sizes(folder: Path, rate: float) -> dict[str, np.ndarray]:
+    """Each twin realization's model-free feedforward size in a twin folder, by model (in seed
+    order); empty where the forcing has no lines."""
+    records = results.records(results.read(tables.SIMULATIONS, folder), folder / tables.SIMULATIONS.file)
+    out: dict[str, list[float]] = {}
+    try:
+        for (model, _), r in sorted(records.items()):
+            out.setdefault(model, []).append(feedforward_size(record_lines(r, rate)))
+    except DataError:
+        return {}
+    return {k: np.array(v) for k, v in out.items()}
 
 
 def twin_paths(twin_config: Config, twin_dir: Path) -> dict[str, tuple]:

@@ -221,10 +221,11 @@ def plot_inversion(rows: list[dict], title: str = "", axes=None):
 def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: float = 0.05, axes=None):
     """Each run's feedforward threshold W* on its forcing set's twins (SPEC 11): the FB twins'
     W* (what a person without feedforward shows), the FF twins' (what one with the group's
-    feedforward shows) and the runs' (filled where p <= alpha), one row of each per forcing set.
+    feedforward shows) and the runs' (filled where their W*'s p-value is at most alpha), one row of
+    each per forcing set, each twins' row labelled with its count.
 
     ``twins``: rows of ``evidence_twins.parquet`` for one group and method; ``runs``: its rows of
-    ``analysis.parquet`` (``forcing_set``, ``w_star``, ``p_value``, ``seed``)."""
+    ``analysis.parquet`` (``forcing_set``, ``w_star``, ``p_w_star``, ``seed``)."""
     sets = sorted({r["forcing_set"] for r in runs})
     fig, axes = _figure(axes, 1, 1, figsize=(8.0, 1.2 + 1.1 * len(sets)))
     ax = axes[0][0]
@@ -234,14 +235,15 @@ def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: f
         base = 3.0 * i
         for offset, twin, color in ((0.0, "FB", "0.55"), (1.0, "FF", "C0")):
             w = np.array([t["w_star"] for t in twins if t["forcing_set"] == fs and t["twin"] == twin])
+            w = w[np.isfinite(w)]  # an FB twin drawn for the Fourier statistic only has no W*
             ax.plot(w, base + offset + rng.uniform(-0.25, 0.25, w.size), "o", color=color, ms=4, alpha=0.7,
                     label=f"{twin} twins" if i == 0 else None)  # fmt: skip
             ticks.append(base + offset)
-            labels.append(f"set {fs}: {twin} twins")
+            labels.append(f"set {fs}: {w.size} {twin} twins")
         mine = [r for r in runs if r["forcing_set"] == fs]
         y = base + 2.0 + rng.uniform(-0.2, 0.2, len(mine))
         for r, yy in zip(mine, y, strict=True):
-            hit = r["p_value"] <= alpha
+            hit = r["p_w_star"] <= alpha
             ax.plot(r["w_star"], yy, "D", color="C3", mfc="C3" if hit else "white", ms=7,
                     label=None)  # fmt: skip
             ax.annotate(
@@ -249,8 +251,8 @@ def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: f
             )
         ticks.append(base + 2.0)
         labels.append(f"set {fs}: runs")
-    ax.plot([], [], "D", color="C3", ms=7, label=f"runs, p <= {alpha:g}")
-    ax.plot([], [], "D", color="C3", mfc="white", ms=7, label=f"runs, p > {alpha:g}")
+    ax.plot([], [], "D", color="C3", ms=7, label=f"runs, p(W*) <= {alpha:g}")
+    ax.plot([], [], "D", color="C3", mfc="white", ms=7, label=f"runs, p(W*) > {alpha:g}")
     ax.set_yticks(ticks)
     ax.set_yticklabels(labels, fontsize=8)
     ax.set_xscale("log")

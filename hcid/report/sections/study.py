@@ -218,9 +218,10 @@ def render(data: StudyData | None, doc: Doc) -> None:
         doc.figure(
             f"evidence_{folder}_{method}.png",
             f"{group}, {method} method: each run's W* (the largest W at which its selection keeps "
-            "feedforward) on its own forcing set's twins: a run shows feedforward where its p-value, "
-            f"the share of FB twins at or above it (with one added to both counts), is at most {alpha:g} "
-            "(filled); the FF twins show how often such a run would be found (the power).",
+            "feedforward) on its own forcing set's twins: a run shows feedforward where its p-value is "
+            f"at most {alpha:g} (filled). FB twins are drawn until 5 are at or above the run's W* (p = 5 "
+            "over the draws), else p = (1 + those at or above) / (1 + all drawn), Besag and Clifford's "
+            "sequential p-value; the FF twins show how often such a run would be found (the power).",
             lambda t=twins, r=runs, n=f"{group}, {method}", a=alpha: figures_hcfit.plot_evidence(t, r, n, a),
         )
     for title, caption, folder, table, used in data.calibrations:
