@@ -332,8 +332,10 @@ def sequential_settled(value: float, fb_in_order: np.ndarray, h: int, n_max: int
 
     Examples
     --------
-    >>> sequential_settled(0.25, np.array([0.5, 0.1]), 2, 99), sequential_settled(0.25, np.array([0.5, 0.3]), 2, 99)
-    (False, True)
+    >>> sequential_settled(0.25, np.array([0.5, 0.1]), 2, 99)  # one of two at or above
+    False
+    >>> sequential_settled(0.25, np.array([0.5, 0.3]), 2, 99)
+    True
     """
     fb = np.asarray(fb_in_order, dtype=np.float64)
     return bool(fb.size >= n_max or np.count_nonzero(fb >= value) >= h)

@@ -440,7 +440,7 @@ def analyse_study(
     run_sizes = checks.sizes()
     judge = Evidence(config, run_dir, alpha, max_fb_twins)
     fb_drawn, deciding = {}, {}
-    for key, seeds in groups.items():
+    for key in groups:
         name, sets = group_name(by, key), used[(key, names[0])].runs
         deciding[key] = {m: judge.statistic(used[(key, m)], m) for m in names}
         for i, members in enumerate(sets):

@@ -263,11 +263,13 @@ class Evidence:
                     "FF": (self.thresholds(twin, method)["FF"], sizes.get("FF")),
                 }
                 for kind, (w_stars, fourier) in drawn.items():
-                    n = max(w_stars.size, 0 if fourier is None else fourier.size)
+                    fourier = np.full(0, math.nan) if fourier is None else fourier
+                    n = max(w_stars.size, fourier.size)
+                    w_stars = np.pad(w_stars, (0, n - w_stars.size), constant_values=math.nan)
+                    fourier = np.pad(fourier, (0, n - fourier.size), constant_values=math.nan)
                     rows += [
-                        {"group": name, "method": method, "forcing_set": forcing_set, "twin": kind, "seed": i + 1,
-                         "w_star": float(w_stars[i]) if i < w_stars.size else math.nan,
-                         "fourier_size": float(fourier[i]) if fourier is not None and i < fourier.size else math.nan}
+                        {"group": name, "method": method, "forcing_set": forcing_set, "twin": kind,
+                         "seed": i + 1, "w_star": float(w_stars[i]), "fourier_size": float(fourier[i])}
                         for i in range(n)
                     ]  # fmt: skip
         return pa.Table.from_pylist(rows, schema=tables.EVIDENCE_TWINS.arrow)

@@ -23,8 +23,8 @@ from hcid.pipeline.sweep import selections
 from hcid.resolve import parse_config
 
 __all__ = [
-    "MIN_TWIN_KPT", "TWIN_SIM_RATE", "FbDraws", "TwinSets", "Twins", "calibrate_twins", "choose_w", "draw_fb_twins",
-    "forcing_sets",
+    "MIN_TWIN_KPT", "TWIN_SIM_RATE", "FbDraws", "TwinSets", "Twins", "calibrate_twins", "choose_w",
+    "draw_fb_twins", "forcing_sets",
     "forcing_text", "group_slug", "pool_twins", "separates", "twin_config_raw", "twin_dir_ready",
     "twin_paths", "twin_rate", "twin_sizes", "twin_values",
 ]  # fmt: skip
