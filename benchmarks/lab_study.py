@@ -121,6 +121,22 @@ def compare(spec: dict, run: Path, config: Path) -> None:
         rule = g["w_rule"] + ("; UNCERTAIN" if g["uncertain"] else "")
         print(f"| {g['group']} | {g['method']} | {g['w']:.3g} | {rule} ({g['ff_twin']}) | {stated} | "
               f"{g['n_feedforward']} of {g['n_runs']} | {made} |")  # fmt: skip
+    # Each run's own evidence (SPEC 11) against the truth: runs at p <= 0.05 with and without
+    # feedforward, the power the twins stated, the statistic that decided, the FB twins drawn.
+    print("\n| condition | method | decided by | FB twins drawn | runs at p <= 0.05 | truth | median power |"
+          " verdict |\n|---|---|---|---|---|---|---|---|")  # fmt: skip
+    hits = {True: [0, 0], False: [0, 0]}
+    for g in groups:
+        mine = [r for r in rows if r["group"] == g["group"] and r["method"] == g["method"]]
+        ff = mine[0]["condition"].startswith("pursuit")
+        k = sum(r["p_value"] <= 0.05 for r in mine)
+        hits[ff][0] += k
+        hits[ff][1] += len(mine)
+        print(f"| {g['group']} | {g['method']} | {g['decided_by']} | {g['fb_twins']} | {k} of {len(mine)} | "
+              f"{'feedforward' if ff else 'none'} | {g['median_power']:.2f} | {g['verdict']} |")  # fmt: skip
+    print(f"\nruns without feedforward at p <= 0.05: {hits[False][0]} of {hits[False][1]} "
+          f"({100 * hits[False][0] / max(hits[False][1], 1):.1f}%); runs with feedforward found: "
+          f"{hits[True][0]} of {hits[True][1]}")  # fmt: skip
     held, total, per = 0, 0, {}
     for r in rows:
         if r["method"] != "direct":

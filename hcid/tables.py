@@ -66,6 +66,7 @@ __all__ = [
     "IDENTIFY_LOG",
     "MEASURED",
     "ORDER_COLUMNS",
+    "PARAMETER_UNITS",
     "RATES",
     "REMNANT_SPECTRUM",
     "RESIDUALS",
@@ -102,6 +103,8 @@ class Schema:
     fields: tuple[tuple[str, pa.DataType], ...]
     key: tuple[str, ...]
     optional: tuple[str, ...] = ()
+    #: Column -> unit, kept in the Parquet schema as each field's ``unit`` metadata.
+    units: tuple[tuple[str, str], ...] = ()
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -109,7 +112,10 @@ class Schema:
 
     @property
     def arrow(self) -> pa.Schema:
-        return pa.schema(list(self.fields))
+        units = dict(self.units)
+        return pa.schema(
+            [pa.field(n, t, metadata={"unit": units[n]} if n in units else None) for n, t in self.fields]
+        )
 
     def conform(self, table: pa.Table) -> pa.Table:
         """``table`` with each of this schema's columns in the schema's exact type.
@@ -384,6 +390,28 @@ RESIDUALS = _schema(
 
 #: The parametric model's parameters (SPEC 8), as the analysis tables name their columns.
 HC_PARAMETER_NAMES = ("Kpe", "TL", "tau_pe", "w_nms", "zeta_nms", "Kpt", "TI", "tau_pt")
+#: Each parameter's unit ("-": none); hcid.config.fit.UNITS is this.
+PARAMETER_UNITS = {
+    "Kpe": "-", "TL": "s", "tau_pe": "s", "w_nms": "rad/s", "zeta_nms": "-",
+    "Kpt": "-", "TI": "s", "tau_pt": "s",
+}  # fmt: skip
+_SHARES = (
+    "fp_rate", "fp_low", "fp_high", "fn_rate", "fn_low", "fn_high", "p_w_star", "power_w_star", "p_fourier",
+    "power_fourier", "p_value", "power", "binomial_p", "median_power", "fc_p", "share_remnant", "alpha",
+)  # fmt: skip
+#: The units of the analysis tables' numeric columns (Parquet field metadata ``unit``; "-": none,
+#: "1": a share or probability, "%").
+_ANALYSIS_UNITS = tuple(
+    {
+        **dict.fromkeys(("w", "safe_low", "safe_high", "w_star", "fourier_size"), "-"),
+        **dict.fromkeys(_SHARES, "1"),
+        **dict.fromkeys(("vaf_arx_validation", "vaf_validation"), "%"),
+        **{f"{prefix}{p}{suffix}": u for p, u in PARAMETER_UNITS.items()
+           for prefix, suffix in (("", ""), ("", "_se"), ("twin_", ""), ("fitted_", ""))},
+        "crossover": "rad/s", "phase_margin": "deg", "he_error_db": "dB", "he_error_deg": "deg",
+        "ht_error_db": "dB", "ht_error_deg": "deg", "twin_w_n": "rad/s",
+    }.items()
+)  # fmt: skip
 _RATE_FIELDS = [(c, _F64) for c in ("fp_rate", "fp_low", "fp_high", "fn_rate", "fn_low", "fn_high")]
 _CHOICE_FIELDS = (
     [
@@ -422,7 +450,7 @@ _CONSISTENCY_FIELDS = [
 #: the group's level, ``decided_by`` the statistic whose
 #: twins' power is higher, whose ``p_value`` and ``power`` decide ``evidence``
 #: (``feedforward`` or ``none shown``); ``evidence_uncertain`` where that power is below 0.8),
-#: the estimator (``target``) and the model's form (``hc_form``:
+#: the estimator (``estimator``: lines, time, closed_loop or frequency) and the model's form (``hc_form``:
 #: ``full``, or ``nms fixed`` where the neuromuscular pair was held at its literature values),
 #: each parameter with its standard error and status (``<p>``, ``<p>_se``, ``<p>_status``:
 #: ``determined`` or the reason it is not, SPEC 11; NaN and ``not fitted`` where not fitted),
@@ -433,7 +461,7 @@ ANALYSIS = _schema(
     [("model", _STR), ("seed", _INT), ("file", _STR), ("file_run", _INT)]
     + _CHOICE_FIELDS
     + [(c, _INT) for c in ORDER_COLUMNS]
-    + [("feedforward", _BOOL), ("vaf_arx_validation", _F64), ("target", _STR), ("vaf_validation", _F64)]
+    + [("feedforward", _BOOL), ("vaf_arx_validation", _F64), ("estimator", _STR), ("vaf_validation", _F64)]
     + [("forcing_set", _INT), ("w_star", _F64), ("p_w_star", _F64), ("power_w_star", _F64)]
     + [("fb_twins_w_star", _INT)]
     + [("fourier_size", _F64), ("p_fourier", _F64), ("power_fourier", _F64), ("fb_twins_fourier", _INT)]
@@ -444,6 +472,7 @@ ANALYSIS = _schema(
     + [("crossover", _F64), ("phase_margin", _F64), ("share_remnant", _F64)]
     + _CONSISTENCY_FIELDS,
     ("model", "seed", "method"),
+    units=_ANALYSIS_UNITS,
 )
 #: ``analysis_groups.parquet`` (``hcid analyse``): one row per group of runs (``--by``) and
 #: method: the W used and why, the safe interval, the twins' rates at W, the runs and how
@@ -472,6 +501,7 @@ ANALYSIS_GROUPS = _schema(
     + [("twin_source", _STR), ("twin_undetermined", _STR), ("n_contradicted", _INT)]
     + _CONSISTENCY_FIELDS,
     ("group", "method"),
+    units=_ANALYSIS_UNITS,
 )
 #: ``fc_estimates.parquet`` (``hcid analyse``): the model-free (Fourier-coefficient, SPEC 10)
 #: estimates per group and forcing line: ``path`` ``e`` (He at a disturbance line) or ``ft``

@@ -72,6 +72,12 @@ def test_every_run_and_group_is_answered_with_its_factors(analysed):
         .splitlines()[0]
         .startswith('"model","seed","file","file_run","group"')
     )
+    # Units in the Parquet schema (docs/tables.md): a time constant in s, a share as 1, VAF in %.
+    schema = pq.read_schema(run / tables.ANALYSIS.file)
+    assert [schema.field(c).metadata for c in ("TL", "TL_se", "p_value", "vaf_validation", "crossover")] == [
+        {b"unit": u} for u in (b"s", b"s", b"1", b"%", b"rad/s")
+    ]
+    assert "estimator" in schema.names and "target" not in schema.names
     assert "feedforward in 4 of 4 runs" in output
     # The answer line leads with the verdict; the command ends with the report it wrote.
     assert "condition=pursuit, direct: " in output

@@ -75,9 +75,10 @@ def test_report_from_tables_alone(ci_run, tmp_path):
         "## 5. Selected models at W_BIC",
         "## 6. FF feedback path",
         "## 7. Errors at W_BIC",
-        "## 8. Verdicts",
     ):
         assert section in md
+    # The answer first: the paper's verdicts before every numbered section.
+    assert md.index("## The answer: the paper's claims") < md.index("## 1. Run facts")
     html = (tmp_path / "out" / "report.html").read_text()
     assert html.count("data:image/png;base64,iVBOR") == len(FIGURES)  # embedded, self-contained
 
@@ -237,7 +238,7 @@ def test_report_of_another_experiment(tmp_path):
     assert "## Experiment" in text and "1.5/s (integrator)" in text
     assert "at the plant input: theta = Yc (u + fd)" in text
     assert "segments: 2 hold, 2 ramp" in text
-    assert "Verdicts" not in text and report.verdicts == []
+    assert "The answer: the paper's claims" not in text and report.verdicts == []
     assert "W_FP 0.012" not in text and "W_FN 0.26" not in text  # the paper's thresholds
     assert (run / "report" / "forcing_spectra.png").stat().st_size > 0
 
@@ -245,7 +246,7 @@ def test_report_of_another_experiment(tmp_path):
 def test_paper_report_names_the_paper_experiment(report):
     text = report.markdown.read_text()
     assert "The paper's experiment" in text and "at the plant output: theta = Yc u + fd" in text
-    assert "Verdicts" in text
+    assert "The answer: the paper's claims" in text
 
 
 # --------------------------------------------------------------------------- sampling verdicts (SPEC 9)

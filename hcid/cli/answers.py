@@ -84,7 +84,7 @@ def print_analysis(result) -> None:
     from hcid.hcfit.consistency import CONTRADICTED, format_p
 
     def pct(k: float, lo: float, hi: float) -> str:
-        return f"{100 * k:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}]"
+        return f"{100 * k:.0f}% (95% interval {100 * lo:.0f} to {100 * hi:.0f}%)"
 
     runs = result.runs.to_pylist()
     for g in result.groups.to_pylist():

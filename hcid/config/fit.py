@@ -13,6 +13,7 @@ import numpy as np
 
 from hcid.config._checks import Section, fmt, integer
 from hcid.errors import ConfigError
+from hcid.tables import PARAMETER_UNITS
 
 __all__ = [
     "DEFAULT_BOUNDS",
@@ -32,16 +33,7 @@ __all__ = [
 FEEDBACK_PARAMETERS = ("Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
 FEEDFORWARD_PARAMETERS = ("Kpt", "TI", "tau_pt")
 PARAMETERS = FEEDBACK_PARAMETERS + FEEDFORWARD_PARAMETERS
-UNITS = {
-    "Kpe": "-",
-    "TL": "s",
-    "tau_pe": "s",
-    "w_nms": "rad/s",
-    "zeta_nms": "-",
-    "Kpt": "-",
-    "TI": "s",
-    "tau_pt": "s",
-}
+UNITS = PARAMETER_UNITS  # one home: the tables' vocabulary (hcid.tables)
 #: The estimators; ``auto`` is ``lines`` where the record's forcing functions are multisines on
 #: disjoint lines over whole periods with at least one disturbance line per feedback parameter,
 #: else ``time`` (docs/parametric-fit.md: how it was chosen).

@@ -57,7 +57,7 @@ from hcid.pipeline.evidence import (
     group_verdict,
 )
 from hcid.pipeline.fit import _choices, _records, _stage_choices
-from hcid.pipeline.parallel import parallel_map
+from hcid.pipeline.parallel import labelled, parallel_map
 from hcid.pipeline.rundir import holds_run_dir
 from hcid.pipeline.studies import identify_study
 from hcid.pipeline.twins import (
@@ -196,7 +196,7 @@ def _tables(config, runs, groups, by, used, chosen, finals, drawn, models, check
                     "vaf_validation": fit.vaf_validation if fit else math.nan,
                 }  # fmt: skip
                 status = parameter_status(fit) if fit else {}
-                row["target"] = fit.target if fit else config.fit_hc.target
+                row["estimator"] = fit.target if fit else config.fit_hc.target
                 row["hc_form"] = ("nms fixed" if fit.fixed else "full") if fit else ""
                 for p in tables.HC_PARAMETER_NAMES:
                     row[p] = values.get(p, math.nan)
@@ -355,8 +355,9 @@ def analyse_study(
             if (folder / folders.MANIFEST).is_file():
                 folders.remove_owned(folder)
     names = tuple(methods.METHODS)
-    identify_study(config, run_dir, names, data_path=list(sources), jobs=jobs, force=force,
-                   backend=backend, scheduler=scheduler, show_progress=show_progress)  # fmt: skip
+    with labelled("runs: "):
+        identify_study(config, run_dir, names, data_path=list(sources), jobs=jobs, force=force,
+                       backend=backend, scheduler=scheduler, show_progress=show_progress)  # fmt: skip
     lap_done("identify")
     runs = results.read(tables.RUNS, run_dir)
     records = {seed: r for (model, seed), r in _records(run_dir).items() if model == data.name}

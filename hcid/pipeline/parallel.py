@@ -15,6 +15,7 @@ python-control and numba. Elsewhere it uses joblib's loky pool.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import os
 import signal
 import sys
@@ -27,9 +28,23 @@ from typing import Any
 
 from hcid.errors import HcidError
 
-__all__ = ["BACKENDS", "check_backend", "check_scheduler", "compile_kernels", "parallel_map"]
+__all__ = ["BACKENDS", "check_backend", "check_scheduler", "compile_kernels", "labelled", "parallel_map"]
 
 BACKENDS = ("loky", "dask")
+
+#: What every progress bar started inside :func:`labelled` says first (whose work it is).
+_LABEL = contextvars.ContextVar("hcid_progress_label", default="")
+
+
+@contextlib.contextmanager
+def labelled(prefix: str):
+    """Progress bars started inside say ``prefix`` before their own label (e.g. the twins of
+    one group: ``twins condition=pursuit: identify``)."""
+    token = _LABEL.set(_LABEL.get() + prefix)
+    try:
+        yield
+    finally:
+        _LABEL.reset(token)
 
 
 def check_backend(backend: str, scheduler: str | None = None) -> None:
@@ -94,7 +109,7 @@ def parallel_map(
                     disable=not show_progress,
                 )
             )
-            bar = progress.add_task(label, total=len(tasks))
+            bar = progress.add_task(_LABEL.get() + label, total=len(tasks))
             for result in stream:
                 progress.advance(bar)
                 finished += 1

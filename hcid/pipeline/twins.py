@@ -17,6 +17,7 @@ from hcid.calibration import calibrate
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError
 from hcid.hcfit.lines import feedforward_size, record_lines
+from hcid.pipeline.parallel import labelled
 from hcid.pipeline.rundir import check_run_dir, using
 from hcid.pipeline.studies import calibrate_study, identify_study, simulate_study
 from hcid.pipeline.sweep import selections
@@ -252,7 +253,8 @@ def calibrate_twins(config, run_dir, key, record, model, remnant, twins, kind, k
             check_run_dir(twin_config, twin_dir, "simulate")
         except DataError:  # the group's fitted model changed (other settings): new twins
             folders.remove_owned(twin_dir, [n for n in folders.owned_files(twin_dir) if n != "forcing.csv"])
-        run = calibrate_study(twin_config, twin_dir, **pool)
+        with labelled(f"{kind} twins of {', '.join(key) or 'all runs'}{_set_label(forcing_set)}: "):
+            run = calibrate_study(twin_config, twin_dir, **pool)
     return Twins(
         kind, {**model, **twin_values(model, kn_rate)}, remnant, f"twins/{slug}",
         {c.method: c for c in run.calibrations}, twin_paths(twin_config, twin_dir),
@@ -292,12 +294,13 @@ def draw_fb_twins(config, run_dir, key, record, model, remnant, kn_rate, forcing
             check_run_dir(twin_config, twin_dir, "simulate")
         except DataError:  # the group's fitted model changed (other settings): new twins
             folders.remove_owned(twin_dir, [n for n in folders.owned_files(twin_dir) if n != "forcing.csv"])
-        if method_names:
-            identify_study(twin_config, twin_dir, method_names, **pool)
-        elif not (twin_dir / tables.SIMULATIONS.file).exists():
-            simulate_study(
-                twin_config, twin_dir, jobs=pool.get("jobs", 2), show_progress=pool.get("show_progress", True)
-            )
+        whose = f"{', '.join(key) or 'all runs'}{_set_label(forcing_set)}"
+        with labelled(f"FB twins {first}-{first + count - 1} of {whose}: "):
+            if method_names:
+                identify_study(twin_config, twin_dir, method_names, **pool)
+            elif not (twin_dir / tables.SIMULATIONS.file).exists():
+                simulate_study(twin_config, twin_dir, jobs=pool.get("jobs", 2),
+                               show_progress=pool.get("show_progress", True))  # fmt: skip
     paths = {}
     if method_names:
         chosen = selections(results.read(tables.FRONTIER, twin_dir), twin_dir)
@@ -305,6 +308,10 @@ def draw_fb_twins(config, run_dir, key, record, model, remnant, kn_rate, forcing
             keys = [("FB", s, method) for s in twin_config.seeds]
             paths[method] = ([chosen[k][0] for k in keys], [chosen[k][1]["nb_ft"] for k in keys])
     return FbDraws(first, count, paths, _sizes(twin_dir, config.timing.output_rate).get("FB"))
+
+
+def _set_label(forcing_set: int) -> str:
+    return f", forcing set {forcing_set}" if forcing_set else ""
 
 
 def _sizes(folder: Path, rate: float) -> dict[str, np.ndarray]:

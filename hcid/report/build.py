@@ -17,7 +17,7 @@ from hcid.pipeline.rundir import using
 from hcid.report import figures
 from hcid.report.document import Doc, to_html, to_markdown
 from hcid.report.run import RunTables, read_run
-from hcid.report.sections import SECTIONS, STUDY_SECTIONS
+from hcid.report.sections import RENDER_ORDER, SECTIONS, STUDY_SECTIONS
 
 __all__ = ["Report", "ReportData", "build_report", "compute_report", "write_report"]
 
@@ -83,7 +83,7 @@ def render(data: ReportData) -> Doc:
             + ", ".join(data.missing)
             + ". Run `hcid run CONFIG` to complete them; what is there is reported below."
         )
-    for section in STUDY_SECTIONS if data.run.analysis is not None else SECTIONS:
+    for section in STUDY_SECTIONS if data.run.analysis is not None else RENDER_ORDER:
         section.render(data.sections[_section_name(section)], doc)
     return doc
 

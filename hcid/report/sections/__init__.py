@@ -22,7 +22,8 @@ from hcid.report.sections import (
     verdicts,
 )
 
-#: The sections in report order; the verdicts appear only for the paper's experiment.
+#: The sections in the order their data are computed (a section may read earlier ones'); the
+#: verdicts appear only for the paper's experiment.
 SECTIONS = (
     facts,
     experiment,
@@ -36,9 +37,14 @@ SECTIONS = (
     data,
     hcfit,
 )
+#: The order a reader sees them: the answer (the paper's verdicts) first, then how it was found.
+RENDER_ORDER = (
+    verdicts, facts, experiment, simulation, curves, rates, responses, handoff, calibration, data, hcfit,
+)  # fmt: skip
+assert set(RENDER_ORDER) == set(SECTIONS)
 
 #: The sections of a measured study's report (a run of ``hcid analyse``): the answer first, no
 #: paper sections.
 STUDY_SECTIONS = (study,)
 
-__all__ = ["SECTIONS", "STUDY_SECTIONS"]
+__all__ = ["RENDER_ORDER", "SECTIONS", "STUDY_SECTIONS"]

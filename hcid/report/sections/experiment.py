@@ -96,7 +96,7 @@ def render(data: ExperimentData, doc: Doc) -> None:
     doc.text(f"## {TITLE}")
     if data.is_paper:
         doc.text("The paper's experiment (SPEC sections 1 and 2).")
-    doc.table(["", ""], data.rows)
+    doc.table(["setting", "value"], data.rows)
     if data.spectra:
         doc.figure(
             "forcing_spectra.png",

@@ -43,6 +43,11 @@ def _num(x: float, digits: int = 4) -> str:
     return "-" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
 
 
+def _vaf(x: float) -> str:
+    """A VAF in percent, in fixed notation (a poor model's -29380.0, never -2.938e+04)."""
+    return "-" if x is None or not math.isfinite(x) else f"{x:.1f}"
+
+
 def _with_se(value: float, se: float, at_bound: bool) -> str:
     """``0.75 +- 0.02``; ``*`` on a bound (no standard error there)."""
     if at_bound:
@@ -170,7 +175,7 @@ def _measured(run, params: pa.Table, name: str):
         rows.append(
             [str(seed), method, f"{w:.4g}", f"{first['nb_ft']}"]
             + [_with_se(values[p], ses[p], hit[p]) if p in values else "-" for p in PARAMETERS]
-            + [_num(first["vaf_validation"], 3), _num(first["vaf_arx_validation"], 3)]
+            + [_vaf(first["vaf_validation"]), _vaf(first["vaf_arx_validation"])]
         )
     for (method, w, p), g in split_by_key(t, ("method", "w", "parameter")).items():
         x = g.column("estimate").to_numpy()

@@ -130,7 +130,7 @@ def render(data: ResponsesData | None, doc: Doc) -> None:
         )
     for stage, (cols, counts) in data.choices.items():
         doc.text(
-            f"Choices of stage {stage} ({', '.join(cols)}): "
+            f"The models {stage} chose ({', '.join(cols)}), over the realizations: "
             + ", ".join(f"{k} x{v}" for k, v in counts)
             + "."
         )

@@ -127,7 +127,7 @@ def compute(run, done) -> StudyData | None:
             [str(r["seed"]), *[str(r[f]) for f in factors], r["method"], str(r["nb_ft"]),
              ("yes" if r["feedforward"] else "no") + (" (uncertain)" if r["uncertain"] else ""),
              *[with_se(p) for p in shown], _num(r["crossover"]), _num(r["phase_margin"]),
-             _num(r["vaf_validation"]), check]
+             "-" if not math.isfinite(r["vaf_validation"]) else f"{r['vaf_validation']:.1f}", check]
         )  # fmt: skip
     calibrations = []
     group_rows = groups.to_pylist()

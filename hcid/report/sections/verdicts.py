@@ -1,4 +1,5 @@
-"""8. Verdicts: the paper's claims (SPEC section 6) against this run, each by a stated rule."""
+"""The answer, first in the report: the paper's claims (SPEC section 6) against this run, each by a
+stated rule."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ from hcid import paper
 from hcid.report.document import Doc
 from hcid.report.verdicts import Verdict, compute_verdicts
 
-TITLE = "8. Verdicts: the paper's claims (SPEC section 6) against this run"
+TITLE = "The answer: the paper's claims (SPEC section 6) against this run"
 
 
 def compute(run, done) -> tuple[bool, list[Verdict]] | None:
