@@ -102,11 +102,15 @@ def to_html(doc: Doc, out_dir: Path, title: str) -> str:
                 + "</tr>"
                 for row in t["rows"]
             )
-            body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>")
+            # A wide table scrolls in its own box; the page keeps its width.
+            body.append(
+                f'<div class="wide"><table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table></div>'
+            )
     style = (
         "body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;line-height:1.4}"
-        "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 8px;"
-        "vertical-align:top;font-size:0.9em}th{background:#f0f0f0}img{max-width:100%}"
+        "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 6px;"
+        "vertical-align:top;font-size:0.85em}th{background:#f0f0f0}img{max-width:100%}"
+        ".wide{overflow-x:auto;max-width:100%}"
         "figcaption{font-size:0.9em;color:#444}.holds{background:#e6f4e6}.fails{background:#fbe3e3}"
         ".na{background:#f4f4f4}"
     )

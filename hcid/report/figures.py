@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from matplotlib import colormaps
+from matplotlib import colormaps, ticker
 from matplotlib.figure import Figure
 
 from hcid import folders
@@ -73,8 +73,24 @@ def finish_bode(ax_mag, ax_ph, band, title: str) -> None:
     ax_mag.set_ylabel("magnitude (-)")
     ax_ph.set_ylabel("phase (deg)")
     ax_ph.set_xlabel("frequency (rad/s)")
+    if ax_mag.get_yscale() == "log":
+        plain_log(ax_mag.yaxis)
     if ax_mag.get_legend_handles_labels()[0]:
         ax_mag.legend(fontsize=8, loc="best")
+
+
+def plain_log(axis) -> None:
+    """A log axis labelled in plain numbers (0.5, 2, 10), not 2x10^0; over less than about 1.5
+    decades its 2, 3 and 5 are labelled too, else only the decades."""
+    lo, hi = sorted(abs(v) for v in axis.get_view_interval())
+    axis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+
+    def minor(v, _):
+        mantissa = round(v / 10 ** np.floor(np.log10(v)), 6)
+        return f"{v:g}" if mantissa in (2.0, 3.0, 5.0) else ""
+
+    short = lo > 0 and hi / lo < 10**1.5
+    axis.set_minor_formatter(ticker.FuncFormatter(minor) if short else ticker.NullFormatter())
 
 
 def _key_label(model: str, method: str) -> str:
@@ -306,8 +322,9 @@ def plot_calibration(table, name: str, axes=None, used: dict[str, float] | None 
     the safe interval shaded and the recommended W marked, one panel per method; ``used``
     marks, per method, a W chosen otherwise (the least total error where no W is safe)."""
     methods = methods_in((None, m) for m in table.column("method").to_pylist())
-    fig, axes = _figure(axes, 1, len(methods), figsize=(5.8 * len(methods), 4.3))
+    fig, axes = _figure(axes, 1, len(methods), figsize=(5.8 * len(methods), 5.2))
     rows = table.to_pylist()
+    fig.suptitle(name)
     for ax, method in zip(axes[0], methods, strict=True):
         r = [x for x in rows if x["method"] == method]
         w = np.array([x["w"] for x in r])
@@ -338,21 +355,25 @@ def plot_calibration(table, name: str, axes=None, used: dict[str, float] | None 
         ax.set_ylim(-0.02, 1.02)
         ax.set_xlabel("W (penalty per parameter, -)")
         ax.set_ylabel("rate over realizations (-)")
-        ax.set_title(
-            f"{name}: {method} method ({r[0]['n_fb']} + {r[0]['n_ff']} realizations)", parse_math=False
-        )
+        ax.set_title(f"{method} method ({r[0]['n_fb']} + {r[0]['n_ff']} realizations)", parse_math=False)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8, loc="center left")
+        _legend_below(ax)
     fig.tight_layout()
     return fig
+
+
+def _legend_below(ax) -> None:
+    """The axes' legend under its x label, never over the data."""
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, frameon=False)
 
 
 def plot_rates(table, marks: dict[str, float], name: str, axes=None):
     """Error rates over W with exact 95% bands (``rates.parquet``), one panel per method: the
     false-positive rate of each model without feedforward, the false-negative rate of each with it."""
     methods = methods_in((None, m) for m in table.column("method").to_pylist())
-    fig, axes = _figure(axes, 1, len(methods), figsize=(5.8 * len(methods), 4.3))
+    fig, axes = _figure(axes, 1, len(methods), figsize=(5.8 * len(methods), 5.6))
     rows = table.to_pylist()
+    fig.suptitle(name)
     colors = {"false_positive": "tab:red", "false_negative": "tab:purple"}
     words = {"false_positive": "false-positive rate", "false_negative": "false-negative rate"}
     for ax, method in zip(axes[0], methods, strict=True):
@@ -380,9 +401,9 @@ def plot_rates(table, marks: dict[str, float], name: str, axes=None):
         ax.set_ylim(-0.02, 1.02)
         ax.set_xlabel("W (penalty per parameter, -)")
         ax.set_ylabel("rate over realizations (-)")
-        ax.set_title(f"{name}: {method} method")
+        ax.set_title(f"{method} method")
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8, loc="center left")
+        _legend_below(ax)
     fig.tight_layout()
     return fig
 

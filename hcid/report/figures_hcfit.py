@@ -7,6 +7,7 @@ nothing here computes results. No pyplot (see :mod:`hcid.report.figures`).
 from __future__ import annotations
 
 import numpy as np
+from matplotlib import ticker
 
 from hcid.hcfit import PARAMETERS, UNITS
 from hcid.report.figures import _figure, finish_bode, method_color
@@ -246,16 +247,22 @@ def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: f
             hit = r["p_w_star"] <= alpha
             ax.plot(r["w_star"], yy, "D", color="C3", mfc="C3" if hit else "white", ms=7,
                     label=None)  # fmt: skip
-            ax.annotate(
-                str(r["seed"]), (r["w_star"], yy), textcoords="offset points", xytext=(5, 3), fontsize=7
-            )
+            ax.annotate(  # alternately above and below: neighbours' numbers do not print over each other
+                str(r["seed"]), (r["w_star"], yy), textcoords="offset points", fontsize=7,
+                xytext=(4, 5 if len(ax.texts) % 2 == 0 else -10),
+            )  # fmt: skip
         ticks.append(base + 2.0)
         labels.append(f"set {fs}: runs")
     ax.plot([], [], "D", color="C3", ms=7, label=f"runs, p(W*) <= {alpha:g}")
     ax.plot([], [], "D", color="C3", mfc="white", ms=7, label=f"runs, p(W*) > {alpha:g}")
     ax.set_yticks(ticks)
     ax.set_yticklabels(labels, fontsize=8)
+    ax.set_ylim(-0.7, 3.0 * (len(sets) - 1) + 2.9)  # room for the runs' numbers above their row
     ax.set_xscale("log")
+    # Plain numbers on the log axis (0.02, 0.05, 0.1), not 2x10^-2 crowding each other.
+    ax.xaxis.set_major_locator(ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
+    ax.xaxis.set_major_formatter(ticker.FuncFormatter(lambda x, _: f"{x:g}"))
+    ax.xaxis.set_minor_formatter(ticker.NullFormatter())
     ax.set_xlabel("W* (largest W keeping feedforward, -)")
     ax.grid(True, axis="x", which="both", alpha=0.3)
     fig.legend(*ax.get_legend_handles_labels(), fontsize=7, loc="lower center", ncol=4)

@@ -84,7 +84,7 @@ def compute(run, done) -> StudyData | None:
         for summary in summarise_parameters(mine):
             left_out = "; ".join(f"{n}: {why}" for why, n in summary.left_out.items()) or "-"
             parameters.append(
-                [g["group"], g["method"], summary.name, f"{summary.kept} of {summary.fitted}",
+                [g["group"], g["method"], summary.name, summary.unit, f"{summary.kept} of {summary.fitted}",
                  _num(summary.median), _num(summary.sd, 2), _num(summary.median_se, 2), left_out]
             )  # fmt: skip
     checks, contradicted = [], []
@@ -102,7 +102,9 @@ def compute(run, done) -> StudyData | None:
             contradicted.append(g["group"])
     factors = [c for c in runs.column_names if c not in tables.ANALYSIS.names]
     shown = ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
-    header = ["seed (run)", *factors, "method", "nb_ft", "feedforward", *shown, "wc rad/s", "PM deg",
+    units = {p: tables.PARAMETER_UNITS[p] for p in shown}
+    header = ["run", *factors, "method", "p (evidence)", "nb_ft at W", "feedforward at W",
+              *[f"{p} {units[p]}" if units[p] != "-" else p for p in shown], "wc rad/s", "PM deg",
               "VAF %", "data check (p)"]  # fmt: skip
     table_rows = []
     for r in rows:
@@ -124,7 +126,8 @@ def compute(run, done) -> StudyData | None:
             else format_p(r["fc_p"]) + (" contradicted" if r["fc_p"] < CONTRADICTED else "")
         )
         table_rows.append(
-            [str(r["seed"]), *[str(r[f]) for f in factors], r["method"], str(r["nb_ft"]),
+            [str(r["seed"]), *[str(r[f]) for f in factors], r["method"],
+             f"{_num(r['p_value'], 2)} ({'W*' if r['decided_by'] == 'W*' else 'Fourier'})", str(r["nb_ft"]),
              ("yes" if r["feedforward"] else "no") + (" (uncertain)" if r["uncertain"] else ""),
              *[with_se(p) for p in shown], _num(r["crossover"]), _num(r["phase_margin"]),
              "-" if not math.isfinite(r["vaf_validation"]) else f"{r['vaf_validation']:.1f}", check]
@@ -204,8 +207,8 @@ def render(data: StudyData | None, doc: Doc) -> None:
     )
     doc.table(
         ["group", "method", "verdict", "runs at p <= alpha", "binomial p", "median power",
-         "feedforward at W", "W", "rule", "FF twin", "safe interval", "twins' FP at W", "twins' FN at W",
-         "decided"],
+         "feedforward at W", "W", "rule", "FF twin", "safe interval", "twins' FP at W (95% interval)",
+         "twins' FN at W (95% interval)", "decided"],
         data.answers,
     )  # fmt: skip
     if data.uncertain:
@@ -263,7 +266,7 @@ def render(data: StudyData | None, doc: Doc) -> None:
         "another) are left out, with their reasons."
     )
     doc.table(
-        ["group", "method", "parameter", "runs determining", "median", "sd over runs", "median se",
+        ["group", "method", "parameter", "unit", "runs determining", "median", "sd over runs", "median se",
          "left out (runs: reason)"],
         data.parameters,
     )  # fmt: skip
@@ -289,7 +292,9 @@ def render(data: StudyData | None, doc: Doc) -> None:
         "Every run (`analysis.csv` holds all columns, one row per run and method, ready for a "
         "repeated-measures ANOVA or a mixed model). Estimates ± standard error; † a value the run "
         "does not determine (the reason in `analysis.csv`'s `<p>_status`), ° held at a literature "
-        "value (`hc_form` nms fixed); data check: the p-value of the run's own model against its "
-        "data."
+        "value (`hc_form` nms fixed); p (evidence): the run's feedforward p-value by the statistic "
+        "that decides for its group (W* or the Fourier coefficients); nb_ft and feedforward at W: "
+        "its selection at the group's calibrated W (SPEC 10); data check: the p-value of the run's "
+        "own model against its data."
     )
     doc.table(data.runs_header, data.runs)
