@@ -10,7 +10,7 @@ LOCK := requirements.lock
 LOCK_TOOLS ?= pip==26.3 pip-tools==7.6.2
 LOCK_UPGRADE ?= --upgrade
 
-.PHONY: run test test-all lint bench robustness clean indirect-variants lock
+.PHONY: run test test-all lint bench robustness clean indirect-variants lock docs-figures
 
 VARIANTS := $(sort $(wildcard configs/indirect_variants/*.yaml))
 
@@ -54,6 +54,11 @@ test: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -p no:cacheprovider --doctest-modules hcid
 	NUMBA_DISABLE_JIT=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -p no:cacheprovider \
 		tests/test_arx_engine.py tests/test_arx_grid.py
+
+# Every figure and answer line the README and docs quote, made again on this machine (named first)
+# and checked against the README (benchmarks/docs_figures.py; the paper study is reused from runs/paper).
+docs-figures: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/docs_figures.py
 
 test-all: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -q tests
