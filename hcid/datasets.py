@@ -37,7 +37,7 @@ from hcid.formats import READERS, csv_layout
 from hcid.measured import read_file_runs
 from hcid.tables import RUNS
 
-__all__ = ["DataFile", "DataSet", "data_files", "read_set", "runs_table"]
+__all__ = ["DataFile", "DataSet", "data_files", "read_set", "runs_table", "set_aside"]
 
 _GLOB = re.compile(r"[*?\[]")
 
@@ -116,7 +116,9 @@ def _manifest(path: Path) -> list[DataFile]:
     return out
 
 
-def _expand(source: str | Path) -> list[DataFile]:
+def _expand(source: str | Path | DataFile) -> list[DataFile]:
+    if isinstance(source, DataFile):  # already expanded (e.g. by set_aside), its factors kept
+        return [source]
     text = str(source)
     path = Path(text)
     if _GLOB.search(text) and not path.exists():
@@ -209,6 +211,21 @@ def _columns(path: Path) -> tuple[str, ...] | None:
         except (pa.ArrowException, OSError) as exc:
             raise DataError(f"{path}: cannot read ({str(exc).splitlines()[0][:160]})") from exc
     return None
+
+
+def set_aside(files: Sequence[DataFile], data: DataConfig) -> tuple[list[DataFile], list[tuple[str, str]]]:
+    """The files that can be read (:func:`hcid.measured.read_file_runs` with ``data``), and the
+    others set aside with the one-line reason each gave: ``(path, reason)``. For ``--skip-unreadable``:
+    each file is read once more than a plain analysis reads it."""
+    good, aside = [], []
+    for f in files:
+        try:
+            _columns(f.path)
+            read_file_runs(f.path, data)
+            good.append(f)
+        except DataError as exc:
+            aside.append((str(f.path), str(exc)))
+    return good, aside
 
 
 def read_set(

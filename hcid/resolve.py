@@ -222,15 +222,7 @@ def data_timing(raw: dict, sources: Sequence[str | Path], base: Path | None = No
 
     data = dict(raw["data"])
     lead_in = data.get("lead_in", 0.0)
-    # The data section described on its own, at a placeholder timing, to read the files.
-    probe = {k: v for k, v in raw.items() if k in ("name", "data")}
-    probe["data"] = {
-        **data,
-        "analysis_rate": data.get("analysis_rate", 1000.0),
-        "window": 1.0,
-        "lead_in": 0.0,
-    }
-    reading = describe_config(probe, "probe", base).data
+    reading = _reading(raw, base)
     files = data_files(sources, reading.pattern)
     first, native, _ = read_file_runs(files[0].path, reading)
     if "analysis_rate" not in data:
@@ -251,6 +243,33 @@ def data_timing(raw: dict, sources: Sequence[str | Path], base: Path | None = No
         data["window"] = (shortest - skip) / rate
     del first
     return {**raw, "data": data}
+
+
+def _reading(raw: dict, base: Path | None):
+    """The config's data section described on its own, at a placeholder timing, to read files."""
+    data = dict(raw["data"]) if isinstance(raw.get("data"), dict) else {}
+    probe = {k: v for k, v in raw.items() if k in ("name", "data")}
+    probe["data"] = {**data, "analysis_rate": data.get("analysis_rate", 1000.0), "window": 1.0,
+                     "lead_in": 0.0}  # fmt: skip
+    return describe_config(probe, "probe", base).data
+
+
+def readable_files(path: str | Path, sources: Sequence[str | Path]):
+    """A study config's data ``sources`` expanded (:func:`hcid.datasets.data_files`), the files
+    that cannot be read set aside (:func:`hcid.datasets.set_aside`): ``(files, [(path, reason)])``.
+    The files keep their factors and can be given as sources again."""
+    from hcid.datasets import data_files, set_aside
+
+    path = Path(path)
+    raw = read_yaml(path)
+    if not isinstance(raw, dict) or not isinstance(raw.get("data", {}), dict):
+        raise ConfigError(f"{path}: data: must be a mapping")
+    raw = {**raw, "data": raw.get("data") or {}}
+    reading = _reading(raw, path.parent)
+    files, aside = set_aside(data_files(sources, reading.pattern), reading)
+    if not files:
+        raise DataError(f"--skip-unreadable: no file of the data set can be read (the first: {aside[0][1]})")
+    return files, aside
 
 
 def load_config(path: str | Path, method_names: Sequence[str] | None = None) -> Config:

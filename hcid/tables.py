@@ -74,6 +74,7 @@ __all__ = [
     "RUN_LOG",
     "SELECTED_COLUMNS",
     "SELECTION",
+    "SET_ASIDE",
     "SIMULATIONS",
     "SIMULATION_SUMMARY",
     "Schema",
@@ -523,6 +524,9 @@ EVIDENCE_TWINS = _schema(
     + [("w_star", _F64), ("fourier_size", _F64)],
     ("group", "method", "forcing_set", "twin", "seed"),
 )
+#: ``set_aside.parquet`` (``hcid analyse --skip-unreadable``): every file of the data set that could
+#: not be read and was left out of the analysis, with the one-line reason (empty when none was).
+SET_ASIDE = _schema("set_aside.parquet", [("file", _STR), ("reason", _STR)], ("file",))
 FC_ESTIMATES = _schema(
     "fc_estimates.parquet",
     [("group", _STR), ("path", _STR), ("omega", _F64), ("magnitude_db", _F64), ("phase_deg", _F64)]

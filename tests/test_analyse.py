@@ -234,3 +234,32 @@ def test_every_group_has_its_own_twins_folder():
     assert _slug(("a b",)) != _slug(("a-b",))
     assert _slug(("x_y", "z")) != _slug(("x", "y_z"))
     assert _slug(("pursuit",)).startswith("pursuit-")
+
+
+def test_unreadable_files_are_refused_or_set_aside_and_listed(tmp_path):
+    # Issue 35: by default a file that cannot be read refuses the data set in one line (exit 2,
+    # nothing written); with --skip-unreadable it is left out and listed in the answer, the table
+    # set_aside.parquet and the report, and the others are analysed.
+    data = tmp_path / "data"
+    data.mkdir()
+    for path in sorted(LAB.glob("S1_*_trial1.csv")):
+        shutil.copy(path, data / path.name)
+    (data / "S2_pursuit_trial1.csv").write_text("this is not\na data file\n")
+    run = tmp_path / "run"
+    args = ["analyse", str(CONFIG), "--data", str(data), "--run", str(run), "--twins", "2",
+            "--max-fb-twins", "2", "--quiet"]  # fmt: skip
+    refused = runner.invoke(app, args)
+    assert refused.exit_code == 2 and "S2_pursuit_trial1.csv" in refused.output
+    assert len(refused.output.strip().splitlines()) == 1 and not run.exists()
+    result = runner.invoke(app, [*args, "--skip-unreadable"])
+    assert result.exit_code == 0, result.output
+    assert "SET ASIDE (--skip-unreadable): 1 file(s)" in result.output
+    assert "S2_pursuit_trial1.csv" in result.output
+    aside = pq.read_table(run / tables.SET_ASIDE.file).to_pylist()
+    assert [Path(r["file"]).name for r in aside] == ["S2_pursuit_trial1.csv"]
+    assert "missing columns" in aside[0]["reason"]
+    assert {r["file"] for r in pq.read_table(run / tables.ANALYSIS.file).to_pylist()} == {
+        "S1_compensatory_trial1.csv",
+        "S1_pursuit_trial1.csv",
+    }
+    assert "**Set aside:** 1 file(s)" in (run / "report" / "report.md").read_text()

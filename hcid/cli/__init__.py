@@ -331,6 +331,14 @@ def analyse(
             "instead of testing each run at --alpha.",
         ),
     ] = False,
+    skip_unreadable: Annotated[
+        bool,
+        typer.Option(
+            "--skip-unreadable",
+            help="Set aside files that cannot be read (each listed with its reason in the answer, the "
+            "report and RUN/set_aside.parquet) instead of refusing the data set.",
+        ),
+    ] = False,
     jobs: JobsOpt = 2,
     backend: BackendOpt = "loky",
     scheduler: SchedulerOpt = None,
@@ -342,11 +350,17 @@ def analyse(
     RUN/analysis.parquet, analysis.csv, analysis_groups.parquet and the report RUN/report/report.html."""
     from hcid.pipeline.analyse import analyse_study
 
+    aside = []
+    if skip_unreadable:
+        from hcid.resolve import readable_files
+
+        data, aside = readable_files(config, data)
     cfg, run_dir = _load(config, run, backend, scheduler, data=data)
     result = analyse_study(
         cfg,
         run_dir,
         data,
+        set_aside=aside,
         by=None if by is None else [b.strip() for b in by.split(",") if b.strip()],
         twins=twins,
         max_fb_twins=max_fb_twins,

@@ -135,6 +135,11 @@ def print_analysis(result) -> None:
             )
         else:
             typer.echo(f"    data check: {g['fc_verdict']}")
+    if result.set_aside:
+        typer.echo(
+            f"SET ASIDE (--skip-unreadable): {len(result.set_aside)} file(s) could not be read and are "
+            "not in this analysis (RUN/set_aside.parquet): " + "; ".join(why for _, why in result.set_aside)
+        )
     typer.echo(
         f"analysed in {result.seconds:.1f} s ("
         + ", ".join(f"{name} {sec:.1f}" for name, sec in result.stages.items())

@@ -94,6 +94,8 @@ class AnalysisRun:
     run_dir: Path
     #: Wall seconds per stage: identify, fit runs, twins, more FB twins, fit selected, tables.
     stages: dict[str, float] = field(default_factory=dict)
+    #: The files left out because they could not be read: (path, reason).
+    set_aside: tuple[tuple[str, str], ...] = ()
 
 
 # --------------------------------------------------------------------------- per-run fits
@@ -291,6 +293,7 @@ def analyse_study(
     ff_twin: str = "auto",
     alpha: float = 0.05,
     fdr: bool = False,
+    set_aside: Sequence[tuple[str, str]] = (),
     jobs: int = 2,
     force: bool = False,
     backend: str = "loky",
@@ -298,6 +301,10 @@ def analyse_study(
     show_progress: bool = True,
 ) -> AnalysisRun:
     """Analyse a measured study with W calibrated on twins of each group's fitted model (module notes).
+
+    ``set_aside``: files left out of ``sources`` because they could not be read (``(path,
+    reason)``, :func:`hcid.resolve.readable_files`), written to ``set_aside.parquet`` so that the
+    answer and the report list them.
 
     Raises
     ------
@@ -515,8 +522,11 @@ def analyse_study(
         tables.FC_ESTIMATES, pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow), run_dir
     )
     results.write(tables.EVIDENCE_TWINS, judge.twins_table(groups, by, evidence), run_dir)
+    aside = [{"file": f, "reason": why} for f, why in set_aside]
+    results.write(tables.SET_ASIDE, pa.Table.from_pylist(aside, schema=tables.SET_ASIDE.arrow), run_dir)
     results.write(tables.ANALYSIS_GROUPS, group_table, run_dir)
     results.write(tables.ANALYSIS, run_table, run_dir)
     folders.atomic_write(run_dir / "analysis.csv", lambda tmp: _write_csv(run_table, tmp))
     lap_done("tables")
-    return AnalysisRun(group_table, run_table, time.perf_counter() - start, run_dir, stages)
+    return AnalysisRun(group_table, run_table, time.perf_counter() - start, run_dir, stages,
+                       tuple((str(f), str(why)) for f, why in set_aside))  # fmt: skip

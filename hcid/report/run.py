@@ -30,6 +30,7 @@ _READS = {
     "analysis_groups": (tables.ANALYSIS_GROUPS, None),
     "fc_estimates": (tables.FC_ESTIMATES, None),
     "evidence_twins": (tables.EVIDENCE_TWINS, None),
+    "set_aside": (tables.SET_ASIDE, None),
     "remnant_spectrum": (tables.REMNANT_SPECTRUM, None),
     "rates": (tables.RATES, None),
     "handoff": (tables.HANDOFF, None),
@@ -64,6 +65,7 @@ class RunTables:
     analysis_groups: pa.Table | None = None
     fc_estimates: pa.Table | None = None
     evidence_twins: pa.Table | None = None
+    set_aside: pa.Table | None = None
 
     def simulations(self) -> dict | None:
         """The simulated records by (model, seed), or None without simulations."""

@@ -33,6 +33,7 @@ class StudyData:
     checks: list[list[str]] = field(default_factory=list)
     contradicted: list[str] = field(default_factory=list)
     evidence: list[tuple[str, str, list, list, float, str]] = field(default_factory=list)
+    set_aside: list[list[str]] = field(default_factory=list)
 
 
 def _num(x, digits: int = 3) -> str:
@@ -184,6 +185,7 @@ def compute(run, done) -> StudyData | None:
         checks,
         contradicted,
         evidence,
+        [[r["file"], r["reason"]] for r in run.set_aside.to_pylist()] if run.set_aside is not None else [],
     )
 
 
@@ -191,6 +193,12 @@ def render(data: StudyData | None, doc: Doc) -> None:
     if data is None:
         return
     doc.text(f"## {TITLE}")
+    if data.set_aside:
+        doc.text(
+            f"**Set aside:** {len(data.set_aside)} file(s) of the data set could not be read and are not in "
+            "this analysis (`--skip-unreadable`; `set_aside.parquet`):"
+        )
+        doc.table(["file", "why it could not be read"], data.set_aside)
     doc.text(
         "Per group of runs and method, first the runs' own evidence (SPEC 11): each run's W* against "
         "its forcing set's FB twins gives a p-value; the verdict is FEEDFORWARD where the number of runs "
