@@ -37,7 +37,7 @@ def test_both_plants_answer_with_by_trial(analysed):
     assert len(result.runs) == 12  # 6 files x 2 methods
     # The forcing functions are multisines; fo's disturbance has 5 lines, so's 3 (the data's
     # README): the default estimator is lines for fo, time for so (hcid.hcfit.fit.resolve_target).
-    assert set(result.runs.column("target").to_pylist()) == {"lines" if plant == "fo" else "time"}
+    assert set(result.runs.column("estimator").to_pylist()) == {"lines" if plant == "fo" else "time"}
 
 
 def test_every_model_is_checked_against_the_data(analysed):
