@@ -112,6 +112,9 @@ def read(
         raise DataError(f"{path}: not a readable Parquet table ({str(exc).splitlines()[0]})") from exc
     problem = schema.problem(table, columns)
     if problem is not None:
+        if not hint and problem.startswith("missing columns"):  # most likely an older hcid's table
+            who = f"`{schema.command} ...`" if schema.command else "the command that wrote it"
+            hint = f"written by an older hcid? run {who} again on this run directory (it reuses what it can)"
         raise DataError(f"{path}: {problem}{'; ' + hint if hint else ''}")
     return table
 

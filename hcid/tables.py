@@ -106,6 +106,8 @@ class Schema:
     optional: tuple[str, ...] = ()
     #: Column -> unit, kept in the Parquet schema as each field's ``unit`` metadata.
     units: tuple[tuple[str, str], ...] = ()
+    #: The command that writes the table, for the next step a refusal names ("" where several do).
+    command: str = ""
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -474,6 +476,7 @@ ANALYSIS = _schema(
     + _CONSISTENCY_FIELDS,
     ("model", "seed", "method"),
     units=_ANALYSIS_UNITS,
+    command="hcid analyse",
 )
 #: ``analysis_groups.parquet`` (``hcid analyse``): one row per group of runs (``--by``) and
 #: method: the W used and why, the safe interval, the twins' rates at W, the runs and how
@@ -503,6 +506,7 @@ ANALYSIS_GROUPS = _schema(
     + _CONSISTENCY_FIELDS,
     ("group", "method"),
     units=_ANALYSIS_UNITS,
+    command="hcid analyse",
 )
 #: ``fc_estimates.parquet`` (``hcid analyse``): the model-free (Fourier-coefficient, SPEC 10)
 #: estimates per group and forcing line: ``path`` ``e`` (He at a disturbance line) or ``ft``

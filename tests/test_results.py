@@ -170,3 +170,17 @@ def test_records_split_by_realization_in_order_of_first_appearance():
         assert all(np.array_equal(record[c], interleaved[key][c]) for c in record)
     with pytest.raises(DataError, match=r"^s.parquet: samples of model A, seed 3 are not k = 0..4 in order$"):
         results.records(_simulations(np.r_[0:5, 6, 5, 7:15]), "s.parquet")
+
+
+def test_a_table_of_an_older_hcid_names_the_command_that_writes_it(tmp_path):
+    # Issue 35: the right next command in every refusal. An analysis table without a column this
+    # hcid writes (here the estimator, named `target` before) is refused in one line naming it.
+    names = [n for n in tables.ANALYSIS.names if n != "estimator"]
+    pq.write_table(
+        pa.table({n: pa.nulls(0, t) for n, t in tables.ANALYSIS.fields if n in names}),
+        tmp_path / "analysis.parquet",
+    )
+    with pytest.raises(
+        DataError, match=r"missing columns \['estimator'\]; written by an older hcid\? run `hcid analyse"
+    ):
+        results.read(tables.ANALYSIS, tmp_path)
