@@ -34,7 +34,11 @@ def test_write_refuses_a_table_off_its_schema(tmp_path):
 @pytest.mark.parametrize(
     ("table", "message"),
     [
-        (_log_row().drop(["jobs"]), "missing columns ['jobs']"),
+        (
+            _log_row().drop(["jobs"]),
+            "missing columns ['jobs']; written by an older hcid? run the command that wrote it again on "
+            "this run directory (it reuses what it can)",
+        ),
         (_log_row(seconds=["1.5"]), "column 'seconds' is string, expected double"),
     ],
 )
