@@ -159,7 +159,7 @@ def compare(spec: dict, run: Path, config: Path) -> None:
     yc = plant(cfg.loop)
     n = round(cfg.timing.window * cfg.timing.output_rate)
     records = _records(run)
-    factors = {r["seed"]: r for r in rows if r["method"] == "direct"}
+    factors = {r["run_id"]: r for r in rows if r["method"] == "direct"}
     err = {"e": ([], []), "ft": ([], [])}
     for (_, seed), record in sorted(records.items()):
         f = factors[seed]

@@ -441,7 +441,7 @@ _CONSISTENCY_FIELDS = [
 ]  # fmt: skip
 
 #: ``analysis.parquet`` (``hcid analyse``; also written as ``analysis.csv``): one row per
-#: measured run (``model`` the data name, ``seed`` the run id, ``file`` and the file's own
+#: measured run (``data_set`` the data name, ``run_id`` its number in the set, ``file`` and the file's own
 #: ``file_run``) and method: its group's W
 #: (``w_rule``: ``safe interval``, or ``least total error (...)`` with ``uncertain``
 #: true), the twins' false-positive and false-negative rates there with their exact 95%
@@ -461,7 +461,7 @@ _CONSISTENCY_FIELDS = [
 #: model against its data (the consistency columns), then one string column per factor.
 ANALYSIS = _schema(
     "analysis.parquet",
-    [("model", _STR), ("seed", _INT), ("file", _STR), ("file_run", _INT)]
+    [("data_set", _STR), ("run_id", _INT), ("file", _STR), ("file_run", _INT)]
     + _CHOICE_FIELDS
     + [(c, _INT) for c in ORDER_COLUMNS]
     + [("feedforward", _BOOL), ("vaf_arx_validation", _F64), ("estimator", _STR), ("vaf_validation", _F64)]
@@ -474,7 +474,7 @@ ANALYSIS = _schema(
     + [f for p in HC_PARAMETER_NAMES for f in ((p, _F64), (f"{p}_se", _F64), (f"{p}_status", _STR))]
     + [("crossover", _F64), ("phase_margin", _F64), ("share_remnant", _F64)]
     + _CONSISTENCY_FIELDS,
-    ("model", "seed", "method"),
+    ("data_set", "run_id", "method"),
     units=_ANALYSIS_UNITS,
     command="hcid analyse",
 )

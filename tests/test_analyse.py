@@ -70,7 +70,7 @@ def test_every_run_and_group_is_answered_with_its_factors(analysed):
         (run / "analysis.csv")
         .read_text()
         .splitlines()[0]
-        .startswith('"model","seed","file","file_run","group"')
+        .startswith('"data_set","run_id","file","file_run","group"')
     )
     # Units in the Parquet schema (docs/tables.md): a time constant in s, a share as 1, VAF in %.
     schema = pq.read_schema(run / tables.ANALYSIS.file)

@@ -190,7 +190,7 @@ def _tables(config, runs, groups, by, used, chosen, finals, drawn, models, check
                 ses = dict(zip(fit.names, fit.se, strict=True)) if fit else {}
                 fitted_loop = next((d for d in a.loop if d.source == "fitted"), None)
                 row = {
-                    "model": config.data.name, "seed": seed,
+                    "data_set": config.data.name, "run_id": seed,
                     "file": str(factor_of[seed]["file"]), "file_run": int(factor_of[seed]["file_run"]),
                     **choice,
                     **dict(zip(tables.ORDER_COLUMNS, sel.orders, strict=True)),

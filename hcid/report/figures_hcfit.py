@@ -226,7 +226,7 @@ def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: f
     each per forcing set, each twins' row labelled with its count.
 
     ``twins``: rows of ``evidence_twins.parquet`` for one group and method; ``runs``: its rows of
-    ``analysis.parquet`` (``forcing_set``, ``w_star``, ``p_w_star``, ``seed``)."""
+    ``analysis.parquet`` (``forcing_set``, ``w_star``, ``p_w_star``, ``run_id``)."""
     sets = sorted({r["forcing_set"] for r in runs})
     fig, axes = _figure(axes, 1, 1, figsize=(8.0, 1.2 + 1.1 * len(sets)))
     ax = axes[0][0]
@@ -248,7 +248,7 @@ def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: f
             ax.plot(r["w_star"], yy, "D", color="C3", mfc="C3" if hit else "white", ms=7,
                     label=None)  # fmt: skip
             ax.annotate(  # alternately above and below: neighbours' numbers do not print over each other
-                str(r["seed"]), (r["w_star"], yy), textcoords="offset points", fontsize=7,
+                str(r["run_id"]), (r["w_star"], yy), textcoords="offset points", fontsize=7,
                 xytext=(4, 5 if len(ax.texts) % 2 == 0 else -10),
             )  # fmt: skip
         ticks.append(base + 2.0)

@@ -127,7 +127,7 @@ def compute(run, done) -> StudyData | None:
             else format_p(r["fc_p"]) + (" contradicted" if r["fc_p"] < CONTRADICTED else "")
         )
         table_rows.append(
-            [str(r["seed"]), *[str(r[f]) for f in factors], r["method"],
+            [str(r["run_id"]), *[str(r[f]) for f in factors], r["method"],
              f"{_num(r['p_value'], 2)} ({'W*' if r['decided_by'] == 'W*' else 'Fourier'})", str(r["nb_ft"]),
              ("yes" if r["feedforward"] else "no") + (" (uncertain)" if r["uncertain"] else ""),
              *[with_se(p) for p in shown], _num(r["crossover"]), _num(r["phase_margin"]),
