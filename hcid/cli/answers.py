@@ -109,7 +109,8 @@ def print_analysis(result) -> None:
             f"{g['group']}, {g['method']}: {g['verdict']}: {g['n_evidence']} of {g['n_runs']} runs show "
             f"feedforward at p <= {g['alpha']:g} (decided by their {g['decided_by']} against their own "
             f"forcing set's FB twins, up to {g['fb_twins']} drawn: the statistic with the higher power; "
-            f"binomial p = {g['binomial_p']:.2g}; power {min(power):.2f} to {max(power):.2f}, "
+            f"binomial p = {g['binomial_p']:.2g}; power (FF twins found at this level) {min(power):.2f} to "
+            f"{max(power):.2f} over the runs, "
             f"{g['forcing_sets']} forcing set{'s' if g['forcing_sets'] > 1 else ''})"
         )
         typer.echo(
