@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import math
 import re
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -234,27 +235,16 @@ def calibrate_twins(config, run_dir, key, record, model, remnant, twins, kind, k
     slug = (
         group_slug(key) + (f"-f{forcing_set}" if forcing_set else "") + ("-study" if kind == "study" else "")
     )
-    twin_dir = run_dir / "twins" / slug
-    with using(twin_dir):
-        forcing = twin_dir / "forcing.csv"
-        text = forcing_text(record, round(config.timing.window * config.timing.output_rate))
-        twin_dir_ready(twin_dir, text)
-        folders.atomic_write(forcing, lambda tmp: Path(tmp).write_text(text))
-        raw = twin_config_raw(config, model, remnant, forcing, twins, f"{config.name}_twins_{slug}")
-        try:
-            twin_config = parse_config(raw, raw["name"])
-        except ConfigError as exc:  # e.g. a median model that is unstable with the plant
-            raise DataError(
-                f"group {', '.join(key) or 'all runs'}: its twins ({kind}: the group's fitted model, "
-                f"medians over its runs{', with the study feedforward' if kind == 'study' else ''}) "
-                f"cannot be simulated: {exc}; look at its runs' fits, or group them otherwise (--by)"
-            ) from None
-        try:
-            check_run_dir(twin_config, twin_dir, "simulate")
-        except DataError:  # the group's fitted model changed (other settings): new twins
-            folders.remove_owned(twin_dir, [n for n in folders.owned_files(twin_dir) if n != "forcing.csv"])
-        with labelled(f"{kind} twins of {', '.join(key) or 'all runs'}{_set_label(forcing_set)}: "):
-            run = calibrate_study(twin_config, twin_dir, **pool)
+
+    def twins_raw(forcing: Path) -> dict:
+        return twin_config_raw(config, model, remnant, forcing, twins, f"{config.name}_twins_{slug}")
+
+    whose = f"{', '.join(key) or 'all runs'}{_set_label(forcing_set)}"
+    with (
+        _twin_folder(config, run_dir, slug, record, key, kind, twins_raw) as (twin_dir, twin_config),
+        labelled(f"{kind} twins of {whose}: "),
+    ):
+        run = calibrate_study(twin_config, twin_dir, **pool)
     return Twins(
         kind, {**model, **twin_values(model, kn_rate)}, remnant, f"twins/{slug}",
         {c.method: c for c in run.calibrations}, twin_paths(twin_config, twin_dir),
@@ -280,20 +270,12 @@ def draw_fb_twins(config, run_dir, key, record, model, remnant, kn_rate, forcing
     in ``RUN/twins/<group>[-f<set>]-fb<first>`` (resumed; a method asked for later is added).
     The FB twin of ``--ff-twin study`` is the same loop, so one draw serves both."""
     slug = group_slug(key) + (f"-f{forcing_set}" if forcing_set else "") + f"-fb{first}"
-    twin_dir = run_dir / "twins" / slug
-    with using(twin_dir):
-        forcing = twin_dir / "forcing.csv"
-        text = forcing_text(record, round(config.timing.window * config.timing.output_rate))
-        twin_dir_ready(twin_dir, text)
-        folders.atomic_write(forcing, lambda tmp: Path(tmp).write_text(text))
+
+    def fb_raw(forcing: Path) -> dict:
         raw = twin_config_raw(config, model, remnant, forcing, count, f"{config.name}_twins_{slug}")
-        raw["models"] = {"FB": raw["models"]["FB"]}
-        raw["seeds"] = {"first": first, "count": count}
-        twin_config = parse_config(raw, raw["name"])
-        try:
-            check_run_dir(twin_config, twin_dir, "simulate")
-        except DataError:  # the group's fitted model changed (other settings): new twins
-            folders.remove_owned(twin_dir, [n for n in folders.owned_files(twin_dir) if n != "forcing.csv"])
+        return {**raw, "models": {"FB": raw["models"]["FB"]}, "seeds": {"first": first, "count": count}}
+
+    with _twin_folder(config, run_dir, slug, record, key, "FB", fb_raw) as (twin_dir, twin_config):
         whose = f"{', '.join(key) or 'all runs'}{_set_label(forcing_set)}"
         with labelled(f"FB twins {first}-{first + count - 1} of {whose}: "):
             if method_names:
@@ -308,6 +290,33 @@ def draw_fb_twins(config, run_dir, key, record, model, remnant, kn_rate, forcing
             keys = [("FB", s, method) for s in twin_config.seeds]
             paths[method] = ([chosen[k][0] for k in keys], [chosen[k][1]["nb_ft"] for k in keys])
     return FbDraws(first, count, paths, _sizes(twin_dir, config.timing.output_rate).get("FB"))
+
+
+@contextmanager
+def _twin_folder(config, run_dir: Path, slug: str, record: dict, key, kind: str, make_raw):
+    """``RUN/twins/<slug>`` held and ready: the forcing set's functions in ``forcing.csv`` (earlier
+    results of other forcing functions removed), the twins' config from ``make_raw(forcing path)``
+    parsed, and earlier results of another config removed; yields ``(folder, config)``."""
+    twin_dir = run_dir / "twins" / slug
+    with using(twin_dir):
+        forcing = twin_dir / "forcing.csv"
+        text = forcing_text(record, round(config.timing.window * config.timing.output_rate))
+        twin_dir_ready(twin_dir, text)
+        folders.atomic_write(forcing, lambda tmp: Path(tmp).write_text(text))
+        raw = make_raw(forcing)
+        try:
+            twin_config = parse_config(raw, raw["name"])
+        except ConfigError as exc:  # e.g. a median model that is unstable with the plant
+            raise DataError(
+                f"group {', '.join(key) or 'all runs'}: its twins ({kind}: the group's fitted model, "
+                f"medians over its runs{', with the study feedforward' if kind == 'study' else ''}) "
+                f"cannot be simulated: {exc}; look at its runs' fits, or group them otherwise (--by)"
+            ) from None
+        try:
+            check_run_dir(twin_config, twin_dir, "simulate")
+        except DataError:  # the group's fitted model changed (other settings): new twins
+            folders.remove_owned(twin_dir, [n for n in folders.owned_files(twin_dir) if n != "forcing.csv"])
+        yield twin_dir, twin_config
 
 
 def _set_label(forcing_set: int) -> str:
