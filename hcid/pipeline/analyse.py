@@ -483,7 +483,7 @@ def analyse_study(
                 row = path.at(np.array([w]))[0]
                 evidence[(seed, method_name)] = judge.run(
                     group_name(by, key), path, nb_ft, used[(key, method_name)], seed, method_name,
-                    run_sizes.get(seed),
+                    run_sizes.get(seed), deciding[key][method_name],
                 )  # fmt: skip
                 sel = SelectedModel.from_frontier(
                     t,

@@ -219,15 +219,23 @@ class Evidence:
         )  # fmt: skip
         return methods_open, fourier_open
 
-    def run(self, group: str, path, nb_ft, pair, seed: int, method: str, run_size: float | None) -> dict:
-        """The run's evidence columns (``decide`` adds the deciding ones)."""
+    def run(self, group: str, path, nb_ft, pair, seed: int, method: str, run_size: float | None,
+            deciding: str) -> dict:  # fmt: skip
+        """The run's evidence columns (``decide`` adds the deciding ones). The ``deciding``
+        statistic's p-value is over every FB twin drawn for it (each run stops at its own 5th, or
+        all were drawn: Besag and Clifford's p); the other's over the calibration's FB twins only,
+        a fixed number, since how many more were drawn depended on the deciding statistic."""
         own = pair.of_run(seed)
         forcing_set = pair.sets.index(own) + 1
         self._judged[(group, method, forcing_set)] = own
+        base = len(self.thresholds(own, method)["FB"])
         fb = self.fb_thresholds(group, forcing_set, own, method)
+        fb = fb if deciding == "W*" else fb[:base]
         w_star = self.w_star(path, nb_ft)
         p_w, n_w = sequential_p_value(w_star, fb, EXCEEDANCES)
         sizes, fb_sizes = self.sizes(own), self.fb_sizes(group, forcing_set, own)
+        if fb_sizes is not None and deciding == "W*":
+            fb_sizes = fb_sizes[:base]
         fourier = (math.nan, math.nan, math.nan, 0)
         if sizes is not None and run_size is not None:
             p_f, n_f = sequential_p_value(run_size, fb_sizes, EXCEEDANCES)
