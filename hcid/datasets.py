@@ -62,6 +62,8 @@ class DataSet:
     runs: list[dict[str, object]]
     factors: tuple[str, ...]
     rate: float
+    #: Files left out (``read_set(skip=True)``): (path, the one-line reason).
+    set_aside: tuple[tuple[str, str], ...] = ()
 
 
 def _pattern_regex(pattern: str, lazy: bool = True) -> re.Pattern:
@@ -229,9 +231,11 @@ def set_aside(files: Sequence[DataFile], data: DataConfig) -> tuple[list[DataFil
 
 
 def read_set(
-    files: Sequence[DataFile], data: DataConfig, rate: float | None = None, need: int = 1
+    files: Sequence[DataFile], data: DataConfig, rate: float | None = None, need: int = 1, skip: bool = False
 ) -> DataSet:
-    """Read and check every file of a set (:func:`hcid.measured.read_runs` each).
+    """Read and check every file of a set (:func:`hcid.measured.read_runs` each). With ``skip``,
+    a file whose reading or checks fail (its own problem, or columns or a sample rate that differ
+    from the set's first readable file) is left out with its reason (``DataSet.set_aside``) instead.
 
     Raises
     ------
@@ -245,28 +249,21 @@ def read_set(
     suffixes = {f.path.suffix.lower().replace(".pq", ".parquet") for f in files}
     if len(suffixes) > 1:
         raise DataError(f"the data set mixes formats ({', '.join(sorted(suffixes))}): give one kind of file")
-    first_columns = _columns(files[0].path)
     records: dict[int, dict[str, np.ndarray]] = {}
     runs: list[dict[str, object]] = []
-    native = None
+    aside: list[tuple[str, str]] = []
+    native = first = None  # the first readable file's (rate, path, run) and (columns, path)
     several = len(files) > 1 or data.dimensions is not None
     for f in files:
-        columns = _columns(f.path)
-        if columns != first_columns:
-            raise DataError(
-                f"{f.path}: columns {list(columns or [])} differ from {files[0].path.name}'s "
-                f"{list(first_columns or [])}"
-            )
-        file_records, rate, natives = read_file_runs(f.path, data, rate, need)
-        for file_run, info in natives.items():
-            found = info["rate"]
-            if native is None:
-                native = (found, f.path, file_run)
-            elif not np.isclose(found, native[0], rtol=1e-6):
-                raise DataError(
-                    f"{f.path}: run {file_run} is sampled at {found:.6g} Hz, {native[1].name} at "
-                    f"{native[0]:.6g} Hz: a set's files share one rate"
-                )
+        try:
+            file_records, file_rate, natives, native = _read_one(f, data, rate, need, first, native)
+        except DataError as exc:
+            if not skip:
+                raise
+            aside.append((str(f.path), str(exc)))
+            continue
+        rate = file_rate
+        first = first or (_columns(f.path), f.path)
         for file_run, record in file_records.items():
             run = len(records) + 1 if several else file_run
             records[run] = record
@@ -274,6 +271,9 @@ def read_set(
                 {"run": run, "file": str(f.path), "file_run": int(file_run), **dict(f.factors),
                  **natives[file_run]["factors"]}
             )  # fmt: skip
+    if not records:
+        raise DataError(f"no file of the data set can be read (the first: {aside[0][1]})")
+    files = [f for f in files if str(f.path) not in {a for a, _ in aside}]
     factors = tuple(n for n, _ in files[0].factors) + tuple(
         d for d in (data.dimensions or ()) if d != "sample"
     )
@@ -282,7 +282,29 @@ def read_set(
     names = {str(f.path): f.path.resolve().relative_to(root).as_posix() for f in files}
     for r in runs:
         r["file"] = names[r["file"]]
-    return DataSet(records, runs, factors, float(rate))
+    return DataSet(records, runs, factors, float(rate), tuple(aside))
+
+
+def _read_one(f: DataFile, data: DataConfig, rate, need: int, first, native):
+    """One file of a set read (:func:`hcid.measured.read_file_runs`) and checked against the
+    set's first readable file (``first``: its columns and path; ``native``: its first run's
+    rate, path and run id, or None before it): ``(records, rate, natives, native)``."""
+    columns = _columns(f.path)
+    if first is not None and columns != first[0]:
+        raise DataError(
+            f"{f.path}: columns {list(columns or [])} differ from {first[1].name}'s {list(first[0] or [])}"
+        )
+    file_records, rate, natives = read_file_runs(f.path, data, rate, need)
+    for file_run, info in natives.items():
+        found = info["rate"]
+        if native is None:
+            native = (found, f.path, file_run)
+        elif not np.isclose(found, native[0], rtol=1e-6):
+            raise DataError(
+                f"{f.path}: run {file_run} is sampled at {found:.6g} Hz, {native[1].name} at "
+                f"{native[0]:.6g} Hz: a set's files share one rate"
+            )
+    return file_records, rate, natives, native
 
 
 def runs_table(name: str, data_set: DataSet) -> pa.Table:

@@ -412,6 +412,8 @@ def _run_rate(where: str, run: dict[str, np.ndarray], data: DataConfig, default:
             )
         if steps.size and steps[0] <= 0:
             raise DataError(f"{where}: time does not increase (step {steps[0]:.6g} s)")
+        if not steps.size and default is None:
+            raise DataError(f"{where}: one sample only; a run needs at least two to have a sample rate")
         return steps.size / (run["time"][-1] - run["time"][0]) if steps.size else default
     rates = np.ravel(run["rate"])
     if rates.size == 0 or not np.isfinite(rates[0]) or rates[0] <= 0:

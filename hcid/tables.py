@@ -413,6 +413,7 @@ _ANALYSIS_UNITS = tuple(
            for prefix, suffix in (("", ""), ("", "_se"), ("twin_", ""), ("fitted_", ""))},
         "crossover": "rad/s", "phase_margin": "deg", "he_error_db": "dB", "he_error_deg": "deg",
         "ht_error_db": "dB", "ht_error_deg": "deg", "twin_w_n": "rad/s",
+        **dict.fromkeys(("fc_chi2", "twin_kn", "twin_zeta_n"), "-"),
     }.items()
 )  # fmt: skip
 _RATE_FIELDS = [(c, _F64) for c in ("fp_rate", "fp_low", "fp_high", "fn_rate", "fn_low", "fn_high")]

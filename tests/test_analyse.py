@@ -245,21 +245,24 @@ def test_unreadable_files_are_refused_or_set_aside_and_listed(tmp_path):
     for path in sorted(LAB.glob("S1_*_trial1.csv")):
         shutil.copy(path, data / path.name)
     (data / "S2_pursuit_trial1.csv").write_text("this is not\na data file\n")
+    # Readable, but 2 s long: too short for the analysis windows (refused when the set is read).
+    lines = (LAB / "S1_pursuit_trial1.csv").read_text().splitlines()
+    (data / "S2_compensatory_trial1.csv").write_text("\n".join(lines[:130]) + "\n")
     run = tmp_path / "run"
     args = ["analyse", str(CONFIG), "--data", str(data), "--run", str(run), "--twins", "2",
             "--max-fb-twins", "2", "--quiet"]  # fmt: skip
     refused = runner.invoke(app, args)
-    assert refused.exit_code == 2 and "S2_pursuit_trial1.csv" in refused.output
+    assert refused.exit_code == 2 and "S2_compensatory_trial1.csv: run 1: 43 samples" in refused.output
     assert len(refused.output.strip().splitlines()) == 1 and not run.exists()
     result = runner.invoke(app, [*args, "--skip-unreadable"])
     assert result.exit_code == 0, result.output
-    assert "SET ASIDE (--skip-unreadable): 1 file(s)" in result.output
+    assert "SET ASIDE (--skip-unreadable): 2 file(s)" in result.output
     assert "S2_pursuit_trial1.csv" in result.output
     aside = pq.read_table(run / tables.SET_ASIDE.file).to_pylist()
-    assert [Path(r["file"]).name for r in aside] == ["S2_pursuit_trial1.csv"]
-    assert "missing columns" in aside[0]["reason"]
+    assert [Path(r["file"]).name for r in aside] == ["S2_pursuit_trial1.csv", "S2_compensatory_trial1.csv"]
+    assert "missing columns" in aside[0]["reason"] and "S2_compensatory_trial1.csv" in aside[1]["reason"]
     assert {r["file"] for r in pq.read_table(run / tables.ANALYSIS.file).to_pylist()} == {
         "S1_compensatory_trial1.csv",
         "S1_pursuit_trial1.csv",
     }
-    assert "**Set aside:** 1 file(s)" in (run / "report" / "report.md").read_text()
+    assert "**Set aside:** 2 file(s)" in (run / "report" / "report.md").read_text()

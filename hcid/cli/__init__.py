@@ -300,13 +300,15 @@ def analyse(
         ),
     ] = 20,
     max_fb_twins: Annotated[
-        int,
+        int | None,
         typer.Option(
             "--max-fb-twins",
             help="The most FB twins per forcing set for the runs' p-values: drawn in batches until 5 show "
-            "at least each run's statistic (Besag-Clifford), so p reaches 1/(1 + this).",
+            "at least each run's statistic (Besag-Clifford), so p reaches 1/(1 + this). Default: 99, "
+            "or --twins if more.",
+            show_default=False,
         ),
-    ] = 99,
+    ] = None,
     ff_twin: Annotated[
         str,
         typer.Option(
@@ -361,6 +363,7 @@ def analyse(
         run_dir,
         data,
         set_aside=aside,
+        skip_unreadable=skip_unreadable,
         by=None if by is None else [b.strip() for b in by.split(",") if b.strip()],
         twins=twins,
         max_fb_twins=max_fb_twins,

@@ -289,11 +289,12 @@ def analyse_study(
     *,
     by: Sequence[str] | None = None,
     twins: int = TWINS,
-    max_fb_twins: int = MAX_FB_TWINS,
+    max_fb_twins: int | None = None,
     ff_twin: str = "auto",
     alpha: float = 0.05,
     fdr: bool = False,
     set_aside: Sequence[tuple[str, str]] = (),
+    skip_unreadable: bool = False,
     jobs: int = 2,
     force: bool = False,
     backend: str = "loky",
@@ -302,8 +303,10 @@ def analyse_study(
 ) -> AnalysisRun:
     """Analyse a measured study with W calibrated on twins of each group's fitted model (module notes).
 
-    ``set_aside``: files left out of ``sources`` because they could not be read (``(path,
-    reason)``, :func:`hcid.resolve.readable_files`), written to ``set_aside.parquet`` so that the
+    ``skip_unreadable``: files that cannot be read or fail their checks (too short for the
+    windows, another sample rate, other columns) are left out instead of refusing the set; with
+    ``set_aside`` (files the caller already left out, ``(path, reason)``,
+    :func:`hcid.resolve.readable_files`) they are written to ``set_aside.parquet`` so that the
     answer and the report list them.
 
     Raises
@@ -320,6 +323,8 @@ def analyse_study(
         )
     if not 2 <= twins <= 1000:
         raise ConfigError(f"--twins: must be an integer in [2, 1000], got {twins}")
+    if max_fb_twins is None:  # the default: p down to 0.01, and never fewer than the calibration's
+        max_fb_twins = max(MAX_FB_TWINS, twins)
     if not twins <= max_fb_twins <= 10000:
         raise ConfigError(
             f"--max-fb-twins: must be an integer in [--twins ({twins}), 10000], got {max_fb_twins}"
@@ -363,8 +368,11 @@ def analyse_study(
                 folders.remove_owned(folder)
     names = tuple(methods.METHODS)
     with labelled("runs: "):
-        identify_study(config, run_dir, names, data_path=list(sources), jobs=jobs, force=force,
-                       backend=backend, scheduler=scheduler, show_progress=show_progress)  # fmt: skip
+        identified = identify_study(
+            config, run_dir, names, data_path=list(sources), jobs=jobs, force=force, backend=backend,
+            scheduler=scheduler, show_progress=show_progress, skip_unreadable=skip_unreadable,
+        )  # fmt: skip
+    set_aside = [*set_aside, *identified.set_aside]
     lap_done("identify")
     runs = results.read(tables.RUNS, run_dir)
     records = {seed: r for (model, seed), r in _records(run_dir).items() if model == data.name}
@@ -466,7 +474,10 @@ def analyse_study(
                     **twin_args,
                 ))  # fmt: skip
             for m in names:
-                n = judge.fb_thresholds(name, i + 1, twin_of[m], m).size
+                if deciding[key][m] == "W*":
+                    n = judge.fb_thresholds(name, i + 1, twin_of[m], m).size
+                else:
+                    n = judge.drawn(name, i + 1, twin_of[m])
                 fb_drawn[(key, m)] = max(fb_drawn.get((key, m), 0), n)
     lap_done("more FB twins")
 

@@ -224,7 +224,9 @@ class Evidence:
         """The run's evidence columns (``decide`` adds the deciding ones). The ``deciding``
         statistic's p-value is over every FB twin drawn for it (each run stops at its own 5th, or
         all were drawn: Besag and Clifford's p); the other's over the calibration's FB twins only,
-        a fixed number, since how many more were drawn depended on the deciding statistic."""
+        a fixed number, since how many more were drawn depended on the deciding statistic. Both
+        powers are the calibration twins', the ones the deciding statistic was chosen by (so they
+        do not depend on how many more were drawn, which the runs' values decide)."""
         own = pair.of_run(seed)
         forcing_set = pair.sets.index(own) + 1
         self._judged[(group, method, forcing_set)] = own
@@ -239,12 +241,12 @@ class Evidence:
         fourier = (math.nan, math.nan, math.nan, 0)
         if sizes is not None and run_size is not None:
             p_f, n_f = sequential_p_value(run_size, fb_sizes, EXCEEDANCES)
-            fourier = (run_size, p_f, evidence_power(sizes["FF"], fb_sizes, self.alpha), n_f)
+            fourier = (run_size, p_f, evidence_power(sizes["FF"], sizes["FB"], self.alpha), n_f)
         return {
             "forcing_set": forcing_set,
             "w_star": w_star,
             "p_w_star": p_w,
-            "power_w_star": evidence_power(self.thresholds(own, method)["FF"], fb, self.alpha),
+            "power_w_star": evidence_power(self.thresholds(own, method)["FF"], fb[:base], self.alpha),
             "fb_twins_w_star": n_w,
             "fourier_size": fourier[0],
             "p_fourier": fourier[1],
@@ -253,8 +255,9 @@ class Evidence:
         }
 
     def twins_table(self, groups: dict, by: Sequence[str], evidence: dict) -> pa.Table:
-        """``evidence_twins.parquet``: the twins' W* each group's runs were judged against, once
-        per group, method and forcing set (in the order of the groups and their runs)."""
+        """``evidence_twins.parquet``: the twins each group's runs were judged against (their W* and
+        feedforward size, as the p-values used them), once per group, method and forcing set (in
+        the order of the groups and their runs)."""
         rows, done = [], set()
         for key, seeds in groups.items():
             name = group_name(by, key)
@@ -266,6 +269,8 @@ class Evidence:
                 twin, forcing_set = self._judged[judged], e["forcing_set"]
                 sizes = self.sizes(twin) or {}
                 fb_sizes = self.fb_sizes(name, forcing_set, twin)
+                if fb_sizes is not None and e["decided_by"] == "W*":  # what p_fourier used (Evidence.run)
+                    fb_sizes = fb_sizes[: len(self.thresholds(twin, method)["FB"])]
                 drawn = {
                     "FB": (self.fb_thresholds(name, forcing_set, twin, method), fb_sizes),
                     "FF": (self.thresholds(twin, method)["FF"], sizes.get("FF")),

@@ -175,6 +175,8 @@ class IdentifyRun:
     run_dir: Path
     simulation: SimulationRun | None = None
     imported: int = 0
+    #: Measured files left out (``skip_unreadable``): (path, reason).
+    set_aside: tuple[tuple[str, str], ...] = ()
 
 
 def _part_kinds() -> dict[str, dict[str, tables.Schema]]:
@@ -248,14 +250,16 @@ def _load_records(config: Config, run_dir: Path) -> dict[tuple[str, int], dict[s
 
 
 def _import_data(
-    config: Config, run_dir: Path, sources: Sequence[str | Path], force: bool
-) -> dict[int, dict[str, np.ndarray]]:
+    config: Config, run_dir: Path, sources: Sequence[str | Path], force: bool, skip: bool = False
+) -> datasets.DataSet:
     """Read and check a data set; keep a copy in ``measured.parquet`` and its runs' factors in
     ``runs.parquet``. Other data than the run's earlier identification results were made from
     are refused without ``force``: their results would be reused as if they were these data's."""
     data = config.data if config.data is not None else default_data()
     files = datasets.data_files(sources, data.pattern)
-    data_set = datasets.read_set(files, data, config.timing.output_rate, measured.samples_needed(config))
+    data_set = datasets.read_set(
+        files, data, config.timing.output_rate, measured.samples_needed(config), skip=skip
+    )
     check_run_dir(config, run_dir, "identify", force=force)
     table = measured.records_table(data.name, data_set.records)
     if not force:
@@ -269,7 +273,7 @@ def _import_data(
     record_config(config, run_dir)
     results.write(tables.MEASURED, table, run_dir)
     results.write(tables.RUNS, datasets.runs_table(data.name, data_set), run_dir)
-    return data_set.records
+    return data_set
 
 
 def _done(run_dir: Path, keys: list, names: tuple[str, ...], force: bool) -> dict:
@@ -319,6 +323,7 @@ def identify_study(
     scheduler: str | None = None,
     worker_timeout: float = 60.0,
     show_progress: bool = True,
+    skip_unreadable: bool = False,
 ) -> IdentifyRun:
     """Identify every model x seed x method of ``config``, simulating first if the run has no simulations.
 
@@ -333,7 +338,8 @@ def identify_study(
     name ``config.data.name`` and seed = run id (the file's own for one file; 1, 2,
     ... over a set of files, whose files and factors ``runs.parquet`` keeps), beside
     any simulated realizations already in the tables.
-    ``method_names`` defaults to every registered method.
+    ``method_names`` defaults to every registered method. ``skip_unreadable``: measured files
+    that cannot be read or checked are left out (``IdentifyRun.set_aside``) instead of refused.
     """
     names = tuple(methods.METHODS) if method_names is None else tuple(method_names)
     for name in names:
@@ -342,8 +348,8 @@ def identify_study(
     simulation = None
     if data_path is not None:
         sources = [data_path] if isinstance(data_path, str | Path) else list(data_path)
-        data = _import_data(config, run_dir, sources, force)
-        records = {(config.data.name, run): rec for run, rec in data.items()}
+        data_set = _import_data(config, run_dir, sources, force, skip_unreadable)
+        records = {(config.data.name, run): rec for run, rec in data_set.records.items()}
         keys = list(records)
         noise_free = {}
     else:
@@ -395,6 +401,7 @@ def identify_study(
         run_dir=run_dir,
         simulation=simulation,
         imported=len(keys) if data_path is not None else 0,
+        set_aside=data_set.set_aside if data_path is not None else (),
     )
 
 
