@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import typer
 
+from hcid.tables import PARAMETER_UNITS
+
 
 def is_paper(cfg) -> bool:
     """Whether the paper's figures are printed beside this run's (its experiment only)."""
@@ -184,7 +186,11 @@ def print_hc_fit(result) -> None:
         typer.echo(f"target {rows[0]['target']}, standard errors {rows[0]['covariance'] or '-'}")
     # One record: its estimate with se and 95% interval; several: medians, the spread across
     # records beside the median se, and how many 95% intervals hold the true value.
-    header = f"{'model':<{m}}{'method':<10}{'W':>9} {'parameter':<10}{'estimate':>10} {'se':>9}"
+    typer.echo(
+        "(one record: its estimate, standard error and 95% interval; n records: the median estimate, the "
+        "median se, the sd across records, how many 95% intervals hold the true value, how many on a bound)"
+    )
+    header = f"{'model':<{m}}{'method':<10}{'W':>9} {'parameter':<10}{'unit':<6}{'estimate':>10} {'se':>9}"
     header += f" {'sd':>9} {'95% interval':>21} {'true':>9}{'n':>5}{'covers':>7}{'bound':>6}"
     typer.echo(header)
     groups: dict[tuple, list[dict]] = {}
@@ -208,7 +214,8 @@ def print_hc_fit(result) -> None:
             covers = f"{int(held.sum())}/{int(given.sum())}"
         hits = sum(bool(r["at_bound"]) for r in group)
         typer.echo(
-            f"{model:<{m}}{method:<10}{w:>9.4g} {name:<10}{median:>10} {se_text:>9} {sd:>9} {interval:>21}"
+            f"{model:<{m}}{method:<10}{w:>9.4g} {name:<10}{PARAMETER_UNITS.get(name, ''):<6}{median:>10} "
+            f"{se_text:>9} {sd:>9} {interval:>21}"
             f" {num(true):>9}{len(group):>5}{covers:>7}{hits:>6}"
         )
     loop = result.loop.to_pylist()

@@ -224,9 +224,10 @@ class Evidence:
         """The run's evidence columns (``decide`` adds the deciding ones). The ``deciding``
         statistic's p-value is over every FB twin drawn for it (each run stops at its own 5th, or
         all were drawn: Besag and Clifford's p); the other's over the calibration's FB twins only,
-        a fixed number, since how many more were drawn depended on the deciding statistic. Both
-        powers are the calibration twins', the ones the deciding statistic was chosen by (so they
-        do not depend on how many more were drawn, which the runs' values decide)."""
+        a fixed number, since how many more were drawn depended on the deciding statistic. Each
+        power is over the same FB twins as its p-value: the deciding one's then estimates the
+        power of the test actually made (p <= alpha against up to all the draws) more precisely
+        than the calibration's 20 can (the largest of 20 FB twins stands for their 95% quantile)."""
         own = pair.of_run(seed)
         forcing_set = pair.sets.index(own) + 1
         self._judged[(group, method, forcing_set)] = own
@@ -241,12 +242,12 @@ class Evidence:
         fourier = (math.nan, math.nan, math.nan, 0)
         if sizes is not None and run_size is not None:
             p_f, n_f = sequential_p_value(run_size, fb_sizes, EXCEEDANCES)
-            fourier = (run_size, p_f, evidence_power(sizes["FF"], sizes["FB"], self.alpha), n_f)
+            fourier = (run_size, p_f, evidence_power(sizes["FF"], fb_sizes, self.alpha), n_f)
         return {
             "forcing_set": forcing_set,
             "w_star": w_star,
             "p_w_star": p_w,
-            "power_w_star": evidence_power(self.thresholds(own, method)["FF"], fb[:base], self.alpha),
+            "power_w_star": evidence_power(self.thresholds(own, method)["FF"], fb, self.alpha),
             "fb_twins_w_star": n_w,
             "fourier_size": fourier[0],
             "p_fourier": fourier[1],
