@@ -418,10 +418,11 @@ def analyse_study(
         runs_of_set = forcing_sets(seeds, records, config)  # each set gets twins of its own
         study_model = {**medians[key], **{p: medians[strongest][p] for p in FEEDFORWARD_PARAMETERS}}
 
-        def twins_for(kind, model, key=key, runs_of_set=runs_of_set, remnant=remnant):
+        def twins_for(kind, model, fb_from=None, key=key, runs_of_set=runs_of_set, remnant=remnant):
             made = [
                 calibrate_twins(config, run_dir, key, records[members[0]], model, remnant, twins, kind,
-                                kn_rate, i + 1 if len(runs_of_set) > 1 else 0, **twin_args)
+                                kn_rate, i + 1 if len(runs_of_set) > 1 else 0,
+                                fb_from.sets[i] if fb_from is not None else None, **twin_args)
                 for i, members in enumerate(runs_of_set)
             ]  # fmt: skip
             return pool_twins(kind, made, runs_of_set, config)
@@ -434,7 +435,8 @@ def analyse_study(
             and key != strongest
             and not all(separates(c) for c in earlier.calibrations.values())
         ):
-            twins_of["study"] = twins_for("study", study_model)
+            # The study's FB twin is the own twins' (Kpt = 0: the same loop), shared, not made again.
+            twins_of["study"] = twins_for("study", study_model, earlier)
         for method_name in names:
             # The first twins where they separate; else the last made (study's, or the same).
             use = first if separates(earlier.calibrations[method_name]) else next(reversed(twins_of))

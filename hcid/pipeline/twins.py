@@ -20,7 +20,7 @@ from hcid.errors import ConfigError, DataError
 from hcid.hcfit.lines import feedforward_size, record_lines
 from hcid.pipeline.parallel import labelled
 from hcid.pipeline.rundir import check_run_dir, using
-from hcid.pipeline.studies import calibrate_study, identify_study, simulate_study
+from hcid.pipeline.studies import calibrate_study, identify_study, run_study, simulate_study
 from hcid.pipeline.sweep import selections
 from hcid.resolve import parse_config
 
@@ -214,12 +214,16 @@ class Twins:
     folder: str  # under the run directory
     calibrations: dict  # method -> Calibration
     paths: dict  # method -> the twins' selection paths and nb_ft (twin_paths)
+    fb_folder: str = ""  # where the FB twin was simulated when not in ``folder`` (shared)
 
 
 def twin_sizes(twin: Twins, run_dir: Path, config: Config) -> dict[str, np.ndarray] | None:
     """Each FB and FF twin realization's model-free feedforward size
     (:func:`hcid.hcfit.lines.feedforward_size`), by twin; None where the forcing has no lines."""
-    return _sizes(run_dir / twin.folder, config.timing.output_rate) or None
+    sizes = _sizes(run_dir / twin.folder, config.timing.output_rate)
+    if twin.fb_folder and sizes:
+        sizes["FB"] = _sizes(run_dir / twin.fb_folder, config.timing.output_rate).get("FB")
+    return sizes if sizes and sizes.get("FB") is not None else None
 
 
 def separates(cal) -> bool:
@@ -228,27 +232,39 @@ def separates(cal) -> bool:
 
 
 def calibrate_twins(config, run_dir, key, record, model, remnant, twins, kind, kn_rate, forcing_set=0,
-                    **pool) -> Twins:  # fmt: skip
+                    fb_from: Twins | None = None, **pool) -> Twins:  # fmt: skip
     """Simulate, identify and calibrate one pair of twins of a group in
     ``RUN/twins/<group>[-f<set>][-study]`` (``forcing_set`` 0 for a group of one forcing set;
-    resumed when its inputs are the same, made anew when not)."""
+    resumed when its inputs are the same, made anew when not). ``fb_from``: twins of the same
+    group and forcing set whose FB twin is this one's (the study twins' is the own twins': the
+    same loop, bit for bit), so only the FF twin is simulated and identified here."""
     slug = (
         group_slug(key) + (f"-f{forcing_set}" if forcing_set else "") + ("-study" if kind == "study" else "")
     )
 
     def twins_raw(forcing: Path) -> dict:
-        return twin_config_raw(config, model, remnant, forcing, twins, f"{config.name}_twins_{slug}")
+        raw = twin_config_raw(config, model, remnant, forcing, twins, f"{config.name}_twins_{slug}")
+        return raw if fb_from is None else {**raw, "models": {"FF": raw["models"]["FF"]}}
 
     whose = f"{', '.join(key) or 'all runs'}{_set_label(forcing_set)}"
     with (
         _twin_folder(config, run_dir, slug, record, key, kind, twins_raw) as (twin_dir, twin_config),
         labelled(f"{kind} twins of {whose}: "),
     ):
-        run = calibrate_study(twin_config, twin_dir, **pool)
-    return Twins(
-        kind, {**model, **twin_values(model, kn_rate)}, remnant, f"twins/{slug}",
-        {c.method: c for c in run.calibrations}, twin_paths(twin_config, twin_dir),
-    )  # fmt: skip
+        if fb_from is None:
+            run = calibrate_study(twin_config, twin_dir, **pool)
+            calibrations, fb_folder = {c.method: c for c in run.calibrations}, ""
+            paths = twin_paths(twin_config, twin_dir)
+        else:
+            run_study(twin_config, twin_dir, **pool)
+            ff = twin_paths(twin_config, twin_dir, ("FF",))
+            paths = {m: (fb_from.paths[m][0], ff[m][0]) for m in methods.METHODS}
+            w = np.asarray(twin_config.selection.w_grid)
+            found = [calibrate(m, *paths[m], w, twin_config.selection.target_rate) for m in methods.METHODS]
+            results.write(tables.CALIBRATION, tables.concat([c.to_arrow() for c in found]), twin_dir)
+            calibrations, fb_folder = {c.method: c for c in found}, fb_from.fb_folder or fb_from.folder
+    simulated = {**model, **twin_values(model, kn_rate)}
+    return Twins(kind, simulated, remnant, f"twins/{slug}", calibrations, paths, fb_folder)
 
 
 @dataclass(frozen=True)
@@ -336,13 +352,15 @@ def _sizes(folder: Path, rate: float) -> dict[str, np.ndarray]:
     return {k: np.array(v) for k, v in out.items()}
 
 
-def twin_paths(twin_config: Config, twin_dir: Path) -> dict[str, tuple]:
-    """Per method, the FB and FF twins' selection paths and nb_ft (for rates at any W)."""
+def twin_paths(
+    twin_config: Config, twin_dir: Path, models: tuple[str, ...] = ("FB", "FF")
+) -> dict[str, tuple]:
+    """Per method, the ``models`` twins' selection paths and nb_ft (for rates at any W)."""
     chosen = selections(results.read(tables.FRONTIER, twin_dir), twin_dir)
     out = {}
     for method in methods.METHODS:
         pair = []
-        for model in ("FB", "FF"):
+        for model in models:
             keys = [(model, s, method) for s in twin_config.seeds]
             pair.append(([chosen[k][0] for k in keys], [chosen[k][1]["nb_ft"] for k in keys]))
         out[method] = tuple(pair)
