@@ -123,7 +123,7 @@ def error_rates(
 
     Examples
     --------
-    >>> from hcid.selection import SelectionPath, false_positive_extent
+    >>> from hcid.selection import SelectionPath
     >>> seg = SelectionPath(np.array([0, 1]), np.array([0.0, 0.01]), np.array([0.01, np.inf]))
     >>> c = error_rates("direct", "FB", "false_positive", [seg, seg], [np.array([2, 0])] * 2, [0.005, 0.02])
     >>> c.rate.tolist(), np.round(c.high, 4).tolist()  # k = 0 of 2: 1 - 0.025^(1/2)
@@ -318,12 +318,12 @@ def sequential_p_value(value: float, fb_in_order: np.ndarray, h: int) -> tuple[f
     >>> sequential_p_value(0.55, fb, 2)  # one of six: (1 + 1) / (1 + 6)
     (0.2857142857142857, 6)
     """
-    at_or_above = np.asarray(fb_in_order, dtype=np.float64) >= value
-    seen = np.cumsum(at_or_above)
+    fb = np.asarray(fb_in_order, dtype=np.float64)
+    seen = np.cumsum(fb >= value)
     if seen.size and seen[-1] >= h:
         m = int(np.searchsorted(seen, h)) + 1
         return h / m, m
-    return float((1 + (seen[-1] if seen.size else 0)) / (1 + seen.size)), int(seen.size)
+    return evidence_p_value(value, fb), int(fb.size)
 
 
 def sequential_settled(value: float, fb_in_order: np.ndarray, h: int, n_max: int) -> bool:

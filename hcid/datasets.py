@@ -256,14 +256,14 @@ def read_set(
     several = len(files) > 1 or data.dimensions is not None
     for f in files:
         try:
-            file_records, file_rate, natives, native = _read_one(f, data, rate, need, first, native)
+            file_records, file_rate, natives, native, columns = _read_one(f, data, rate, need, first, native)
         except DataError as exc:
             if not skip:
                 raise
             aside.append((str(f.path), str(exc)))
             continue
         rate = file_rate
-        first = first or (_columns(f.path), f.path)
+        first = first or (columns, f.path)
         for file_run, record in file_records.items():
             run = len(records) + 1 if several else file_run
             records[run] = record
@@ -273,7 +273,8 @@ def read_set(
             )  # fmt: skip
     if not records:
         raise DataError(f"no file of the data set can be read (the first: {aside[0][1]})")
-    files = [f for f in files if str(f.path) not in {a for a, _ in aside}]
+    left_out = {path for path, _ in aside}
+    files = [f for f in files if str(f.path) not in left_out]
     factors = tuple(n for n, _ in files[0].factors) + tuple(
         d for d in (data.dimensions or ()) if d != "sample"
     )
@@ -288,7 +289,7 @@ def read_set(
 def _read_one(f: DataFile, data: DataConfig, rate, need: int, first, native):
     """One file of a set read (:func:`hcid.measured.read_file_runs`) and checked against the
     set's first readable file (``first``: its columns and path; ``native``: its first run's
-    rate, path and run id, or None before it): ``(records, rate, natives, native)``."""
+    rate, path and run id, or None before it): ``(records, rate, natives, native, columns)``."""
     columns = _columns(f.path)
     if first is not None and columns != first[0]:
         raise DataError(
@@ -304,7 +305,7 @@ def _read_one(f: DataFile, data: DataConfig, rate, need: int, first, native):
                 f"{f.path}: run {file_run} is sampled at {found:.6g} Hz, {native[1].name} at "
                 f"{native[0]:.6g} Hz: a set's files share one rate"
             )
-    return file_records, rate, natives, native
+    return file_records, rate, natives, native, columns
 
 
 def runs_table(name: str, data_set: DataSet) -> pa.Table:

@@ -137,7 +137,8 @@ class Evidence:
         self.config, self.run_dir, self.alpha, self.max_fb = config, run_dir, alpha, max_fb
         self._thresholds: dict[tuple[str, str], dict[str, np.ndarray]] = {}
         self._sizes: dict[str, dict | None] = {}
-        self._more: dict[tuple[str, int], list] = {}  # (group, forcing set) -> [FbDraws]
+        # (group, forcing set) -> per draw: its count, its W* by identified method, its sizes
+        self._more: dict[tuple[str, int], list[tuple[int, dict, np.ndarray | None]]] = {}
         self._judged: dict[tuple[str, str, int], str] = {}  # (group, method, forcing set) -> folder
 
     def w_star(self, path, nb_ft) -> float:
@@ -159,31 +160,49 @@ class Evidence:
         return self._sizes[twin.folder]
 
     def add(self, group: str, forcing_set: int, draws) -> None:
-        """More FB twins of a group's forcing set (:class:`hcid.pipeline.twins.FbDraws`), in order."""
-        self._more.setdefault((group, forcing_set), []).append(draws)
+        """More FB twins of a group's forcing set (:class:`hcid.pipeline.twins.FbDraws`), in order;
+        their W* computed once, here."""
+        w = {
+            m: np.array([self.w_star(p, n) for p, n in zip(*pair, strict=True)])
+            for m, pair in draws.paths.items()
+        }
+        self._more.setdefault((group, forcing_set), []).append((draws.count, w, draws.sizes))
 
     def drawn(self, group: str, forcing_set: int, twin) -> int:
         """FB twins simulated so far for a group's forcing set (the next draw's first seed - 1)."""
-        return len(twin.paths[next(iter(twin.paths))][0][0]) + sum(
-            d.count for d in self._more.get((group, forcing_set), [])
-        )
+        more = self._more.get((group, forcing_set), [])
+        return len(twin.paths[next(iter(twin.paths))][0][0]) + sum(count for count, _, _ in more)
 
     def fb_thresholds(self, group: str, forcing_set: int, twin, method: str) -> np.ndarray:
         """Every FB twin's W* under ``method`` in the order drawn: the calibration's, then the
         draws that identified ``method`` (up to the first that did not: it was settled there)."""
         out = [self.thresholds(twin, method)["FB"]]
-        for d in self._more.get((group, forcing_set), []):
-            if method not in d.paths:
+        for _, w, _ in self._more.get((group, forcing_set), []):
+            if method not in w:
                 break
-            out.append(np.array([self.w_star(p, n) for p, n in zip(*d.paths[method], strict=True)]))
+            out.append(w[method])
         return np.concatenate(out)
 
     def fb_sizes(self, group: str, forcing_set: int, twin) -> np.ndarray | None:
         base = self.sizes(twin)
         if base is None:
             return None
-        more = [d.sizes for d in self._more.get((group, forcing_set), [])]
-        return np.concatenate([base["FB"], *[m for m in more if m is not None]])
+        more = [sizes for _, _, sizes in self._more.get((group, forcing_set), []) if sizes is not None]
+        return np.concatenate([base["FB"], *more])
+
+    def used(self, group: str, forcing_set: int, twin, method: str, deciding: str):
+        """The FB twins' W* and sizes in the order drawn, as the run's two p-values use them: the
+        deciding statistic's every draw, the other's the calibration's only (:meth:`run`)."""
+        base = len(self.thresholds(twin, method)["FB"])
+        w, sizes = (
+            self.fb_thresholds(group, forcing_set, twin, method),
+            self.fb_sizes(group, forcing_set, twin),
+        )
+        if deciding != "W*":
+            w = w[:base]
+        if sizes is not None and deciding == "W*":
+            sizes = sizes[:base]
+        return w, sizes
 
     def statistic(self, pair, method: str) -> str:
         """Which statistic decides for a group and method (a name of :data:`STATISTICS`): the one
@@ -231,14 +250,10 @@ class Evidence:
         own = pair.of_run(seed)
         forcing_set = pair.sets.index(own) + 1
         self._judged[(group, method, forcing_set)] = own
-        base = len(self.thresholds(own, method)["FB"])
-        fb = self.fb_thresholds(group, forcing_set, own, method)
-        fb = fb if deciding == "W*" else fb[:base]
+        fb, fb_sizes = self.used(group, forcing_set, own, method, deciding)
         w_star = self.w_star(path, nb_ft)
         p_w, n_w = sequential_p_value(w_star, fb, EXCEEDANCES)
-        sizes, fb_sizes = self.sizes(own), self.fb_sizes(group, forcing_set, own)
-        if fb_sizes is not None and deciding == "W*":
-            fb_sizes = fb_sizes[:base]
+        sizes = self.sizes(own)
         fourier = (math.nan, math.nan, math.nan, 0)
         if sizes is not None and run_size is not None:
             p_f, n_f = sequential_p_value(run_size, fb_sizes, EXCEEDANCES)
@@ -269,11 +284,8 @@ class Evidence:
                 done.add(judged)
                 twin, forcing_set = self._judged[judged], e["forcing_set"]
                 sizes = self.sizes(twin) or {}
-                fb_sizes = self.fb_sizes(name, forcing_set, twin)
-                if fb_sizes is not None and e["decided_by"] == "W*":  # what p_fourier used (Evidence.run)
-                    fb_sizes = fb_sizes[: len(self.thresholds(twin, method)["FB"])]
                 drawn = {
-                    "FB": (self.fb_thresholds(name, forcing_set, twin, method), fb_sizes),
+                    "FB": self.used(name, forcing_set, twin, method, e["decided_by"]),
                     "FF": (self.thresholds(twin, method)["FF"], sizes.get("FF")),
                 }
                 for kind, (w_stars, fourier) in drawn.items():

@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import math
 import re
+from collections.abc import Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -299,12 +300,8 @@ def draw_fb_twins(config, run_dir, key, record, model, remnant, kn_rate, forcing
             elif not (twin_dir / tables.SIMULATIONS.file).exists():
                 simulate_study(twin_config, twin_dir, jobs=pool.get("jobs", 2),
                                show_progress=pool.get("show_progress", True))  # fmt: skip
-    paths = {}
-    if method_names:
-        chosen = selections(results.read(tables.FRONTIER, twin_dir), twin_dir)
-        for method in method_names:
-            keys = [("FB", s, method) for s in twin_config.seeds]
-            paths[method] = ([chosen[k][0] for k in keys], [chosen[k][1]["nb_ft"] for k in keys])
+    found = twin_paths(twin_config, twin_dir, ("FB",), method_names) if method_names else {}
+    paths = {method: fb for method, (fb,) in found.items()}
     return FbDraws(first, count, paths, _sizes(twin_dir, config.timing.output_rate).get("FB"))
 
 
@@ -352,13 +349,13 @@ def _sizes(folder: Path, rate: float) -> dict[str, np.ndarray]:
     return {k: np.array(v) for k, v in out.items()}
 
 
-def twin_paths(
-    twin_config: Config, twin_dir: Path, models: tuple[str, ...] = ("FB", "FF")
-) -> dict[str, tuple]:
-    """Per method, the ``models`` twins' selection paths and nb_ft (for rates at any W)."""
+def twin_paths(twin_config: Config, twin_dir: Path, models: tuple[str, ...] = ("FB", "FF"),
+               method_names: Sequence[str] | None = None) -> dict[str, tuple]:  # fmt: skip
+    """Per method (``method_names``, default every registered one), the ``models`` twins'
+    selection paths and nb_ft (for rates at any W)."""
     chosen = selections(results.read(tables.FRONTIER, twin_dir), twin_dir)
     out = {}
-    for method in methods.METHODS:
+    for method in methods.METHODS if method_names is None else method_names:
         pair = []
         for model in models:
             keys = [(model, s, method) for s in twin_config.seeds]
