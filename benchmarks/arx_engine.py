@@ -38,8 +38,8 @@ RATE_REPEATS = 5
 REFERENCE_SAMPLE = 1000
 
 
-def _fit(signals, grid, rows, legacy, *, fused, keep=False):
-    return _fit_grid(*signals, grid, *rows, 1, keep, legacy=legacy, fused=fused)
+def _fit(signals, grid, rows, unpruned, *, fused, keep=False):
+    return _fit_grid(*signals, grid, *rows, 1, keep, unpruned=unpruned, fused=fused)
 
 
 def _same_frontier(one, two) -> bool:
@@ -58,9 +58,9 @@ def _side_by_side(label, signals, grid, rows):
     seconds = {name: [] for name in configs}
     fits = {}
     for _ in range(REPEATS):
-        for name, (legacy, fuse) in configs.items():
+        for name, (unpruned, fuse) in configs.items():
             start = time.perf_counter()
-            fits[name] = _fit(signals, grid, rows, legacy, fused=fuse)
+            fits[name] = _fit(signals, grid, rows, unpruned, fused=fuse)
             seconds[name].append(time.perf_counter() - start)
     engine = "engine, fused"
     new, new_counts = fits[engine]
@@ -91,8 +91,8 @@ def main():
 
     # Warm-up: compile (or load from the cache) every kernel.
     small = Grid(na=(1, 2), nb1=(0, 2), nb2=(0, 2), nk1=(1, 2), nk2=(1, 2))
-    for legacy in (False, True):
-        _fit(direct, small, DIRECT_ROWS, legacy, fused=True)
+    for unpruned in (False, True):
+        _fit(direct, small, DIRECT_ROWS, unpruned, fused=True)
 
     engine_rate, old_rate = _side_by_side("direct", direct, DIRECT_GRID, DIRECT_ROWS)
 

@@ -51,7 +51,13 @@ ROOT = Path(__file__).resolve().parent.parent
 #: with it first on their path.
 SOURCE = ROOT
 #: Kernel groups, by the module that defines the jitted function; everything else is "other".
-GROUPS = ("hcid.arx._lanes", "hcid.arx._kernels", "hcid.arx._blocks", "hcid.arx._lane_ir", "hcid.simulate")
+GROUPS = (
+    "hcid.arx._lanes",
+    "hcid.arx._kernels",
+    "hcid.arx._blocks",
+    "hcid.arx._lane_ir",
+    "hcid.loop.simulate",
+)
 OTHER = "other"
 TOP_FUNCTIONS = 40
 #: argv[1] of the recording child, this file run as ``cold_start.py --child OUT HCID_ARGS...``.
@@ -79,7 +85,7 @@ def _child(out: str, hcid_args: list[str]) -> None:
     import hcid.cli
 
     # hcid run compiles the engine's two parts at once, one in a forked child this listener
-    # cannot see (hcid.pipeline.parallel.compile_kernels): here one after the other, so that the
+    # cannot see (hcid.pipeline.parallel.compile_before_fork): here one after the other, so that the
     # table holds every kernel. An hcid from before that has neither.
     try:
         import hcid.pipeline.parallel as parallel

@@ -28,9 +28,9 @@ import numpy as np
 import pyarrow.parquet as pq
 
 from hcid.hcfit import parse_fit_settings
-from hcid.pipeline import fit_hc_study
+from hcid.io.resolve import load_config
+from hcid.pipeline import Execution, fit_hc_study
 from hcid.report.sections.hcfit import accuracy
-from hcid.resolve import load_config
 
 VARIANTS = [
     ("closed_loop", "sandwich"),
@@ -65,7 +65,7 @@ def main() -> None:
         settings = dataclasses.replace(base, target=target, covariance=cov)
         start = time.perf_counter()
         run = fit_hc_study(
-            dataclasses.replace(config, fit_hc=settings), args.run_dir, jobs=2, show_progress=False
+            dataclasses.replace(config, fit_hc=settings), args.run_dir, execution=Execution(2, progress=False)
         )
         wall = time.perf_counter() - start
         pq.write_table(run.parameters, args.out / f"{target}_{cov}.parquet")

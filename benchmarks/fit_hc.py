@@ -4,9 +4,9 @@ Paper config, default fit settings, one core. For 3 seeds of each model
 (FB, FF) and each method, the record is identified on the paper grids (not
 timed) and the model selected at W_BIC. Then, for each estimator
 (``closed_loop``, ``time``, ``frequency``), side by side on the same selected
-models: the parametric fit alone (:func:`hcid.selected.fit_selected`) and the
+models: the parametric fit alone (:func:`hcid.analysis.selected.fit_selected`) and the
 whole task, fit plus loop descriptors plus residual analysis
-(:func:`hcid.selected.analyse_selected`, what one fit-hc task does per W).
+(:func:`hcid.analysis.selected.analyse_selected`, what one fit-hc task does per W).
 Prints the median wall times per estimator, and per model and method for the
 config's own estimator.
 
@@ -28,12 +28,12 @@ from _paper_record import PAPER_CONFIG  # noqa: E402
 
 import hcid  # noqa: E402
 from hcid import methods  # noqa: E402
-from hcid.criteria import w_bic  # noqa: E402
+from hcid.analysis.selected import analyse_selected, fit_selected  # noqa: E402
 from hcid.hcfit import TARGETS  # noqa: E402
-from hcid.hcmodel import plant  # noqa: E402
-from hcid.resolve import load_config  # noqa: E402
-from hcid.selected import analyse_selected, fit_selected  # noqa: E402
-from hcid.simulate import remnant_gain, simulate_realization  # noqa: E402
+from hcid.io.resolve import load_config  # noqa: E402
+from hcid.loop.hcmodel import plant  # noqa: E402
+from hcid.loop.simulate import remnant_gain, simulate_realization  # noqa: E402
+from hcid.selection.criteria import w_bic  # noqa: E402
 
 SEEDS = (1, 2, 3)
 

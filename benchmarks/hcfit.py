@@ -2,7 +2,7 @@
 
 1. Noise-free FF model, default settings: one frequency-domain fit (the true
    paths of SPEC 1 on the band grid) and one time-domain fit (the noise-free
-   closed-loop record of hcid.simulate), median wall time of 5 runs each, and
+   closed-loop record of hcid.loop.simulate), median wall time of 5 runs each, and
    the recovery error of every parameter.
 2. A realistic record (paper config, FF, seed 1, with remnant): the direct
    method's grid, the model selected at W_BIC, then both fits and a residual
@@ -25,15 +25,15 @@ import numpy as np  # noqa: E402
 from _paper_record import PAPER_CONFIG, paper_record  # noqa: E402
 
 from hcid import hcfit  # noqa: E402
+from hcid.analysis.residuals import analyse_residuals  # noqa: E402
 from hcid.arx import Grid, fit_grid  # noqa: E402
 from hcid.arx.response import path_response  # noqa: E402
 from hcid.arx.simulation import simulate  # noqa: E402
-from hcid.criteria import w_bic  # noqa: E402
-from hcid.hcmodel import plant, true_response  # noqa: E402
-from hcid.residuals import analyse_residuals  # noqa: E402
-from hcid.resolve import load_config  # noqa: E402
-from hcid.selection import select_at  # noqa: E402
-from hcid.simulate import simulate_realization  # noqa: E402
+from hcid.io.resolve import load_config  # noqa: E402
+from hcid.loop.hcmodel import plant, true_response  # noqa: E402
+from hcid.loop.simulate import simulate_realization  # noqa: E402
+from hcid.selection.criteria import w_bic  # noqa: E402
+from hcid.selection.over_w import select_at  # noqa: E402
 
 REPEATS = 5
 ESTIMATION, VALIDATION = slice(128, 1088), slice(1088, 2048)  # SPEC 3, direct

@@ -47,10 +47,10 @@ def _margins_ok(p: dict) -> bool:
     """Whether the subject's loop with the example's plant is one a person tracks with: one
     gain crossover, phase margin at least 30 deg (the ranges also hold loops that the
     neuromuscular peak makes unstable near 10 rad/s)."""
-    from hcid.descriptors import loop_margins
+    from hcid.analysis.descriptors import loop_margins
     from hcid.hcfit import hc_response
-    from hcid.hcmodel import plant
-    from hcid.resolve import load_config
+    from hcid.io.resolve import load_config
+    from hcid.loop.hcmodel import plant
 
     yc = plant(load_config(ROOT / "configs" / "lab_example.yaml").loop)
     m = loop_margins(lambda w: hc_response({**p, **NMS}, yc, w)[1] * np.asarray(yc(1j * w)).ravel())
@@ -102,11 +102,11 @@ def analyse(config: Path, data: Path, run: Path, jobs: int) -> tuple[float, str]
 
 def compare(spec: dict, run: Path, config: Path) -> None:
     """What the analysis found against the truth."""
-    from hcid.fourier import fc_estimate
+    from hcid.analysis.fourier import fc_estimate
     from hcid.hcfit import hc_response
-    from hcid.hcmodel import plant
+    from hcid.io.resolve import load_config
+    from hcid.loop.hcmodel import plant
     from hcid.pipeline.fit import _records
-    from hcid.resolve import load_config
 
     rows = pq.read_table(run / "analysis.parquet").to_pylist()
     groups = pq.read_table(run / "analysis_groups.parquet").to_pylist()

@@ -33,7 +33,7 @@ holds), Kpt 1, TI 0.15, tau_pt 0.05)
 driven by the recorded forcing functions of dp's ``+1`` trial of the plant, with SPEC 1's remnant
 filter at three levels 0.2, 0.4, 0.6 and ``--seeds`` seeds each, the levels read two ways
 (``--remnant``, default share): as ``loop.remnant_ratio`` (hcid's var(n)/var(u) in the
-disturbance-only task, Kn from ``hcid.simulate.remnant_gain``) and as the share of var(u) the
+disturbance-only task, Kn from ``hcid.loop.simulate.remnant_gain``) and as the share of var(u) the
 remnant takes in the full task (Kn scaled so that var(u - u0)/var(u) is the level on average, u0
 the same loop without remnant: the README's "20 to 60% of var(u)"). Printed: the share achieved,
 and per variant and level the bias, sd and RMSE (% of the true value) of every parameter and the
@@ -70,9 +70,9 @@ import numpy as np
 from joblib import Parallel, delayed
 
 import hcid
+from hcid.analysis.fourier import fc_estimate, forcing_lines
 from hcid.config import Timing
 from hcid.config.parse import data_identify_defaults
-from hcid.fourier import fc_estimate, forcing_lines
 from hcid.hcfit import (
     DEFAULT_BOUNDS,
     PARAMETERS,
@@ -86,8 +86,8 @@ from hcid.hcfit import (
 from hcid.hcfit.consistency import consistency
 from hcid.hcfit.determined import DETERMINED, is_undetermined, parameter_status
 from hcid.hcfit.lines import line_data
-from hcid.resolve import parse_config
-from hcid.simulate import remnant_gain, simulate_realization
+from hcid.io.resolve import parse_config
+from hcid.loop.simulate import remnant_gain, simulate_realization
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "cphs2017"
@@ -443,7 +443,7 @@ def _label(mode: str, level: float) -> str:
 def simulate_twins(runs, seeds: int, modes: tuple[str, ...]) -> tuple[dict, list[list[str]], list[str]]:
     """``{(plant, mode, level, seed): signals}``, the remnant table's rows and the problems met.
 
-    ``ratio``: Kn from ``hcid.simulate.remnant_gain`` at ``loop.remnant_ratio = level``
+    ``ratio``: Kn from ``hcid.loop.simulate.remnant_gain`` at ``loop.remnant_ratio = level``
     (var(n)/var(u) in the disturbance-only task). ``share``: one Kn per plant and level such that
     var(u - u0)/var(u) = level on average over the seeds (the loop is linear: u - u0 scales with Kn).
     """
@@ -468,8 +468,9 @@ def simulate_twins(runs, seeds: int, modes: tuple[str, ...]) -> tuple[dict, list
                             big = simulate_realization(config, model, 1, 1e3, disturbance_only=True)
                             said = "; ".join(f"{w.category.__name__}: {w.message}" for w in caught)
                             problems.append(
-                                f"{plant}, loop.remnant_ratio {level:g}: hcid.simulate.remnant_gain returned "
-                                f"{kn} ({said or 'no warning'}); this loop reaches at most var(n)/var(u) "
+                                f"{plant}, loop.remnant_ratio {level:g}: hcid.loop.simulate.remnant_gain "
+                                f"returned {kn} ({said or 'no warning'}); this loop reaches at most "
+                                f"var(n)/var(u) "
                                 f"= {big.noise_ratio:.3f} (simulated with Kn = 1e3, ft = 0)"
                             )
                             rows.append(
@@ -510,7 +511,7 @@ def twin_tables(keys, results, remnant_rows, problems, seeds: int, twins: dict) 
     _table(["plant", "remnant", "Kn", "var(u - u0)/var(u), mean over seeds", "min..max"], remnant_rows)
     print(
         "\n`remnant_ratio` is hcid's var(n)/var(u) in the disturbance-only task "
-        "(hcid.simulate.remnant_gain); "
+        "(hcid.loop.simulate.remnant_gain); "
         "`share` scales Kn so that var(u - u0)/var(u) of the full task is the level, as the README's "
         "20 to 60% of var(u) in people."
     )

@@ -37,9 +37,11 @@ def main() -> None:
     r = paper_record()
     i1, i2, o = r["ft_s"], r["e"], r["u"]
     n, first = o.size, VALIDATION.start
-    fit, _ = _fit_grid(i1, i2, o, GRID, ESTIMATION, VALIDATION, 1, True, legacy=False, fused=True)  # every V
+    fit, _ = _fit_grid(
+        i1, i2, o, GRID, ESTIMATION, VALIDATION, 1, True, unpruned=False, fused=True
+    )  # every V
     _, counts = _fit_grid(
-        i1, i2, o, GRID, ESTIMATION, VALIDATION, 1, False, legacy=False, fused=True
+        i1, i2, o, GRID, ESTIMATION, VALIDATION, 1, False, unpruned=False, fused=True
     )  # pruned
     cand = fit.candidates.to_pydict()
     na, nb1, nb2, nk1, nk2, v = (np.asarray(cand[c]) for c in ("na", "nb1", "nb2", "nk1", "nk2", "v"))

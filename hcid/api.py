@@ -26,15 +26,17 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from hcid import criteria, hcfit, methods, results, selection, tables
+from hcid import hcfit, methods, tables
+from hcid.analysis.selected import SelectedModel, fit_selected
 from hcid.config import Config, DataConfig, Forcing, IdentifyConfig, Plant, Timing
 from hcid.config.parse import default_data
-from hcid.errors import ConfigError, DataError, IdentificationError
-from hcid.hcmodel import transfer_function
-from hcid.measured import check_signal, read_runs
-from hcid.resolve import resolve_identify
-from hcid.selected import SelectedModel, fit_selected
-from hcid.selection import SelectionPath
+from hcid.errors import ConfigError, DataError, IdentificationError, checked_rate
+from hcid.io import results
+from hcid.io.measured import check_signal, read_runs
+from hcid.io.resolve import resolve_identify
+from hcid.loop.hcmodel import transfer_function
+from hcid.selection import criteria, over_w
+from hcid.selection.over_w import SelectionPath
 
 __all__ = [
     "Experiment",
@@ -72,8 +74,7 @@ class Record:
     u: np.ndarray = field(repr=False)
 
     def __post_init__(self) -> None:
-        if isinstance(self.rate, bool) or not isinstance(self.rate, numbers.Real) or not 0 < self.rate < 1e6:
-            raise DataError(f"rate: must be a positive number of Hz, got {self.rate!r}")
+        checked_rate(self.rate, DataError)
         n = None
         for name in ("t", "ft", "fd", "e", "u"):
             x = check_signal(getattr(self, name), f"record {name}")
@@ -140,10 +141,8 @@ def read_records(
         raise ConfigError(f"columns: unknown signal {unknown[0]!r} (allowed: {', '.join(data.columns)})")
     if not (isinstance(lead_in, int | float) and 0 <= lead_in < 1e4):
         raise ConfigError(f"lead_in: must be a number of seconds in [0, 10000), got {lead_in!r}")
-    if rate is not None and (
-        isinstance(rate, bool) or not isinstance(rate, numbers.Real) or not 0 < rate < 1e6
-    ):
-        raise ConfigError(f"rate: must be a positive number of Hz, got {rate!r}")
+    if rate is not None:
+        checked_rate(rate)
     data = DataConfig(
         name="data",
         columns={**data.columns, **given},
@@ -243,13 +242,9 @@ class IdentificationResult:
         """W of the Bayesian criterion at this Nf (SPEC 4)."""
         return criteria.w_bic(self.nf)
 
-    def _orders(self) -> np.ndarray:
-        return np.column_stack([self.frontier.column(c).to_numpy() for c in tables.ORDER_COLUMNS])
-
     def selection_path(self) -> SelectionPath:
         """The exact selection over W: ``frontier`` row ``index[i]`` for ``w_from[i] <= W < w_to[i]``."""
-        d, v = self.frontier.column("d").to_numpy(), self.frontier.column("v").to_numpy()
-        return selection.breakpoints(d, v, self._orders())
+        return over_w.frontier_path(self.frontier)
 
     def select(self, w: float) -> SelectedModel:
         """The model ``MSC = log V + W d`` selects at ``w`` (ties: SPEC 4's rule).

@@ -6,6 +6,8 @@ one line on stderr and exit code 2, in one place; anything else is a bug and
 keeps its traceback.
 """
 
+import numbers
+
 
 class HcidError(Exception):
     """Base class of the errors hcid reports to the user as one line."""
@@ -37,3 +39,20 @@ def quote(value: object) -> str:
     """
     text = repr(value) if isinstance(value, str) else str(value)
     return text if len(text) <= QUOTE else text[: QUOTE - 3] + "..."
+
+
+def checked_rate(rate: object, error: type[HcidError] = ConfigError) -> float:
+    """A sample rate as a float number of Hz in (0, 1e6), else ``error`` in one line.
+
+    Examples
+    --------
+    >>> checked_rate(25)
+    25.0
+    >>> checked_rate(float("nan"), DataError)
+    Traceback (most recent call last):
+    ...
+    hcid.errors.DataError: rate: must be a positive number of Hz, got nan
+    """
+    if isinstance(rate, bool) or not isinstance(rate, numbers.Real) or not 0 < rate < 1e6:
+        raise error(f"rate: must be a positive number of Hz, got {quote(rate)}")
+    return float(rate)

@@ -1,7 +1,7 @@
 """Every table hcid writes: its file name, columns with their Arrow types, and its key.
 
 The one home of each table's schema. Writers build their tables against these
-schemas, :func:`hcid.results.read` checks what it reads against them, and the
+schemas, :func:`hcid.io.results.read` checks what it reads against them, and the
 report reads the columns named here. A leaf module: it imports only pyarrow, so
 any layer may refer to a schema.
 
@@ -280,7 +280,7 @@ def thresholds(criterion_columns: Sequence[str] = ()) -> Schema:
     each criterion's W.
 
     ``criterion_columns`` are the ``w_<name>`` columns of the configured criteria
-    (:attr:`hcid.criteria.Criterion.column`); a reader passes none and finds them
+    (:attr:`hcid.selection.criteria.Criterion.column`); a reader passes none and finds them
     by name.
     """
     rates = [rate_column(c) for c in criterion_columns]

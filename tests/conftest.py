@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hcid.resolve import load_config
+from hcid.io.resolve import load_config
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_CONFIG = ROOT / "configs" / "paper.yaml"
@@ -25,8 +25,8 @@ def ci_config():
 
 
 def _record(config, model_name: str, seed: int) -> dict[str, np.ndarray]:
+    from hcid.loop.simulate import remnant_gain, simulate_realization
     from hcid.methods import shift_forward
-    from hcid.simulate import remnant_gain, simulate_realization
 
     r = simulate_realization(config, config.model(model_name), seed, remnant_gain(config))
     shift = config.identify.shift_samples(config.timing.output_rate)
@@ -54,6 +54,16 @@ def ci_raw():
     raw = yaml.safe_load(CI_CONFIG.read_text())
     raw["seeds"] = [1]
     return raw
+
+
+def load_data(path, config) -> dict[int, dict[str, np.ndarray]]:
+    """One measured file's checked runs for a study, as ``hcid identify --data FILE`` reads them:
+    the config's data section, analysis rate and the samples its windows need."""
+    from hcid.config.parse import default_data
+    from hcid.io.measured import read_runs, samples_needed
+
+    data = config.data if config.data is not None else default_data()
+    return read_runs(path, data, config.timing.output_rate, samples_needed(config))[0]
 
 
 def interrupt_after(monkeypatch, module, name: str, calls: int):

@@ -7,10 +7,11 @@ import pyarrow.parquet as pq
 import pytest
 
 import hcid
-from hcid import methods, selection
+from hcid import methods
 from hcid.arx.response import path_response
 from hcid.arx.simulation import simulate
 from hcid.methods import shift_forward
+from hcid.selection import over_w
 
 from .conftest import CI_CONFIG, ROOT
 
@@ -51,10 +52,10 @@ def test_readme_quickstart_runs(capsys, monkeypatch):
 
 
 def test_records_are_the_pipelines(record):
-    # read_records = the pipeline's reader with the same names (hcid.measured.read_runs).
+    # read_records = the pipeline's reader with the same names (hcid.io.measured.read_runs).
     from hcid.config import DataConfig
     from hcid.config.parse import default_data
-    from hcid.measured import read_runs
+    from hcid.io.measured import read_runs
 
     data = DataConfig("data", {**default_data().columns, **COLUMNS}, (0.1,))
     runs, rate = read_runs(EXAMPLE, data, 25.0)
@@ -65,14 +66,14 @@ def test_records_are_the_pipelines(record):
 
 
 def test_identification_equals_the_engine_and_selection(record, direct):
-    # Source: methods.identify and selection.select_at, which the CLI's tables are made of.
+    # Source: methods.identify and over_w.select_at, which the CLI's tables are made of.
     found = methods.identify(record.signals, direct.settings, "direct", rate=25.0)
     assert direct.frontier.column("v").to_numpy().tolist() == found.fit.v.tolist()
     assert direct.frontier.num_rows == 448 and direct.nf == 960
     orders = np.column_stack([found.fit.na, found.fit.nb1, found.fit.nb2, found.fit.nk1, found.fit.nk2])
     for w in (0.0, direct.w_aic, direct.w_bic, 0.1, 0.5):
         model = direct.select(w)
-        row = int(selection.select_at(found.fit.d, found.fit.v, orders, np.array([w]))[0])
+        row = int(over_w.select_at(found.fit.d, found.fit.v, orders, np.array([w]))[0])
         assert model.orders == tuple(int(x) for x in orders[row])
         np.testing.assert_array_equal(model.a, found.fit.a[row])
     path = direct.selection_path()
@@ -101,7 +102,7 @@ def test_api_result_equals_the_cli_tables(tmp_path, ci_config):
     from typer.testing import CliRunner
 
     from hcid.cli import app
-    from hcid.results import records as read_records_table
+    from hcid.io.results import records as read_records_table
     from hcid.tables import SIMULATIONS
 
     run = tmp_path / "run"
@@ -120,10 +121,10 @@ def test_api_result_equals_the_cli_tables(tmp_path, ci_config):
 
 
 def test_fit_hc_through_the_api_equals_the_pipelines(record, direct):
-    # The same function (hcid.selected.fit_selected) as `hcid fit-hc`, with the config's band.
+    # The same function (hcid.analysis.selected.fit_selected) as `hcid fit-hc`, with the config's band.
+    from hcid.analysis.selected import fit_selected
     from hcid.hcfit import parse_fit_settings
-    from hcid.hcmodel import transfer_function
-    from hcid.selected import fit_selected
+    from hcid.loop.hcmodel import transfer_function
 
     model = direct.select(direct.w_bic)
     plant = hcid.Plant.second_order(2.75, 2.0)

@@ -1073,8 +1073,8 @@ def test_orders_above_the_vector_recursion_take_the_four_lane_path():
     top = _lanes.MAX_NA + 1
     grid = Grid(na=(top - 1, top), nb1=(0, 2), nb2=(1, 2), nk1=(0, 5), nk2=(1, 4))
     rows = (slice(40, 300), slice(300, n))
-    pruned, counts = _fit_grid(i1, i2, o, grid, *rows, 1, False, legacy=False, fused=False)
-    _assert_same_frontier(pruned, _legacy(i1, i2, o, grid, *rows))
+    pruned, counts = _fit_grid(i1, i2, o, grid, *rows, 1, False, unpruned=False, fused=False)
+    _assert_same_frontier(pruned, _unpruned(i1, i2, o, grid, *rows))
     assert counts[:, 1].sum() > 0
 
 
@@ -1100,8 +1100,8 @@ def _assert_close_candidates(fused: GridFit, old: GridFit, rtol: float):
     np.testing.assert_allclose(v[finite], v_old[finite], rtol=rtol, atol=0)
 
 
-def _legacy(*args, keep_candidates=False):
-    return _fit_grid(*args, 1, keep_candidates, legacy=True, fused=False)[0]
+def _unpruned(*args, keep_candidates=False):
+    return _fit_grid(*args, 1, keep_candidates, unpruned=True, fused=False)[0]
 
 
 @pytest.mark.parametrize("fused", [False, pytest.param(True, marks=needs_jit)])  # no JIT: never fused
@@ -1121,11 +1121,11 @@ def test_pruned_frontier_equals_the_old_kernel_on_random_records(seed, fused):
     # 24 delay pairs: more than one batch of lanes, so the later ones are pruned.
     grid = Grid(na=(1, na_hi), nb1=(0, nb1_hi), nb2=(0, nb2_hi), nk1=(0, 5), nk2=(1, 4))
     rows = (slice(20, 200), slice(int(rng.integers(150, 250)), n))
-    pruned, counts = _fit_grid(i1, i2, o, grid, *rows, 1, False, legacy=False, fused=fused)
+    pruned, counts = _fit_grid(i1, i2, o, grid, *rows, 1, False, unpruned=False, fused=fused)
     assert counts[:, 1].sum() > 0  # something was pruned
     assert counts[:, :2].sum() == pruned.n_candidates - pruned.n_unstable_total
     full = fit_grid(i1, i2, o, grid, *rows, keep_candidates=True, fused=fused)
-    old = _legacy(i1, i2, o, grid, *rows, keep_candidates=True)
+    old = _unpruned(i1, i2, o, grid, *rows, keep_candidates=True)
     _assert_same_frontier(pruned, old)
     _assert_same_frontier(full, old)
     if fused:
@@ -1160,27 +1160,27 @@ def test_affine_groups_give_the_old_kernels_frontier_on_random_records(seed, gri
     o = lfilter([0, 0, 0, 0, 0.4, 0.2], [1, -1.2, 0.5], i1) + lfilter([0, 0.3], [1, -0.6], i2)
     o += 0.3 * rng.standard_normal(n)
     rows = (slice(40, 250), slice(int(rng.integers(200, 300)), n))
-    pruned, counts = _fit_grid(i1, i2, o, grid, *rows, threads, False, legacy=False, fused=False)
-    old = _legacy(i1, i2, o, grid, *rows, keep_candidates=True)
+    pruned, counts = _fit_grid(i1, i2, o, grid, *rows, threads, False, unpruned=False, fused=False)
+    old = _unpruned(i1, i2, o, grid, *rows, keep_candidates=True)
     _assert_same_frontier(pruned, old)
     assert counts[:, 1].sum() > 0
     assert counts[:, :2].sum() == pruned.n_candidates - pruned.n_unstable_total
     full = fit_grid(i1, i2, o, grid, *rows, keep_candidates=True, fused=False)
     assert full.candidates.equals(old.candidates)
-    fused, _ = _fit_grid(i1, i2, o, grid, *rows, threads, False, legacy=False, fused=True)
+    fused, _ = _fit_grid(i1, i2, o, grid, *rows, threads, False, unpruned=False, fused=True)
     _assert_same_frontier(fused, old)
 
 
 @pytest.mark.parametrize("rows", [DIRECT_ROWS, STAGE1_ROWS])
-@pytest.mark.parametrize("legacy", [True, False])
-def test_frontier_v_is_its_candidates_unfused_v(paper_record, rows, legacy):
+@pytest.mark.parametrize("unpruned", [True, False])
+def test_frontier_v_is_its_candidates_unfused_v(paper_record, rows, unpruned):
     # The frontier's V is recomputed from its rows' outputs (mse_of_squares); unfused, it is
     # the V the search computed for that candidate, bit for bit, old kernel and lanes alike,
     # with separate windows and with one window for both (stage 1). na 13: the plain path.
     grid = Grid(na=(1, 13), nb1=(0, 3), nb2=(0, 2), nk1=(20, 23), nk2=(4, 6))
     if numba.config.DISABLE_JIT:  # as plain Python: fewer candidates, still both paths
         grid = Grid(na=(12, 13), nb1=(0, 1), nb2=(0, 1), nk1=(20, 21), nk2=(4, 5))
-    fit, _ = _fit_grid(*_direct(paper_record), grid, *rows, 1, True, legacy=legacy, fused=False)
+    fit, _ = _fit_grid(*_direct(paper_record), grid, *rows, 1, True, unpruned=unpruned, fused=False)
     c = fit.candidates
     names = ("na", "nb1", "nb2", "nk1", "nk2")
     where = {key: i for i, key in enumerate(zip(*(c[k].to_pylist() for k in names), strict=True))}
@@ -1415,17 +1415,21 @@ def test_tap_vectors_hold_every_eight_values(n):
 
 def test_pruned_frontier_with_two_threads(paper_record):
     grid = Grid(na=(1, 3), nb1=(0, 2), nb2=(0, 2), nk1=(20, 21), nk2=(4, 5))
-    one, counts1 = _fit_grid(*_direct(paper_record), grid, *DIRECT_ROWS, 1, False, legacy=False, fused=False)
-    two, counts2 = _fit_grid(*_direct(paper_record), grid, *DIRECT_ROWS, 2, False, legacy=False, fused=False)
+    one, counts1 = _fit_grid(
+        *_direct(paper_record), grid, *DIRECT_ROWS, 1, False, unpruned=False, fused=False
+    )
+    two, counts2 = _fit_grid(
+        *_direct(paper_record), grid, *DIRECT_ROWS, 2, False, unpruned=False, fused=False
+    )
     _assert_same_frontier(one, two)
     np.testing.assert_array_equal(counts1, counts2)  # each triple prunes alone
-    _assert_same_frontier(one, _legacy(*_direct(paper_record), grid, *DIRECT_ROWS))
+    _assert_same_frontier(one, _unpruned(*_direct(paper_record), grid, *DIRECT_ROWS))
 
 
 @pytest.fixture(scope="module")
 def direct_old(paper_record):
     """The old kernel on the paper direct grid, every candidate (about 3 s)."""
-    return _legacy(*_direct(paper_record), DIRECT_GRID, *DIRECT_ROWS, keep_candidates=True)
+    return _unpruned(*_direct(paper_record), DIRECT_GRID, *DIRECT_ROWS, keep_candidates=True)
 
 
 @needs_jit
@@ -1435,7 +1439,7 @@ def test_pruned_paper_frontiers_equal_the_old_kernel(paper_record, direct_old, f
     # on a paper record, and the unstable counts too, fused or not.
     pruned = fit_grid(*_direct(paper_record), DIRECT_GRID, *DIRECT_ROWS, fused=fused)
     _assert_same_frontier(pruned, direct_old)
-    old = _legacy(*_stage1(paper_record), STAGE1_GRID, *STAGE1_ROWS, keep_candidates=True)
+    old = _unpruned(*_stage1(paper_record), STAGE1_GRID, *STAGE1_ROWS, keep_candidates=True)
     pruned = fit_grid(*_stage1(paper_record), STAGE1_GRID, *STAGE1_ROWS, fused=fused)
     _assert_same_frontier(pruned, old)
 
@@ -1452,7 +1456,7 @@ def test_paper_candidates_keep_every_v_unfused_and_close_fused(
     assert unfused.candidates.equals(direct_old.candidates)
     _assert_same_frontier(direct_fit, direct_old)
     _assert_close_candidates(direct_fit, direct_old, rtol=1e-11)
-    old = _legacy(*_stage1(paper_record), STAGE1_GRID, *STAGE1_ROWS, keep_candidates=True)
+    old = _unpruned(*_stage1(paper_record), STAGE1_GRID, *STAGE1_ROWS, keep_candidates=True)
     unfused = fit_grid(*_stage1(paper_record), STAGE1_GRID, *STAGE1_ROWS, keep_candidates=True, fused=False)
     assert unfused.candidates.equals(old.candidates)
     _assert_same_frontier(stage1_fit, old)
@@ -1475,7 +1479,7 @@ def test_near_ties_are_simulated_again_unfused(paper_record, monkeypatch, thread
     monkeypatch.setattr(engine, "_TIE_RTOL", 1.0)
     again = fit_grid(*signals, grid, *DIRECT_ROWS, threads=threads, keep_candidates=True, fused=True)
     assert again.candidates.equals(unfused.candidates)
-    pruned, counts = _fit_grid(*signals, grid, *DIRECT_ROWS, threads, False, legacy=False, fused=True)
+    pruned, counts = _fit_grid(*signals, grid, *DIRECT_ROWS, threads, False, unpruned=False, fused=True)
     _assert_same_frontier(pruned, unfused)
     stable = pruned.n_candidates - pruned.n_unstable_total
     assert counts[:, :2].sum() == stable  # each triple counted once, from its last simulation

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from hcid.calibration import calibrate, clopper_pearson, sequential_p_value, sequential_settled
-from hcid.selection import SelectionPath
+from hcid.selection.calibration import calibrate, clopper_pearson, sequential_p_value, sequential_settled
+from hcid.selection.over_w import SelectionPath
 
 INF = np.inf
 
@@ -71,7 +71,7 @@ def test_clopper_pearson_against_the_exact_binomial_interval():
 
 
 def test_error_rates_count_realizations_exactly_with_exact_bands():
-    from hcid.calibration import error_rates
+    from hcid.selection.calibration import error_rates
 
     fb, ff = _twins()
     w = np.array([0.005, 0.01, 0.4])
@@ -93,7 +93,7 @@ def test_error_rates_count_realizations_exactly_with_exact_bands():
 def test_a_runs_p_value_and_power_follow_spec_11():
     # Source: SPEC 11's formulas. 19 FB twins with W* 0.01, 0.02, ..., 0.19: a run at W* 0.185 has
     # one FB twin at or above (0.19): p = (1 + 1) / 20 = 0.1; at 0.2, none: p = 1/20 = 0.05.
-    from hcid.calibration import evidence_p_value, evidence_power
+    from hcid.selection.calibration import evidence_p_value, evidence_power
 
     fb = np.arange(1, 20) / 100.0
     assert evidence_p_value(0.185, fb) == pytest.approx(0.1)
@@ -105,7 +105,7 @@ def test_a_runs_p_value_and_power_follow_spec_11():
 
 
 def test_the_threshold_is_the_selection_paths_last_feedforward_w_clipped_to_the_grid():
-    from hcid.calibration import feedforward_threshold
+    from hcid.selection.calibration import feedforward_threshold
 
     path = SelectionPath(
         np.array([0, 1, 2, 3]), np.array([0.0, 1e-3, 0.05, 0.3]), np.array([1e-3, 0.05, 0.3, np.inf])
@@ -118,7 +118,7 @@ def test_the_threshold_is_the_selection_paths_last_feedforward_w_clipped_to_the_
 
 def test_the_binomial_summary_and_the_false_discovery_rate():
     # Source: P(X >= 2) for X ~ Binomial(4, 0.05) = 1 - 0.95^4 - 4 * 0.05 * 0.95^3 = 0.014019.
-    from hcid.calibration import benjamini_hochberg, binomial_summary
+    from hcid.selection.calibration import benjamini_hochberg, binomial_summary
 
     k, n, p = binomial_summary(np.array([0.01, 0.5, 0.03, 0.9]), 0.05)
     assert (k, n) == (2, 4) and p == pytest.approx(1 - 0.95**4 - 4 * 0.05 * 0.95**3)

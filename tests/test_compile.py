@@ -1,7 +1,7 @@
-"""Compiling ahead (issue 28): ``compile_kernels`` compiles what a study's fits then run.
+"""Compiling ahead (issue 28): ``compile_before_fork`` compiles what a study's fits then run.
 
 Source of the expectation: a kernel compiled (or loaded) ahead is one numba need not compile
-again, so a fit after ``hcid.pipeline.parallel.compile_kernels`` adds no signature to any of the
+again, so a fit after ``hcid.pipeline.parallel.compile_before_fork`` adds no signature to any of the
 engine's kernels; if the ahead-of-time call used other argument types (a Python int for an
 int64 array, a C for an F layout), the fit would compile its own and this test fails.
 """
@@ -21,7 +21,7 @@ import numba
 import numpy as np
 from hcid.arx import _blocks, _kernels, _lanes, engine
 from hcid.arx.grid import Grid
-from hcid.pipeline.parallel import compile_kernels
+from hcid.pipeline.parallel import compile_before_fork
 
 
 def signatures():
@@ -33,7 +33,7 @@ def signatures():
     return out
 
 
-compile_kernels()
+compile_before_fork()
 before = signatures()
 rng = np.random.default_rng(1)
 i1, i2 = rng.standard_normal(600), rng.standard_normal(600)

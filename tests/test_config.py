@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from hcid.errors import ConfigError
-from hcid.resolve import load_config, parse_config
+from hcid.io.resolve import load_config, parse_config
 
 from .conftest import PAPER_CONFIG
 
@@ -168,8 +168,8 @@ def test_stability_check_agrees_with_simulation(paper_config):
     import numpy as np
 
     from hcid.config import Plant
-    from hcid.hcmodel import DiscreteLoop, closed_loop_poles
-    from hcid.simulate import simulate_loop
+    from hcid.loop.hcmodel import DiscreteLoop, closed_loop_poles
+    from hcid.loop.simulate import simulate_loop
 
     fb = paper_config.model("FB")
     for kc, grows in ((5.0, False), (8.0, True)):

@@ -5,10 +5,10 @@ import math
 import pytest
 from typer.testing import CliRunner
 
-from hcid import criteria
 from hcid.cli import app
 from hcid.errors import ConfigError
-from hcid.resolve import parse_config
+from hcid.io.resolve import parse_config
+from hcid.selection import criteria
 
 
 def test_spec_values_at_nf_960():

@@ -11,13 +11,13 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from hcid import datasets, tables
+from hcid import tables
 from hcid.cli import app
 from hcid.errors import DataError
-from hcid.measured import load_data
-from hcid.resolve import parse_config
+from hcid.io import datasets
+from hcid.io.resolve import parse_config
 
-from .conftest import CI_CONFIG
+from .conftest import CI_CONFIG, load_data
 from .test_measured import COLUMNS, EXAMPLE
 
 runner = CliRunner()
@@ -245,8 +245,6 @@ def test_a_matlab_struct_of_samples_x_trials_x_subjects(tmp_path):
     # struct per condition file with arrays samples x repeats x participants. Read back, every
     # run's signals equal the trial's, and its factors are its indices (1-based).
     import scipy.io
-
-    from hcid.measured import load_data
 
     config = parse_config(yaml.safe_load(_config(tmp_path, None, COLUMNS).read_text()), "lab")
     trials = load_data(EXAMPLE, config)

@@ -1,12 +1,13 @@
-"""Crossover frequency and phase margin (hcid.descriptors), against exact formulas and python-control."""
+"""Crossover frequency and phase margin (hcid.analysis.descriptors), against exact formulas and
+python-control."""
 
 import control
 import numpy as np
 import pytest
 
-from hcid.descriptors import loop_margins
+from hcid.analysis.descriptors import loop_margins
 from hcid.errors import IdentificationError
-from hcid.hcmodel import feedback_path, plant
+from hcid.loop.hcmodel import feedback_path, plant
 
 
 def _response(tf):

@@ -9,7 +9,7 @@ from typer.testing import CliRunner
 
 from hcid import hcfit, tables
 from hcid.cli import app
-from hcid.criteria import w_bic
+from hcid.selection.criteria import w_bic
 
 runner = CliRunner()
 

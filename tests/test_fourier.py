@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
+from hcid.analysis.fourier import fc_estimate, forcing_lines
 from hcid.errors import DataError
-from hcid.fourier import fc_estimate, forcing_lines
-from hcid.hcmodel import DiscreteLoop
-from hcid.resolve import load_config
-from hcid.simulate import remnant_gain, simulate_realization
+from hcid.io.resolve import load_config
+from hcid.loop.hcmodel import DiscreteLoop
+from hcid.loop.simulate import remnant_gain, simulate_realization
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +36,7 @@ def test_the_lines_are_the_multisines_frequencies(integrator):
 
 
 def test_noise_free_loop_gives_the_true_paths(integrator):
-    # Source: the discrete loop hcid.simulate runs (Tustin at 100 Hz, whole-sample delays; its
+    # Source: the discrete loop hcid.loop.simulate runs (Tustin at 100 Hz, whole-sample delays; its
     # response by DiscreteLoop.response), in periodic steady state and decimated by an FFT brick
     # wall, so every line is exact: He = U/E at the disturbance lines to 1e-6. At the target
     # lines Ht = (U - He_i E)/Ft differs from the true Hft by exactly (He - He_i) E/Ft, He_i the

@@ -9,8 +9,8 @@ import pytest
 from hcid import hcfit
 from hcid.errors import ConfigError, DataError, IdentificationError
 from hcid.hcfit.model import _tustin
-from hcid.hcmodel import PATH_METHOD, discretise, feedback_path, feedforward_path, plant, true_response
-from hcid.simulate import simulate_realization
+from hcid.loop.hcmodel import PATH_METHOD, discretise, feedback_path, feedforward_path, plant, true_response
+from hcid.loop.simulate import simulate_realization
 
 # SPEC section 1, paper Table 2 (w_nms, zeta_nms from the loop).
 TRUE_FF = {
@@ -49,7 +49,7 @@ def loop_plant(paper_config):
 
 @pytest.fixture(scope="module")
 def noise_free(paper_config):
-    """Noise-free closed-loop records (hcid.simulate, 100 Hz Tustin, decimated to 25 Hz)."""
+    """Noise-free closed-loop records (hcid.loop.simulate, 100 Hz Tustin, decimated to 25 Hz)."""
     return {
         name: simulate_realization(paper_config, paper_config.model(name), seed=1, kn=0.0)
         for name in ("FB", "FF")
@@ -65,7 +65,7 @@ def _record(r, u=None):
 
 @pytest.mark.parametrize("model_name", ["FF", "FB"])
 def test_frequency_fit_recovers_the_true_paths(paper_config, loop_plant, model_name):
-    # Source: the SPEC-1 paths from hcid.hcmodel.true_response (python-control,
+    # Source: the SPEC-1 paths from hcid.loop.hcmodel.true_response (python-control,
     # an independent evaluation) stand in for the ARX response on the band grid;
     # noise-free, so the brief's 1% / 5 ms must hold (measured: ~1e-15).
     model = paper_config.model(model_name)
@@ -91,7 +91,7 @@ def test_frequency_fit_validation_vaf_with_a_record(paper_config, loop_plant, no
 
 
 def test_hc_response_matches_hcmodel_true_response(paper_config, loop_plant):
-    # Source: hcid.hcmodel builds the same paths with python-control.
+    # Source: hcid.loop.hcmodel builds the same paths with python-control.
     omega = np.geomspace(0.1, 30.0, 40)
     hft, he = hcfit.hc_response(TRUE_FF, loop_plant, omega)
     hft_true, he_true = true_response(paper_config.model("FF"), paper_config.loop, omega)
@@ -144,7 +144,7 @@ def test_anticipation_is_recovered_by_both_targets(paper_config, loop_plant, noi
 
 
 def test_time_fit_recovers_the_closed_loop_simulation(loop_plant, noise_free):
-    # Source: the noise-free closed loop of hcid.simulate (100 Hz Tustin, whole-sample
+    # Source: the noise-free closed loop of hcid.loop.simulate (100 Hz Tustin, whole-sample
     # delays, FFT decimation), an implementation independent of simulate_hc. With the
     # default oversample = 4 the brief's 1% / 5 ms hold (measured: <= 0.06%, 0.4 ms;
     # at oversample = 1, w_nms comes out 1.3% high from Tustin warping at 25 Hz).
@@ -173,7 +173,7 @@ def test_simulated_path_matches_the_continuous_response(loop_plant):
 
 
 def test_tustin_equals_hcmodel_path_discretisation(paper_config):
-    # Source: hcid.hcmodel.discretise with PATH_METHOD (python-control's Tustin).
+    # Source: hcid.loop.hcmodel.discretise with PATH_METHOD (python-control's Tustin).
     model, loop = paper_config.model("FF"), paper_config.loop
     for path in (feedback_path(model, loop), feedforward_path(model, loop)):
         num = np.asarray(path.num[0][0], dtype=float)

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from hcid import hcfit
-from hcid.descriptors import fit_remnant
+from hcid.analysis.descriptors import fit_remnant
 from hcid.hcfit.uncertainty import covariance, jacobian
-from hcid.hcmodel import closed_loop_poles, plant
-from hcid.simulate import remnant_gain, simulate_realization
+from hcid.loop.hcmodel import closed_loop_poles, plant
+from hcid.loop.simulate import remnant_gain, simulate_realization
 from tests.test_hcfit import DELAYS, TRUE_FB, TRUE_FF
 
 ESTIMATION, VALIDATION = slice(128, 1088), slice(1088, 2048)
@@ -26,14 +26,14 @@ def _record(r, rate=25.0, estimation=ESTIMATION, validation=VALIDATION):
 
 @pytest.fixture(scope="module")
 def fine_noise_free(paper_config):
-    """Noise-free closed loops of hcid.simulate at 400 Hz (Tustin, whole-sample delays), 25 Hz out."""
+    """Noise-free closed loops of hcid.loop.simulate at 400 Hz (Tustin, whole-sample delays), 25 Hz out."""
     config = _fine(paper_config)
     return {m: simulate_realization(config, config.model(m), seed=1, kn=0.0) for m in ("FB", "FF")}
 
 
 @pytest.mark.parametrize("model_name", ["FF", "FB"])
 def test_closed_loop_fit_recovers_the_noise_free_loop(paper_config, fine_noise_free, model_name):
-    # Source: hcid.simulate's closed loop (an implementation independent of the estimator's DFT
+    # Source: hcid.loop.simulate's closed loop (an implementation independent of the estimator's DFT
     # solution) at 400 Hz, where Tustin's warping is below 0.01% in the band. The issue's bar:
     # every parameter to 0.1%, delays to 1 ms (measured: <= 0.005%, 1e-5 s). At the simulator's
     # usual 100 Hz the generator itself is off by its warping (w_nms -0.07%, zeta_nms -0.1%).
@@ -53,8 +53,8 @@ def test_closed_loop_fit_recovers_the_noise_free_loop(paper_config, fine_noise_f
 
 def test_closed_loop_fit_with_an_input_disturbance_and_an_integrator(ci_config):
     # SPEC 7: the integrator example's experiment (Yc = 1.5/s, fd at the plant's input,
-    # multisine target, 20 Hz analysis rate). Source: hcid.simulate at 400 Hz, no remnant.
-    from hcid.resolve import load_config
+    # multisine target, 20 Hz analysis rate). Source: hcid.loop.simulate at 400 Hz, no remnant.
+    from hcid.io.resolve import load_config
 
     config = _fine(load_config("configs/integrator_example.yaml"))
     model = config.model("FF")
@@ -78,7 +78,7 @@ def test_closed_loop_fit_with_an_input_disturbance_and_an_integrator(ci_config):
 
 
 def test_closed_loop_u_is_the_simulated_loop(paper_config, fine_noise_free):
-    # Source: hcid.simulate's u (400 Hz Tustin) against the DFT solution with the true values:
+    # Source: hcid.loop.simulate's u (400 Hz Tustin) against the DFT solution with the true values:
     # equal to 1e-3 of u's RMS (the generator's discretisation).
     r = fine_noise_free["FF"]
     u = hcfit.closed_loop_u(TRUE_FF, plant(paper_config.loop), _record(r))
@@ -88,7 +88,7 @@ def test_closed_loop_u_is_the_simulated_loop(paper_config, fine_noise_free):
 @pytest.mark.parametrize("kpe", [0.3, 0.75, 1.5, 2.5, 4.0, 8.0])
 @pytest.mark.parametrize("tau", [0.1, 0.24, 0.5])
 def test_stability_check_agrees_with_the_discretised_loop(paper_config, kpe, tau):
-    # Source: hcid.hcmodel.closed_loop_poles, the poles of the loop discretised at 1 kHz with
+    # Source: hcid.loop.hcmodel.closed_loop_poles, the poles of the loop discretised at 1 kHz with
     # its delay as whole samples (no Pade): stable exactly when every pole is inside |z| = 1.
     from hcid.config.types import HCModel
 
@@ -173,7 +173,7 @@ def test_parameters_the_residuals_cannot_tell_apart_get_an_infinite_se():
 def test_the_frequency_target_gives_no_standard_errors(paper_config):
     # Its residuals are the ARX model's approximation error on a grid of our choosing: a
     # covariance from them would shrink as the grid grows (0.0035, 0.0017, 0.0009 at 50, 200, 800).
-    from hcid.hcmodel import true_response
+    from hcid.loop.hcmodel import true_response
 
     omega = hcfit.band_grid((0.23, 17.33))
     hft, he = true_response(paper_config.model("FF"), paper_config.loop, omega)
@@ -207,7 +207,7 @@ def test_a_fit_reports_standard_errors_and_intervals(paper_config, fine_noise_fr
 
 
 def test_remnant_filter_is_recovered_from_a_simulated_remnant(paper_config):
-    # Source: SPEC 1's remnant, n = Kn Yn w with w white of unit variance at 100 Hz (hcid.simulate),
+    # Source: SPEC 1's remnant, n = Kn Yn w with w white of unit variance at 100 Hz (hcid.loop.simulate),
     # Kn from remnant_gain; the fit reads only n at 25 Hz. Over 10 realizations the mean estimates
     # lie within 3% (Kn, w_n) and 8% (zeta_n) of the truth (measured -0.4%, -0.04%, -1.9% over 20).
     kn = remnant_gain(paper_config)

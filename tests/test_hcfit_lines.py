@@ -16,8 +16,8 @@ import pytest
 from scipy import stats
 
 from hcid import hcfit
+from hcid.analysis.fourier import fc_estimate
 from hcid.errors import DataError
-from hcid.fourier import fc_estimate
 from hcid.hcfit.consistency import consistency, group_consistency, line_test
 from hcid.hcfit.determined import (
     DETERMINED,

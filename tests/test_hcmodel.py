@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
-from hcid.hcmodel import DiscreteLoop, feedback_path, feedforward_path, plant, true_response
+from hcid.loop.hcmodel import DiscreteLoop, feedback_path, feedforward_path, plant, true_response
 
 W = np.geomspace(0.1, 30.0, 60)
 

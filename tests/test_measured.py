@@ -15,10 +15,9 @@ from typer.testing import CliRunner
 
 from hcid.cli import app
 from hcid.errors import ConfigError, DataError
-from hcid.measured import load_data
-from hcid.resolve import parse_config
+from hcid.io.resolve import parse_config
 
-from .conftest import CI_CONFIG, ROOT
+from .conftest import CI_CONFIG, ROOT, load_data
 
 runner = CliRunner()
 EXAMPLE = ROOT / "configs" / "example_data" / "subject_synthetic.csv"
@@ -423,7 +422,7 @@ def test_resampling_keeps_a_slow_sine_and_removes_a_fast_one():
     # frequency 10 Hz) keeps its amplitude to 0.1% and its phase to 0.1 deg away from the
     # record's ends (the filter spans 10 max(up, down) = 30 input samples, 0.5 s); one at 15 Hz,
     # above the new Nyquist frequency, is removed (left below 0.1% of its amplitude).
-    from hcid.measured import resample, resampling_factors
+    from hcid.io.measured import resample, resampling_factors
 
     up, down = resampling_factors(60.0, 20.0)
     t = np.arange(0, 45.0, 1 / 60)
@@ -444,7 +443,7 @@ def test_resampling_keeps_a_slow_sine_and_removes_a_fast_one():
     [((60.0, 20.0), (1, 3)), ((60.0, 25.0), (5, 12)), ((59.94, 20.0), None), ((1000.0, 3.0), None)],
 )
 def test_resampling_ratios(rates, ok):
-    from hcid.measured import resampling_factors
+    from hcid.io.measured import resampling_factors
 
     if ok is not None:
         assert resampling_factors(*rates) == ok
@@ -520,7 +519,7 @@ def test_the_files_run_ids_are_kept(tmp_path, data_config, example_table):
     assert list(records) == [11, 12, 13]
     expected = load_data(EXAMPLE, data_config)
     np.testing.assert_array_equal(records[13]["u"], expected[1]["u"])  # file order: 13 holds trial 1
-    from hcid.measured import records_table
+    from hcid.io.measured import records_table
 
     assert sorted(set(records_table("s", records).column("seed").to_pylist())) == [11, 12, 13]
 
@@ -547,7 +546,7 @@ def test_byte_order_mark_before_comment_lines(tmp_path, data_config):
 def test_comment_lines_across_read_blocks(tmp_path, monkeypatch, data_config):
     # The comment filter reads block by block: lines cut by a block edge and comment lines
     # in the middle of the data give the same records as the plain file.
-    from hcid import formats
+    from hcid.io import formats
 
     monkeypatch.setattr(formats, "_BLOCK", 97)
     lines = EXAMPLE.read_bytes().splitlines(keepends=True)
@@ -561,7 +560,7 @@ def test_comment_lines_across_read_blocks(tmp_path, monkeypatch, data_config):
 def test_a_file_above_the_size_limit_is_refused_before_reading(tmp_path, monkeypatch, data_config):
     # The limit is checked with stat(): a sparse file of 2 GiB is refused without reading a byte
     # (before: read whole, 17-22 s and 4.5 GB). MAX_FILE_BYTES is lowered here to test the edge.
-    from hcid import formats
+    from hcid.io import formats
 
     path = tmp_path / "big.csv"
     with open(path, "wb") as f:
@@ -608,7 +607,7 @@ def test_lead_in_longer_than_the_record(tmp_path, data_config):
 
 def test_read_signal_needs_the_run_column_for_a_run(tmp_path):
     # Before: run 2 of a file without a run column silently gave the whole column (run 1's signal).
-    from hcid.measured import read_signal
+    from hcid.io.measured import read_signal
 
     path = tmp_path / "f.csv"
     pacsv.write_csv(pa.table({"fd": np.sin(np.arange(100.0))}), path)
@@ -625,7 +624,7 @@ def test_read_signal_needs_the_run_column_for_a_run(tmp_path):
 
 def test_every_signal_from_a_file_passes_the_same_check(tmp_path):
     # One bound for data columns and forcing functions (measured.LARGEST).
-    from hcid.measured import LARGEST, check_signal, read_signal
+    from hcid.io.measured import LARGEST, check_signal, read_signal
 
     path = tmp_path / "f.csv"
     pacsv.write_csv(pa.table({"fd": [0.0, 2 * LARGEST, 1.0]}), path)
@@ -650,7 +649,7 @@ def test_csv_line_layouts(tmp_path, data_config, layout):
 
 def test_a_forcing_file_of_several_runs_needs_its_run(tmp_path):
     # Review: without run:, a file of several trials was read as one signal, the trials end to end.
-    from hcid.measured import read_signal
+    from hcid.io.measured import read_signal
 
     path = tmp_path / "f.csv"
     pacsv.write_csv(pa.table({"fd": np.arange(6.0), "run": [1, 1, 2, 2, 3, 3]}), path)

@@ -9,10 +9,12 @@ import pytest
 import yaml
 from scipy import signal as sps
 
-from hcid import methods, selection
+from hcid import methods
 from hcid.errors import IdentificationError
+from hcid.io.resolve import parse_config
 from hcid.methods import Method, StageSpec, identify, registered, shift_forward
-from hcid.resolve import parse_config
+from hcid.pipeline import Execution
+from hcid.selection import over_w
 
 from .conftest import CI_CONFIG
 
@@ -57,7 +59,7 @@ def test_noise_free_system_is_selected_exactly(record, settings, method, w):
     result = identify(record, settings, method, rate=25.0)
     fit = result.fit
     orders = np.column_stack([fit.na, fit.nb1, fit.nb2, fit.nk1, fit.nk2])
-    row = selection.select_at(fit.d, fit.v, orders, np.array([w]))[0]
+    row = over_w.select_at(fit.d, fit.v, orders, np.array([w]))[0]
     assert tuple(orders[row]) == (2, 2, 3, NK21, NK22)
     np.testing.assert_allclose(fit.a[row], A2, atol=1e-9)
     np.testing.assert_allclose(fit.b1[row], B21, atol=1e-9)
@@ -108,7 +110,7 @@ def test_nearly_noise_free_system_is_selected_at_small_w(record, settings, metho
     noisy = dict(record, u=record["u"] + 1e-6 * np.std(record["u"]) * rng.standard_normal(2048))
     fit = identify(noisy, settings, method, rate=25.0).fit
     orders = np.column_stack([fit.na, fit.nb1, fit.nb2, fit.nk1, fit.nk2])
-    row = selection.select_at(fit.d, fit.v, orders, np.array([w]))[0]
+    row = over_w.select_at(fit.d, fit.v, orders, np.array([w]))[0]
     assert tuple(orders[row]) == (2, 2, 3, NK21, NK22)
     np.testing.assert_allclose(fit.a[row], A2, atol=1e-5)
     np.testing.assert_allclose(fit.b2[row], B22, atol=1e-5)
@@ -159,7 +161,7 @@ def test_a_registered_method_flows_through_to_the_selection_tables(ci_raw, tmp_p
         cfg = parse_config(ci_raw, "toy")
         assert cfg.identify.stage("toy").estimation.length == 888
         run = tmp_path / "toy"
-        identify_study(cfg, run, ("toy",), jobs=1, show_progress=False)
+        identify_study(cfg, run, ("toy",), execution=Execution(1, progress=False))
         sweep = sweep_study(cfg, run)
     selection = pq.read_table(run / "selection.parquet")
     assert set(selection.column("method").to_pylist()) == {"toy"}
@@ -179,7 +181,7 @@ def test_nf_follows_each_methods_own_final_stage(ci_raw, tmp_path):
     ci_raw["identify"]["stage2"]["estimation"] = [201, 1088]
     cfg = parse_config(ci_raw, "nf")
     run = tmp_path / "nf"
-    result = run_study(cfg, run, jobs=1, show_progress=False)
+    result = run_study(cfg, run, execution=Execution(1, progress=False))
     th = {(r["method"], r["model"]): r for r in result.sweep.thresholds.to_pylist()}
     assert th[("direct", "FB")]["nf"] == 960 and th[("indirect", "FB")]["nf"] == 888
     assert th[("indirect", "FF")]["w_bic"] == pytest.approx(np.log(888) / 888, rel=1e-12)
@@ -268,7 +270,7 @@ def test_a_stage1_variant_on_the_ci_config_flows_to_its_tables_and_report(ci_raw
 
     cfg = _with_stage1(ci_raw, rows="zero_initial", model="fixed", fixed_orders=[4, 2, 2, 6, 6])
     run = tmp_path / "variant"
-    identify_study(cfg, run, ("indirect",), jobs=1, show_progress=False)
+    identify_study(cfg, run, ("indirect",), execution=Execution(1, progress=False))
     sweep_study(cfg, run)
     stage1 = pq.read_table(run / "stage1.parquet").to_pylist()
     assert {(r["na"], r["nb_ft"], r["nb_fd"], r["nk_ft"], r["nk_fd"]) for r in stage1} == {(4, 2, 2, 6, 6)}

@@ -16,7 +16,7 @@ import yaml
 
 from hcid import pipeline
 from hcid.errors import HcidError
-from hcid.pipeline import parallel, rundir
+from hcid.pipeline import Execution, parallel, rundir
 
 from .conftest import CI_CONFIG
 
@@ -55,7 +55,7 @@ def test_local_pool_gives_the_in_process_tables(fork, tmp_path, monkeypatch, ci_
     for jobs in (1, 2):
         started = _forking(monkeypatch, fork)
         runs[jobs] = tmp_path / f"jobs{jobs}"
-        pipeline.run_study(ci_config, runs[jobs], jobs=jobs, show_progress=False)
+        pipeline.run_study(ci_config, runs[jobs], execution=Execution(jobs, progress=False))
         assert len(started) == (2 if fork and jobs == 2 else 0)  # simulate and identify
     for name in ("simulations", "frontier", "stage1", "selection", "thresholds"):
         assert (runs[1] / f"{name}.parquet").read_bytes() == (runs[2] / f"{name}.parquet").read_bytes()

@@ -10,10 +10,13 @@ import pytest
 
 from hcid import tables
 from hcid.hcfit.determined import is_undetermined
-from hcid.pipeline.analyse import analyse_study
-from hcid.resolve import load_config
+from hcid.io.resolve import load_config
+from hcid.pipeline import Execution
+from hcid.pipeline.analyse import AnalysisOptions, analyse_study
 
 from .conftest import ROOT
+
+QUIET = Execution(2, progress=False)
 
 DATA = ROOT.parent / "shared" / "data" / "cphs2017"
 
@@ -25,8 +28,8 @@ def analysed(request, tmp_path_factory):
     plant = request.param
     config = load_config(ROOT / "configs" / f"cphs2017_{plant}.yaml")
     run = tmp_path_factory.mktemp(f"cphs_{plant}") / "run"
-    result = analyse_study(config, run, [str(DATA / f"*_{plant}_*.csv")], by=["trial"], twins=2,
-                           jobs=2, show_progress=False)  # fmt: skip
+    options = AnalysisOptions(by=("trial",), twins=2)
+    result = analyse_study(config, run, [str(DATA / f"*_{plant}_*.csv")], options, execution=QUIET)
     return plant, result
 
 
@@ -78,8 +81,8 @@ def test_by_plant_puts_both_signs_in_one_group_with_a_forcing_set_each(tmp_path)
     # every run a p-value (1 + k) / (1 + N) with N its set's FB twins (SPEC 11; 4 at most, so that
     # no run reaches the 5 at or above that would stop it early).
     config = load_config(ROOT / "configs" / "cphs2017_fo.yaml")
-    result = analyse_study(config, tmp_path / "run", [str(DATA / "*_fo_*.csv")], by=["plant"], twins=4,
-                           max_fb_twins=4, jobs=2, show_progress=False)  # fmt: skip
+    options = AnalysisOptions(by=("plant",), twins=4, max_fb_twins=4)
+    result = analyse_study(config, tmp_path / "run", [str(DATA / "*_fo_*.csv")], options, execution=QUIET)
     assert set(result.groups.column("forcing_sets").to_pylist()) == {2}
     rows = result.runs.to_pylist()
     assert {r["forcing_set"] for r in rows if r["trial"] == "+1"} == {1}

@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 from hcid import pipeline, tables
 from hcid.cli import app
-from hcid.pipeline import studies
+from hcid.pipeline import Execution, studies
 
 from . import naive
 from .conftest import CI_CONFIG, interrupt_after
@@ -117,11 +117,11 @@ def test_resume_after_interruption_gives_identical_tables(ci_runs, tmp_path, mon
         shutil.copy(ci_runs[1] / name, run / name)
     real = interrupt_after(monkeypatch, studies, "_identify_task", 5)
     with pytest.raises(KeyboardInterrupt):
-        pipeline.identify_study(ci_config, run, jobs=1, show_progress=False)
+        pipeline.identify_study(ci_config, run, execution=Execution(1, progress=False))
     assert not (run / "frontier.parquet").exists()
     assert len(list((run / ".parts").glob("*/*.frontier.arrow"))) == 5
     monkeypatch.setattr(studies, "_identify_task", real)
-    resumed = pipeline.identify_study(ci_config, run, jobs=1, show_progress=False)
+    resumed = pipeline.identify_study(ci_config, run, execution=Execution(1, progress=False))
     assert (resumed.computed, resumed.reused) == (7, 5)
     for name in ("frontier.parquet", "stage1.parquet"):
         assert (run / name).read_bytes() == (ci_runs[1] / name).read_bytes()
@@ -133,7 +133,7 @@ def test_done_realizations_are_not_recomputed(ci_runs, ci_config, monkeypatch):
         raise AssertionError("recomputed a finished realization")
 
     monkeypatch.setattr(studies, "_identify_task", fail)
-    again = pipeline.identify_study(ci_config, ci_runs[2], jobs=1, show_progress=False)
+    again = pipeline.identify_study(ci_config, ci_runs[2], execution=Execution(1, progress=False))
     assert again.computed == 0
 
 

@@ -256,7 +256,9 @@ def _fb_thresholds(extents_by_method: dict, n_study: int = 50):
     """thresholds rows as sweep-w writes them, from given per-realization L of FB."""
     import pyarrow as pa
 
-    from hcid import paper, selection, tables
+    from hcid import tables
+    from hcid.config import paper
+    from hcid.selection import over_w
 
     rows = []
     for method, extents in extents_by_method.items():
@@ -269,7 +271,7 @@ def _fb_thresholds(extents_by_method: dict, n_study: int = 50):
                 "nf": 960,
                 "w_fp": float(max(extents)),
                 "w_fn": None,
-                "p_w_fp_at_paper": selection.threshold_exceedance(extents, paper.W_FP[method], n_study),
+                "p_w_fp_at_paper": over_w.threshold_exceedance(extents, paper.W_FP[method], n_study),
             }
         )
     return pa.Table.from_pylist(rows, schema=tables.thresholds().arrow)
@@ -336,7 +338,7 @@ def test_w_fn_verdict_by_the_bootstrap_interval(ci_config):
 
 def test_report_out_follows_the_run_directory_rules(ci_run, tmp_path):
     # Before: --out wrote into any folder, replacing a user's report.md; --out / wrote 11 files
-    # into /. Now: new, empty or hcid's own report folder only (hcid.folders).
+    # into /. Now: new, empty or hcid's own report folder only (hcid.io.folders).
     mine = tmp_path / "mine"
     mine.mkdir()
     (mine / "report.md").write_text("my own notes\n")

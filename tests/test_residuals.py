@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from hcid.analysis.residuals import RESIDUAL, analyse_residuals
 from hcid.errors import DataError, IdentificationError
-from hcid.residuals import RESIDUAL, analyse_residuals
 
 
 def _slow_correlation(eps, x, lag):

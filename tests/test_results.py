@@ -5,8 +5,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from hcid import results, tables
+from hcid import tables
 from hcid.errors import DataError
+from hcid.io import results
 
 
 def _log_row(**overrides):

@@ -14,9 +14,9 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from hcid import folders, results
 from hcid.cli import app
 from hcid.errors import DataError
+from hcid.io import folders, results
 from hcid.pipeline import rundir
 
 runner = CliRunner()
@@ -230,7 +230,7 @@ def test_a_refused_command_leaves_the_lock_file_as_it_was(small_run, tmp_path):
 
 def test_hcid_never_replaces_a_file_it_did_not_write(tmp_path):
     # In an hcid folder a file of hcid's name that its manifest does not list is the user's.
-    from hcid.folders import claim
+    from hcid.io.folders import claim
 
     folder = tmp_path / "out"
     claim(folder, ["t.parquet"])
@@ -252,7 +252,7 @@ def test_a_folder_with_only_a_users_config_is_not_adopted(tmp_path):
 
 
 def test_a_foreign_mark_is_not_hcids(tmp_path):
-    from hcid.folders import claim
+    from hcid.io.folders import claim
 
     folder = tmp_path / "other"
     folder.mkdir()
@@ -265,7 +265,7 @@ def test_a_foreign_mark_is_not_hcids(tmp_path):
 def test_a_file_is_listed_before_it_appears(tmp_path, monkeypatch):
     # A kill between the rename and the listing would leave a file hcid then refuses to
     # replace; it is listed first, so an interrupted write leaves at most a listed absent file.
-    from hcid import folders
+    from hcid.io import folders
 
     folder = tmp_path / "out"
     folders.claim(folder, [])
@@ -289,7 +289,7 @@ def test_a_file_is_listed_before_it_appears(tmp_path, monkeypatch):
 def test_the_record_keeps_earlier_stages_only_beside_their_results(small_run, tmp_path):
     # config.yaml holds the stages of the methods whose results the directory holds: after a
     # --force removed the tables, a command resolved for one method records that method only.
-    from hcid.resolve import load_config
+    from hcid.io.resolve import load_config
 
     config, run = _copy(small_run, tmp_path)
     direct_only = load_config(config, ("direct",))

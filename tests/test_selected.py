@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from hcid import methods
+from hcid.analysis.residuals import RESIDUAL
+from hcid.analysis.selected import SelectedModel, analyse_selected, true_parameters
 from hcid.arx.simulation import simulate
 from hcid.config import Window
-from hcid.residuals import RESIDUAL
-from hcid.selected import SelectedModel, analyse_selected, true_parameters
 
 FAST = {"starts": 1, "popsize": 4, "maxiter": 8}
 
@@ -54,7 +54,7 @@ def test_residual_of_the_true_output_error_model_is_the_added_noise(fast_config,
     sel = _selected(a, b_ft, b_e, nk_ft, nk_e)
     result = analyse_selected(sel, r, fast_config, methods.get("direct"))
     validation = fast_config.identify.stage("direct").validation.rows()
-    from hcid.residuals import analyse_residuals
+    from hcid.analysis.residuals import analyse_residuals
 
     expected = analyse_residuals(w, {"ft_s": r["ft_s"], "e": r["e"]}, validation, 25, rate=25.0)
     for got, want in zip(result.residuals.correlations, expected.correlations, strict=True):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hcid import criteria, selection
+from hcid.selection import criteria, over_w
 
 from . import naive
 
@@ -23,7 +23,7 @@ def test_selection_equals_brute_force(seed):
     rng = np.random.default_rng(seed)
     d, v, orders = _random_frontier(rng)
     w = np.geomspace(1e-4, 10, 400)
-    got = selection.select_at(d, v, orders, w)
+    got = over_w.select_at(d, v, orders, w)
     expected = [naive.select_brute_force(d, v, orders, x) for x in w]
     np.testing.assert_array_equal(got, expected)
 
@@ -34,7 +34,7 @@ def test_breakpoints_agree_with_fine_grid(seed):
     # breakpoint, and every breakpoint by a change.
     rng = np.random.default_rng(100 + seed)
     d, v, orders = _random_frontier(rng)
-    seg = selection.breakpoints(d, v, orders)
+    seg = over_w.breakpoints(d, v, orders)
     w = np.geomspace(1e-5, 50, 5000)
     brute = np.array([naive.select_brute_force(d, v, orders, x) for x in w])
     changes = np.flatnonzero(brute[1:] != brute[:-1])
@@ -50,8 +50,8 @@ def test_ties_go_to_smaller_d_then_orders():
     v = np.exp(np.array([-1.0, -1.0 - 0.5, -1.0]))  # row 1 ties row 0 at W = 0.5
     orders = np.array([[2, 0, 0, 0, 0], [1, 1, 0, 3, 0], [1, 0, 1, 0, 2]])
     assert naive.select_brute_force(d, v, orders, 0.5) == 2
-    assert selection.select_at(d, v, orders, np.array([0.5]))[0] == 2
-    assert selection.select_at(d, v, orders, np.array([0.49]))[0] == 1
+    assert over_w.select_at(d, v, orders, np.array([0.5]))[0] == 2
+    assert over_w.select_at(d, v, orders, np.array([0.49]))[0] == 1
 
 
 def test_aic_bic_penalties():
@@ -62,21 +62,21 @@ def test_aic_bic_penalties():
 
 def test_false_positive_threshold_is_last_positive_interval_end():
     # Two realizations: nb_ft > 0 selected below W = 0.02 and below W = 0.05.
-    seg_a = selection.SelectionPath(np.array([0, 1]), np.array([0.0, 0.02]), np.array([0.02, np.inf]))
-    seg_b = selection.SelectionPath(
+    seg_a = over_w.SelectionPath(np.array([0, 1]), np.array([0.0, 0.02]), np.array([0.02, np.inf]))
+    seg_b = over_w.SelectionPath(
         np.array([0, 1, 2]), np.array([0.0, 0.01, 0.05]), np.array([0.01, 0.05, np.inf])
     )
     nb = np.array([3, 2, 0])
     nb_a = np.array([3, 0])
-    assert selection.false_positive_threshold([seg_a, seg_b], [nb_a, nb]) == 0.05
+    assert over_w.false_positive_threshold([seg_a, seg_b], [nb_a, nb]) == 0.05
 
 
 def test_false_negative_threshold_is_first_mean_below_two():
     # Means of nb_ft: (4+3)/2 below 0.1, (1+3)/2 = 2 from 0.1, (1+0)/2 from 0.3.
-    seg_a = selection.SelectionPath(np.array([0, 1]), np.array([0.0, 0.1]), np.array([0.1, np.inf]))
-    seg_b = selection.SelectionPath(np.array([0, 1]), np.array([0.0, 0.3]), np.array([0.3, np.inf]))
+    seg_a = over_w.SelectionPath(np.array([0, 1]), np.array([0.0, 0.1]), np.array([0.1, np.inf]))
+    seg_b = over_w.SelectionPath(np.array([0, 1]), np.array([0.0, 0.3]), np.array([0.3, np.inf]))
     nb_a, nb_b = np.array([4, 1]), np.array([3, 0])
-    assert selection.false_negative_threshold([seg_a, seg_b], [nb_a, nb_b]) == 0.3
+    assert over_w.false_negative_threshold([seg_a, seg_b], [nb_a, nb_b]) == 0.3
 
 
 # --------------------------------------------------------------------------- sampling (SPEC 9)
@@ -85,34 +85,32 @@ def test_false_negative_threshold_is_first_mean_below_two():
 def _realization(w_from, nb):
     """One realization selecting rows 0, 1, ... on [w_from[i], w_from[i+1]), with those nb_ft."""
     w_from = np.asarray(w_from, dtype=float)
-    return selection.SelectionPath(np.arange(w_from.size), w_from, np.append(w_from[1:], np.inf)), np.asarray(
-        nb
-    )
+    return over_w.SelectionPath(np.arange(w_from.size), w_from, np.append(w_from[1:], np.inf)), np.asarray(nb)
 
 
 def test_false_positive_extent_is_the_end_of_the_last_positive_interval():
     # Positive on [0, 0.01) and again on [0.02, 0.05): L = 0.05; never positive: L = 0; W_FP = max L.
     a = _realization([0.0, 0.01, 0.02, 0.05], [2, 0, 1, 0])
     b = _realization([0.0], [0])
-    assert selection.false_positive_extent(*a) == 0.05
-    assert selection.false_positive_extent(*b) == 0.0
-    assert selection.false_positive_threshold([a[0], b[0]], [a[1], b[1]]) == 0.05
+    assert over_w.false_positive_extent(*a) == 0.05
+    assert over_w.false_positive_extent(*b) == 0.0
+    assert over_w.false_positive_threshold([a[0], b[0]], [a[1], b[1]]) == 0.05
 
 
 def test_threshold_exceedance_is_one_minus_the_chance_that_no_realization_reaches_w():
     # 200 realizations, 2 with L >= 0.037: q = 0.01, so a study of 50 has W_FP >= 0.037 with
     # probability 1 - 0.99^50 = 0.39499 (exact formula); none with L >= 0.1: probability 0.
     extents = np.concatenate([np.full(198, 0.008), [0.04, 0.05]])
-    assert selection.threshold_exceedance(extents, 0.037, 50) == pytest.approx(1 - 0.99**50, rel=1e-12)
-    assert selection.threshold_exceedance(extents, 0.1, 50) == 0.0
+    assert over_w.threshold_exceedance(extents, 0.037, 50) == pytest.approx(1 - 0.99**50, rel=1e-12)
+    assert over_w.threshold_exceedance(extents, 0.1, 50) == 0.0
     # at or above: L equal to w counts (W_FP is the supremum of the false-positive W)
-    assert selection.threshold_exceedance(extents, 0.05, 1) == pytest.approx(1 / 200)
+    assert over_w.threshold_exceedance(extents, 0.05, 1) == pytest.approx(1 / 200)
 
 
 def test_false_negative_bootstrap_is_degenerate_for_identical_realizations_and_seeded():
     # Every realization drops from nb_ft 2 to 0 at W = 0.3: every resample has W_FN = 0.3.
     same = [_realization([0.0, 0.3], [2, 0]) for _ in range(10)]
-    boot = selection.false_negative_bootstrap([s for s, _ in same], [nb for _, nb in same])
+    boot = over_w.false_negative_bootstrap([s for s, _ in same], [nb for _, nb in same])
     assert (boot.low, boot.high) == (0.3, 0.3)
     assert boot.share_at_or_above(0.26) == 1.0 and boot.share_at_or_above(0.31) == 0.0
     # Half drop at 0.1, half at 0.5 (nb_ft 3 -> 0): the mean drops below 2 where the resample's
@@ -121,8 +119,8 @@ def test_false_negative_bootstrap_is_degenerate_for_identical_realizations_and_s
         _realization([0.0, 0.5], [3, 0]) for _ in range(20)
     ]
     segs, nbs = [s for s, _ in mixed], [nb for _, nb in mixed]
-    one = selection.false_negative_bootstrap(segs, nbs, seed=3)
-    two = selection.false_negative_bootstrap(segs, nbs, seed=3)
+    one = over_w.false_negative_bootstrap(segs, nbs, seed=3)
+    two = over_w.false_negative_bootstrap(segs, nbs, seed=3)
     assert set(np.unique(one.values)) <= {0.1, 0.5}
     np.testing.assert_array_equal(one.values, two.values)
-    assert selection.false_negative_threshold(segs, nbs) == 0.1  # mean 1.5 from W = 0.1 on
+    assert over_w.false_negative_threshold(segs, nbs) == 0.1  # mean 1.5 from W = 0.1 on

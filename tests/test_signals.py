@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hcid import signals
+from hcid.loop import signals
 
 
 def _window(config):
@@ -109,7 +109,7 @@ def test_file_signal_repeats_its_window_at_the_simulation_rate(tmp_path):
     # 'file' forcing function must equal the formula at 100 Hz over every period, run-in included
     # (FFT resampling is exact for a periodic band-limited signal).
     from hcid.config import FileSignal, Multisine, Timing
-    from hcid.measured import read_signal
+    from hcid.io.measured import read_signal
 
     ms = Multisine(
         base_period=20.0, time_offset=0.0, k=(1, 3, 7), amplitude=(0.1, 0.05, 0.02), phase=(0, 1, 2)
@@ -133,7 +133,7 @@ def test_forcing_functions_from_the_example_data_file():
     # them): calibrate-w can simulate with the measured file's own forcing functions.
     import dataclasses
 
-    from hcid.resolve import load_config, parse_config, read_yaml
+    from hcid.io.resolve import load_config, parse_config, read_yaml
 
     from .conftest import ROOT
 

@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hcid.hcmodel import plant, true_response
-from hcid.simulate import decimate, remnant_gain, simulate_realization
+from hcid.loop.hcmodel import plant, true_response
+from hcid.loop.simulate import decimate, remnant_gain, simulate_realization
 
 
 def _spectrum_at(x, k):
@@ -104,8 +104,8 @@ def test_common_random_numbers(fifty_seeds):
 
 def _periodic_loop_response(loop, model, k_ft, k_fd, period=20.48, rate=100.0, periods=4):
     """Noise-free loop driven by two multisines on disjoint bins; spectra of the last period."""
-    from hcid.hcmodel import DiscreteLoop
-    from hcid.simulate import simulate_loop
+    from hcid.loop.hcmodel import DiscreteLoop
+    from hcid.loop.simulate import simulate_loop
 
     n = round(period * rate)
     t = np.arange(periods * n) / rate
@@ -138,7 +138,7 @@ def test_noise_free_e_and_u_equal_closed_loop_transfers(paper_config, plant_spec
     # frequency warping (wT)^2/12 = 1.1e-3 at the top bin (37 x 2 pi / 20.48 = 11.4 rad/s),
     # hence 1% of the forcing amplitude on e and u.
     from hcid.config import Plant
-    from hcid.hcmodel import feedforward_path
+    from hcid.loop.hcmodel import feedforward_path
 
     loop = paper_config.loop
     if plant_spec is not None:
@@ -209,9 +209,9 @@ def test_compiled_loop_is_bit_identical_to_the_lfilter_blocks(
 ):
     # The compiled sample loop (the fast path) against its slow twin, blocks of
     # scipy.signal.lfilter calls with carried state: lfilter's own arithmetic, so equal bits.
-    from hcid import simulate
     from hcid.config import Plant
-    from hcid.hcmodel import DiscreteLoop
+    from hcid.loop import simulate
+    from hcid.loop.hcmodel import DiscreteLoop
 
     loop = paper_config.loop
     if plant_spec is not None:
@@ -233,7 +233,7 @@ def test_compiled_loop_is_bit_identical_to_the_lfilter_blocks(
 def test_only_filters_in_lfilters_own_form_take_the_compiled_loop():
     # lfilter convolves when len(a) = 1 and divides its zero padding by a[0]: the kernel
     # replicates neither, so such filters run as lfilter blocks.
-    from hcid.simulate import _replicable
+    from hcid.loop.simulate import _replicable
 
     assert _replicable(np.array([0.5, 0.2]), np.array([1.0, -0.3]))
     assert not _replicable(np.array([2.0]), np.array([1.0]))
@@ -244,7 +244,7 @@ def test_only_filters_in_lfilters_own_form_take_the_compiled_loop():
 def test_cached_forcing_and_loop_are_not_shared_for_writing(paper_config):
     # Every realization of a process reads the same cached forcing and discretised loop:
     # a caller's write must not reach the next one.
-    from hcid.simulate import _discrete_loop, _forcing
+    from hcid.loop.simulate import _discrete_loop, _forcing
 
     first = _forcing(paper_config.timing, paper_config.target)
     first[:] = 0.0
@@ -261,7 +261,7 @@ def test_a_remnant_ratio_the_loop_cannot_show_is_refused_in_one_line():
     import yaml
 
     from hcid.errors import ConfigError
-    from hcid.resolve import parse_config
+    from hcid.io.resolve import parse_config
 
     raw = yaml.safe_load(
         (Path(__file__).resolve().parents[1] / "configs/integrator_example.yaml").read_text()

@@ -15,8 +15,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 
-from hcid.resolve import load_config
-from hcid.simulate import remnant_gain, simulate_realization
+from hcid.io.resolve import load_config
+from hcid.loop.simulate import remnant_gain, simulate_realization
 
 HERE = Path(__file__).resolve().parent
 

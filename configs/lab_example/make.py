@@ -25,8 +25,8 @@ import sys
 from pathlib import Path
 
 from hcid.config import HCModel
-from hcid.resolve import load_config
-from hcid.simulate import remnant_gain, simulate_realization
+from hcid.io.resolve import load_config
+from hcid.loop.simulate import remnant_gain, simulate_realization
 
 HERE = Path(__file__).resolve().parent
 RATE = 60.0  # Hz, the logger's

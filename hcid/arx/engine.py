@@ -154,7 +154,16 @@ def fit_grid(
     docs/engine.md and docs/benchmarks.md.
     """
     fit, _ = _fit_grid(
-        i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_candidates, legacy=False, fused=fused
+        i1,
+        i2,
+        o,
+        grid,
+        estimation_rows,
+        validation_rows,
+        threads,
+        keep_candidates,
+        unpruned=False,
+        fused=fused,
     )
     return fit
 
@@ -256,8 +265,10 @@ def _outputs(grid: Grid, start: np.ndarray, size: np.ndarray):
     return offset, np.empty(n_cand), np.zeros((n_cand, most)), np.zeros(n_cand), counts
 
 
-def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_candidates, *, legacy, fused):
-    """:func:`fit_grid`, also returning the simulation counts; ``legacy``
+def _fit_grid(
+    i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_candidates, *, unpruned, fused
+):
+    """:func:`fit_grid`, also returning the simulation counts; ``unpruned``
     runs the one-candidate-at-a-time kernel (no pruning, unfused
     whatever ``fused``), the twin the tests and the benchmark compare with.
 
@@ -266,7 +277,7 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
     GridFit
     counts : numpy.ndarray of int64, shape (n_blocks, 3)
         Per order triple: candidates simulated in full, pruned, and
-        candidate-samples simulated (all zero for ``legacy``).
+        candidate-samples simulated (all zero for ``unpruned``).
     """
     i1, i2, o, (est_start, est_stop), (val_start, val_stop) = _checked(
         i1, i2, o, grid, estimation_rows, validation_rows
@@ -282,7 +293,22 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
     block_na, block_nb1, block_nb2, start, size = order_blocks(grid)
     offset, v_all, theta_all, score, counts = _outputs(grid, start, size)
 
-    args = (units, rt, bounds, i1p, i2p, pad, o, val_start, val_stop, offset, v_all, theta_all, score, legacy)
+    args = (
+        units,
+        rt,
+        bounds,
+        i1p,
+        i2p,
+        pad,
+        o,
+        val_start,
+        val_stop,
+        offset,
+        v_all,
+        theta_all,
+        score,
+        unpruned,
+    )
     # errstate: unstable simulations overflow by design; only matters when
     # the kernels run as Python (NUMBA_DISABLE_JIT=1).
     with np.errstate(over="ignore", invalid="ignore"):
@@ -290,7 +316,7 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
             _kernels.fit_units(*args)
         else:
             _kernels.run_parallel(_kernels.fit_units_parallel, args, threads)
-        if not legacy:
+        if not unpruned:
             # Stable candidates wait with V = NaN; simulate them per order
             # triple, pruning unless every V is wanted.
             orders = np.stack((block_na, block_nb1, block_nb2), axis=1)
@@ -344,7 +370,7 @@ def _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_c
     v, vaf_est, vaf_val = _frontier_outputs(
         first, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows
     )
-    if not legacy and fused:
+    if not unpruned and fused:
         # A row whose unfused V is not finite, or further from the search's than the
         # tie margin assumes (never seen): its triple is searched again unfused.
         search = v_all[first]

@@ -8,18 +8,12 @@ stderr and exit code 2, here and nowhere else.
 from __future__ import annotations
 
 import functools
-import os
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from hcid.cli import answers
-
-# One level of parallelism (the worker processes) and bit-identical results whatever
-# --jobs: BLAS runs single-threaded. Set before numpy is first imported (typer does not).
-for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_name, "1")
 
 app = typer.Typer(
     add_completion=False,
@@ -72,14 +66,17 @@ SchedulerOpt = Annotated[
 
 
 def _user_errors(func):
-    """Turn an HcidError into one line on stderr and exit code 2."""
+    """Turn an HcidError into one line on stderr and exit code 2; the command runs with BLAS
+    single-threaded (:meth:`hcid.pipeline.Execution.pinned`: the same tables whatever --jobs)."""
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
         from hcid.errors import HcidError
+        from hcid.pipeline.execution import Execution
 
         try:
-            return func(*args, **kwargs)
+            with Execution.pinned():
+                return func(*args, **kwargs)
         except HcidError as exc:
             typer.echo(f"hcid: error: {exc}", err=True)
             raise typer.Exit(code=2) from None
@@ -87,11 +84,17 @@ def _user_errors(func):
     return wrapper
 
 
+def _execution(jobs: int = 1, backend: str = "loky", scheduler: str | None = None,
+               worker_timeout: float = 60.0, quiet: bool = False):  # fmt: skip
+    """The command's execution settings; a bad --backend or --scheduler is refused before any work."""
+    from hcid.pipeline import Execution
+
+    return Execution(jobs, backend, scheduler, worker_timeout, progress=not quiet)
+
+
 def _load(
     config: Path,
     run: Path | None,
-    backend: str = "loky",
-    scheduler: str | None = None,
     method_names: tuple[str, ...] | None = None,
     *,
     reopen: bool = False,
@@ -103,13 +106,10 @@ def _load(
     and window are taken when its config leaves them out.
 
     ``reopen``: a command that reads a run's results resolves the methods the run
-    recorded (a method registered since changes nothing). A bad --backend or
-    --scheduler is refused before any work.
+    recorded (a method registered since changes nothing).
     """
-    from hcid.pipeline import check_backend
-    from hcid.resolve import describe_file, described_name, methods_of_run, resolve_config
+    from hcid.io.resolve import describe_file, described_name, methods_of_run, resolve_config
 
-    check_backend(backend, scheduler)
     # The run directory's default needs the study's name, read first from the YAML itself.
     name = described_name(config)
     run_dir = run if run is not None else Path("runs") / name
@@ -140,9 +140,10 @@ def simulate(
     """Simulate every model x seed of CONFIG and write RUN/simulations.parquet."""
     from hcid.pipeline import simulate_study
 
+    execution = _execution(jobs, quiet=quiet)
     cfg, run_dir = _load(config, run)
     answers.print_simulation(
-        simulate_study(cfg, run_dir, jobs=jobs, show_progress=not quiet, force=force), answers.is_paper(cfg)
+        simulate_study(cfg, run_dir, execution=execution, force=force), answers.is_paper(cfg)
     )
 
 
@@ -172,18 +173,10 @@ def identify(
     """Identify every model x seed of CONFIG (or every run of --data); writes RUN/frontier.parquet."""
     from hcid.pipeline import identify_study
 
-    cfg, run_dir = _load(config, run, backend, scheduler, _methods(method), data=data)
+    execution = _execution(jobs, backend, scheduler, worker_timeout, quiet)
+    cfg, run_dir = _load(config, run, _methods(method), data=data)
     result = identify_study(
-        cfg,
-        run_dir,
-        _methods(method),
-        data_path=data or None,
-        jobs=jobs,
-        force=force,
-        backend=backend,
-        scheduler=scheduler,
-        worker_timeout=worker_timeout,
-        show_progress=not quiet,
+        cfg, run_dir, _methods(method), data_path=data or None, execution=execution, force=force
     )
     answers.print_identification(result, answers.is_paper(cfg))
 
@@ -214,16 +207,9 @@ def run_all(
     """Simulate, identify every method and sweep W, skipping what is already done."""
     from hcid.pipeline import run_study
 
-    cfg, run_dir = _load(config, run, backend, scheduler)
-    result = run_study(
-        cfg,
-        run_dir,
-        jobs=jobs,
-        backend=backend,
-        scheduler=scheduler,
-        worker_timeout=worker_timeout,
-        show_progress=not quiet,
-    )
+    execution = _execution(jobs, backend, scheduler, worker_timeout, quiet)
+    cfg, run_dir = _load(config, run)
+    result = run_study(cfg, run_dir, execution=execution)
     answers.print_identification(result.identification, answers.is_paper(cfg))
     answers.print_thresholds(result.sweep, answers.is_paper(cfg))
     typer.echo(f"done in {result.seconds:.1f} s; tables in {run_dir}")
@@ -243,16 +229,9 @@ def calibrate_w(
     """Calibrate W on simulations of the config's FB and FF twins: rates, safe interval, recommended W."""
     from hcid.pipeline import calibrate_study
 
-    cfg, run_dir = _load(config, run, backend, scheduler)
-    result = calibrate_study(
-        cfg,
-        run_dir,
-        jobs=jobs,
-        backend=backend,
-        scheduler=scheduler,
-        worker_timeout=worker_timeout,
-        show_progress=not quiet,
-    )
+    execution = _execution(jobs, backend, scheduler, worker_timeout, quiet)
+    cfg, run_dir = _load(config, run)
+    result = calibrate_study(cfg, run_dir, execution=execution)
     answers.print_identification(result.study.identification, answers.is_paper(cfg))
     rate = cfg.selection.target_rate
     typer.echo(f"target rate {rate:g} for false positives (FB twin) and false negatives (FF twin)")
@@ -344,38 +323,28 @@ def analyse(
     jobs: JobsOpt = 2,
     backend: BackendOpt = "loky",
     scheduler: SchedulerOpt = None,
+    worker_timeout: TimeoutOpt = 60.0,
     force: ForceOpt = False,
     quiet: QuietOpt = False,
 ):
     """Analyse a measured study end to end: identify every run, calibrate W per condition on twins of
     the condition's own fitted model, select every run there and fit its parameters; writes
     RUN/analysis.parquet, analysis.csv, analysis_groups.parquet and the report RUN/report/report.html."""
-    from hcid.pipeline.analyse import analyse_study
+    from hcid.pipeline.analyse import AnalysisOptions, analyse_study
 
+    execution = _execution(jobs, backend, scheduler, worker_timeout, quiet)
+    groups = None if by is None else tuple(b.strip() for b in by.split(",") if b.strip())
+    options = AnalysisOptions(groups, twins, max_fb_twins, ff_twin, alpha, fdr)
     aside = []
     if skip_unreadable:
-        from hcid.resolve import readable_files
+        from hcid.io.resolve import readable_files
 
         data, aside = readable_files(config, data)
-    cfg, run_dir = _load(config, run, backend, scheduler, data=data)
+    cfg, run_dir = _load(config, run, data=data)
     result = analyse_study(
-        cfg,
-        run_dir,
-        data,
+        cfg, run_dir, data, options, execution=execution, force=force, skip_unreadable=skip_unreadable,
         set_aside=aside,
-        skip_unreadable=skip_unreadable,
-        by=None if by is None else [b.strip() for b in by.split(",") if b.strip()],
-        twins=twins,
-        max_fb_twins=max_fb_twins,
-        ff_twin=ff_twin,
-        alpha=alpha,
-        fdr=fdr,
-        jobs=jobs,
-        force=force,
-        backend=backend,
-        scheduler=scheduler,
-        show_progress=not quiet,
-    )
+    )  # fmt: skip
     answers.print_analysis(result)
     from hcid.report import build_report
 
@@ -406,6 +375,7 @@ def fit_hc(
     jobs: JobsOpt = 2,
     backend: BackendOpt = "loky",
     scheduler: SchedulerOpt = None,
+    worker_timeout: TimeoutOpt = 60.0,
     force: ForceOpt = False,
     quiet: QuietOpt = False,
 ):
@@ -414,19 +384,9 @@ def fit_hc(
     remnant_spectrum.parquet and residuals.parquet."""
     from hcid.pipeline import fit_hc_study
 
-    cfg, run_dir = _load(config, run, backend, scheduler, reopen=True)
-    result = fit_hc_study(
-        cfg,
-        run_dir,
-        _methods(method),
-        w,
-        target=target,
-        jobs=jobs,
-        force=force,
-        backend=backend,
-        scheduler=scheduler,
-        show_progress=not quiet,
-    )
+    execution = _execution(jobs, backend, scheduler, worker_timeout, quiet)
+    cfg, run_dir = _load(config, run, reopen=True)
+    result = fit_hc_study(cfg, run_dir, _methods(method), w, target=target, execution=execution, force=force)
     answers.print_hc_fit(result)
 
 

@@ -10,7 +10,7 @@ from hcid.tables import PARAMETER_UNITS
 
 def is_paper(cfg) -> bool:
     """Whether the paper's figures are printed beside this run's (its experiment only)."""
-    from hcid import paper
+    from hcid.config import paper
 
     return paper.is_paper_experiment(cfg)
 
@@ -18,7 +18,7 @@ def is_paper(cfg) -> bool:
 def print_simulation(result, is_paper: bool) -> None:
     import numpy as np
 
-    from hcid import paper
+    from hcid.config import paper
 
     summary = result.summary.to_pydict()
     models = list(dict.fromkeys(summary["model"]))
@@ -54,7 +54,7 @@ def print_identification(result, is_paper: bool) -> None:
 
 
 def print_thresholds(sweep, is_paper: bool) -> None:
-    from hcid import paper
+    from hcid.config import paper
 
     rows = sweep.thresholds.to_pylist()
     typer.echo(f"{'method':<10}{'model':<8}{'threshold':<11}{'this run':>12}{'paper':>10}")
@@ -81,16 +81,11 @@ def print_thresholds(sweep, is_paper: bool) -> None:
 def print_analysis(result) -> None:
     """Per group and method: the answer first (feedforward in k of N runs at W, how sure), then
     the parameters the runs determine, the loop, and the data check (SPEC 11)."""
-    import numpy as np
-
     from hcid.hcfit.consistency import CONTRADICTED, format_p
+    from hcid.pipeline.summary import rate_interval, summarise_groups
 
-    def pct(k: float, lo: float, hi: float) -> str:
-        return f"{100 * k:.0f}% (95% interval {100 * lo:.0f} to {100 * hi:.0f}%)"
-
-    runs = result.runs.to_pylist()
-    for g in result.groups.to_pylist():
-        rows = [r for r in runs if r["group"] == g["group"] and r["method"] == g["method"]]
+    for summary in summarise_groups(result.groups, result.runs):
+        g = summary.group
         if g["w_rule"] == "safe interval":
             safe = f"safe interval [{g['safe_low']:.3g}, {g['safe_high']:.3g})"
             if g["ff_twin"] == "study":
@@ -106,24 +101,24 @@ def print_analysis(result) -> None:
                 "no contiguous safe interval; W of least total error, where the twins' rates are "
                 "within the target"
             )
-        power = [r["power"] for r in rows]
         typer.echo(
             f"{g['group']}, {g['method']}: {g['verdict']}: {g['n_evidence']} of {g['n_runs']} runs show "
             f"feedforward at p <= {g['alpha']:g} (decided by their {g['decided_by']} against their own "
             f"forcing set's FB twins, up to {g['fb_twins']} drawn: the statistic with the higher power; "
-            f"binomial p = {g['binomial_p']:.2g}; power (FF twins found at this level) {min(power):.2f} to "
-            f"{max(power):.2f} over the runs, "
+            f"binomial p = {g['binomial_p']:.2g}; power (FF twins found at this level) "
+            f"{summary.power[0]:.2f} to {summary.power[1]:.2f} over the runs, "
             f"{g['forcing_sets']} forcing set{'s' if g['forcing_sets'] > 1 else ''})"
         )
         typer.echo(
             f"    calibrated W (SPEC 10): feedforward in {g['n_feedforward']} of {g['n_runs']} runs at "
-            f"W = {g['w']:.3g} ({safe}; twins' FP {pct(g['fp_rate'], g['fp_low'], g['fp_high'])}, "
-            f"FN {pct(g['fn_rate'], g['fn_low'], g['fn_high'])})"
+            f"W = {g['w']:.3g} ({safe}; twins' FP {rate_interval(g['fp_rate'], g['fp_low'], g['fp_high'])}, "
+            f"FN {rate_interval(g['fn_rate'], g['fn_low'], g['fn_high'])})"
         )
-        typer.echo(_analysis_parameters(rows))
-        wc = np.nanmedian([r["crossover"] for r in rows])
-        pm = np.nanmedian([r["phase_margin"] for r in rows])
-        typer.echo(f"    loop: crossover {wc:.3g} rad/s, phase margin {pm:.3g} deg (medians over runs)")
+        typer.echo(_analysis_parameters(summary.parameters))
+        typer.echo(
+            f"    loop: crossover {summary.crossover:.3g} rad/s, phase margin {summary.phase_margin:.3g} deg "
+            "(medians over runs)"
+        )
         contradicted = (
             f"{g['n_contradicted']} of {g['n_runs']} runs' own fits at W are contradicted by the data"
         )
@@ -151,13 +146,11 @@ def print_analysis(result) -> None:
     )
 
 
-def _analysis_parameters(rows: list[dict]) -> str:
+def _analysis_parameters(summaries) -> str:
     """The runs' fits at W (hcid.pipeline.evidence.summarise_parameters): median over the runs that
     determine each, their sd and count, units; then what some runs leave undetermined, and why."""
-    from hcid.pipeline.evidence import summarise_parameters
-
     parts, left_out = [], []
-    for s in summarise_parameters(rows):
+    for s in summaries:
         unit = "" if s.unit == "-" else f" {s.unit}"
         if s.kept:
             sd = f", sd {s.sd:.2g}" if s.kept > 1 else ""

@@ -2,7 +2,7 @@
 
 :func:`identify_section` keeps each stage's section as given; :func:`build_stages`
 builds the stages of the methods a command uses from their stage specs (passed
-in by :mod:`hcid.resolve`, which knows the method registry).
+in by :mod:`hcid.io.resolve`, which knows the method registry).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from typing import Any
 
 from hcid.config._checks import LIMITS, Section, fmt, int_range
 from hcid.config.types import Grid, IdentifyConfig, StageConfig, Timing, Window
-from hcid.errors import ConfigError
+from hcid.errors import ConfigError, checked_rate
 
 __all__ = ["build_stages", "identify_section", "parse_identify", "stage_raw"]
 
@@ -211,8 +211,7 @@ def parse_identify(data: Any, rate: float, n_samples: int) -> tuple[IdentifyConf
     ConfigError
         Naming the key, as in a config.
     """
-    if not (isinstance(rate, int | float) and math.isfinite(rate) and rate > 0):
-        raise ConfigError(f"rate: must be a positive number of Hz, got {fmt(rate)}")
+    checked_rate(rate)
     if not (isinstance(n_samples, int) and n_samples > 0):
         raise ConfigError(f"n_samples: must be a positive integer, got {fmt(n_samples)}")
     timing = Timing(sim_rate=rate, output_rate=rate, run_in=0.0, window=n_samples / rate, periods=1)

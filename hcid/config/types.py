@@ -215,7 +215,7 @@ class FileSignal:
 
     ``values`` (rad) are the column's samples at ``rate`` Hz (of run ``run`` when
     given, told apart by ``run_column``), None until the file is read
-    (:func:`hcid.resolve.resolve_config`); the measurement window starts ``start``
+    (:func:`hcid.io.resolve.resolve_config`); the measurement window starts ``start``
     s into them and is taken as one period of the signal.
     """
 
@@ -368,7 +368,7 @@ class IdentifyConfig:
     ``sections`` are the config's stage sections as given and ``windows_in`` the
     unit of their windows; ``stages`` are the built stages of the methods a
     command uses (:func:`hcid.config.stages.build_stages`, through
-    :func:`hcid.resolve.resolve_config`): ``direct``, ``stage1`` and ``stage2`` for
+    :func:`hcid.io.resolve.resolve_config`): ``direct``, ``stage1`` and ``stage2`` for
     the paper's two methods. A stage not built is not in ``stages``.
     """
 
@@ -394,7 +394,7 @@ class SelectionConfig:
     """Model selection settings (SPEC sections 4 and 9).
 
     ``w_grid`` is the log-spaced grid of penalties W; ``criteria`` the named
-    criteria (:mod:`hcid.criteria`) with their constants, marked in the thresholds
+    criteria (:mod:`hcid.selection.criteria`) with their constants, marked in the thresholds
     table, the report and the CLI; ``target_rate`` the largest false-positive and
     false-negative rate a W calibration accepts.
     """

@@ -7,7 +7,7 @@ The parametric paths are those of SPEC sections 1 and 7 with continuous delays:
     Ynms    = w_nms^2 / (s^2 + 2 zeta_nms w_nms s + w_nms^2)
 
 with the plant ``Yc`` any proper continuous python-control transfer function
-(:func:`hcid.hcmodel.plant`); it is only evaluated through its frequency
+(:func:`hcid.loop.hcmodel.plant`); it is only evaluated through its frequency
 response and its numerator and denominator polynomials. The feedforward
 parameters are fitted only when the selected model has a feedforward path
 (``nb_ft > 0``).

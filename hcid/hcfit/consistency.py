@@ -25,7 +25,7 @@ That spread holds the differences between the group's people, not only their rem
 A model fitted to these same lines (the ``lines`` estimator) has ``fitted`` parameters taken off
 the degrees of freedom (its cost is nearly this statistic); a model fitted to other data, or the
 group's medians, keeps ``2 L``. Beside the test, the median |error| of the model against the
-Fourier-coefficient estimates themselves (:func:`hcid.fourier.fc_estimate`), in dB and
+Fourier-coefficient estimates themselves (:func:`hcid.analysis.fourier.fc_estimate`), in dB and
 degrees, per path: a description, not a test (a run's U/E is biased where the remnant is large).
 """
 
@@ -39,8 +39,8 @@ import control
 import numpy as np
 from scipy import stats
 
+from hcid.analysis.fourier import fc_estimate
 from hcid.errors import DataError
-from hcid.fourier import fc_estimate
 from hcid.hcfit.lines import LineData
 from hcid.hcfit.model import hc_response
 

@@ -308,7 +308,7 @@ def fit_frequency(
         the selected model has no feedforward (``nb_ft = 0``): the
         feedforward parameters are then not fitted.
     plant : control.TransferFunction
-        ``Yc`` (:func:`hcid.hcmodel.plant`).
+        ``Yc`` (:func:`hcid.loop.hcmodel.plant`).
     settings : FitSettings
         Bounds, starts, seed and global-stage size (``target`` is not read).
     record : TrackingRecord, optional

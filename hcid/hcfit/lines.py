@@ -1,7 +1,7 @@
 """A record's forcing lines: its DFT coefficients there and the remnant's variance beside them.
 
 Where the forcing functions are multisines over whole periods of the record
-(:func:`hcid.fourier.forcing_lines`), everything the forcing functions drive lies
+(:func:`hcid.analysis.fourier.forcing_lines`), everything the forcing functions drive lies
 at their lines, and every other bin holds the remnant's response alone. The
 remnant's variance at a line is then read off its neighbours: the mean of
 ``|X_j|^2`` over the :data:`NEIGHBOURS` nearest bins without forcing (a
@@ -28,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hcid.analysis.fourier import ForcingLines, forcing_lines, interpolate
 from hcid.errors import DataError
-from hcid.fourier import ForcingLines, forcing_lines, interpolate
 from hcid.hcfit.closed_loop import loop_spectrum, loops_are_stable
 from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials
 
@@ -89,7 +89,7 @@ def line_data(record: TrackingRecord, neighbours: int = NEIGHBOURS) -> LineData:
     ------
     DataError
         If the record has no fd, or its forcing functions are not multisines on disjoint
-        lines over whole periods of it (the reason of :func:`hcid.fourier.forcing_lines`),
+        lines over whole periods of it (the reason of :func:`hcid.analysis.fourier.forcing_lines`),
         or too few bins without forcing lie beside the lines.
     """
     if record.fd is None:

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import functools
 import math
-import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -25,7 +24,7 @@ from hcid.arx.simulation import checked_rows
 from hcid.config._checks import integer
 from hcid.config.fit import FEEDBACK_PARAMETERS, PARAMETERS
 from hcid.config.types import MAX_INVERTIBLE_DEGREE, relative_degree
-from hcid.errors import ConfigError, DataError
+from hcid.errors import ConfigError, DataError, checked_rate
 
 __all__ = ["TrackingRecord", "hc_response", "simulate_hc"]
 
@@ -62,11 +61,7 @@ class TrackingRecord:
         object.__setattr__(self, "u", _signal("u", self.u, ft.size))
         if self.fd is not None:
             object.__setattr__(self, "fd", _signal("fd", self.fd, ft.size))
-        if isinstance(self.rate, bool) or not isinstance(self.rate, numbers.Real):
-            raise DataError(f"rate: must be a positive number of Hz, got {self.rate!r}")
-        if not (math.isfinite(self.rate) and self.rate > 0):
-            raise DataError(f"rate: must be a positive number of Hz, got {self.rate!r}")
-        object.__setattr__(self, "rate", float(self.rate))
+        object.__setattr__(self, "rate", checked_rate(self.rate, DataError))
         for name in ("estimation", "validation"):
             start, stop = checked_rows(name, getattr(self, name), ft.size)
             object.__setattr__(self, name, slice(start, stop))
@@ -176,7 +171,7 @@ def _tustin(b: np.ndarray, a: np.ndarray, fs: float) -> tuple[np.ndarray, np.nda
     """Tustin discretisation of ``b(s)/a(s)`` (proper, descending powers): ``(bd, ad)`` for lfilter.
 
     The same map as ``scipy.signal.bilinear`` and python-control's ``bilinear``
-    (:data:`hcid.hcmodel.PATH_METHOD`), as one small matrix product: scipy's
+    (:data:`hcid.loop.hcmodel.PATH_METHOD`), as one small matrix product: scipy's
     function costs ~0.8 ms per call, most of a simulation.
     """
     order = a.size - 1
@@ -250,7 +245,7 @@ def simulate_hc(
     The record's e (and ft) are upsampled by ``oversample`` with
     ``scipy.signal.resample_poly`` (zero phase, zeros outside the record).
     At that rate the rational part of each path is discretised by Tustin
-    (``scipy.signal.bilinear``, the same as :data:`hcid.hcmodel.PATH_METHOD`)
+    (``scipy.signal.bilinear``, the same as :data:`hcid.loop.hcmodel.PATH_METHOD`)
     and run from rest; the continuous delay is applied to its output by linear
     interpolation between the fine samples (ft after the record is 0, for
     ``tau_pt < 0``). Every ``oversample``-th sample is returned. At 25 Hz and

@@ -5,10 +5,14 @@
 - :mod:`hcid.pipeline.sweep`: ``sweep-w``, the selection over the W grid and its thresholds.
 - :mod:`hcid.pipeline.fit`: ``fit-hc``, the parametric HC fit and residual
   analysis of every selected model.
-- :mod:`hcid.pipeline.parallel`: the worker pool and progress bar.
+- :mod:`hcid.pipeline.analyse`: ``hcid analyse``, a measured study end to end, in its phases
+  (its twins in :mod:`hcid.pipeline.twins`, each run's evidence in :mod:`hcid.pipeline.evidence`).
+- :mod:`hcid.pipeline.execution`: :class:`Execution`, how a command's work runs (workers,
+  backend, progress, BLAS single-threaded); :mod:`hcid.pipeline.parallel` its worker pool.
 - :mod:`hcid.pipeline.rundir`: which config a run directory belongs to.
 """
 
+from hcid.pipeline.execution import Execution
 from hcid.pipeline.fit import HCFitRun, fit_hc_study
 from hcid.pipeline.parallel import BACKENDS, check_backend, parallel_map
 from hcid.pipeline.rundir import check_run_dir
@@ -27,6 +31,7 @@ from hcid.pipeline.sweep import SweepRun, sweep_study
 __all__ = [
     "BACKENDS",
     "CalibrationRun",
+    "Execution",
     "HCFitRun",
     "IdentifyRun",
     "SimulationRun",

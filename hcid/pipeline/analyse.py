@@ -11,7 +11,7 @@
    rate and window (SPEC 10). ``calibrate-w`` on them (``RUN/twins/<group>/``) gives
    the safe interval and the recommended W per method.
 4. Every run is selected at its group's W; the selected structure's parametric model
-   is fitted (:func:`hcid.selected.analyse_selected`).
+   is fitted (:func:`hcid.analysis.selected.analyse_selected`).
 
 Where no W separates a group's own twins and another group's fitted feedforward is stronger
 (``--ff-twin auto``, the default: a group where nobody uses feedforward has twins that nearly
@@ -36,16 +36,17 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from hcid import datasets, folders, hcfit, methods, results, selection, tables
-from hcid.calibration import benjamini_hochberg, rates_at
+from hcid import hcfit, methods, tables
+from hcid.analysis.descriptors import fit_remnant
+from hcid.analysis.fourier import fc_estimate
+from hcid.analysis.selected import SelectedModel, analyse_selected
 from hcid.config import Config
 from hcid.config.fit import FEEDFORWARD_PARAMETERS
 from hcid.config.parse import default_data
-from hcid.descriptors import fit_remnant
 from hcid.errors import ConfigError, DataError, IdentificationError
-from hcid.fourier import fc_estimate
 from hcid.hcfit.determined import group_model, parameter_status
-from hcid.hcmodel import plant
+from hcid.io import datasets, folders, results
+from hcid.loop.hcmodel import plant
 from hcid.pipeline.evidence import (
     MAX_FB_TWINS,
     MIN_POWER,
@@ -56,11 +57,13 @@ from hcid.pipeline.evidence import (
     group_name,
     group_verdict,
 )
+from hcid.pipeline.execution import Execution
 from hcid.pipeline.fit import _choices, _records, _stage_choices
-from hcid.pipeline.parallel import labelled, parallel_map
+from hcid.pipeline.parallel import labelled
 from hcid.pipeline.rundir import holds_run_dir
 from hcid.pipeline.studies import identify_study
 from hcid.pipeline.twins import (
+    TwinSource,
     calibrate_twins,
     choose_w,
     draw_fb_twins,
@@ -70,9 +73,10 @@ from hcid.pipeline.twins import (
     separates,
     twin_rate,
 )
-from hcid.selected import SelectedModel, analyse_selected
+from hcid.selection import over_w
+from hcid.selection.calibration import benjamini_hochberg, rates_at
 
-__all__ = ["AnalysisRun", "analyse_study"]
+__all__ = ["AnalysisOptions", "AnalysisRun", "analyse_study"]
 
 #: Realizations of each twin (FB and FF) per group.
 TWINS = 20
@@ -150,15 +154,23 @@ def _final_task(config, seed, record, method_name, sel, choices, fit):
 
 def _same_fit(config: Config, sel: SelectedModel, fits: dict):
     """The run's own fit (step 2) of the selected structure when it is the one
-    :func:`hcid.selected.fit_selected` would make (same windows: the direct method's final
+    :func:`hcid.analysis.selected.fit_selected` would make (same windows: the direct method's final
     stage's), else None (fitted again)."""
     if (sel.estimation.rows(), sel.validation.rows()) != _fit_windows(config):
         return None
     return fits[bool(sel.has_feedforward)]
 
 
-def _tables(config, runs, groups, by, used, chosen, finals, drawn, models, checks, evidence, alpha):
-    twins, fb_drawn = drawn
+def _tables(study: _Study, found: _Found, checks: Checks) -> tuple[pa.Table, pa.Table]:
+    """The groups' and the runs' analysis tables (one row per group or run, and method)."""
+    config, runs, groups, by = study.config, study.runs, study.groups, study.by
+    used, chosen, finals, models, evidence = (
+        found.used,
+        found.chosen,
+        found.finals,
+        found.models,
+        found.evidence,
+    )
     group_checks = {key: checks.group(seeds, models[key].values) for key, seeds in groups.items()}
     factors = [c for c in runs.column_names if c not in tables.RUNS.names]
     factor_of = {int(r["seed"]): r for r in runs.to_pylist()}
@@ -217,12 +229,14 @@ def _tables(config, runs, groups, by, used, chosen, finals, drawn, models, check
                 run_rows.append(row)
             mine = [evidence[(seed, method_name)] for seed in seeds]
             group_rows.append(
-                {**choice, "n_runs": len(seeds), "n_feedforward": int(n_ff), **group_verdict(mine, alpha),
+                {**choice, "n_runs": len(seeds), "n_feedforward": int(n_ff),
+                 **group_verdict(mine, study.options.alpha),
                  "forcing_sets": len(pair.sets), "decided_by": mine[0]["decided_by"],
                  **{f"twin_{p}": pair.model[p] for p in tables.HC_PARAMETER_NAMES},
                  **{f"fitted_{p}": models[key].values[p] for p in tables.HC_PARAMETER_NAMES},
                  "twin_kn": pair.remnant[0], "twin_w_n": pair.remnant[1], "twin_zeta_n": pair.remnant[2],
-                 "twins": twins, "fb_twins": fb_drawn[(key, method_name)], "twins_folder": pair.folder,
+                 "twins": study.options.twins, "fb_twins": found.fb_drawn[(key, method_name)],
+                 "twins_folder": pair.folder,
                  "twin_source": models[key].source, "twin_undetermined": ", ".join(models[key].undetermined),
                  "n_contradicted": int(n_contradicted),
                  **consistency_columns(group_checks[key], checks.problem(seeds))}
@@ -281,63 +295,78 @@ def _write_csv(table: pa.Table, path: str) -> None:
     pacsv.write_csv(table, path)
 
 
-@holds_run_dir(create=True)
-def analyse_study(
-    config: Config,
-    run_dir: Path,
-    sources: Sequence[str | Path],
-    *,
-    by: Sequence[str] | None = None,
-    twins: int = TWINS,
-    max_fb_twins: int | None = None,
-    ff_twin: str = "auto",
-    alpha: float = 0.05,
-    fdr: bool = False,
-    set_aside: Sequence[tuple[str, str]] = (),
-    skip_unreadable: bool = False,
-    jobs: int = 2,
-    force: bool = False,
-    backend: str = "loky",
-    scheduler: str | None = None,
-    show_progress: bool = True,
-) -> AnalysisRun:
-    """Analyse a measured study with W calibrated on twins of each group's fitted model (module notes).
+@dataclass(frozen=True)
+class AnalysisOptions:
+    """How ``hcid analyse`` groups and decides (its options; checked when made).
 
-    ``skip_unreadable``: files that cannot be read or fail their checks (too short for the
-    windows, another sample rate, other columns) are left out instead of refusing the set; with
-    ``set_aside`` (files the caller already left out, ``(path, reason)``,
-    :func:`hcid.resolve.readable_files`) they are written to ``set_aside.parquet`` so that the
-    answer and the report list them.
+    ``by``: the factors whose runs share one calibrated W (None: ``condition`` if the data set
+    has it, else one group); ``twins``: realizations of each twin per group and forcing set
+    (also the batch in which more FB twins are drawn); ``max_fb_twins``: the most FB twins per
+    forcing set for the runs' p-values (None: :data:`MAX_FB_TWINS`, or ``twins`` if more);
+    ``ff_twin``: :data:`FF_TWINS`; ``alpha``: each run's test level; ``fdr``: control the false
+    discovery rate over the study's runs instead."""
 
-    Raises
-    ------
-    ConfigError
-        Without a plant (``loop``), or for a ``by`` factor the data set does not have.
-    DataError
-        For a bad data set (one line, nothing written).
-    """
-    if config.loop is None:
-        raise ConfigError(
-            "loop: missing; `hcid analyse` needs the plant of the experiment (loop.plant and "
-            "loop.disturbance_at) for the parametric fit and the twins"
-        )
-    if not 2 <= twins <= 1000:
-        raise ConfigError(f"--twins: must be an integer in [2, 1000], got {twins}")
-    if max_fb_twins is None:  # the default: p down to 0.01, and never fewer than the calibration's
-        max_fb_twins = max(MAX_FB_TWINS, twins)
-    if not twins <= max_fb_twins <= 10000:
-        raise ConfigError(
-            f"--max-fb-twins: must be an integer in [--twins ({twins}), 10000], got {max_fb_twins}"
-        )
-    if not (isinstance(alpha, float | int) and 0.0 < alpha < 1.0):
-        raise ConfigError(f"--alpha: must be a level in (0, 1), got {alpha!r}")
-    if ff_twin not in FF_TWINS:
-        raise ConfigError(f"--ff-twin: must be one of {', '.join(FF_TWINS)}, got {ff_twin!r}")
-    if config.fit_hc.target == "frequency":
-        raise ConfigError(
-            "fit_hc.target: frequency fits an ARX model's responses, and hcid analyse fits every run "
-            "before any model is selected; use time (the default) or closed_loop"
-        )
+    by: tuple[str, ...] | None = None
+    twins: int = TWINS
+    max_fb_twins: int | None = None
+    ff_twin: str = "auto"
+    alpha: float = 0.05
+    fdr: bool = False
+
+    def __post_init__(self) -> None:
+        if not 2 <= self.twins <= 1000:
+            raise ConfigError(f"--twins: must be an integer in [2, 1000], got {self.twins}")
+        if not self.twins <= self.most_fb_twins <= 10000:
+            raise ConfigError(
+                f"--max-fb-twins: must be an integer in [--twins ({self.twins}), 10000], "
+                f"got {self.max_fb_twins}"
+            )
+        if not (isinstance(self.alpha, float | int) and 0.0 < self.alpha < 1.0):
+            raise ConfigError(f"--alpha: must be a level in (0, 1), got {self.alpha!r}")
+        if self.ff_twin not in FF_TWINS:
+            raise ConfigError(f"--ff-twin: must be one of {', '.join(FF_TWINS)}, got {self.ff_twin!r}")
+
+    @property
+    def most_fb_twins(self) -> int:
+        """The default: p down to 0.01, and never fewer than the calibration's twins."""
+        return max(MAX_FB_TWINS, self.twins) if self.max_fb_twins is None else self.max_fb_twins
+
+
+@dataclass(frozen=True)
+class _Study:
+    """A study being analysed: what every phase reads."""
+
+    config: Config
+    run_dir: Path
+    options: AnalysisOptions
+    execution: Execution
+    by: tuple[str, ...]
+    runs: pa.Table
+    records: dict[int, dict]
+    groups: dict[tuple[str, ...], list[int]]
+    kn_rate: float
+
+
+@dataclass
+class _Found:
+    """What the phases found: each run's fits; per group its model, twins (per method) and their
+    remnant; per run and method its frontier and selection path, evidence and final analysis."""
+
+    fitted: dict = field(default_factory=dict)  # seed -> ({ff: HCFit}, remnant fit or None)
+    models: dict = field(default_factory=dict)  # group -> GroupModel
+    remnants: dict = field(default_factory=dict)  # group -> (kn, w_n, zeta_n)
+    used: dict = field(default_factory=dict)  # (group, method) -> TwinSets
+    paths: dict = field(default_factory=dict)  # (seed, method) -> (frontier, selection path, nb_ft)
+    deciding: dict = field(default_factory=dict)  # group -> {method: statistic}
+    fb_drawn: dict = field(default_factory=dict)  # (group, method) -> FB twins the p-values used
+    chosen: dict = field(default_factory=dict)  # (group, method) -> (w, rule, uncertain)
+    evidence: dict = field(default_factory=dict)  # (seed, method) -> evidence columns
+    finals: dict = field(default_factory=dict)  # (seed, method) -> SelectedAnalysis
+
+
+def _factors_and_groups(config: Config, sources: Sequence[str | Path], by: Sequence[str] | None):
+    """The data set's factors checked against the tables' columns, and the ``by`` factors (the
+    default: ``condition`` where the data set has it); refused before any work."""
     data = config.data if config.data is not None else default_data()
     files = datasets.data_files(sources, data.pattern)  # a bad set is refused before any work
     factors = [n for n, _ in files[0].factors] + [d for d in (data.dimensions or ()) if d != "sample"]
@@ -355,6 +384,242 @@ def analyse_study(
             f"--by {','.join(by)}: the data set has no factor {missing[0]!r} (its factors: "
             f"{', '.join(factors) or 'none'}; name them with data.pattern or a manifest)"
         )
+    return tuple(by)
+
+
+def _check_config(config: Config) -> None:
+    if config.loop is None:
+        raise ConfigError(
+            "loop: missing; `hcid analyse` needs the plant of the experiment (loop.plant and "
+            "loop.disturbance_at) for the parametric fit and the twins"
+        )
+    if config.fit_hc.target == "frequency":
+        raise ConfigError(
+            "fit_hc.target: frequency fits an ARX model's responses, and hcid analyse fits every run "
+            "before any model is selected; use time (the default) or closed_loop"
+        )
+
+
+def _fit_runs(study: _Study, found: _Found) -> None:
+    """Phase 2: every run fitted with and without feedforward."""
+    tasks = [(study.config, s, study.records[s], study.kn_rate) for s in sorted(study.records)]
+    found.fitted = {
+        seed: (fits, remnant) for seed, fits, remnant in study.execution.map(_fit_run, tasks, "fit runs")
+    }
+
+
+def _group_models(study: _Study, found: _Found) -> None:
+    """Per group: its model from what its runs determine, and its twins' remnant filter."""
+    num_c, den_c = np.array(study.config.loop.plant.num), np.array(study.config.loop.plant.den)
+    for key, seeds in study.groups.items():
+        fits = [found.fitted[s][0][True] for s in seeds]
+        try:
+            found.models[key] = group_model(fits, [f"run {s}" for s in seeds], num_c, den_c)
+        except DataError as exc:
+            raise DataError(
+                f"group {group_slug(key)}: {exc}; look at its runs' fits or group them otherwise (--by)"
+            ) from None
+        remnants = [found.fitted[s][1] for s in seeds]
+        remnants = [r for r in remnants if r is not None and not r.at_bound]
+        if not remnants:
+            raise DataError(
+                f"group {group_slug(key)}: no run's remnant could be fitted; cannot build its twins"
+            )
+        found.remnants[key] = tuple(
+            float(np.median([getattr(r, a) for r in remnants])) for a in ("kn", "w_n", "zeta_n")
+        )
+
+
+def _twin_sets(study: _Study, found: _Found, key, kind: str, model: dict, fb_from=None):
+    """One kind of twins of a group, for each of its forcing sets, pooled."""
+    runs_of_set = forcing_sets(study.groups[key], study.records, study.config)  # each set its own twins
+    made = []
+    for i, members in enumerate(runs_of_set):
+        source = TwinSource(
+            study.config, study.run_dir, key, study.records[members[0]], model, found.remnants[key],
+            study.kn_rate, i + 1 if len(runs_of_set) > 1 else 0,
+        )  # fmt: skip
+        previous = fb_from.sets[i] if fb_from is not None else None
+        made.append(calibrate_twins(source, study.options.twins, kind, study.execution, previous))
+    return pool_twins(kind, made, runs_of_set, study.config)
+
+
+def _twins(study: _Study, found: _Found) -> None:
+    """Phase 3: per group, the twins and their calibration; which twins each method uses."""
+    _group_models(study, found)
+    medians = {key: m.values for key, m in found.models.items()}
+    # The study's strongest feedforward (--ff-twin study and auto): the group with the largest
+    # fitted Kpt ("would feedforward of the size seen in this study be found here?").
+    strongest = max(medians, key=lambda k: medians[k]["Kpt"])
+    ff_twin = study.options.ff_twin
+    for key in study.groups:
+        study_model = {**medians[key], **{p: medians[strongest][p] for p in FEEDFORWARD_PARAMETERS}}
+        first = "study" if ff_twin == "study" and key != strongest else "own"
+        twins_of = {
+            first: _twin_sets(study, found, key, first, medians[key] if first == "own" else study_model)
+        }
+        earlier = twins_of[first]
+        if (
+            ff_twin == "auto"
+            and key != strongest
+            and not all(separates(c) for c in earlier.calibrations.values())
+        ):
+            # The study's FB twin is the own twins' (Kpt = 0: the same loop), shared, not made again.
+            twins_of["study"] = _twin_sets(study, found, key, "study", study_model, earlier)
+        for method_name in methods.METHODS:
+            # The first twins where they separate; else the last made (study's, or the same).
+            use = first if separates(earlier.calibrations[method_name]) else next(reversed(twins_of))
+            found.used[(key, method_name)] = twins_of[use]
+
+
+def _selection_paths(study: _Study, found: _Found) -> None:
+    """Every run's frontier and selection path over W, per method."""
+    name = study.config.data.name if study.config.data is not None else default_data().name
+    by_key = tables.split_by_key(results.read(tables.FRONTIER, study.run_dir), tables.FRONTIER.key)
+    for seed in study.records:
+        for method_name in methods.METHODS:
+            t = by_key[(name, seed, method_name)]
+            path = over_w.frontier_path(t)
+            found.paths[(seed, method_name)] = (t, path, t.column("nb_ft").to_numpy())
+
+
+def _more_fb_twins(study: _Study, found: _Found, judge: Evidence, run_sizes: dict) -> None:
+    """Phase 4: more FB twins wherever a run's p-value is not settled (sequential, Besag and
+    Clifford), in batches of ``twins``, up to ``max_fb_twins`` per forcing set."""
+    names, most, batch = tuple(methods.METHODS), study.options.most_fb_twins, study.options.twins
+    for key in study.groups:
+        name, sets = group_name(study.by, key), found.used[(key, names[0])].runs
+        found.deciding[key] = {m: judge.statistic(found.used[(key, m)], m) for m in names}
+        model = found.models[key].values
+        for i, members in enumerate(sets):
+            twin_of = {m: found.used[(key, m)].sets[i] for m in names}
+            values = [
+                ({m: judge.w_star(*found.paths[(s, m)][1:]) for m in names}, run_sizes.get(s))
+                for s in members
+            ]
+            source = TwinSource(
+                study.config, study.run_dir, key, study.records[members[0]], model, found.remnants[key],
+                study.kn_rate, i + 1 if len(sets) > 1 else 0,
+            )  # fmt: skip
+            while (drawn := judge.drawn(name, i + 1, twin_of[names[0]])) < most:
+                open_methods, fourier_open = judge.unsettled(
+                    name, i + 1, twin_of, found.deciding[key], values
+                )
+                if not (open_methods or fourier_open):
+                    break
+                draws = draw_fb_twins(
+                    source, drawn + 1, min(batch, most - drawn), open_methods, study.execution
+                )
+                judge.add(name, i + 1, draws)
+            for m in names:
+                if found.deciding[key][m] == "W*":
+                    n = judge.fb_thresholds(name, i + 1, twin_of[m], m).size
+                else:
+                    n = judge.drawn(name, i + 1, twin_of[m])
+                found.fb_drawn[(key, m)] = max(found.fb_drawn.get((key, m), 0), n)
+
+
+def _select_and_fit(study: _Study, found: _Found, judge: Evidence, run_sizes: dict) -> None:
+    """Phase 5: every run's evidence, its selection at its group's W, and the selected
+    structure's parametric fit."""
+    config, run_dir = study.config, study.run_dir
+    data_name = config.data.name if config.data is not None else default_data().name
+    stored = _choices(run_dir)
+    tasks = []
+    for key, seeds in study.groups.items():
+        for method_name in methods.METHODS:
+            pair = found.used[(key, method_name)]
+            w, rule, uncertain = choose_w(pair.calibrations[method_name])
+            found.chosen[(key, method_name)] = (w, rule, uncertain)
+            stage = config.identify.stage(methods.get(method_name).final_stage.name)
+            deciding = found.deciding[key][method_name]
+            for seed in seeds:
+                t, path, nb_ft = found.paths[(seed, method_name)]
+                found.evidence[(seed, method_name)] = judge.run(
+                    group_name(study.by, key),
+                    path,
+                    nb_ft,
+                    pair,
+                    seed,
+                    method_name,
+                    run_sizes.get(seed),
+                    deciding,
+                )
+                row = int(path.at(np.array([w]))[0])
+                shift = config.identify.target_shift
+                sel = SelectedModel.from_frontier(
+                    t, row, w, rate=config.timing.output_rate, target_shift=shift, stage=stage
+                )
+                choices = _stage_choices(run_dir, stored, method_name, data_name, seed)
+                own = _same_fit(config, sel, found.fitted[seed][0])  # shared, not fitted twice
+                tasks.append((config, seed, study.records[seed], method_name, sel, choices, own))
+            decide([found.evidence[(seed, method_name)] for seed in seeds], study.options.alpha, deciding)
+    found.finals = {
+        (seed, method_name): analysis
+        for seed, method_name, analysis in study.execution.map(_final_task, tasks, "fit selected")
+    }
+    if study.options.fdr:  # Benjamini-Hochberg over the study's runs, per method
+        for method_name in methods.METHODS:
+            keys = [k for k in found.evidence if k[1] == method_name]
+            hits = benjamini_hochberg(
+                np.array([found.evidence[k]["p_value"] for k in keys]), study.options.alpha
+            )
+            for k, hit in zip(keys, hits, strict=True):
+                found.evidence[k] = {**found.evidence[k], "evidence": "feedforward" if hit else "none shown"}
+
+
+def _write_tables(study: _Study, found: _Found, checks: Checks, judge: Evidence, set_aside) -> tuple:
+    """Phase 6: the analysis tables, the groups' Fourier-coefficient estimates, the evidence's
+    twins and the files set aside, each written atomically; returns (groups, runs)."""
+    run_dir = study.run_dir
+    group_table, run_table = _tables(study, found, checks)
+    fc_rows = []
+    for key, seeds in study.groups.items():
+        fc_rows += _fc_rows(
+            study.config, group_name(study.by, key), seeds, study.records, found.models[key].values
+        )
+    results.write(
+        tables.FC_ESTIMATES, pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow), run_dir
+    )
+    results.write(tables.EVIDENCE_TWINS, judge.twins_table(study.groups, study.by, found.evidence), run_dir)
+    aside = [{"file": f, "reason": why} for f, why in set_aside]
+    results.write(tables.SET_ASIDE, pa.Table.from_pylist(aside, schema=tables.SET_ASIDE.arrow), run_dir)
+    results.write(tables.ANALYSIS_GROUPS, group_table, run_dir)
+    results.write(tables.ANALYSIS, run_table, run_dir)
+    folders.atomic_write(run_dir / "analysis.csv", lambda tmp: _write_csv(run_table, tmp))
+    return group_table, run_table
+
+
+@holds_run_dir(create=True)
+def analyse_study(
+    config: Config,
+    run_dir: Path,
+    sources: Sequence[str | Path],
+    options: AnalysisOptions = AnalysisOptions(),
+    *,
+    execution: Execution = Execution(),
+    force: bool = False,
+    skip_unreadable: bool = False,
+    set_aside: Sequence[tuple[str, str]] = (),
+) -> AnalysisRun:
+    """Analyse a measured study with W calibrated on twins of each group's fitted model (module
+    notes), in its phases: identify, fit runs, twins, more FB twins, fit selected, tables.
+
+    ``skip_unreadable``: files that cannot be read or fail their checks (too short for the
+    windows, another sample rate, other columns) are left out instead of refusing the set; with
+    ``set_aside`` (files the caller already left out, ``(path, reason)``,
+    :func:`hcid.io.resolve.readable_files`) they are written to ``set_aside.parquet`` so that the
+    answer and the report list them.
+
+    Raises
+    ------
+    ConfigError
+        Without a plant (``loop``), or for a ``by`` factor the data set does not have.
+    DataError
+        For a bad data set (one line, nothing written).
+    """
+    _check_config(config)
+    by = _factors_and_groups(config, sources, options.by)
     start = time.perf_counter()
     stages, lap = {}, [start]
 
@@ -366,180 +631,36 @@ def analyse_study(
         for folder in sorted((run_dir / "twins").glob("*/")) if (run_dir / "twins").is_dir() else []:
             if (folder / folders.MANIFEST).is_file():
                 folders.remove_owned(folder)
-    names = tuple(methods.METHODS)
     with labelled("runs: "):
         identified = identify_study(
-            config, run_dir, names, data_path=list(sources), jobs=jobs, force=force, backend=backend,
-            scheduler=scheduler, show_progress=show_progress, skip_unreadable=skip_unreadable,
+            config, run_dir, tuple(methods.METHODS), data_path=list(sources), execution=execution,
+            force=force, skip_unreadable=skip_unreadable,
         )  # fmt: skip
-    set_aside = [*set_aside, *identified.set_aside]
     lap_done("identify")
+    data_name = config.data.name if config.data is not None else default_data().name
     runs = results.read(tables.RUNS, run_dir)
-    records = {seed: r for (model, seed), r in _records(run_dir).items() if model == data.name}
-    groups = _groups(runs, by)
-    kn_rate = twin_rate(config.timing.output_rate)
-
-    # 2. Every run fitted with and without feedforward.
-    fitted = {
-        seed: (fits, remnant)
-        for seed, fits, remnant in parallel_map(
-            _fit_run, [(config, s, records[s], kn_rate) for s in sorted(records)], jobs=jobs,
-            label="fit runs", show_progress=show_progress, backend=backend, scheduler=scheduler,
-        )
-    }  # fmt: skip
-
+    records = {seed: r for (model, seed), r in _records(run_dir).items() if model == data_name}
+    study = _Study(
+        config, run_dir, options, execution, by, runs, records, _groups(runs, by),
+        twin_rate(config.timing.output_rate),
+    )  # fmt: skip
+    found = _Found()
+    _fit_runs(study, found)
     lap_done("fit runs")
-
-    # 3. Per group: its model from what its runs determine, the twins and their calibration.
-    num_c, den_c = np.array(config.loop.plant.num), np.array(config.loop.plant.den)
-    models = {}
-    for key, seeds in groups.items():
-        try:
-            models[key] = group_model([fitted[s][0][True] for s in seeds], [f"run {s}" for s in seeds],
-                                      num_c, den_c)  # fmt: skip
-        except DataError as exc:
-            raise DataError(
-                f"group {group_slug(key)}: {exc}; look at its runs' fits or group them otherwise (--by)"
-            ) from None
-    medians = {key: m.values for key, m in models.items()}
-    # The study's strongest feedforward (--ff-twin study and auto): the group with the largest
-    # fitted Kpt ("would feedforward of the size seen in this study be found here?").
-    strongest = max(medians, key=lambda k: medians[k]["Kpt"])
-    twin_args = dict(jobs=jobs, backend=backend, scheduler=scheduler, show_progress=show_progress)
-    used, remnants_of = {}, {}  # (group, method) -> TwinSets; group -> its twins' remnant filter
-    for key, seeds in groups.items():
-        remnants = [fitted[s][1] for s in seeds if fitted[s][1] is not None and not fitted[s][1].at_bound]
-        if not remnants:
-            raise DataError(
-                f"group {group_slug(key)}: no run's remnant could be fitted; cannot build its twins"
-            )
-        remnant = tuple(float(np.median([getattr(r, a) for r in remnants])) for a in ("kn", "w_n", "zeta_n"))
-        remnants_of[key] = remnant
-        runs_of_set = forcing_sets(seeds, records, config)  # each set gets twins of its own
-        study_model = {**medians[key], **{p: medians[strongest][p] for p in FEEDFORWARD_PARAMETERS}}
-
-        def twins_for(kind, model, fb_from=None, key=key, runs_of_set=runs_of_set, remnant=remnant):
-            made = [
-                calibrate_twins(config, run_dir, key, records[members[0]], model, remnant, twins, kind,
-                                kn_rate, i + 1 if len(runs_of_set) > 1 else 0,
-                                fb_from.sets[i] if fb_from is not None else None, **twin_args)
-                for i, members in enumerate(runs_of_set)
-            ]  # fmt: skip
-            return pool_twins(kind, made, runs_of_set, config)
-
-        first = "study" if ff_twin == "study" and key != strongest else "own"
-        twins_of = {first: twins_for(first, medians[key] if first == "own" else study_model)}
-        earlier = twins_of[first]
-        if (
-            ff_twin == "auto"
-            and key != strongest
-            and not all(separates(c) for c in earlier.calibrations.values())
-        ):
-            # The study's FB twin is the own twins' (Kpt = 0: the same loop), shared, not made again.
-            twins_of["study"] = twins_for("study", study_model, earlier)
-        for method_name in names:
-            # The first twins where they separate; else the last made (study's, or the same).
-            use = first if separates(earlier.calibrations[method_name]) else next(reversed(twins_of))
-            used[(key, method_name)] = twins_of[use]
-
+    _twins(study, found)
     lap_done("twins")
-
-    # 4. More FB twins wherever a run's p-value is not settled (sequential, Besag and Clifford).
-    frontier = results.read(tables.FRONTIER, run_dir)
-    by_key = tables.split_by_key(frontier, tables.FRONTIER.key)
-    paths = {}  # (seed, method) -> (its frontier, selection path, nb_ft)
-    for seed in records:
-        for method_name in names:
-            t = by_key[(data.name, seed, method_name)]
-            orders = np.column_stack([t.column(c).to_numpy() for c in tables.ORDER_COLUMNS])
-            path = selection.breakpoints(t.column("d").to_numpy(), t.column("v").to_numpy(), orders)
-            paths[(seed, method_name)] = (t, path, t.column("nb_ft").to_numpy())
+    _selection_paths(study, found)
     checks = Checks(config, records)
     run_sizes = checks.sizes()
-    judge = Evidence(config, run_dir, alpha, max_fb_twins)
-    fb_drawn, deciding = {}, {}
-    for key in groups:
-        name, sets = group_name(by, key), used[(key, names[0])].runs
-        deciding[key] = {m: judge.statistic(used[(key, m)], m) for m in names}
-        for i, members in enumerate(sets):
-            twin_of = {m: used[(key, m)].sets[i] for m in names}
-            values = [
-                ({m: judge.w_star(*paths[(s, m)][1:]) for m in names}, run_sizes.get(s)) for s in members
-            ]
-            while (drawn := judge.drawn(name, i + 1, twin_of[names[0]])) < max_fb_twins:
-                open_methods, fourier_open = judge.unsettled(name, i + 1, twin_of, deciding[key], values)
-                if not (open_methods or fourier_open):
-                    break
-                judge.add(name, i + 1, draw_fb_twins(
-                    config, run_dir, key, records[members[0]], medians[key], remnants_of[key], kn_rate,
-                    i + 1 if len(sets) > 1 else 0, drawn + 1, min(twins, max_fb_twins - drawn), open_methods,
-                    **twin_args,
-                ))  # fmt: skip
-            for m in names:
-                if deciding[key][m] == "W*":
-                    n = judge.fb_thresholds(name, i + 1, twin_of[m], m).size
-                else:
-                    n = judge.drawn(name, i + 1, twin_of[m])
-                fb_drawn[(key, m)] = max(fb_drawn.get((key, m), 0), n)
+    judge = Evidence(config, run_dir, options.alpha, options.most_fb_twins)
+    _more_fb_twins(study, found, judge, run_sizes)
     lap_done("more FB twins")
-
-    # 5. Every run selected at its group's W and its selected structure fitted.
-    stored = _choices(run_dir)
-    chosen, tasks, evidence = {}, [], {}
-    for key, seeds in groups.items():
-        for method_name in names:
-            w, rule, uncertain = choose_w(used[(key, method_name)].calibrations[method_name])
-            chosen[(key, method_name)] = (w, rule, uncertain)
-            stage = config.identify.stage(methods.get(method_name).final_stage.name)
-            for seed in seeds:
-                t, path, nb_ft = paths[(seed, method_name)]
-                row = path.at(np.array([w]))[0]
-                evidence[(seed, method_name)] = judge.run(
-                    group_name(by, key), path, nb_ft, used[(key, method_name)], seed, method_name,
-                    run_sizes.get(seed), deciding[key][method_name],
-                )  # fmt: skip
-                sel = SelectedModel.from_frontier(
-                    t,
-                    int(row),
-                    w,
-                    rate=config.timing.output_rate,
-                    target_shift=config.identify.target_shift,
-                    stage=stage,
-                )
-                choices = _stage_choices(run_dir, stored, method_name, data.name, seed)
-                own = _same_fit(config, sel, fitted[seed][0])  # shared, not fitted twice
-                tasks.append((config, seed, records[seed], method_name, sel, choices, own))
-            decide([evidence[(seed, method_name)] for seed in seeds], alpha, deciding[key][method_name])
-    finals = {
-        (seed, method_name): analysis
-        for seed, method_name, analysis in parallel_map(
-            _final_task, tasks, jobs=jobs, label="fit selected",
-            show_progress=show_progress, backend=backend, scheduler=scheduler,
-        )
-    }  # fmt: skip
+    _select_and_fit(study, found, judge, run_sizes)
     lap_done("fit selected")
-    if fdr:  # Benjamini-Hochberg over the study's runs, per method
-        for method_name in names:
-            keys = [k for k in evidence if k[1] == method_name]
-            found = benjamini_hochberg(np.array([evidence[k]["p_value"] for k in keys]), alpha)
-            for k, hit in zip(keys, found, strict=True):
-                evidence[k] = {**evidence[k], "evidence": "feedforward" if hit else "none shown"}
-    group_table, run_table = _tables(
-        config, runs, groups, by, used, chosen, finals, (twins, fb_drawn), models, checks, evidence, alpha
-    )
-    fc_rows = []
-    for key, seeds in groups.items():
-        name = group_name(by, key)
-        fc_rows += _fc_rows(config, name, seeds, records, medians[key])
-    results.write(
-        tables.FC_ESTIMATES, pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow), run_dir
-    )
-    results.write(tables.EVIDENCE_TWINS, judge.twins_table(groups, by, evidence), run_dir)
-    aside = [{"file": f, "reason": why} for f, why in set_aside]
-    results.write(tables.SET_ASIDE, pa.Table.from_pylist(aside, schema=tables.SET_ASIDE.arrow), run_dir)
-    results.write(tables.ANALYSIS_GROUPS, group_table, run_dir)
-    results.write(tables.ANALYSIS, run_table, run_dir)
-    folders.atomic_write(run_dir / "analysis.csv", lambda tmp: _write_csv(run_table, tmp))
+    aside = [*set_aside, *identified.set_aside]
+    group_table, run_table = _write_tables(study, found, checks, judge, aside)
     lap_done("tables")
-    return AnalysisRun(group_table, run_table, time.perf_counter() - start, run_dir, stages,
-                       tuple((str(f), str(why)) for f, why in set_aside))  # fmt: skip
+    seconds = time.perf_counter() - start
+    return AnalysisRun(
+        group_table, run_table, seconds, run_dir, stages, tuple((str(f), str(w)) for f, w in aside)
+    )

@@ -13,20 +13,20 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import hcfit, tables
-from hcid.calibration import (
+from hcid.config import Config
+from hcid.errors import DataError
+from hcid.hcfit.consistency import consistency, group_consistency
+from hcid.hcfit.determined import is_undetermined, reason
+from hcid.hcfit.lines import feedforward_size, record_lines
+from hcid.loop.hcmodel import plant
+from hcid.pipeline.twins import twin_sizes
+from hcid.selection.calibration import (
     binomial_summary,
     evidence_power,
     feedforward_threshold,
     sequential_p_value,
     sequential_settled,
 )
-from hcid.config import Config
-from hcid.errors import DataError
-from hcid.hcfit.consistency import consistency, group_consistency
-from hcid.hcfit.determined import is_undetermined, reason
-from hcid.hcfit.lines import feedforward_size, record_lines
-from hcid.hcmodel import plant
-from hcid.pipeline.twins import twin_sizes
 
 __all__ = [
     "EXCEEDANCES",

@@ -2,8 +2,8 @@
 
 For every record (simulated realization or measured run) and method in
 ``frontier.parquet``, the model selected at each requested W is analysed by
-:func:`hcid.selected.analyse_selected` on the worker pool
-(:func:`~hcid.pipeline.parallel.parallel_map`), one task per record and method.
+:func:`hcid.analysis.selected.analyse_selected` on the worker pool
+(an :class:`~hcid.pipeline.execution.Execution`), one task per record and method.
 Writes ``hc_parameters.parquet``, ``residuals.parquet``, ``hc_loop.parquet`` and
 ``remnant_spectrum.parquet`` (:data:`OUTPUTS`).
 
@@ -31,14 +31,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute  # noqa: F401  (pa.compute)
 
-from hcid import criteria, methods, results, selection, tables
-from hcid.config import Config
-from hcid.errors import ConfigError, DataError, HcidError
-from hcid.hcfit import FEEDBACK_PARAMETERS, TARGETS, UNITS, parse_fit_settings
-from hcid.hcfit.determined import parameter_status
-from hcid.pipeline.parallel import parallel_map
-from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
-from hcid.selected import (
+from hcid import methods, tables
+from hcid.analysis.selected import (
     RESIDUAL_CONFIDENCE,
     RESIDUAL_MAX_LAG,
     SelectedModel,
@@ -46,6 +40,14 @@ from hcid.selected import (
     true_loop,
     true_parameters,
 )
+from hcid.config import Config
+from hcid.errors import ConfigError, DataError, HcidError
+from hcid.hcfit import FEEDBACK_PARAMETERS, TARGETS, UNITS, parse_fit_settings
+from hcid.hcfit.determined import parameter_status
+from hcid.io import results
+from hcid.pipeline.execution import Execution
+from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
+from hcid.selection import criteria, over_w
 
 __all__ = ["OUTPUTS", "HCFitRun", "fit_hc_study", "requested_w"]
 
@@ -160,10 +162,7 @@ def _choices(run_dir: Path) -> dict[str, dict[tuple[str, int], methods.StageChoi
 
 
 def _selected(t: pa.Table, ws: list[float], config, method: str) -> list[SelectedModel]:
-    d = t.column("d").to_numpy()
-    v = t.column("v").to_numpy()
-    orders = np.column_stack([t.column(c).to_numpy() for c in tables.ORDER_COLUMNS])
-    rows = selection.select_at(d, v, orders, np.asarray(ws))
+    rows = over_w.frontier_select(t, ws)
     stage = config.identify.stage(methods.get(method).final_stage.name)
     return [
         SelectedModel.from_frontier(
@@ -440,17 +439,14 @@ def fit_hc_study(
     w_values: Sequence[float] | None = None,
     *,
     target: str | None = None,
-    jobs: int = 2,
+    execution: Execution = Execution(),
     force: bool = False,
-    backend: str = "loky",
-    scheduler: str | None = None,
-    show_progress: bool = True,
 ) -> HCFitRun:
     """Fit the parametric HC model to, and analyse the residuals of, every selected model.
 
     For every record and method of ``frontier.parquet`` (``method_names``
     default: every registered method present), the models selected at
-    :func:`requested_w` are analysed by :func:`hcid.selected.analyse_selected`.
+    :func:`requested_w` are analysed by :func:`hcid.analysis.selected.analyse_selected`.
     Writes the tables of :data:`OUTPUTS` atomically;
     reuses valid rows unless ``force``. ``target`` overrides the config's
     ``fit_hc.target``.
@@ -498,15 +494,7 @@ def fit_hc_study(
 
     tasks, kept, reused = _plan(config, run_dir, by_key, w_of, names, existing, digest)
     parts_dir = run_dir / PARTS / digest
-    for key, made in parallel_map(
-        _fit_task,
-        tasks,
-        jobs=jobs,
-        label="fit-hc",
-        show_progress=show_progress,
-        backend=backend,
-        scheduler=scheduler,
-    ):
+    for key, made in execution.map(_fit_task, tasks, "fit-hc"):
         stem = "__".join(str(k) for k in key)
         for name, table in made.items():  # parameters last: a part counts once it is there
             if name != "parameters":
@@ -526,7 +514,7 @@ def fit_hc_study(
     shutil.rmtree(run_dir / PARTS, ignore_errors=True)
     seconds = time.perf_counter() - start
     if tasks:
-        results.append_run_log(run_dir, f"fit-hc ({len(tasks)} tasks)", seconds, jobs)
+        results.append_run_log(run_dir, f"fit-hc ({len(tasks)} tasks)", seconds, execution.jobs)
     return HCFitRun(
         written["parameters"],
         written["residuals"],

@@ -28,7 +28,7 @@ from typing import Any
 
 from hcid.errors import HcidError
 
-__all__ = ["BACKENDS", "check_backend", "check_scheduler", "compile_kernels", "labelled", "parallel_map"]
+__all__ = ["BACKENDS", "check_backend", "check_scheduler", "compile_before_fork", "labelled", "parallel_map"]
 
 BACKENDS = ("loky", "dask")
 
@@ -124,7 +124,7 @@ def parallel_map(
 _compiled = False
 
 
-def compile_kernels() -> None:
+def compile_before_fork() -> None:
     """The identification engine's kernels compiled, or loaded from numba's cache, in this
     process before it forks its workers, so that they start with them instead of each
     compiling its own. The two parts of :data:`hcid.arx.engine.KERNEL_PARTS` compile at once:

@@ -3,7 +3,7 @@
 - :func:`using` holds a run directory for a command: it refuses paths that are
   not a plain directory of their own (``/``, the working directory or one of its
   parents), marks the directory as hcid's with a manifest written first
-  (:func:`hcid.folders.claim`), and takes an ``fcntl`` lock that the operating
+  (:func:`hcid.io.folders.claim`), and takes an ``fcntl`` lock that the operating
   system releases when the process ends, so a ``kill -9`` never leaves a stale
   lock; a second command on the directory is refused in one line naming the
   process that holds it.
@@ -26,11 +26,12 @@ from typing import Any
 
 import yaml
 
-from hcid import folders, results, tables
+from hcid import tables
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError, HcidError
+from hcid.io import folders, results
+from hcid.io.resolve import read_yaml
 from hcid.methods import METHODS
-from hcid.resolve import read_yaml
 
 __all__ = [
     "IDENTIFICATION_SECTIONS",

@@ -1,7 +1,7 @@
 """The stages of a study over models x seeds (or measured runs) x methods, and the whole study.
 
 Each ``*_study`` function reads what it needs from the run directory, runs its
-tasks on :func:`~hcid.pipeline.parallel.parallel_map`, writes its tables
+tasks on an :class:`~hcid.pipeline.execution.Execution`, writes its tables
 atomically and returns them. :func:`run_study` owns the chain "simulate if
 missing, identify what is not done, sweep W"; the CLI calls one of these.
 """
@@ -18,15 +18,17 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from hcid import datasets, measured, methods, results, tables
-from hcid.calibration import calibrate
+from hcid import methods, tables
 from hcid.config import Config, IdentifyConfig
 from hcid.config.parse import default_data
 from hcid.errors import ConfigError, DataError
-from hcid.pipeline.parallel import check_scheduler, compile_kernels, parallel_map
+from hcid.io import datasets, measured, results
+from hcid.loop.simulate import remnant_gain, simulate_realization
+from hcid.pipeline.execution import Execution
+from hcid.pipeline.parallel import compile_before_fork
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
 from hcid.pipeline.sweep import SweepRun, selections, sweep_study
-from hcid.simulate import remnant_gain, simulate_realization
+from hcid.selection.calibration import calibrate
 
 __all__ = [
     "CalibrationRun",
@@ -63,7 +65,7 @@ class SimulationRun:
 
 @holds_run_dir(create=True)
 def simulate_study(
-    config: Config, run_dir: Path, *, jobs: int = 2, show_progress: bool = True, force: bool = False
+    config: Config, run_dir: Path, *, execution: Execution = Execution(), force: bool = False
 ) -> SimulationRun:
     """Simulate every model x seed of ``config`` and write the run's tables.
 
@@ -75,16 +77,14 @@ def simulate_study(
     start = time.perf_counter()
     kn = remnant_gain(config)
     tasks = [(config, m.name, seed, kn) for m in config.models for seed in config.seeds]
-    pairs = list(
-        parallel_map(_simulate_task, tasks, jobs=jobs, label="simulate", show_progress=show_progress)
-    )
+    pairs = execution.run(_simulate_task, tasks, "simulate")
     realizations = [p[0] for p in pairs]
     simulations = results.realizations_table(realizations)
     summary = results.summary_table(realizations, [p[1] for p in pairs])
     record_config(config, run_dir)
     results.write(tables.SIMULATIONS, simulations, run_dir)
     results.write(tables.SIMULATION_SUMMARY, summary, run_dir)
-    results.append_run_log(run_dir, "simulate", time.perf_counter() - start, jobs)
+    results.append_run_log(run_dir, "simulate", time.perf_counter() - start, execution.jobs)
     return SimulationRun(simulations=simulations, summary=summary, kn=kn, run_dir=run_dir)
 
 
@@ -317,12 +317,8 @@ def identify_study(
     method_names: Sequence[str] | None = None,
     *,
     data_path: str | Path | Sequence[str | Path] | None = None,
-    jobs: int = 2,
+    execution: Execution = Execution(),
     force: bool = False,
-    backend: str = "loky",
-    scheduler: str | None = None,
-    worker_timeout: float = 60.0,
-    show_progress: bool = True,
     skip_unreadable: bool = False,
 ) -> IdentifyRun:
     """Identify every model x seed x method of ``config``, simulating first if the run has no simulations.
@@ -331,10 +327,10 @@ def identify_study(
     interrupted run, in ``.parts/``) are not recomputed unless ``force``.
     Writes ``frontier.parquet``, one table per choosing stage
     (``stage1.parquet``) and ``identify_log.parquet``; the first two are
-    identical whatever ``jobs``, backend or interruptions.
+    identical whatever ``execution`` (jobs, backend) or interruptions.
 
     With ``data_path`` (measured data: files, globs, folders or manifests,
-    :func:`hcid.datasets.data_files`), its runs are identified instead, under model
+    :func:`hcid.io.datasets.data_files`), its runs are identified instead, under model
     name ``config.data.name`` and seed = run id (the file's own for one file; 1, 2,
     ... over a set of files, whose files and factors ``runs.parquet`` keeps), beside
     any simulated realizations already in the tables.
@@ -344,7 +340,7 @@ def identify_study(
     names = tuple(methods.METHODS) if method_names is None else tuple(method_names)
     for name in names:
         methods.get(name)
-    check_scheduler(backend, scheduler, worker_timeout)  # refused before anything is read or written
+    execution.check()  # a dask scheduler without workers is refused before anything is read or written
     simulation = None
     if data_path is not None:
         sources = [data_path] if isinstance(data_path, str | Path) else list(data_path)
@@ -358,7 +354,7 @@ def identify_study(
         # forcing functions and compiled loop kernel (hcid.pipeline.parallel).
         noise_free = noise_free_records(config)
         if not (run_dir / tables.SIMULATIONS.file).exists():
-            simulation = simulate_study(config, run_dir, jobs=jobs, show_progress=show_progress)
+            simulation = simulate_study(config, run_dir, execution=execution)
         keys = [(m.name, s) for m in config.models for s in config.seeds]
     check_run_dir(config, run_dir, "identify", force=force)
     if data_path is None:
@@ -374,24 +370,17 @@ def identify_study(
         if (model, seed, method) not in done
     ]
     reused = sum(1 for k in keys for me in names if (*k, me) in done)
-    if tasks and backend == "loky":
-        compile_kernels()  # once, here: forked workers start with them (hcid.pipeline.parallel)
-    for key, parts in parallel_map(
-        _identify_task,
-        tasks,
-        jobs=jobs,
-        label="identify",
-        show_progress=show_progress,
-        backend=backend,
-        scheduler=scheduler,
-        worker_timeout=worker_timeout,
-    ):
+    if tasks and execution.backend == "loky":
+        compile_before_fork()  # once, here: forked workers start with them (hcid.pipeline.parallel)
+    for key, parts in execution.map(_identify_task, tasks, "identify"):
         results.write_part(run_dir, *key, parts)  # for a resume, if this run is interrupted
         done[key] = parts
 
     frontier, choices, log = _write_identification(config, run_dir, done)
     if tasks:
-        results.append_run_log(run_dir, f"identify ({len(tasks)} tasks)", time.perf_counter() - start, jobs)
+        results.append_run_log(
+            run_dir, f"identify ({len(tasks)} tasks)", time.perf_counter() - start, execution.jobs
+        )
     return IdentifyRun(
         frontier=frontier,
         choices=choices,
@@ -440,24 +429,12 @@ def run_study(
     config: Config,
     run_dir: Path,
     *,
-    jobs: int = 2,
-    backend: str = "loky",
-    scheduler: str | None = None,
-    worker_timeout: float = 60.0,
-    show_progress: bool = True,
+    execution: Execution = Execution(),
 ) -> StudyRun:
     """Simulate (if missing), identify every method (what is not done yet), then sweep W."""
     config.require_simulation("run")
     start = time.perf_counter()
-    identification = identify_study(
-        config,
-        run_dir,
-        jobs=jobs,
-        backend=backend,
-        scheduler=scheduler,
-        worker_timeout=worker_timeout,
-        show_progress=show_progress,
-    )
+    identification = identify_study(config, run_dir, execution=execution)
     sweep = sweep_study(config, run_dir)
     return StudyRun(identification, sweep, time.perf_counter() - start)
 
@@ -479,11 +456,7 @@ def calibrate_study(
     config: Config,
     run_dir: Path,
     *,
-    jobs: int = 2,
-    backend: str = "loky",
-    scheduler: str | None = None,
-    worker_timeout: float = 60.0,
-    show_progress: bool = True,
+    execution: Execution = Execution(),
 ) -> CalibrationRun:
     """Run the study of the config's HC hypothesis (what is not done yet), then compute
     false-positive and false-negative rates over W and the safe interval per method.
@@ -499,15 +472,7 @@ def calibrate_study(
             "models: calibration needs a feedback-only model (Kpt = 0) and a feedforward "
             f"model (Kpt > 0), got {[m.name for m in config.models]}"
         )
-    study = run_study(
-        config,
-        run_dir,
-        jobs=jobs,
-        backend=backend,
-        scheduler=scheduler,
-        worker_timeout=worker_timeout,
-        show_progress=show_progress,
-    )
+    study = run_study(config, run_dir, execution=execution)
     chosen = selections(results.read(tables.FRONTIER, run_dir), run_dir)
     out = []
     for method in methods.METHODS:

@@ -13,10 +13,12 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from hcid import calibration, criteria, methods, paper, results, selection, tables
-from hcid.config import Config
+from hcid import methods, tables
+from hcid.config import Config, paper
 from hcid.errors import DataError, IdentificationError
+from hcid.io import results
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
+from hcid.selection import calibration, criteria, over_w
 
 __all__ = ["SweepRun", "selections", "sweep_study"]
 
@@ -85,7 +87,7 @@ def selections(frontier: pa.Table, run_dir: Path) -> dict[tuple[str, int, str], 
         cols = {c: t.column(c).to_numpy() for c in tables.SELECTED_COLUMNS}
         orders = np.column_stack([cols[c] for c in tables.ORDER_COLUMNS])
         try:
-            out[(model, seed, method)] = (selection.breakpoints(cols["d"], cols["v"], orders), cols)
+            out[(model, seed, method)] = (over_w.breakpoints(cols["d"], cols["v"], orders), cols)
         except IdentificationError as exc:
             raise DataError(f"{path}: model {model}, seed {seed}, {method}: {exc}") from exc
     return out
@@ -111,11 +113,11 @@ def _error(model) -> str:
 def _uncertainty(method: str, ff: bool, segs: list, nbs: list) -> dict:
     """SPEC 9: P(W_FP >= the paper's) for a study of the paper's size; a bootstrap interval of W_FN."""
     if not ff:
-        extents = [selection.false_positive_extent(s, nb) for s, nb in zip(segs, nbs, strict=True)]
+        extents = [over_w.false_positive_extent(s, nb) for s, nb in zip(segs, nbs, strict=True)]
         ref = paper.W_FP.get(method)
-        p = None if ref is None else selection.threshold_exceedance(extents, ref, paper.N_REALIZATIONS)
+        p = None if ref is None else over_w.threshold_exceedance(extents, ref, paper.N_REALIZATIONS)
         return {"p_w_fp_at_paper": p}
-    boot = selection.false_negative_bootstrap(segs, nbs)
+    boot = over_w.false_negative_bootstrap(segs, nbs)
     return {
         "w_fn_low": boot.low,
         "w_fn_high": boot.high,
@@ -144,8 +146,8 @@ def _thresholds(config: Config, chosen, segments: dict, nb_ft: dict) -> pa.Table
                     "n_realizations": len(segments[key]),
                     "nf": nf,
                     **marks,
-                    "w_fp": None if ff else selection.false_positive_threshold(segments[key], nb_ft[key]),
-                    "w_fn": selection.false_negative_threshold(segments[key], nb_ft[key]) if ff else None,
+                    "w_fp": None if ff else over_w.false_positive_threshold(segments[key], nb_ft[key]),
+                    "w_fn": over_w.false_negative_threshold(segments[key], nb_ft[key]) if ff else None,
                     **_uncertainty(method.name, ff, segments[key], nb_ft[key]),
                     **{tables.rate_column(c): float(r) for c, r in zip(marks, at_marks.rate, strict=True)},
                 }

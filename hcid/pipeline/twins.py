@@ -14,20 +14,22 @@ from pathlib import Path
 
 import numpy as np
 
-from hcid import folders, methods, results, tables
-from hcid.calibration import calibrate
+from hcid import methods, tables
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError
 from hcid.hcfit.lines import feedforward_size, record_lines
+from hcid.io import folders, results
+from hcid.io.resolve import parse_config
+from hcid.pipeline.execution import Execution
 from hcid.pipeline.parallel import labelled
 from hcid.pipeline.rundir import check_run_dir, using
 from hcid.pipeline.studies import calibrate_study, identify_study, run_study, simulate_study
 from hcid.pipeline.sweep import selections
-from hcid.resolve import parse_config
+from hcid.selection.calibration import calibrate
 
 __all__ = [
-    "MIN_TWIN_KPT", "TWIN_SIM_RATE", "FbDraws", "TwinSets", "Twins", "calibrate_twins", "choose_w",
-    "draw_fb_twins", "forcing_sets",
+    "MIN_TWIN_KPT", "TWIN_SIM_RATE", "FbDraws", "TwinSets", "TwinSource", "Twins", "calibrate_twins",
+    "choose_w", "draw_fb_twins", "forcing_sets",
     "forcing_text", "group_slug", "pool_twins", "separates", "twin_config_raw", "twin_dir_ready",
     "twin_paths", "twin_rate", "twin_sizes", "twin_values",
 ]  # fmt: skip
@@ -155,7 +157,7 @@ class TwinSets:
 
 def pool_twins(kind: str, sets: list, runs: list[list[int]], config: Config) -> TwinSets:
     """:class:`TwinSets` of the sets' twins; several sets are calibrated together (their FB twins'
-    and FF twins' selection paths pooled, :func:`hcid.calibration.calibrate`)."""
+    and FF twins' selection paths pooled, :func:`hcid.selection.calibration.calibrate`)."""
     if len(sets) == 1:
         only = sets[0]
         return TwinSets(kind, (only,), (tuple(runs[0]),), only.calibrations, only.paths)
@@ -232,40 +234,65 @@ def separates(cal) -> bool:
     return bool(cal.has_safe_interval and math.isfinite(cal.recommended))
 
 
-def calibrate_twins(config, run_dir, key, record, model, remnant, twins, kind, kn_rate, forcing_set=0,
-                    fb_from: Twins | None = None, **pool) -> Twins:  # fmt: skip
-    """Simulate, identify and calibrate one pair of twins of a group in
-    ``RUN/twins/<group>[-f<set>][-study]`` (``forcing_set`` 0 for a group of one forcing set;
-    resumed when its inputs are the same, made anew when not). ``fb_from``: twins of the same
-    group and forcing set whose FB twin is this one's (the study twins' is the own twins': the
-    same loop, bit for bit), so only the FF twin is simulated and identified here."""
-    slug = (
-        group_slug(key) + (f"-f{forcing_set}" if forcing_set else "") + ("-study" if kind == "study" else "")
-    )
+@dataclass(frozen=True)
+class TwinSource:
+    """What one forcing set's twins of a group are made of: the study's ``config`` and
+    ``run_dir``, the group (``key``, its factor values), the set's first run's ``record`` (its
+    ft and fd drive the twins), the fitted HC values ``model`` (the FF twin; Kpt = 0 the FB
+    twin), the remnant filter ``(kn, w_n, zeta_n)`` at ``kn_rate``, and the set's number
+    (``forcing_set``, 0 for a group of one set)."""
+
+    config: Config
+    run_dir: Path
+    key: tuple[str, ...]
+    record: dict
+    model: dict
+    remnant: tuple[float, float, float]
+    kn_rate: float
+    forcing_set: int = 0
+
+    @property
+    def slug(self) -> str:
+        return group_slug(self.key) + (f"-f{self.forcing_set}" if self.forcing_set else "")
+
+    @property
+    def whose(self) -> str:
+        return f"{', '.join(self.key) or 'all runs'}{_set_label(self.forcing_set)}"
+
+
+def calibrate_twins(
+    source: TwinSource, twins: int, kind: str, execution: Execution, fb_from: Twins | None = None
+) -> Twins:
+    """Simulate, identify and calibrate one pair of ``twins`` realizations each of a group in
+    ``RUN/twins/<group>[-f<set>][-study]`` (resumed when its inputs are the same, made anew when
+    not). ``fb_from``: twins of the same group and forcing set whose FB twin is this one's (the
+    study twins' is the own twins': the same loop, bit for bit), so only the FF twin is
+    simulated and identified here."""
+    config, model = source.config, source.model
+    slug = source.slug + ("-study" if kind == "study" else "")
 
     def twins_raw(forcing: Path) -> dict:
-        raw = twin_config_raw(config, model, remnant, forcing, twins, f"{config.name}_twins_{slug}")
+        raw = twin_config_raw(config, model, source.remnant, forcing, twins, f"{config.name}_twins_{slug}")
         return raw if fb_from is None else {**raw, "models": {"FF": raw["models"]["FF"]}}
 
-    whose = f"{', '.join(key) or 'all runs'}{_set_label(forcing_set)}"
     with (
-        _twin_folder(config, run_dir, slug, record, key, kind, twins_raw) as (twin_dir, twin_config),
-        labelled(f"{kind} twins of {whose}: "),
+        _twin_folder(source, slug, kind, twins_raw) as (twin_dir, twin_config),
+        labelled(f"{kind} twins of {source.whose}: "),
     ):
         if fb_from is None:
-            run = calibrate_study(twin_config, twin_dir, **pool)
+            run = calibrate_study(twin_config, twin_dir, execution=execution)
             calibrations, fb_folder = {c.method: c for c in run.calibrations}, ""
             paths = twin_paths(twin_config, twin_dir)
         else:
-            run_study(twin_config, twin_dir, **pool)
+            run_study(twin_config, twin_dir, execution=execution)
             ff = twin_paths(twin_config, twin_dir, ("FF",))
             paths = {m: (fb_from.paths[m][0], ff[m][0]) for m in methods.METHODS}
             w = np.asarray(twin_config.selection.w_grid)
             found = [calibrate(m, *paths[m], w, twin_config.selection.target_rate) for m in methods.METHODS]
             results.write(tables.CALIBRATION, tables.concat([c.to_arrow() for c in found]), twin_dir)
             calibrations, fb_folder = {c.method: c for c in found}, fb_from.fb_folder or fb_from.folder
-    simulated = {**model, **twin_values(model, kn_rate)}
-    return Twins(kind, simulated, remnant, f"twins/{slug}", calibrations, paths, fb_folder)
+    simulated = {**model, **twin_values(model, source.kn_rate)}
+    return Twins(kind, simulated, source.remnant, f"twins/{slug}", calibrations, paths, fb_folder)
 
 
 @dataclass(frozen=True)
@@ -280,40 +307,45 @@ class FbDraws:
     sizes: np.ndarray | None
 
 
-def draw_fb_twins(config, run_dir, key, record, model, remnant, kn_rate, forcing_set, first, count,
-                  method_names, **pool) -> FbDraws:  # fmt: skip
+def draw_fb_twins(
+    source: TwinSource, first: int, count: int, method_names: Sequence[str], execution: Execution
+) -> FbDraws:
     """FB twins ``first .. first + count - 1`` of a group (its fitted model without feedforward,
     driven by the forcing set's functions), simulated and identified by ``method_names`` only,
     in ``RUN/twins/<group>[-f<set>]-fb<first>`` (resumed; a method asked for later is added).
     The FB twin of ``--ff-twin study`` is the same loop, so one draw serves both."""
-    slug = group_slug(key) + (f"-f{forcing_set}" if forcing_set else "") + f"-fb{first}"
+    config = source.config
+    slug = f"{source.slug}-fb{first}"
 
     def fb_raw(forcing: Path) -> dict:
-        raw = twin_config_raw(config, model, remnant, forcing, count, f"{config.name}_twins_{slug}")
+        raw = twin_config_raw(
+            config, source.model, source.remnant, forcing, count, f"{config.name}_twins_{slug}"
+        )
         return {**raw, "models": {"FB": raw["models"]["FB"]}, "seeds": {"first": first, "count": count}}
 
-    with _twin_folder(config, run_dir, slug, record, key, "FB", fb_raw) as (twin_dir, twin_config):
-        whose = f"{', '.join(key) or 'all runs'}{_set_label(forcing_set)}"
-        with labelled(f"FB twins {first}-{first + count - 1} of {whose}: "):
-            if method_names:
-                identify_study(twin_config, twin_dir, method_names, **pool)
-            elif not (twin_dir / tables.SIMULATIONS.file).exists():
-                simulate_study(twin_config, twin_dir, jobs=pool.get("jobs", 2),
-                               show_progress=pool.get("show_progress", True))  # fmt: skip
+    with (
+        _twin_folder(source, slug, "FB", fb_raw) as (twin_dir, twin_config),
+        labelled(f"FB twins {first}-{first + count - 1} of {source.whose}: "),
+    ):
+        if method_names:
+            identify_study(twin_config, twin_dir, method_names, execution=execution)
+        elif not (twin_dir / tables.SIMULATIONS.file).exists():
+            simulate_study(twin_config, twin_dir, execution=execution)
     found = twin_paths(twin_config, twin_dir, ("FB",), method_names) if method_names else {}
     paths = {method: fb for method, (fb,) in found.items()}
     return FbDraws(first, count, paths, _sizes(twin_dir, config.timing.output_rate).get("FB"))
 
 
 @contextmanager
-def _twin_folder(config, run_dir: Path, slug: str, record: dict, key, kind: str, make_raw):
+def _twin_folder(source: TwinSource, slug: str, kind: str, make_raw):
     """``RUN/twins/<slug>`` held and ready: the forcing set's functions in ``forcing.csv`` (earlier
     results of other forcing functions removed), the twins' config from ``make_raw(forcing path)``
     parsed, and earlier results of another config removed; yields ``(folder, config)``."""
-    twin_dir = run_dir / "twins" / slug
+    config, key = source.config, source.key
+    twin_dir = source.run_dir / "twins" / slug
     with using(twin_dir):
         forcing = twin_dir / "forcing.csv"
-        text = forcing_text(record, round(config.timing.window * config.timing.output_rate))
+        text = forcing_text(source.record, round(config.timing.window * config.timing.output_rate))
         twin_dir_ready(twin_dir, text)
         folders.atomic_write(forcing, lambda tmp: Path(tmp).write_text(text))
         raw = make_raw(forcing)
@@ -364,8 +396,8 @@ def twin_paths(twin_config: Config, twin_dir: Path, models: tuple[str, ...] = ("
     return out
 
 
-def twin_dir_ready(twin_dir: Path, forcing_text: str) -> None:
+def twin_dir_ready(twin_dir: Path, text: str) -> None:
     """Keep the twins' earlier results only if their forcing functions are these (other data: new twins)."""
     path = twin_dir / "forcing.csv"
-    if path.is_file() and path.read_text() != forcing_text:
+    if path.is_file() and path.read_text() != text:
         folders.remove_owned(twin_dir)

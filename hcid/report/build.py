@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hcid import folders, results
+from hcid.io import folders, results
 from hcid.pipeline.rundir import using
 from hcid.report import figures
 from hcid.report.document import Doc, to_html, to_markdown
@@ -96,7 +96,7 @@ def _old_report(entries: list[str]) -> bool:
 def write_report(data: ReportData, out_dir: Path, *, adopt_old: bool = False) -> Report:
     """Draw the figures and write ``report.md``, ``report.html`` and the PNGs into ``out_dir``.
 
-    ``out_dir`` follows the rules of every folder hcid writes (:mod:`hcid.folders`):
+    ``out_dir`` follows the rules of every folder hcid writes (:mod:`hcid.io.folders`):
     new, empty or an hcid report folder; only hcid's own files are replaced, and
     figures of an earlier report that this one does not draw are removed.
     ``adopt_old`` takes over a report folder written before folders had manifests.

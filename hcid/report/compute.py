@@ -16,10 +16,11 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute  # noqa: F401  (pa.compute)
 
-from hcid import paper, selection, tables
+from hcid import tables
 from hcid.arx.response import path_response
-from hcid.config import Config
-from hcid.hcmodel import true_response
+from hcid.config import Config, paper
+from hcid.loop.hcmodel import true_response
+from hcid.selection import over_w
 from hcid.tables import ORDER_COLUMNS, split_by_key
 
 __all__ = [
@@ -38,7 +39,7 @@ __all__ = [
 
 
 def frequency_grid(n: int = 200) -> np.ndarray:
-    """SPEC 5: log grid over :data:`hcid.paper.FREQUENCY_RANGE` (0.1..30 rad/s)."""
+    """SPEC 5: log grid over :data:`hcid.config.paper.FREQUENCY_RANGE` (0.1..30 rad/s)."""
     return np.geomspace(*paper.FREQUENCY_RANGE, n)
 
 
@@ -115,12 +116,10 @@ def compute_responses(
     for (model, _seed, method), t in split_by_key(frontier, tables.FRONTIER.key).items():
         if method not in w_of:
             continue
-        d = t.column("d").to_numpy()
-        v = t.column("v").to_numpy()
-        orders = np.column_stack([t.column(c).to_numpy() for c in ORDER_COLUMNS])
-        row = int(selection.select_at(d, v, orders, np.array([w_of[method]]))[0])
+        row = int(over_w.frontier_select(t, w_of[method])[0])
         a = t.column("a")[row].as_py()
         b_ft = t.column("b_ft")[row].as_py()
+        orders = over_w.frontier_orders(t)
         b_e = t.column("b_e")[row].as_py()
         key = (model, method)
         hft.setdefault(key, []).append(path_response(a, b_ft, int(orders[row, 3]), omega, dt, advance=shift))
@@ -136,7 +135,7 @@ def compute_responses(
 
 
 def reference_feedforward(config: Config, omega: np.ndarray) -> np.ndarray | None:
-    """The FF model's feedforward with ``Kpt`` replaced by :data:`hcid.paper.KPT_FALSE_POSITIVE`
+    """The FF model's feedforward with ``Kpt`` replaced by :data:`hcid.config.paper.KPT_FALSE_POSITIVE`
     (paper Fig. 7a: Kpt = 0.2), or None without a feedforward model."""
     ff = next((m for m in config.models if m.has_feedforward), None)
     if ff is None:
@@ -192,11 +191,9 @@ def data_summary_rows(frontier: pa.Table, name: str, w_values: list[float]) -> l
     mask = pa.compute.equal(frontier.column("model"), name)
     out = []
     for (_m, seed, method), t in split_by_key(frontier.filter(mask), tables.FRONTIER.key).items():
-        d = t.column("d").to_numpy()
-        v = t.column("v").to_numpy()
-        orders = np.column_stack([t.column(c).to_numpy() for c in ORDER_COLUMNS])
+        orders = over_w.frontier_orders(t)
         for w in w_values:
-            row = int(selection.select_at(d, v, orders, np.array([w]))[0])
+            row = int(over_w.frontier_select(t, w)[0])
             na, nbf, nbe, nkf, nke = (int(x) for x in orders[row])
             out.append(
                 [

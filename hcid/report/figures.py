@@ -13,7 +13,7 @@ import numpy as np
 from matplotlib import colormaps, ticker
 from matplotlib.figure import Figure
 
-from hcid import folders
+from hcid.io import folders
 from hcid.methods import METHODS
 from hcid.report.compute import Curves, Responses
 
@@ -49,7 +49,7 @@ def methods_in(keys) -> list[str]:
 
 
 def save(fig, path) -> None:
-    """Write ``fig`` as a PNG atomically, as one of its folder's hcid files (:mod:`hcid.folders`)."""
+    """Write ``fig`` as a PNG atomically, as one of its folder's hcid files (:mod:`hcid.io.folders`)."""
     path = Path(path)
     folders.atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=DPI, bbox_inches="tight", format="png"))
 

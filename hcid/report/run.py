@@ -7,10 +7,12 @@ from pathlib import Path
 
 import pyarrow as pa
 
-from hcid import criteria, methods, results, tables
+from hcid import methods, tables
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError
-from hcid.resolve import parse_config, read_yaml, recorded_methods
+from hcid.io import results
+from hcid.io.resolve import parse_config, read_yaml, recorded_methods
+from hcid.selection import criteria
 
 __all__ = ["RunTables", "marks_for_plot", "read_run"]
 

@@ -17,15 +17,17 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from hcid import criteria, folders, paper, results, tables
-from hcid.config import Config
+from hcid import tables
+from hcid.config import Config, paper
 from hcid.errors import DataError, HcidError
+from hcid.io import folders, results
+from hcid.io.resolve import load_config
 from hcid.report import figures
 from hcid.report.document import Doc, to_html, to_markdown
 from hcid.report.sections.handoff import stage_options, summarize
 from hcid.report.sections.rates import rate_with_band
 from hcid.report.verdicts import sampling_verdict
-from hcid.resolve import load_config
+from hcid.selection import criteria
 
 __all__ = ["Variant", "compute_variant", "main", "write_variants"]
 

@@ -12,10 +12,10 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from hcid import criteria, paper
-from hcid.config import Config, HCModel
-from hcid.hcmodel import true_response
+from hcid.config import Config, HCModel, paper
+from hcid.loop.hcmodel import true_response
 from hcid.report.compute import Curves, Responses, compute_errors, reference_feedforward
+from hcid.selection import criteria
 
 __all__ = ["CONSISTENT", "Verdict", "compute_verdicts", "sampling_verdict"]
 

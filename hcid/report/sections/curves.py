@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from hcid import paper, tables
+from hcid import tables
+from hcid.config import paper
 from hcid.report import compute as calc
 from hcid.report import figures
 from hcid.report.document import Doc

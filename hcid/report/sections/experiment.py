@@ -6,11 +6,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hcid import paper
-from hcid.config import FileSignal, Multisine, Segments
+from hcid.config import FileSignal, Multisine, Segments, paper
+from hcid.loop.signals import forcing
 from hcid.report import figures
 from hcid.report.document import Doc
-from hcid.signals import forcing
 
 TITLE = "Experiment"
 

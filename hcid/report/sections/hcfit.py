@@ -10,12 +10,12 @@ import pyarrow as pa
 import pyarrow.compute  # noqa: F401  (pa.compute)
 
 from hcid import methods
-from hcid.calibration import clopper_pearson
 from hcid.hcfit import PARAMETERS, UNITS, hc_response
-from hcid.hcmodel import plant
+from hcid.loop.hcmodel import plant
 from hcid.report import compute as calc
 from hcid.report import figures_hcfit
 from hcid.report.document import Doc
+from hcid.selection.calibration import clopper_pearson
 from hcid.tables import split_by_key
 
 TITLE = "11. Parametric HC model (SPEC 8) and residuals"

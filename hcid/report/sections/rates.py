@@ -7,12 +7,14 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from hcid import criteria, paper, tables
-from hcid.calibration import clopper_pearson
+from hcid import tables
+from hcid.config import paper
 from hcid.report import figures
 from hcid.report.document import Doc
 from hcid.report.run import marks_for_plot
 from hcid.report.verdicts import W_FN_RULE, W_FP_RULE
+from hcid.selection import criteria
+from hcid.selection.calibration import clopper_pearson
 
 TITLE = "4b. Error rates over W and the thresholds' sampling uncertainty (SPEC 9)"
 

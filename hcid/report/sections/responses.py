@@ -7,8 +7,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hcid import methods, paper
-from hcid.hcmodel import true_response
+from hcid import methods
+from hcid.config import paper
+from hcid.loop.hcmodel import true_response
 from hcid.report import compute as calc
 from hcid.report import figures
 from hcid.report.document import Doc

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hcid import paper
+from hcid.config import paper
 from hcid.report import figures
 from hcid.report.document import Doc
 

@@ -9,10 +9,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyarrow as pa
 
-from hcid import results, tables
+from hcid import tables
 from hcid.hcfit.consistency import CONTRADICTED, format_p
 from hcid.hcfit.determined import is_undetermined
-from hcid.pipeline.evidence import summarise_parameters
+from hcid.io import results
+from hcid.pipeline.summary import rate_interval, summarise_groups
 from hcid.report import figures, figures_hcfit
 from hcid.report.document import Doc
 from hcid.tables import HC_PARAMETER_NAMES
@@ -40,10 +41,6 @@ def _num(x, digits: int = 3) -> str:
     return "-" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
 
 
-def _pct(rate: float, low: float, high: float) -> str:
-    return f"{100 * rate:.0f}% [{100 * low:.0f}, {100 * high:.0f}]"
-
-
 def _slug(folder: str) -> str:
     """A group's name for its figure files: its twins folder's (unique per group)."""
     return folder.rsplit("/", 1)[-1]
@@ -53,7 +50,7 @@ def _model_curves(run, twin: dict, lines: list[float]) -> dict:
     """The group's fitted model (the FF twin's parameters) on a dense grid around the forcing
     lines (half the lowest to 1.5 times the highest): omega, He, Ht."""
     from hcid.hcfit import hc_response
-    from hcid.hcmodel import plant
+    from hcid.loop.hcmodel import plant
 
     top = min(1.5 * max(lines), np.pi * run.config.timing.output_rate)
     omega = np.geomspace(0.5 * min(lines), top, 300)
@@ -69,24 +66,26 @@ def compute(run, done) -> StudyData | None:
         return None
     answers, uncertain, parameters = [], [], []
     rows = runs.to_pylist()
-    for g in groups.to_pylist():
+    summaries = summarise_groups(groups, runs)
+    for summary in summaries:
+        g = summary.group
         safe = f"[{_num(g['safe_low'])}, {_num(g['safe_high'])})" if not g["uncertain"] else "none"
         answers.append(
             [g["group"], g["method"], g["verdict"], f"{g['n_evidence']} of {g['n_runs']}",
              _num(g["binomial_p"], 2), _num(g["median_power"], 2),
              f"{g['n_feedforward']} of {g['n_runs']}", _num(g["w"]), g["w_rule"],
              "own" if g["ff_twin"] == "own" else f"study's FF (Kpt {_num(g['twin_Kpt'], 2)})",
-             safe, _pct(g["fp_rate"], g["fp_low"], g["fp_high"]),
-             _pct(g["fn_rate"], g["fn_low"], g["fn_high"]), "UNCERTAIN" if g["uncertain"] else "yes"]
+             safe, rate_interval(g["fp_rate"], g["fp_low"], g["fp_high"], long=False),
+             rate_interval(g["fn_rate"], g["fn_low"], g["fn_high"], long=False),
+             "UNCERTAIN" if g["uncertain"] else "yes"]
         )  # fmt: skip
         if g["uncertain"]:
             uncertain.append(f"{g['group']} ({g['method']})")
-        mine = [r for r in rows if r["group"] == g["group"] and r["method"] == g["method"]]
-        for summary in summarise_parameters(mine):
-            left_out = "; ".join(f"{n}: {why}" for why, n in summary.left_out.items()) or "-"
+        for p in summary.parameters:
+            left_out = "; ".join(f"{n}: {why}" for why, n in p.left_out.items()) or "-"
             parameters.append(
-                [g["group"], g["method"], summary.name, summary.unit, f"{summary.kept} of {summary.fitted}",
-                 _num(summary.median), _num(summary.sd, 2), _num(summary.median_se, 2), left_out]
+                [g["group"], g["method"], p.name, p.unit, f"{p.kept} of {p.fitted}",
+                 _num(p.median), _num(p.sd, 2), _num(p.median_se, 2), left_out]
             )  # fmt: skip
     checks, contradicted = [], []
     for g in groups.to_pylist():
@@ -167,8 +166,8 @@ def compute(run, done) -> StudyData | None:
     evidence = []
     if run.evidence_twins is not None:
         twins = run.evidence_twins.to_pylist()
-        for g in groups.to_pylist():
-            mine = [r for r in rows if r["group"] == g["group"] and r["method"] == g["method"]]
+        for summary in summaries:
+            g, mine = summary.group, summary.runs
             theirs = [t for t in twins if t["group"] == g["group"] and t["method"] == g["method"]]
             if mine and theirs:
                 folder = _slug(g["twins_folder"].removesuffix("-study"))

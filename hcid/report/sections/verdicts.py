@@ -3,7 +3,7 @@ stated rule."""
 
 from __future__ import annotations
 
-from hcid import paper
+from hcid.config import paper
 from hcid.report.document import Doc
 from hcid.report.verdicts import Verdict, compute_verdicts
 

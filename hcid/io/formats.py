@@ -1,5 +1,5 @@
 """Data file formats: the named columns of a CSV, Parquet or MATLAB file, and nothing else
-(results layer; :mod:`hcid.measured` turns them into checked records).
+(results layer; :mod:`hcid.io.measured` turns them into checked records).
 
 - Every file is checked against :data:`MAX_FILE_BYTES` (``stat()``) before it is read.
 - CSV: a UTF-8 byte-order mark, ``#`` comment lines and blank lines are dropped block by

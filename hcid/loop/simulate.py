@@ -1,7 +1,7 @@
 """Closed-loop simulation of the HC model in the tracking task (SPEC sections 1, 2).
 
 The loop runs at the simulation rate with discretised paths (Tustin for Hft,
-He and Yc, ZOH for the remnant filter; :mod:`hcid.hcmodel`) and whole-sample
+He and Yc, ZOH for the remnant filter; :mod:`hcid.loop.hcmodel`) and whole-sample
 delays. Because the feedback path holds a delay of ``L`` samples,
 the feedback input ``e(k - L)`` is known ``L`` samples ahead: the loop is
 exact to rounding with no algebraic loop and no iteration. It runs sample by
@@ -24,10 +24,10 @@ import numpy as np
 from numba import njit
 from scipy import signal as sps
 
-from hcid import signals
 from hcid.config import Config, HCModel, Multisine, Segments
 from hcid.errors import ConfigError
-from hcid.hcmodel import DiscreteLoop
+from hcid.loop import signals
+from hcid.loop.hcmodel import DiscreteLoop
 from hcid.tables import CHANNELS
 
 __all__ = [
@@ -198,7 +198,7 @@ def decimate(x: np.ndarray, factor: int) -> np.ndarray:
 
 
 def _forcing(timing, spec) -> np.ndarray:
-    """:func:`hcid.signals.forcing`, computed once per process for the kinds made from
+    """:func:`hcid.loop.signals.forcing`, computed once per process for the kinds made from
     the config alone (every seed and model of a study shares them); any other kind
     (a data file's column) is made each time. A copy: callers may write to it."""
     if isinstance(spec, _CONFIG_ONLY):

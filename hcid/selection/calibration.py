@@ -20,7 +20,7 @@ import pyarrow as pa
 from scipy import stats
 
 from hcid import tables
-from hcid.selection import SelectionPath, false_positive_extent
+from hcid.selection.over_w import SelectionPath, false_positive_extent
 
 __all__ = [
     "ERRORS",
@@ -123,7 +123,7 @@ def error_rates(
 
     Examples
     --------
-    >>> from hcid.selection import SelectionPath
+    >>> from hcid.selection.over_w import SelectionPath
     >>> seg = SelectionPath(np.array([0, 1]), np.array([0.0, 0.01]), np.array([0.01, np.inf]))
     >>> c = error_rates("direct", "FB", "false_positive", [seg, seg], [np.array([2, 0])] * 2, [0.005, 0.02])
     >>> c.rate.tolist(), np.round(c.high, 4).tolist()  # k = 0 of 2: 1 - 0.025^(1/2)

@@ -4,7 +4,7 @@ Part of the results layer (it reads files). A data file holds one or more runs
 of one subject and condition, each with ft, fd, e and u (rad) and either a
 time column or a sample rate. Names are mapped by the config's ``data``
 section. Every check fails with one line naming the file and what is wrong:
-a file above :data:`hcid.formats.MAX_FILE_BYTES`, missing columns, unequal lengths, a run
+a file above :data:`hcid.io.formats.MAX_FILE_BYTES`, missing columns, unequal lengths, a run
 id in two places, a non-uniform or wrong sample rate, NaN, inf or a value
 beyond :data:`LARGEST`, a constant signal, or a record too short for the
 identification windows.
@@ -15,7 +15,7 @@ are read.
 
 Layouts:
 
-How each format's columns are read: :mod:`hcid.formats`.
+How each format's columns are read: :mod:`hcid.io.formats`.
 
 - CSV / Parquet: one row per sample, a column per signal; several runs are
   told apart by the ``run`` column (integers; each run one contiguous block
@@ -34,16 +34,14 @@ import numpy as np
 import pyarrow as pa
 
 from hcid.config import Config, DataConfig
-from hcid.config.parse import default_data
 from hcid.errors import DataError, quote
-from hcid.formats import column_label, read_columns
+from hcid.io.formats import column_label, read_columns
 from hcid.tables import MEASURED, SIGNALS
 
 __all__ = [
     "LARGEST",
     "check_signal",
     "read_file_runs",
-    "load_data",
     "read_signal",
     "records_table",
     "samples_needed",
@@ -283,21 +281,6 @@ def resample(x: np.ndarray, up: int, down: int) -> np.ndarray:
     if up == down:
         return x
     return sps.resample_poly(x, up, down)
-
-
-def load_data(path: str | Path, config: Config) -> dict[int, dict[str, np.ndarray]]:
-    """Read and check a measured-data file for a study; one record per run, keyed by the file's run id.
-
-    :func:`read_runs` with the config's ``data`` section, its analysis rate
-    ``config.timing.output_rate`` and the samples its identification windows need.
-
-    Raises
-    ------
-    DataError
-        One line naming the file and the problem.
-    """
-    data = config.data if config.data is not None else default_data()
-    return read_runs(path, data, config.timing.output_rate, samples_needed(config))[0]
 
 
 def samples_needed(config: Config) -> int:

@@ -33,8 +33,8 @@ import pyarrow as pa
 from hcid.config import DataConfig
 from hcid.config.parse import RESERVED_FACTORS, check_pattern
 from hcid.errors import ConfigError, DataError
-from hcid.formats import READERS, csv_layout
-from hcid.measured import read_file_runs
+from hcid.io.formats import READERS, csv_layout
+from hcid.io.measured import read_file_runs
 from hcid.tables import RUNS
 
 __all__ = ["DataFile", "DataSet", "data_files", "read_set", "runs_table", "set_aside"]
@@ -216,7 +216,7 @@ def _columns(path: Path) -> tuple[str, ...] | None:
 
 
 def set_aside(files: Sequence[DataFile], data: DataConfig) -> tuple[list[DataFile], list[tuple[str, str]]]:
-    """The files that can be read (:func:`hcid.measured.read_file_runs` with ``data``), and the
+    """The files that can be read (:func:`hcid.io.measured.read_file_runs` with ``data``), and the
     others set aside with the one-line reason each gave: ``(path, reason)``. For ``--skip-unreadable``:
     each file is read once more than a plain analysis reads it."""
     good, aside = [], []
@@ -233,7 +233,7 @@ def set_aside(files: Sequence[DataFile], data: DataConfig) -> tuple[list[DataFil
 def read_set(
     files: Sequence[DataFile], data: DataConfig, rate: float | None = None, need: int = 1, skip: bool = False
 ) -> DataSet:
-    """Read and check every file of a set (:func:`hcid.measured.read_runs` each). With ``skip``,
+    """Read and check every file of a set (:func:`hcid.io.measured.read_runs` each). With ``skip``,
     a file whose reading or checks fail (its own problem, or columns or a sample rate that differ
     from the set's first readable file) is left out with its reason (``DataSet.set_aside``) instead.
 
@@ -287,7 +287,7 @@ def read_set(
 
 
 def _read_one(f: DataFile, data: DataConfig, rate, need: int, first, native):
-    """One file of a set read (:func:`hcid.measured.read_file_runs`) and checked against the
+    """One file of a set read (:func:`hcid.io.measured.read_file_runs`) and checked against the
     set's first readable file (``first``: its columns and path; ``native``: its first run's
     rate, path and run id, or None before it): ``(records, rate, natives, native, columns)``."""
     columns = _columns(f.path)

@@ -4,7 +4,7 @@ Given a record, the model a method selected at some W (its orders and
 coefficients, from ``frontier.parquet``) and the earlier stages' choices, this
 module fits the parametric HC model of SPEC sections 1, 7 and 8
 (:mod:`hcid.hcfit`) and analyses the selected model's simulation residual
-(:mod:`hcid.residuals`). Pure: arrays and dataclasses in, dataclasses out.
+(:mod:`hcid.analysis.residuals`). Pure: arrays and dataclasses in, dataclasses out.
 
 - Fit targets (``config.fit_hc.target``): ``frequency`` fits the parametric
   paths to the ARX paths (SPEC 5: ``Hft`` with the target shift undone, ``He``)
@@ -31,14 +31,14 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import hcfit
+from hcid.analysis.descriptors import RemnantFit, fit_remnant, loop_margins, variance_shares
+from hcid.analysis.residuals import ResidualAnalysis, analyse_residuals
 from hcid.arx.response import path_response
 from hcid.arx.simulation import simulate
 from hcid.config import Config, StageConfig, Window
-from hcid.descriptors import RemnantFit, fit_remnant, loop_margins, variance_shares
 from hcid.errors import IdentificationError
-from hcid.hcmodel import plant, true_response
+from hcid.loop.hcmodel import plant, true_response
 from hcid.methods import Method, StageChoice, shift_forward
-from hcid.residuals import ResidualAnalysis, analyse_residuals
 from hcid.tables import ORDER_COLUMNS
 
 __all__ = [

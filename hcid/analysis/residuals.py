@@ -37,7 +37,7 @@ from scipy import signal as sps
 from scipy import stats
 
 from hcid.arx.simulation import checked_rows
-from hcid.errors import DataError, IdentificationError
+from hcid.errors import DataError, IdentificationError, checked_rate
 
 __all__ = ["Correlation", "ResidualAnalysis", "analyse_residuals"]
 
@@ -233,8 +233,7 @@ def analyse_residuals(
         )
     if not 0.0 < confidence < 1.0:
         raise IdentificationError(f"confidence: must be in (0, 1), got {confidence!r}")
-    if not (math.isfinite(rate) and rate > 0):
-        raise IdentificationError(f"rate: must be a positive number of Hz, got {rate!r}")
+    checked_rate(rate, IdentificationError)
     if RESIDUAL in inputs:
         raise IdentificationError(f"inputs: the name {RESIDUAL!r} is the residual's own")
 

@@ -22,9 +22,9 @@ import pyarrow.parquet as pq
 
 from hcid import tables
 from hcid.errors import DataError
-from hcid.folders import atomic_write
+from hcid.io.folders import atomic_write
+from hcid.loop.simulate import Realization
 from hcid.methods import METHODS
-from hcid.simulate import Realization
 from hcid.tables import CHANNELS, Schema
 
 __all__ = [

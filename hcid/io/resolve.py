@@ -4,13 +4,13 @@
 values; this step, above the data readers and the method registry, completes a
 :class:`~hcid.config.Config` for a command:
 
-- forcing functions of kind ``file`` are read (:func:`hcid.measured.read_signal`,
+- forcing functions of kind ``file`` are read (:func:`hcid.io.measured.read_signal`,
   the checks every signal from a file passes) and checked against the window;
 - the stages of the methods the command uses, and only those, are built
   (:func:`hcid.config.stages.build_stages` with each method's stage specs): a
   method added to the registry changes no other config or run directory;
-- the selection criteria are looked up in :mod:`hcid.criteria`;
-- a simulating config's closed loops must be stable (:func:`hcid.hcmodel.check_closed_loops`)
+- the selection criteria are looked up in :mod:`hcid.selection.criteria`;
+- a simulating config's closed loops must be stable (:func:`hcid.loop.hcmodel.check_closed_loops`)
   and its study not too large.
 
 :func:`load_config` reads a YAML file (:func:`read_yaml`: bounded, no aliases) and does both.
@@ -25,15 +25,16 @@ from typing import Any
 
 import yaml
 
-from hcid import criteria, methods
+from hcid import methods
 from hcid.config import Config, FileSignal, HCModel, IdentifyConfig
 from hcid.config._checks import LIMITS
 from hcid.config.forcing import check_forcing_values
 from hcid.config.parse import describe_config
 from hcid.config.stages import build_stages, parse_identify, stage_raw
 from hcid.errors import ConfigError, DataError, quote
-from hcid.hcmodel import check_closed_loops
-from hcid.measured import read_signal
+from hcid.io.measured import read_signal
+from hcid.loop.hcmodel import check_closed_loops
+from hcid.selection import criteria
 
 __all__ = [
     "describe_file",
@@ -217,8 +218,8 @@ def data_timing(raw: dict, sources: Sequence[str | Path], base: Path | None = No
     DataError, ConfigError
         For a bad data set or data section, in one line.
     """
-    from hcid.datasets import data_files
-    from hcid.measured import read_file_runs, resampling_factors
+    from hcid.io.datasets import data_files
+    from hcid.io.measured import read_file_runs, resampling_factors
 
     data = dict(raw["data"])
     lead_in = data.get("lead_in", 0.0)
@@ -255,10 +256,10 @@ def _reading(raw: dict, base: Path | None):
 
 
 def readable_files(path: str | Path, sources: Sequence[str | Path]):
-    """A study config's data ``sources`` expanded (:func:`hcid.datasets.data_files`), the files
-    that cannot be read set aside (:func:`hcid.datasets.set_aside`): ``(files, [(path, reason)])``.
+    """A study config's data ``sources`` expanded (:func:`hcid.io.datasets.data_files`), the files
+    that cannot be read set aside (:func:`hcid.io.datasets.set_aside`): ``(files, [(path, reason)])``.
     The files keep their factors and can be given as sources again."""
-    from hcid.datasets import data_files, set_aside
+    from hcid.io.datasets import data_files, set_aside
 
     path = Path(path)
     raw = read_yaml(path)
