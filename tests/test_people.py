@@ -10,7 +10,7 @@ import pytest
 
 from hcid import tables
 from hcid.hcfit.determined import is_undetermined
-from hcid.io.resolve import load_config
+from hcid.io.resolve import read_study
 from hcid.pipeline import Execution
 from hcid.pipeline.analyse import AnalysisOptions, analyse_study
 
@@ -26,10 +26,9 @@ pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"no recordings at {DA
 @pytest.fixture(scope="module", params=["fo", pytest.param("so", marks=pytest.mark.slow)])
 def analysed(request, tmp_path_factory):
     plant = request.param
-    config = load_config(ROOT / "configs" / f"cphs2017_{plant}.yaml")
+    config, data = read_study(ROOT / "configs" / f"cphs2017_{plant}.yaml", [str(DATA / f"*_{plant}_*.csv")])
     run = tmp_path_factory.mktemp(f"cphs_{plant}") / "run"
-    options = AnalysisOptions(by=("trial",), twins=2)
-    result = analyse_study(config, run, [str(DATA / f"*_{plant}_*.csv")], options, execution=QUIET)
+    result = analyse_study(config, run, data, AnalysisOptions(by=("trial",), twins=2), execution=QUIET)
     return plant, result
 
 
@@ -80,9 +79,9 @@ def test_by_plant_puts_both_signs_in_one_group_with_a_forcing_set_each(tmp_path)
     # flipped, so --by plant gives one group of two forcing sets, each with twins of its own, and
     # every run a p-value (1 + k) / (1 + N) with N its set's FB twins (SPEC 11; 4 at most, so that
     # no run reaches the 5 at or above that would stop it early).
-    config = load_config(ROOT / "configs" / "cphs2017_fo.yaml")
+    config, data = read_study(ROOT / "configs" / "cphs2017_fo.yaml", [str(DATA / "*_fo_*.csv")])
     options = AnalysisOptions(by=("plant",), twins=4, max_fb_twins=4)
-    result = analyse_study(config, tmp_path / "run", [str(DATA / "*_fo_*.csv")], options, execution=QUIET)
+    result = analyse_study(config, tmp_path / "run", data, options, execution=QUIET)
     assert set(result.groups.column("forcing_sets").to_pylist()) == {2}
     rows = result.runs.to_pylist()
     assert {r["forcing_set"] for r in rows if r["trial"] == "+1"} == {1}

@@ -92,31 +92,38 @@ def _execution(jobs: int = 1, backend: str = "loky", scheduler: str | None = Non
     return Execution(jobs, backend, scheduler, worker_timeout, progress=not quiet)
 
 
+def _run_dir(config: Path, run: Path | None) -> Path:
+    """--run, else runs/<the study's name> (read first from the YAML itself)."""
+    from hcid.io.resolve import described_name
+
+    return run if run is not None else Path("runs") / described_name(config)
+
+
 def _load(
-    config: Path,
-    run: Path | None,
-    method_names: tuple[str, ...] | None = None,
-    *,
-    reopen: bool = False,
-    data: list[str] | None = None,
+    config: Path, run: Path | None, method_names: tuple[str, ...] | None = None, *, reopen: bool = False
 ):
     """The config resolved for ``method_names`` (None: every method) and its run directory.
-
-    ``data``: the measured data of the command, from which a measured study's analysis rate
-    and window are taken when its config leaves them out.
 
     ``reopen``: a command that reads a run's results resolves the methods the run
     recorded (a method registered since changes nothing).
     """
-    from hcid.io.resolve import describe_file, described_name, methods_of_run, resolve_config
+    from hcid.io.resolve import describe_file, methods_of_run, resolve_config
 
-    # The run directory's default needs the study's name, read first from the YAML itself.
-    name = described_name(config)
-    run_dir = run if run is not None else Path("runs") / name
-    described = describe_file(config, data, run_dir)
+    run_dir = _run_dir(config, run)
+    described = describe_file(config, run_dir)
     if reopen and method_names is None:
         method_names = methods_of_run(run_dir)
     return resolve_config(described, method_names), run_dir
+
+
+def _load_data(config: Path, run: Path | None, data: list[str], method_names=None, skip: bool = False):
+    """A measured study's config, completed from its data where it leaves the analysis rate or
+    window out, its run directory and its data set, each file found and read once."""
+    from hcid.io.resolve import read_study
+
+    run_dir = _run_dir(config, run)
+    cfg, data_set = read_study(config, data, method_names, skip_unreadable=skip)
+    return cfg, run_dir, data_set
 
 
 def _methods(method: str) -> tuple[str, ...]:
@@ -174,10 +181,11 @@ def identify(
     from hcid.pipeline import identify_study
 
     execution = _execution(jobs, backend, scheduler, worker_timeout, quiet)
-    cfg, run_dir = _load(config, run, _methods(method), data=data)
-    result = identify_study(
-        cfg, run_dir, _methods(method), data_path=data or None, execution=execution, force=force
-    )
+    if data:
+        cfg, run_dir, data_set = _load_data(config, run, data, _methods(method))
+    else:
+        (cfg, run_dir), data_set = _load(config, run, _methods(method)), None
+    result = identify_study(cfg, run_dir, _methods(method), data=data_set, execution=execution, force=force)
     answers.print_identification(result, answers.is_paper(cfg))
 
 
@@ -335,16 +343,8 @@ def analyse(
     execution = _execution(jobs, backend, scheduler, worker_timeout, quiet)
     groups = None if by is None else tuple(b.strip() for b in by.split(",") if b.strip())
     options = AnalysisOptions(groups, twins, max_fb_twins, ff_twin, alpha, fdr)
-    aside = []
-    if skip_unreadable:
-        from hcid.io.resolve import readable_files
-
-        data, aside = readable_files(config, data)
-    cfg, run_dir = _load(config, run, data=data)
-    result = analyse_study(
-        cfg, run_dir, data, options, execution=execution, force=force, skip_unreadable=skip_unreadable,
-        set_aside=aside,
-    )  # fmt: skip
+    cfg, run_dir, data_set = _load_data(config, run, data, skip=skip_unreadable)
+    result = analyse_study(cfg, run_dir, data_set, options, execution=execution, force=force)
     answers.print_analysis(result)
     from hcid.report import build_report
 

@@ -34,10 +34,10 @@ from hcid.config import DataConfig
 from hcid.config.parse import RESERVED_FACTORS, check_pattern
 from hcid.errors import ConfigError, DataError
 from hcid.io.formats import READERS, csv_layout
-from hcid.io.measured import read_file_runs
+from hcid.io.measured import FileRuns, read_file, runs_at
 from hcid.tables import RUNS
 
-__all__ = ["DataFile", "DataSet", "data_files", "read_set", "runs_table", "set_aside"]
+__all__ = ["DataFile", "DataSet", "data_files", "read_files", "read_set", "runs_table", "set_at"]
 
 _GLOB = re.compile(r"[*?\[]")
 
@@ -215,55 +215,73 @@ def _columns(path: Path) -> tuple[str, ...] | None:
     return None
 
 
-def set_aside(files: Sequence[DataFile], data: DataConfig) -> tuple[list[DataFile], list[tuple[str, str]]]:
-    """The files that can be read (:func:`hcid.io.measured.read_file_runs` with ``data``), and the
-    others set aside with the one-line reason each gave: ``(path, reason)``. For ``--skip-unreadable``:
-    each file is read once more than a plain analysis reads it."""
-    good, aside = [], []
-    for f in files:
-        try:
-            _columns(f.path)
-            read_file_runs(f.path, data)
-            good.append(f)
-        except DataError as exc:
-            aside.append((str(f.path), str(exc)))
-    return good, aside
-
-
-def read_set(
-    files: Sequence[DataFile], data: DataConfig, rate: float | None = None, need: int = 1, skip: bool = False
-) -> DataSet:
-    """Read and check every file of a set (:func:`hcid.io.measured.read_runs` each). With ``skip``,
-    a file whose reading or checks fail (its own problem, or columns or a sample rate that differ
-    from the set's first readable file) is left out with its reason (``DataSet.set_aside``) instead.
+def read_files(
+    files: Sequence[DataFile], data: DataConfig, skip: bool = False
+) -> tuple[list[tuple[DataFile, FileRuns]], list[tuple[str, str]]]:
+    """Every file of a set read once (:func:`hcid.io.measured.read_file`) and checked against the
+    set's first readable file (one format, the same columns): ``([(file, its runs)], set aside)``.
+    With ``skip``, a file that fails is set aside with its one-line reason instead of refused.
 
     Raises
     ------
     DataError
-        One line: a file's own problem (named), files of different formats,
-        columns or sample rates (the first that differs named against the first
-        file), or an empty set.
+        One line: a file's own problem (named), files of different formats or columns (the
+        first that differs named against the first file), or an empty set.
     """
     if not files:
         raise DataError("--data: the data set holds no file")
     suffixes = {f.path.suffix.lower().replace(".pq", ".parquet") for f in files}
     if len(suffixes) > 1:
         raise DataError(f"the data set mixes formats ({', '.join(sorted(suffixes))}): give one kind of file")
-    records: dict[int, dict[str, np.ndarray]] = {}
-    runs: list[dict[str, object]] = []
-    aside: list[tuple[str, str]] = []
-    native = first = None  # the first readable file's (rate, path, run) and (columns, path)
-    several = len(files) > 1 or data.dimensions is not None
+    read, aside = [], []
+    first = None  # the first readable file's (columns, path)
     for f in files:
         try:
-            file_records, file_rate, natives, native, columns = _read_one(f, data, rate, need, first, native)
+            columns = _columns(f.path)
+            if first is not None and columns != first[0]:
+                mine, theirs = list(columns or []), list(first[0] or [])
+                raise DataError(f"{f.path}: columns {mine} differ from {first[1].name}'s {theirs}")
+            read.append((f, read_file(f.path, data)))
+        except DataError as exc:
+            if not skip:
+                raise
+            aside.append((str(f.path), str(exc)))
+            continue
+        first = first or (columns, f.path)
+    if not read:
+        raise DataError(f"no file of the data set can be read (the first: {aside[0][1]})")
+    return read, aside
+
+
+def set_at(
+    read: Sequence[tuple[DataFile, FileRuns]],
+    data: DataConfig,
+    rate: float | None = None,
+    need: int = 1,
+    skip: bool = False,
+    aside: Sequence[tuple[str, str]] = (),
+) -> DataSet:
+    """The files :func:`read_files` read, as a data set at the analysis ``rate`` (default: the
+    first run's own), every run holding ``need`` samples after the lead-in, all runs at one
+    native rate. With ``skip``, a file whose runs fail (too short, another sample rate) is set
+    aside with its reason, after those ``aside`` already holds."""
+    records: dict[int, dict[str, np.ndarray]] = {}
+    runs: list[dict[str, object]] = []
+    aside = list(aside)
+    native = None  # the first run's (rate, path, run id)
+    several = len(read) + len(aside) > 1 or data.dimensions is not None
+    kept = []
+    for f, file_runs in read:
+        try:
+            file_records, file_rate, natives = runs_at(file_runs, data, rate, need)
+            native = _same_rate(f, natives, native)
         except DataError as exc:
             if not skip:
                 raise
             aside.append((str(f.path), str(exc)))
             continue
         rate = file_rate
-        first = first or (columns, f.path)
+        kept.append(f)
         for file_run, record in file_records.items():
             run = len(records) + 1 if several else file_run
             records[run] = record
@@ -273,29 +291,39 @@ def read_set(
             )  # fmt: skip
     if not records:
         raise DataError(f"no file of the data set can be read (the first: {aside[0][1]})")
-    left_out = {path for path, _ in aside}
-    files = [f for f in files if str(f.path) not in left_out]
-    factors = tuple(n for n, _ in files[0].factors) + tuple(
+    factors = tuple(n for n, _ in kept[0].factors) + tuple(
         d for d in (data.dimensions or ()) if d != "sample"
     )
     # Files by their path under the set's common folder: the same whatever the set was given as.
-    root = Path(os.path.commonpath([str(f.path.resolve().parent) for f in files]))
-    names = {str(f.path): f.path.resolve().relative_to(root).as_posix() for f in files}
+    root = Path(os.path.commonpath([str(f.path.resolve().parent) for f in kept]))
+    names = {str(f.path): f.path.resolve().relative_to(root).as_posix() for f in kept}
     for r in runs:
         r["file"] = names[r["file"]]
     return DataSet(records, runs, factors, float(rate), tuple(aside))
 
 
-def _read_one(f: DataFile, data: DataConfig, rate, need: int, first, native):
-    """One file of a set read (:func:`hcid.io.measured.read_file_runs`) and checked against the
-    set's first readable file (``first``: its columns and path; ``native``: its first run's
-    rate, path and run id, or None before it): ``(records, rate, natives, native, columns)``."""
-    columns = _columns(f.path)
-    if first is not None and columns != first[0]:
-        raise DataError(
-            f"{f.path}: columns {list(columns or [])} differ from {first[1].name}'s {list(first[0] or [])}"
-        )
-    file_records, rate, natives = read_file_runs(f.path, data, rate, need)
+def read_set(
+    files: Sequence[DataFile], data: DataConfig, rate: float | None = None, need: int = 1, skip: bool = False
+) -> DataSet:
+    """Read and check every file of a set once (:func:`read_files`, then :func:`set_at`). With
+    ``skip``, a file whose reading or checks fail (its own problem, or columns or a sample rate
+    that differ from the set's first readable file) is left out with its reason
+    (``DataSet.set_aside``) instead.
+
+    Raises
+    ------
+    DataError
+        One line: a file's own problem (named), files of different formats,
+        columns or sample rates (the first that differs named against the first
+        file), or an empty set.
+    """
+    read, aside = read_files(files, data, skip)
+    return set_at(read, data, rate, need, skip, aside)
+
+
+def _same_rate(f: DataFile, natives: dict, native):
+    """A file's runs checked against the set's first run's native rate (``native``: its rate,
+    path and run id, or None before it); returns that first run's."""
     for file_run, info in natives.items():
         found = info["rate"]
         if native is None:
@@ -305,7 +333,7 @@ def _read_one(f: DataFile, data: DataConfig, rate, need: int, first, native):
                 f"{f.path}: run {file_run} is sampled at {found:.6g} Hz, {native[1].name} at "
                 f"{native[0]:.6g} Hz: a set's files share one rate"
             )
-    return file_records, rate, natives, native, columns
+    return native
 
 
 def runs_table(name: str, data_set: DataSet) -> pa.Table:

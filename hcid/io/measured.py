@@ -28,6 +28,7 @@ How each format's columns are read: :mod:`hcid.io.formats`.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -40,10 +41,13 @@ from hcid.tables import MEASURED, SIGNALS
 
 __all__ = [
     "LARGEST",
+    "FileRuns",
     "check_signal",
+    "read_file",
     "read_file_runs",
     "read_signal",
     "records_table",
+    "runs_at",
     "samples_needed",
 ]
 
@@ -325,31 +329,66 @@ def read_runs(
     return records, rate
 
 
-def read_file_runs(
-    path: str | Path, data: DataConfig, rate: float | None = None, need: int = 1
-) -> tuple[dict[int, dict[str, np.ndarray]], float, dict[int, dict]]:
-    """:func:`read_runs`, and per run ``{"rate": its own sample rate (Hz) before resampling,
-    "factors": the factors its position in N-D arrays gives (data.dimensions), else {}}``."""
+@dataclass(frozen=True)
+class FileRuns:
+    """One measured file as read, once (:func:`read_file`): per run id its checked columns at
+    the file's own rate (the signals, and ``time`` or ``rate``) and the factors its position in
+    N-D arrays gives (``data.dimensions``, else none). :func:`runs_at` turns them into records
+    at an analysis rate."""
+
+    path: Path
+    runs: dict[int, dict[str, np.ndarray]]
+    factors: dict[int, dict[str, object]]
+
+
+def read_file(path: str | Path, data: DataConfig) -> FileRuns:
+    """Read a measured-data file and check its signals (finite, not too large); no rate yet.
+
+    Raises
+    ------
+    DataError
+        One line naming the file and the problem.
+    """
     path = Path(path)
-    given = rate is not None
     cols = _named_signals(path, _read_columns(path, data), data)
-    records, natives = {}, {}
-    factors = {}
+    runs, factors = {}, {}
     for run_id, run in _split_runs(path, cols, data).items():
         factors[run_id] = run.pop("_factors", {})
         where = f"{path}: run {run_id}"
         for name in (*SIGNALS, "time"):
             if name in run:
                 run[name] = check_signal(run[name], f"{where}: {column_label(data.columns[name])}")
+        runs[run_id] = run
+    if not runs:
+        raise DataError(f"{path}: holds no samples")
+    return FileRuns(path, runs, factors)
+
+
+def runs_at(
+    file: FileRuns, data: DataConfig, rate: float | None = None, need: int = 1
+) -> tuple[dict[int, dict[str, np.ndarray]], float, dict[int, dict]]:
+    """A file's runs as records at the analysis ``rate`` (default: the first run's own), after
+    the lead-in, each holding at least ``need`` samples (:func:`read_runs`), and per run
+    ``{"rate": its own sample rate (Hz) before resampling, "factors": its factors}``."""
+    given = rate is not None
+    records, natives = {}, {}
+    for run_id, run in file.runs.items():
+        where = f"{file.path}: run {run_id}"
         found = _run_rate(where, run, data, rate)
         if rate is None:
             rate = found
-        natives[run_id] = {"rate": float(found), "factors": factors[run_id]}
+        natives[run_id] = {"rate": float(found), "factors": file.factors[run_id]}
         signals_ = _at_rate(where, {name: run[name] for name in SIGNALS}, found, rate, given)
         records[run_id] = _after_lead_in(where, signals_, rate, data, need)
-    if not records:
-        raise DataError(f"{path}: holds no samples")
     return records, float(rate), natives
+
+
+def read_file_runs(
+    path: str | Path, data: DataConfig, rate: float | None = None, need: int = 1
+) -> tuple[dict[int, dict[str, np.ndarray]], float, dict[int, dict]]:
+    """:func:`read_runs`, and per run ``{"rate": its own sample rate (Hz) before resampling,
+    "factors": the factors its position in N-D arrays gives (data.dimensions), else {}}``."""
+    return runs_at(read_file(path, data), data, rate, need)
 
 
 def _named_signals(path: Path, cols: dict[str, np.ndarray], data: DataConfig) -> dict[str, np.ndarray]:

@@ -26,13 +26,14 @@ from typing import Any
 import yaml
 
 from hcid import methods
-from hcid.config import Config, FileSignal, HCModel, IdentifyConfig
+from hcid.config import Config, DataConfig, FileSignal, HCModel, IdentifyConfig
 from hcid.config._checks import LIMITS
 from hcid.config.forcing import check_forcing_values
-from hcid.config.parse import describe_config
+from hcid.config.parse import default_data, describe_config
 from hcid.config.stages import build_stages, parse_identify, stage_raw
 from hcid.errors import ConfigError, DataError, quote
-from hcid.io.measured import read_signal
+from hcid.io.datasets import DataSet
+from hcid.io.measured import FileRuns, read_signal, resampling_factors, runs_at, samples_needed
 from hcid.loop.hcmodel import check_closed_loops
 from hcid.selection import criteria
 
@@ -41,6 +42,7 @@ __all__ = [
     "load_config",
     "methods_of_run",
     "parse_config",
+    "read_study",
     "read_yaml",
     "recorded_methods",
     "resolve_config",
@@ -159,36 +161,64 @@ def described_name(path: str | Path) -> str:
     return name if isinstance(name, str) and name else path.stem
 
 
-def describe_file(
-    path: str | Path, sources: Sequence[str | Path] | None = None, run_dir: Path | None = None
-) -> Config:
+def describe_file(path: str | Path, run_dir: Path | None = None) -> Config:
     """Read a YAML study config and describe it (:func:`~hcid.config.parse.describe_config`), unresolved.
 
     A measured study that leaves ``data.analysis_rate`` or ``data.window`` out takes them from
-    its data ``sources`` (:func:`data_timing`) when given, else from the run directory's recorded
-    config (a command after ``hcid identify --data`` or ``hcid analyse``).
+    the run directory's recorded config (a command after ``hcid identify --data`` or ``hcid
+    analyse``; with the data themselves, :func:`read_study`).
     """
     path = Path(path)
     raw = read_yaml(path)
     if _needs_timing(raw):
-        if sources:
-            raw = data_timing(raw, sources, path.parent)
-        else:
-            recorded = (run_dir / "config.yaml") if run_dir is not None else None
-            if recorded is None or not recorded.is_file():
-                raise ConfigError(
-                    "data.analysis_rate, data.window: missing; give them, or let `hcid identify --data` "
-                    "or `hcid analyse` take them from the data first"
-                )
-            earlier = read_yaml(recorded, "run config").get("data", {})
-            raw = {
-                **raw,
-                "data": {
-                    **raw["data"],
-                    **{k: earlier[k] for k in ("analysis_rate", "window") if k in earlier},
-                },
-            }
+        recorded = (run_dir / "config.yaml") if run_dir is not None else None
+        if recorded is None or not recorded.is_file():
+            raise ConfigError(
+                "data.analysis_rate, data.window: missing; give them, or let `hcid identify --data` "
+                "or `hcid analyse` take them from the data first"
+            )
+        earlier = read_yaml(recorded, "run config").get("data", {})
+        raw = {
+            **raw,
+            "data": {**raw["data"], **{k: earlier[k] for k in ("analysis_rate", "window") if k in earlier}},
+        }
     return describe_config(raw, path.stem, path.parent)
+
+
+def read_study(
+    path: str | Path,
+    sources: Sequence[str | Path],
+    method_names: Sequence[str] | None = None,
+    *,
+    skip_unreadable: bool = False,
+) -> tuple[Config, DataSet]:
+    """A measured study's config (YAML at ``path``), completed from its data where it leaves the
+    analysis rate or window out (:func:`data_timing`) and resolved for ``method_names``, and its
+    data set at the analysis rate: every file of ``sources`` found once and read once
+    (:func:`hcid.io.datasets.read_files`, :func:`hcid.io.datasets.set_at`). With
+    ``skip_unreadable``, files that cannot be read or fail their checks are set aside with their
+    reasons (``DataSet.set_aside``) instead of refused.
+
+    Raises
+    ------
+    ConfigError, DataError
+        For a bad config, data section or data set, in one line.
+    """
+    from hcid.io.datasets import data_files, read_files, set_at
+
+    path = Path(path)
+    raw = read_yaml(path)
+    if not isinstance(raw, dict) or not isinstance(raw.get("data", {}), dict):
+        raise ConfigError(f"{path}: data: must be a mapping")
+    reading = _reading(raw, path.parent)
+    read, aside = read_files(data_files(sources, reading.pattern), reading, skip_unreadable)
+    if _needs_timing(raw):
+        raw = data_timing(raw, [file_runs for _, file_runs in read], reading)
+    config = resolve_config(describe_config(raw, path.stem, path.parent), method_names)
+    data = config.data if config.data is not None else default_data()
+    need = samples_needed(config)
+    data_set = set_at(read, data, config.timing.output_rate, need, skip_unreadable, aside)
+    return config, data_set
 
 
 #: The analysis rate a measured study defaults to when its data are faster (Hz): SPEC 3's.
@@ -205,9 +235,10 @@ def _needs_timing(raw: Any) -> bool:
     return "analysis_rate" not in raw["data"] or "window" not in raw["data"]
 
 
-def data_timing(raw: dict, sources: Sequence[str | Path], base: Path | None = None) -> dict:
-    """``raw`` with the data section's ``analysis_rate`` and ``window`` taken from the data where
-    the config leaves them out.
+def data_timing(raw: dict, read: Sequence[FileRuns], reading: DataConfig) -> dict:
+    """``raw`` with the data section's ``analysis_rate`` and ``window`` taken from the files
+    ``read`` (:func:`hcid.io.measured.read_file`, ``reading`` their data section) where the
+    config leaves them out.
 
     The analysis rate: the first run's own rate if at most :data:`DEFAULT_ANALYSIS_RATE`, else
     that rate (25 Hz, SPEC 3's; or the data's own when 25 Hz is no ratio p/q with p, q <= 100).
@@ -218,14 +249,9 @@ def data_timing(raw: dict, sources: Sequence[str | Path], base: Path | None = No
     DataError, ConfigError
         For a bad data set or data section, in one line.
     """
-    from hcid.io.datasets import data_files
-    from hcid.io.measured import read_file_runs, resampling_factors
-
     data = dict(raw["data"])
     lead_in = data.get("lead_in", 0.0)
-    reading = _reading(raw, base)
-    files = data_files(sources, reading.pattern)
-    first, native, _ = read_file_runs(files[0].path, reading)
+    _, native, _ = runs_at(read[0], reading)
     if "analysis_rate" not in data:
         rate = native if native <= DEFAULT_ANALYSIS_RATE else DEFAULT_ANALYSIS_RATE
         try:
@@ -235,14 +261,12 @@ def data_timing(raw: dict, sources: Sequence[str | Path], base: Path | None = No
         data["analysis_rate"] = float(rate)
     rate = float(data["analysis_rate"])
     if "window" not in data:
-        shortest = min(len(r["ft"]) for f in files for r in read_file_runs(f.path, reading, rate)[0].values())
+        shortest = min(len(r["ft"]) for f in read for r in runs_at(f, reading, rate)[0].values())
         skip = round(float(lead_in) * rate)
         if shortest - skip < 2:
-            raise DataError(
-                f"{files[0].path}: runs of {shortest} samples at {rate:g} Hz, none after the lead-in"
-            )
+            where = read[0].path
+            raise DataError(f"{where}: runs of {shortest} samples at {rate:g} Hz, none after the lead-in")
         data["window"] = (shortest - skip) / rate
-    del first
     return {**raw, "data": data}
 
 
@@ -253,24 +277,6 @@ def _reading(raw: dict, base: Path | None):
     probe["data"] = {**data, "analysis_rate": data.get("analysis_rate", 1000.0), "window": 1.0,
                      "lead_in": 0.0}  # fmt: skip
     return describe_config(probe, "probe", base).data
-
-
-def readable_files(path: str | Path, sources: Sequence[str | Path]):
-    """A study config's data ``sources`` expanded (:func:`hcid.io.datasets.data_files`), the files
-    that cannot be read set aside (:func:`hcid.io.datasets.set_aside`): ``(files, [(path, reason)])``.
-    The files keep their factors and can be given as sources again."""
-    from hcid.io.datasets import data_files, set_aside
-
-    path = Path(path)
-    raw = read_yaml(path)
-    if not isinstance(raw, dict) or not isinstance(raw.get("data", {}), dict):
-        raise ConfigError(f"{path}: data: must be a mapping")
-    raw = {**raw, "data": raw.get("data") or {}}
-    reading = _reading(raw, path.parent)
-    files, aside = set_aside(data_files(sources, reading.pattern), reading)
-    if not files:
-        raise DataError(f"--skip-unreadable: no file of the data set can be read (the first: {aside[0][1]})")
-    return files, aside
 
 
 def load_config(path: str | Path, method_names: Sequence[str] | None = None) -> Config:

@@ -46,6 +46,7 @@ from hcid.config.parse import default_data
 from hcid.errors import ConfigError, DataError, IdentificationError
 from hcid.hcfit.determined import group_model, parameter_status
 from hcid.io import datasets, folders, results
+from hcid.io.datasets import DataSet
 from hcid.loop.hcmodel import plant
 from hcid.pipeline.evidence import (
     MAX_FB_TWINS,
@@ -58,7 +59,7 @@ from hcid.pipeline.evidence import (
     group_verdict,
 )
 from hcid.pipeline.execution import Execution
-from hcid.pipeline.fit import _choices, _records, _stage_choices
+from hcid.pipeline.fit import _choices, _stage_choices
 from hcid.pipeline.parallel import labelled
 from hcid.pipeline.rundir import holds_run_dir
 from hcid.pipeline.studies import identify_study
@@ -364,12 +365,10 @@ class _Found:
     finals: dict = field(default_factory=dict)  # (seed, method) -> SelectedAnalysis
 
 
-def _factors_and_groups(config: Config, sources: Sequence[str | Path], by: Sequence[str] | None):
+def _factors_and_groups(data: DataSet, by: Sequence[str] | None) -> tuple[str, ...]:
     """The data set's factors checked against the tables' columns, and the ``by`` factors (the
     default: ``condition`` where the data set has it); refused before any work."""
-    data = config.data if config.data is not None else default_data()
-    files = datasets.data_files(sources, data.pattern)  # a bad set is refused before any work
-    factors = [n for n, _ in files[0].factors] + [d for d in (data.dimensions or ()) if d != "sample"]
+    factors = list(data.factors)
     taken = sorted(set(factors) & (set(tables.ANALYSIS.names) | set(tables.ANALYSIS_GROUPS.names)))
     if taken:
         raise ConfigError(
@@ -594,22 +593,18 @@ def _write_tables(study: _Study, found: _Found, checks: Checks, judge: Evidence,
 def analyse_study(
     config: Config,
     run_dir: Path,
-    sources: Sequence[str | Path],
+    data: DataSet,
     options: AnalysisOptions = AnalysisOptions(),
     *,
     execution: Execution = Execution(),
     force: bool = False,
-    skip_unreadable: bool = False,
-    set_aside: Sequence[tuple[str, str]] = (),
 ) -> AnalysisRun:
     """Analyse a measured study with W calibrated on twins of each group's fitted model (module
     notes), in its phases: identify, fit runs, twins, more FB twins, fit selected, tables.
 
-    ``skip_unreadable``: files that cannot be read or fail their checks (too short for the
-    windows, another sample rate, other columns) are left out instead of refusing the set; with
-    ``set_aside`` (files the caller already left out, ``(path, reason)``,
-    :func:`hcid.io.resolve.readable_files`) they are written to ``set_aside.parquet`` so that the
-    answer and the report list them.
+    ``data``: the study's data set, read once (:func:`hcid.io.resolve.read_study`); the files it
+    set aside (``--skip-unreadable``) are written to ``set_aside.parquet`` so that the answer and
+    the report list them.
 
     Raises
     ------
@@ -619,7 +614,7 @@ def analyse_study(
         For a bad data set (one line, nothing written).
     """
     _check_config(config)
-    by = _factors_and_groups(config, sources, options.by)
+    by = _factors_and_groups(data, options.by)
     start = time.perf_counter()
     stages, lap = {}, [start]
 
@@ -632,16 +627,11 @@ def analyse_study(
             if (folder / folders.MANIFEST).is_file():
                 folders.remove_owned(folder)
     with labelled("runs: "):
-        identified = identify_study(
-            config, run_dir, tuple(methods.METHODS), data_path=list(sources), execution=execution,
-            force=force, skip_unreadable=skip_unreadable,
-        )  # fmt: skip
+        identify_study(config, run_dir, tuple(methods.METHODS), data=data, execution=execution, force=force)
     lap_done("identify")
-    data_name = config.data.name if config.data is not None else default_data().name
-    runs = results.read(tables.RUNS, run_dir)
-    records = {seed: r for (model, seed), r in _records(run_dir).items() if model == data_name}
+    runs = datasets.runs_table((config.data or default_data()).name, data)
     study = _Study(
-        config, run_dir, options, execution, by, runs, records, _groups(runs, by),
+        config, run_dir, options, execution, by, runs, data.records, _groups(runs, by),
         twin_rate(config.timing.output_rate),
     )  # fmt: skip
     found = _Found()
@@ -650,14 +640,14 @@ def analyse_study(
     _twins(study, found)
     lap_done("twins")
     _selection_paths(study, found)
-    checks = Checks(config, records)
+    checks = Checks(config, data.records)
     run_sizes = checks.sizes()
     judge = Evidence(config, run_dir, options.alpha, options.most_fb_twins)
     _more_fb_twins(study, found, judge, run_sizes)
     lap_done("more FB twins")
     _select_and_fit(study, found, judge, run_sizes)
     lap_done("fit selected")
-    aside = [*set_aside, *identified.set_aside]
+    aside = data.set_aside
     group_table, run_table = _write_tables(study, found, checks, judge, aside)
     lap_done("tables")
     seconds = time.perf_counter() - start

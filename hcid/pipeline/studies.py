@@ -249,17 +249,11 @@ def _load_records(config: Config, run_dir: Path) -> dict[tuple[str, int], dict[s
     return recs
 
 
-def _import_data(
-    config: Config, run_dir: Path, sources: Sequence[str | Path], force: bool, skip: bool = False
-) -> datasets.DataSet:
-    """Read and check a data set; keep a copy in ``measured.parquet`` and its runs' factors in
+def _import_data(config: Config, run_dir: Path, data_set: datasets.DataSet, force: bool) -> None:
+    """Keep a copy of a data set in ``measured.parquet`` and its runs' factors in
     ``runs.parquet``. Other data than the run's earlier identification results were made from
     are refused without ``force``: their results would be reused as if they were these data's."""
     data = config.data if config.data is not None else default_data()
-    files = datasets.data_files(sources, data.pattern)
-    data_set = datasets.read_set(
-        files, data, config.timing.output_rate, measured.samples_needed(config), skip=skip
-    )
     check_run_dir(config, run_dir, "identify", force=force)
     table = measured.records_table(data.name, data_set.records)
     if not force:
@@ -273,7 +267,6 @@ def _import_data(
     record_config(config, run_dir)
     results.write(tables.MEASURED, table, run_dir)
     results.write(tables.RUNS, datasets.runs_table(data.name, data_set), run_dir)
-    return data_set
 
 
 def _done(run_dir: Path, keys: list, names: tuple[str, ...], force: bool) -> dict:
@@ -316,10 +309,9 @@ def identify_study(
     run_dir: Path,
     method_names: Sequence[str] | None = None,
     *,
-    data_path: str | Path | Sequence[str | Path] | None = None,
+    data: datasets.DataSet | None = None,
     execution: Execution = Execution(),
     force: bool = False,
-    skip_unreadable: bool = False,
 ) -> IdentifyRun:
     """Identify every model x seed x method of ``config``, simulating first if the run has no simulations.
 
@@ -329,23 +321,21 @@ def identify_study(
     (``stage1.parquet``) and ``identify_log.parquet``; the first two are
     identical whatever ``execution`` (jobs, backend) or interruptions.
 
-    With ``data_path`` (measured data: files, globs, folders or manifests,
-    :func:`hcid.io.datasets.data_files`), its runs are identified instead, under model
-    name ``config.data.name`` and seed = run id (the file's own for one file; 1, 2,
-    ... over a set of files, whose files and factors ``runs.parquet`` keeps), beside
-    any simulated realizations already in the tables.
-    ``method_names`` defaults to every registered method. ``skip_unreadable``: measured files
-    that cannot be read or checked are left out (``IdentifyRun.set_aside``) instead of refused.
+    With ``data`` (a measured data set, read once: :func:`hcid.io.resolve.read_study`), its
+    runs are identified instead, under model name ``config.data.name`` and seed = run id (the
+    file's own for one file; 1, 2, ... over a set of files, whose files and factors
+    ``runs.parquet`` keeps), beside any simulated realizations already in the tables.
+    ``method_names`` defaults to every registered method.
     """
     names = tuple(methods.METHODS) if method_names is None else tuple(method_names)
     for name in names:
         methods.get(name)
     execution.check()  # a dask scheduler without workers is refused before anything is read or written
     simulation = None
-    if data_path is not None:
-        sources = [data_path] if isinstance(data_path, str | Path) else list(data_path)
-        data_set = _import_data(config, run_dir, sources, force, skip_unreadable)
-        records = {(config.data.name, run): rec for run, rec in data_set.records.items()}
+    if data is not None:
+        _import_data(config, run_dir, data, force)
+        name = (config.data or default_data()).name
+        records = {(name, run): rec for run, rec in data.records.items()}
         keys = list(records)
         noise_free = {}
     else:
@@ -357,7 +347,7 @@ def identify_study(
             simulation = simulate_study(config, run_dir, execution=execution)
         keys = [(m.name, s) for m in config.models for s in config.seeds]
     check_run_dir(config, run_dir, "identify", force=force)
-    if data_path is None:
+    if data is None:
         records = _load_records(config, run_dir)
     start = time.perf_counter()
     done = _done(run_dir, keys, names, force)
@@ -389,8 +379,8 @@ def identify_study(
         reused=reused,
         run_dir=run_dir,
         simulation=simulation,
-        imported=len(keys) if data_path is not None else 0,
-        set_aside=data_set.set_aside if data_path is not None else (),
+        imported=len(keys) if data is not None else 0,
+        set_aside=data.set_aside if data is not None else (),
     )
 
 
