@@ -251,19 +251,6 @@ def _span(selected: SelectedModel) -> slice:
     return slice(min(est.start, val.start), max(est.stop, val.stop))
 
 
-def _describe(source, he_of_w, band, u, parts, rows, rate, kn_rate, yc) -> LoopDescription:
-    margins = loop_margins(lambda w: he_of_w(w) * yc(1j * w), band)
-    shares = variance_shares(u[rows], {k: x[rows] for k, x in parts.items()})
-    n = u[rows] - sum(x[rows] for x in parts.values())
-    try:
-        remnant = fit_remnant(n, rate, kn_rate) if np.ptp(n) > 0 else None
-    except IdentificationError:  # too few spectral lines in the band
-        remnant = None
-    return LoopDescription(
-        source, margins.crossover, margins.phase_margin, margins.n_crossovers, shares, remnant
-    )
-
-
 def describe_loop(
     selected: SelectedModel,
     fit: hcfit.HCFit | None,
@@ -286,16 +273,25 @@ def describe_loop(
     rows = _span(selected)
     ft, e, u = (np.asarray(record[k], dtype=np.float64) for k in ("ft", "e", "u"))
     zeros = np.zeros_like(ft)
-    arx = _describe(
+
+    def describe(source, he_of_w, band, parts) -> LoopDescription:
+        """The loop of ``He = he_of_w`` with the plant, u's split into ``parts`` and the remnant."""
+        margins = loop_margins(lambda w: he_of_w(w) * yc(1j * w), band)
+        shares = variance_shares(u[rows], {k: x[rows] for k, x in parts.items()})
+        n = u[rows] - sum(x[rows] for x in parts.values())
+        try:
+            remnant = fit_remnant(n, rate, kn_rate) if np.ptp(n) > 0 else None
+        except IdentificationError:  # too few spectral lines in the band
+            remnant = None
+        return LoopDescription(
+            source, margins.crossover, margins.phase_margin, margins.n_crossovers, shares, remnant
+        )
+
+    arx = describe(
         "arx",
         lambda w: selected.frequency_response(w)["e"],
         (1e-2, 0.999 * np.pi * rate),
-        u,
         {"ft": selected.simulate(ft, zeros), "e": selected.simulate(zeros, e)},
-        rows,
-        rate,
-        kn_rate,
-        yc,
     )
     if fit is None:
         return (arx,)
@@ -304,17 +300,7 @@ def describe_loop(
     feedback = {k: values[k] for k in hcfit.FEEDBACK_PARAMETERS}
     u_e = hcfit.simulate_hc(feedback, yc, tracking, oversample)
     parts = {"ft": hcfit.simulate_hc(values, yc, tracking, oversample) - u_e, "e": u_e}
-    fitted = _describe(
-        "fitted",
-        lambda w: hcfit.hc_response(values, yc, w)[1],
-        (1e-2, 1e3),
-        u,
-        parts,
-        rows,
-        rate,
-        kn_rate,
-        yc,
-    )
+    fitted = describe("fitted", lambda w: hcfit.hc_response(values, yc, w)[1], (1e-2, 1e3), parts)
     return arx, fitted
 
 

@@ -27,7 +27,6 @@ group's model-free estimates of both paths, SPEC 10, beside its fitted model).
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -38,25 +37,22 @@ import pyarrow as pa
 
 from hcid import hcfit, methods, tables
 from hcid.analysis.descriptors import fit_remnant
-from hcid.analysis.fourier import fc_estimate
 from hcid.analysis.selected import SelectedModel, analyse_selected
 from hcid.config import Config
 from hcid.config.fit import FEEDFORWARD_PARAMETERS
 from hcid.config.parse import default_data
 from hcid.errors import ConfigError, DataError, IdentificationError
-from hcid.hcfit.determined import group_model, parameter_status
+from hcid.hcfit.determined import group_model
 from hcid.io import datasets, folders, results
 from hcid.io.datasets import DataSet
 from hcid.loop.hcmodel import plant
+from hcid.pipeline.analysis_tables import write_tables
 from hcid.pipeline.evidence import (
     MAX_FB_TWINS,
-    MIN_POWER,
     Checks,
     Evidence,
-    consistency_columns,
     decide,
     group_name,
-    group_verdict,
 )
 from hcid.pipeline.execution import Execution
 from hcid.pipeline.fit import _choices, _stage_choices
@@ -75,7 +71,7 @@ from hcid.pipeline.twins import (
     twin_rate,
 )
 from hcid.selection import over_w
-from hcid.selection.calibration import benjamini_hochberg, rates_at
+from hcid.selection.calibration import benjamini_hochberg
 
 __all__ = ["AnalysisOptions", "AnalysisRun", "analyse_study"]
 
@@ -160,140 +156,6 @@ def _same_fit(config: Config, sel: SelectedModel, fits: dict):
     if (sel.estimation.rows(), sel.validation.rows()) != _fit_windows(config):
         return None
     return fits[bool(sel.has_feedforward)]
-
-
-def _tables(study: _Study, found: _Found, checks: Checks) -> tuple[pa.Table, pa.Table]:
-    """The groups' and the runs' analysis tables (one row per group or run, and method)."""
-    config, runs, groups, by = study.config, study.runs, study.groups, study.by
-    used, chosen, finals, models, evidence = (
-        found.used,
-        found.chosen,
-        found.finals,
-        found.models,
-        found.evidence,
-    )
-    group_checks = {key: checks.group(seeds, models[key].values) for key, seeds in groups.items()}
-    factors = [c for c in runs.column_names if c not in tables.RUNS.names]
-    factor_of = {int(r["seed"]): r for r in runs.to_pylist()}
-    group_rows, run_rows = [], []
-    for key, seeds in groups.items():
-        name = group_name(by, key)
-        for method_name in methods.METHODS:
-            pair = used[(key, method_name)]
-            cal = pair.calibrations[method_name]
-            w, rule, uncertain = chosen[(key, method_name)]
-            choice = {
-                "group": name,
-                "method": method_name,
-                "w": w,
-                "w_rule": rule,
-                "uncertain": uncertain,
-                "ff_twin": pair.kind,
-                "safe_low": float(cal.safe_low),
-                "safe_high": float(cal.safe_high),
-                # Exactly at W, from the twins' selection paths (W need not be on the grid).
-                **rates_at(*pair.paths[method_name], w),
-            }
-            n_ff = n_contradicted = 0
-            for seed in seeds:
-                a = finals[(seed, method_name)]
-                sel, fit = a.model, a.fit
-                n_ff += sel.nb_ft > 0
-                values = dict(zip(fit.names, fit.estimates, strict=True)) if fit else {}
-                ses = dict(zip(fit.names, fit.se, strict=True)) if fit else {}
-                fitted_loop = next((d for d in a.loop if d.source == "fitted"), None)
-                row = {
-                    "data_set": config.data.name, "run_id": seed,
-                    "file": str(factor_of[seed]["file"]), "file_run": int(factor_of[seed]["file_run"]),
-                    **choice,
-                    **dict(zip(tables.ORDER_COLUMNS, sel.orders, strict=True)),
-                    "feedforward": bool(sel.nb_ft > 0), "vaf_arx_validation": sel.vaf_validation,
-                    "vaf_validation": fit.vaf_validation if fit else math.nan,
-                }  # fmt: skip
-                status = parameter_status(fit) if fit else {}
-                row["estimator"] = fit.target if fit else config.fit_hc.target
-                row["hc_form"] = ("nms fixed" if fit.fixed else "full") if fit else ""
-                for p in tables.HC_PARAMETER_NAMES:
-                    row[p] = values.get(p, math.nan)
-                    row[f"{p}_se"] = ses.get(p, math.nan)
-                    row[f"{p}_status"] = status.get(p, "not fitted")
-                row["crossover"] = fitted_loop.crossover if fitted_loop else math.nan
-                row["phase_margin"] = fitted_loop.phase_margin if fitted_loop else math.nan
-                row["share_remnant"] = fitted_loop.shares["remnant"] if fitted_loop else math.nan
-                row.update(evidence[(seed, method_name)])
-                row["evidence_uncertain"] = bool(row["power"] < MIN_POWER)
-                check = checks.run(seed, fit) if fit else None
-                n_contradicted += bool(check is not None and check.contradicted)
-                row.update(consistency_columns(check, checks.problem([seed]) if fit else "not fitted"))
-                for f in factors:
-                    row[f] = str(factor_of[seed][f])
-                run_rows.append(row)
-            mine = [evidence[(seed, method_name)] for seed in seeds]
-            group_rows.append(
-                {**choice, "n_runs": len(seeds), "n_feedforward": int(n_ff),
-                 **group_verdict(mine, study.options.alpha),
-                 "forcing_sets": len(pair.sets), "decided_by": mine[0]["decided_by"],
-                 **{f"twin_{p}": pair.model[p] for p in tables.HC_PARAMETER_NAMES},
-                 **{f"fitted_{p}": models[key].values[p] for p in tables.HC_PARAMETER_NAMES},
-                 "twin_kn": pair.remnant[0], "twin_w_n": pair.remnant[1], "twin_zeta_n": pair.remnant[2],
-                 "twins": study.options.twins, "fb_twins": found.fb_drawn[(key, method_name)],
-                 "twins_folder": pair.folder,
-                 "twin_source": models[key].source, "twin_undetermined": ", ".join(models[key].undetermined),
-                 "n_contradicted": int(n_contradicted),
-                 **consistency_columns(group_checks[key], checks.problem(seeds))}
-            )  # fmt: skip
-    schema = tables.ANALYSIS.arrow
-    for f in factors:
-        schema = schema.append(pa.field(f, pa.string()))
-    return (
-        pa.Table.from_pylist(group_rows, schema=tables.ANALYSIS_GROUPS.arrow),
-        pa.Table.from_pylist(run_rows, schema=schema),
-    )
-
-
-def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median: dict) -> list[dict]:
-    """The group's Fourier-coefficient estimates and its fitted model at the same lines."""
-    n = round(config.timing.window * config.timing.output_rate)
-    rows = slice(0, n)
-    base = {"group": name, "n_runs": len(seeds)}
-    try:
-        fc = fc_estimate([records[s] for s in seeds], config.timing.output_rate, rows)
-    except DataError as exc:
-        nan = math.nan
-        return [{**base, "path": "", "omega": nan, "magnitude_db": nan, "phase_deg": nan, "sd_db": nan,
-                 "sd_deg": nan, "extrapolated": False, "model_db": nan, "model_deg": nan,
-                 "inversion": nan, "inversion_deg": nan, "inversion_sd": nan, "inversion_sd_deg": nan,
-                 "problem": str(exc)}]  # fmt: skip
-    yc = plant(config.loop)
-    out = []
-    inversion = fc.inversion(np.asarray(yc(1j * fc.omega_t), dtype=complex))
-    for path, omega, h, extrapolated in (
-        ("e", fc.omega_e, fc.he, np.zeros(fc.omega_e.size, dtype=bool)),
-        ("ft", fc.omega_t, fc.ht, fc.extrapolated),
-    ):
-        sd_db, sd_deg = fc.spread(path)
-        hft, he = hcfit.hc_response(median, yc, omega)
-        model = he if path == "e" else hft
-        inv = inversion if path == "ft" else tuple(np.full(omega.size, math.nan) for _ in range(4))
-        for i in range(omega.size):
-            out.append(
-                {**base, "path": path, "omega": float(omega[i]),
-                 "magnitude_db": float(20 * np.log10(abs(h[i]))),
-                 "phase_deg": float(np.degrees(np.angle(h[i]))), "sd_db": float(sd_db[i]),
-                 "sd_deg": float(sd_deg[i]), "extrapolated": bool(extrapolated[i]),
-                 "model_db": float(20 * np.log10(abs(model[i]))),
-                 "model_deg": float(np.degrees(np.angle(model[i] / h[i])) + np.degrees(np.angle(h[i]))),
-                 "inversion": float(inv[0][i]), "inversion_deg": float(inv[1][i]),
-                 "inversion_sd": float(inv[2][i]), "inversion_sd_deg": float(inv[3][i]),
-                 "problem": ""}
-            )  # fmt: skip
-    return out
-
-
-def _write_csv(table: pa.Table, path: str) -> None:
-    import pyarrow.csv as pacsv
-
-    pacsv.write_csv(table, path)
 
 
 @dataclass(frozen=True)
@@ -567,26 +429,11 @@ def _select_and_fit(study: _Study, found: _Found, judge: Evidence, run_sizes: di
                 found.evidence[k] = {**found.evidence[k], "evidence": "feedforward" if hit else "none shown"}
 
 
-def _write_tables(study: _Study, found: _Found, checks: Checks, judge: Evidence, set_aside) -> tuple:
-    """Phase 6: the analysis tables, the groups' Fourier-coefficient estimates, the evidence's
-    twins and the files set aside, each written atomically; returns (groups, runs)."""
-    run_dir = study.run_dir
-    group_table, run_table = _tables(study, found, checks)
-    fc_rows = []
-    for key, seeds in study.groups.items():
-        fc_rows += _fc_rows(
-            study.config, group_name(study.by, key), seeds, study.records, found.models[key].values
-        )
-    results.write(
-        tables.FC_ESTIMATES, pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow), run_dir
-    )
-    results.write(tables.EVIDENCE_TWINS, judge.twins_table(study.groups, study.by, found.evidence), run_dir)
-    aside = [{"file": f, "reason": why} for f, why in set_aside]
-    results.write(tables.SET_ASIDE, pa.Table.from_pylist(aside, schema=tables.SET_ASIDE.arrow), run_dir)
-    results.write(tables.ANALYSIS_GROUPS, group_table, run_dir)
-    results.write(tables.ANALYSIS, run_table, run_dir)
-    folders.atomic_write(run_dir / "analysis.csv", lambda tmp: _write_csv(run_table, tmp))
-    return group_table, run_table
+def _forget_twins(run_dir: Path) -> None:
+    """``--force``: every twins folder hcid made removed, so that they are made again."""
+    for folder in sorted((run_dir / "twins").glob("*/")) if (run_dir / "twins").is_dir() else []:
+        if (folder / folders.MANIFEST).is_file():
+            folders.remove_owned(folder)
 
 
 @holds_run_dir(create=True)
@@ -622,10 +469,8 @@ def analyse_study(
         now = time.perf_counter()
         stages[name], lap[0] = now - lap[0], now
 
-    if force:  # recompute everything, the twins included
-        for folder in sorted((run_dir / "twins").glob("*/")) if (run_dir / "twins").is_dir() else []:
-            if (folder / folders.MANIFEST).is_file():
-                folders.remove_owned(folder)
+    if force:
+        _forget_twins(run_dir)
     with labelled("runs: "):
         identify_study(config, run_dir, tuple(methods.METHODS), data=data, execution=execution, force=force)
     lap_done("identify")
@@ -647,10 +492,7 @@ def analyse_study(
     lap_done("more FB twins")
     _select_and_fit(study, found, judge, run_sizes)
     lap_done("fit selected")
-    aside = data.set_aside
-    group_table, run_table = _write_tables(study, found, checks, judge, aside)
+    group_table, run_table = write_tables(study, found, checks, judge, data.set_aside)
     lap_done("tables")
-    seconds = time.perf_counter() - start
-    return AnalysisRun(
-        group_table, run_table, seconds, run_dir, stages, tuple((str(f), str(w)) for f, w in aside)
-    )
+    aside = tuple((str(f), str(why)) for f, why in data.set_aside)
+    return AnalysisRun(group_table, run_table, time.perf_counter() - start, run_dir, stages, aside)

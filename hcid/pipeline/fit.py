@@ -276,7 +276,11 @@ def _loop_rows(base: dict, loop, true_margins: tuple[float, float]) -> tuple[lis
     return rows, spectrum
 
 
-def _fit_task(config, key, record, selected, sources, choices, truths, true_margins, digest):
+def _fit_task(config, key, record, todo, choices, truth, digest):
+    """One record and method's analyses: ``todo`` its (selected model, source) pairs, ``truth``
+    the simulated model's (parameters, loop margins) or ({}, NaNs) for measured data."""
+    selected, sources = [s for s, _ in todo], [src for _, src in todo]
+    truths, true_margins = truth
     method = methods.get(key[2])
     settings = config.fit_hc
     out = {name: [] for name in OUTPUTS}
@@ -400,19 +404,7 @@ def _plan(config, run_dir: Path, by_key: dict, w_of: dict, names: list[str], exi
         truths, true_margins = {}, (math.nan, math.nan)
         if model in {m.name for m in config.models}:
             truths, true_margins = true_parameters(config, model), true_loop(config, model)
-        tasks.append(
-            (
-                config,
-                key,
-                record,
-                [s for s, _ in todo],
-                [src for _, src in todo],
-                stage_choices,
-                truths,
-                true_margins,
-                digest,
-            )
-        )
+        tasks.append((config, key, record, list(todo), stage_choices, (truths, true_margins), digest))
 
     return tasks, kept, reused
 
@@ -429,6 +421,43 @@ def _stage_choices(run_dir: Path, choices: dict, method_name: str, model: str, s
             )
         out.append(found)
     return tuple(out)
+
+
+def _fit_settings(config: Config, target: str | None):
+    """The config's fit settings (built in code: the config's disturbance band, SPEC 5), with
+    ``target`` (``--target``) over its estimator."""
+    settings = config.fit_hc if config.fit_hc is not None else parse_fit_settings(None)
+    if settings.band is None:
+        settings = dataclasses.replace(settings, band=config.disturbance.band)
+    if target is not None:
+        if target not in TARGETS:
+            raise ConfigError(f"--target: must be one of {', '.join(TARGETS)}, got {target!r}")
+        settings = dataclasses.replace(settings, target=target)
+    return settings
+
+
+def _write_fit_parts(parts_dir: Path, key: tuple, made: dict) -> None:
+    """A finished task's tables as parts, for a resume; parameters last: a part counts once it is there."""
+    stem = "__".join(str(k) for k in key)
+    for name, table in made.items():
+        if name != "parameters":
+            results.write_part_table(table, parts_dir / f"{stem}.{name}{results.PART_SUFFIX}")
+    results.write_part_table(made["parameters"], parts_dir / f"{stem}.parameters{results.PART_SUFFIX}")
+
+
+def _write_fits(config: Config, run_dir: Path, by_key: dict, kept: dict) -> dict[str, pa.Table]:
+    """The tables of :data:`OUTPUTS` in frontier order, written atomically; the parts removed."""
+    order = {k: i for i, k in enumerate(by_key)}
+    keys = sorted(kept, key=lambda k: (order.get(k[:3], len(order)), k[3]))
+    written = {
+        name: tables.concat([schema.arrow.empty_table()] + [kept[k][name] for k in keys])
+        for name, schema in OUTPUTS.items()
+    }
+    record_config(config, run_dir)
+    for name, schema in OUTPUTS.items():
+        results.write(schema, written[name], run_dir)
+    shutil.rmtree(run_dir / PARTS, ignore_errors=True)
+    return written
 
 
 @holds_run_dir(create=False)
@@ -467,14 +496,7 @@ def fit_hc_study(
         )
     check_run_dir(config, run_dir, "select")
     start = time.perf_counter()
-    settings = config.fit_hc if config.fit_hc is not None else parse_fit_settings(None)
-    if settings.band is None:  # settings built in code: the config's disturbance band (SPEC 5)
-        settings = dataclasses.replace(settings, band=config.disturbance.band)
-    if target is not None:
-        if target not in TARGETS:
-            raise ConfigError(f"--target: must be one of {', '.join(TARGETS)}, got {target!r}")
-        settings = dataclasses.replace(settings, target=target)
-    config = dataclasses.replace(config, fit_hc=settings)
+    config = dataclasses.replace(config, fit_hc=_fit_settings(config, target))
     frontier = results.read(tables.FRONTIER, run_dir, hint="run `hcid identify` first")
     results.check_against_config(frontier, config, run_dir / tables.FRONTIER.file)
     by_key = tables.split_by_key(frontier, tables.FRONTIER.key)
@@ -495,23 +517,9 @@ def fit_hc_study(
     tasks, kept, reused = _plan(config, run_dir, by_key, w_of, names, existing, digest)
     parts_dir = run_dir / PARTS / digest
     for key, made in execution.map(_fit_task, tasks, "fit-hc"):
-        stem = "__".join(str(k) for k in key)
-        for name, table in made.items():  # parameters last: a part counts once it is there
-            if name != "parameters":
-                results.write_part_table(table, parts_dir / f"{stem}.{name}{results.PART_SUFFIX}")
-        results.write_part_table(made["parameters"], parts_dir / f"{stem}.parameters{results.PART_SUFFIX}")
+        _write_fit_parts(parts_dir, key, made)
         kept.update(_groups(made, digest))
-
-    order = {k: i for i, k in enumerate(by_key)}
-    keys = sorted(kept, key=lambda k: (order.get(k[:3], len(order)), k[3]))
-    written = {
-        name: tables.concat([schema.arrow.empty_table()] + [kept[k][name] for k in keys])
-        for name, schema in OUTPUTS.items()
-    }
-    record_config(config, run_dir)
-    for name, schema in OUTPUTS.items():
-        results.write(schema, written[name], run_dir)
-    shutil.rmtree(run_dir / PARTS, ignore_errors=True)
+    written = _write_fits(config, run_dir, by_key, kept)
     seconds = time.perf_counter() - start
     if tasks:
         results.append_run_log(run_dir, f"fit-hc ({len(tasks)} tasks)", seconds, execution.jobs)

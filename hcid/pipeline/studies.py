@@ -331,24 +331,7 @@ def identify_study(
     for name in names:
         methods.get(name)
     execution.check()  # a dask scheduler without workers is refused before anything is read or written
-    simulation = None
-    if data is not None:
-        _import_data(config, run_dir, data, force)
-        name = (config.data or default_data()).name
-        records = {(name, run): rec for run, rec in data.records.items()}
-        keys = list(records)
-        noise_free = {}
-    else:
-        config.require_simulation("identify (without --data)")
-        # Before the simulations: forked workers then start with this process's loops,
-        # forcing functions and compiled loop kernel (hcid.pipeline.parallel).
-        noise_free = noise_free_records(config)
-        if not (run_dir / tables.SIMULATIONS.file).exists():
-            simulation = simulate_study(config, run_dir, execution=execution)
-        keys = [(m.name, s) for m in config.models for s in config.seeds]
-    check_run_dir(config, run_dir, "identify", force=force)
-    if data is None:
-        records = _load_records(config, run_dir)
+    records, keys, noise_free, simulation = _records_to_identify(config, run_dir, data, execution, force)
     start = time.perf_counter()
     done = _done(run_dir, keys, names, force)
     record_config(config, run_dir)
@@ -382,6 +365,27 @@ def identify_study(
         imported=len(keys) if data is not None else 0,
         set_aside=data.set_aside if data is not None else (),
     )
+
+
+def _records_to_identify(config: Config, run_dir: Path, data, execution: Execution, force: bool):
+    """The records to identify by (model, seed) and their keys in order, each simulated model's
+    noise-free record, and the simulation if it was made here (a study without one yet)."""
+    if data is not None:
+        _import_data(config, run_dir, data, force)
+        name = (config.data or default_data()).name
+        records = {(name, run): rec for run, rec in data.records.items()}
+        check_run_dir(config, run_dir, "identify", force=force)
+        return records, list(records), {}, None
+    config.require_simulation("identify (without --data)")
+    # Before the simulations: forked workers then start with this process's loops,
+    # forcing functions and compiled loop kernel (hcid.pipeline.parallel).
+    noise_free = noise_free_records(config)
+    simulation = None
+    if not (run_dir / tables.SIMULATIONS.file).exists():
+        simulation = simulate_study(config, run_dir, execution=execution)
+    keys = [(m.name, s) for m in config.models for s in config.seeds]
+    check_run_dir(config, run_dir, "identify", force=force)
+    return _load_records(config, run_dir), keys, noise_free, simulation
 
 
 def _with_worker(log: pa.Table) -> pa.Table:

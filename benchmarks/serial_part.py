@@ -1,0 +1,101 @@
+"""The serial part of a study (issue 36): wall time outside the worker pool, measured.
+
+Runs ``hcid run CONFIG`` (default configs/paper.yaml) in this process with ``--jobs 1`` and
+``--jobs 2`` into fresh run directories, side by side, and splits each command's wall time
+into the time inside :meth:`hcid.pipeline.Execution.map` (the pool at work; the main process
+only collects results) and the rest (imports, config, simulation set-up, writing the tables,
+the W sweep): that rest does not shrink with more workers. Amdahl's fit of the two walls,
+S = 2 T2 - T1, is printed beside it. The machine (CPU, load) is printed first.
+
+usage: python benchmarks/serial_part.py [CONFIG] [--repeat N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+CHILD = r"""
+import sys, time, json
+t0 = time.perf_counter()
+spans = []
+import hcid.pipeline.execution as ex
+original = ex.Execution.map
+def timed(self, func, tasks, label):
+    start = time.perf_counter()
+    try:
+        yield from original(self, func, tasks, label)
+    finally:
+        spans.append((label, time.perf_counter() - start))
+ex.Execution.map = timed
+from hcid.cli import main
+sys.argv = ["hcid", "run", sys.argv[1], "--run", sys.argv[2], "--jobs", sys.argv[3], "--quiet"]
+try:
+    main()
+except SystemExit:
+    pass
+total = time.perf_counter() - t0
+print("SPANS " + json.dumps({"total": total, "spans": spans}))
+"""
+
+
+def _cpu() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def run(config: str, jobs: int) -> dict:
+    import json
+
+    folder = Path(tempfile.mkdtemp(prefix="hcid-serial-"))
+    try:
+        env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+        out = subprocess.run(
+            [sys.executable, "-c", CHILD, config, str(folder / "run"), str(jobs)],
+            capture_output=True,
+            text=True,
+            env=env,
+            check=True,
+        ).stdout
+        line = next(x for x in out.splitlines() if x.startswith("SPANS "))
+        return json.loads(line[6:])
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("config", nargs="?", default="configs/paper.yaml")
+    parser.add_argument("--repeat", type=int, default=1)
+    args = parser.parse_args()
+    print(f"machine: {_cpu()}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}")
+    walls = {}
+    for _ in range(args.repeat):
+        for jobs in (1, 2):
+            found = run(args.config, jobs)
+            inside = sum(s for _, s in found["spans"])
+            walls.setdefault(jobs, []).append(found["total"])
+            print(
+                f"--jobs {jobs}: wall {found['total']:.1f} s, in the pool {inside:.1f} s "
+                f"({', '.join(f'{label} {s:.1f}' for label, s in found['spans'])}), "
+                f"outside it {found['total'] - inside:.1f} s"
+            )
+    t1, t2 = min(walls[1]), min(walls[2])
+    print(f"Amdahl from the two walls (fastest of {args.repeat}): serial S = 2 T2 - T1 = {2 * t2 - t1:.1f} s")
+    print(f"done {time.strftime('%Y-%m-%d %H:%M')}")
+
+
+if __name__ == "__main__":
+    main()

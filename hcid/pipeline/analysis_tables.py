@@ -1,0 +1,207 @@
+"""The tables ``hcid analyse`` writes (:mod:`hcid.pipeline.analyse`, its last phase): one row per
+run and method (``analysis.parquet``, ``analysis.csv``), per group and method
+(``analysis_groups.parquet``), each group's Fourier-coefficient estimates beside its fitted
+model (``fc_estimates.parquet``), the FB twins each run's p-value used (``evidence_twins``)
+and the files set aside (``set_aside.parquet``)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pyarrow as pa
+
+from hcid import hcfit, methods, tables
+from hcid.analysis.fourier import fc_estimate
+from hcid.config import Config
+from hcid.errors import DataError
+from hcid.hcfit.determined import parameter_status
+from hcid.io import folders, results
+from hcid.loop.hcmodel import plant
+from hcid.pipeline.evidence import (
+    MIN_POWER,
+    Checks,
+    Evidence,
+    consistency_columns,
+    group_name,
+    group_verdict,
+)
+from hcid.selection.calibration import rates_at
+
+__all__ = ["write_tables"]
+
+
+def write_tables(study, found, checks: Checks, judge: Evidence, set_aside) -> tuple:
+    """Phase 6 of an analysis (``study``, ``found``: its state and findings,
+    :mod:`hcid.pipeline.analyse`): the analysis tables, the groups' Fourier-coefficient
+    estimates, the evidence's twins and the files set aside, each written atomically; returns
+    (groups, runs)."""
+    run_dir = study.run_dir
+    group_table, run_table = _tables(study, found, checks)
+    fc_rows = []
+    for key, seeds in study.groups.items():
+        fc_rows += _fc_rows(
+            study.config, group_name(study.by, key), seeds, study.records, found.models[key].values
+        )
+    results.write(
+        tables.FC_ESTIMATES, pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow), run_dir
+    )
+    results.write(tables.EVIDENCE_TWINS, judge.twins_table(study.groups, study.by, found.evidence), run_dir)
+    aside = [{"file": f, "reason": why} for f, why in set_aside]
+    results.write(tables.SET_ASIDE, pa.Table.from_pylist(aside, schema=tables.SET_ASIDE.arrow), run_dir)
+    results.write(tables.ANALYSIS_GROUPS, group_table, run_dir)
+    results.write(tables.ANALYSIS, run_table, run_dir)
+    folders.atomic_write(run_dir / "analysis.csv", lambda tmp: _write_csv(run_table, tmp))
+    return group_table, run_table
+
+
+class _Rows:
+    """The analysis tables' rows: one per run and method, one per group and method."""
+
+    def __init__(self, study, found, checks: Checks):
+        self.study, self.found, self.checks = study, found, checks
+        self.factors = [c for c in study.runs.column_names if c not in tables.RUNS.names]
+        self.factor_of = {int(r["seed"]): r for r in study.runs.to_pylist()}
+        # Every group's check first: a group whose test fails names its problem for its runs too.
+        self.group_checks = {
+            key: checks.group(seeds, found.models[key].values) for key, seeds in study.groups.items()
+        }
+
+    def choice(self, key, method_name: str) -> dict:
+        """The group's W for a method, how it was chosen, and its twins' rates there."""
+        pair = self.found.used[(key, method_name)]
+        cal = pair.calibrations[method_name]
+        w, rule, uncertain = self.found.chosen[(key, method_name)]
+        return {
+            "group": group_name(self.study.by, key),
+            "method": method_name,
+            "w": w,
+            "w_rule": rule,
+            "uncertain": uncertain,
+            "ff_twin": pair.kind,
+            "safe_low": float(cal.safe_low),
+            "safe_high": float(cal.safe_high),
+            # Exactly at W, from the twins' selection paths (W need not be on the grid).
+            **rates_at(*pair.paths[method_name], w),
+        }
+
+    def run(self, seed: int, method_name: str, choice: dict) -> tuple[dict, bool]:
+        """A run's row, and whether the data contradict its own fit at W."""
+        config, factor_of = self.study.config, self.factor_of
+        a = self.found.finals[(seed, method_name)]
+        sel, fit = a.model, a.fit
+        values = dict(zip(fit.names, fit.estimates, strict=True)) if fit else {}
+        ses = dict(zip(fit.names, fit.se, strict=True)) if fit else {}
+        fitted_loop = next((d for d in a.loop if d.source == "fitted"), None)
+        row = {
+            "data_set": config.data.name, "run_id": seed,
+            "file": str(factor_of[seed]["file"]), "file_run": int(factor_of[seed]["file_run"]),
+            **choice,
+            **dict(zip(tables.ORDER_COLUMNS, sel.orders, strict=True)),
+            "feedforward": bool(sel.nb_ft > 0), "vaf_arx_validation": sel.vaf_validation,
+            "vaf_validation": fit.vaf_validation if fit else math.nan,
+        }  # fmt: skip
+        status = parameter_status(fit) if fit else {}
+        row["estimator"] = fit.target if fit else config.fit_hc.target
+        row["hc_form"] = ("nms fixed" if fit.fixed else "full") if fit else ""
+        for p in tables.HC_PARAMETER_NAMES:
+            row[p] = values.get(p, math.nan)
+            row[f"{p}_se"] = ses.get(p, math.nan)
+            row[f"{p}_status"] = status.get(p, "not fitted")
+        row["crossover"] = fitted_loop.crossover if fitted_loop else math.nan
+        row["phase_margin"] = fitted_loop.phase_margin if fitted_loop else math.nan
+        row["share_remnant"] = fitted_loop.shares["remnant"] if fitted_loop else math.nan
+        row.update(self.found.evidence[(seed, method_name)])
+        row["evidence_uncertain"] = bool(row["power"] < MIN_POWER)
+        check = self.checks.run(seed, fit) if fit else None
+        row.update(consistency_columns(check, self.checks.problem([seed]) if fit else "not fitted"))
+        for f in self.factors:
+            row[f] = str(factor_of[seed][f])
+        return row, bool(check is not None and check.contradicted)
+
+    def group(self, key, method_name: str, choice: dict, runs: list[dict], n_contradicted: int) -> dict:
+        """A group's row from its choice of W and its runs' rows."""
+        found, seeds = self.found, self.study.groups[key]
+        pair, model = found.used[(key, method_name)], found.models[key]
+        mine = [found.evidence[(seed, method_name)] for seed in seeds]
+        return {
+            **choice, "n_runs": len(seeds), "n_feedforward": int(sum(r["feedforward"] for r in runs)),
+            **group_verdict(mine, self.study.options.alpha),
+            "forcing_sets": len(pair.sets), "decided_by": mine[0]["decided_by"],
+            **{f"twin_{p}": pair.model[p] for p in tables.HC_PARAMETER_NAMES},
+            **{f"fitted_{p}": model.values[p] for p in tables.HC_PARAMETER_NAMES},
+            "twin_kn": pair.remnant[0], "twin_w_n": pair.remnant[1], "twin_zeta_n": pair.remnant[2],
+            "twins": self.study.options.twins, "fb_twins": found.fb_drawn[(key, method_name)],
+            "twins_folder": pair.folder,
+            "twin_source": model.source, "twin_undetermined": ", ".join(model.undetermined),
+            "n_contradicted": int(n_contradicted),
+            **consistency_columns(self.group_checks[key], self.checks.problem(seeds)),
+        }  # fmt: skip
+
+
+def _tables(study, found, checks: Checks) -> tuple[pa.Table, pa.Table]:
+    """The groups' and the runs' analysis tables (one row per group or run, and method)."""
+    rows = _Rows(study, found, checks)
+    group_rows, run_rows = [], []
+    for key, seeds in study.groups.items():
+        for method_name in methods.METHODS:
+            choice = rows.choice(key, method_name)
+            mine, n_contradicted = [], 0
+            for seed in seeds:
+                row, contradicted = rows.run(seed, method_name, choice)
+                mine.append(row)
+                n_contradicted += contradicted
+            run_rows += mine
+            group_rows.append(rows.group(key, method_name, choice, mine, n_contradicted))
+    schema = tables.ANALYSIS.arrow
+    for f in rows.factors:
+        schema = schema.append(pa.field(f, pa.string()))
+    return (
+        pa.Table.from_pylist(group_rows, schema=tables.ANALYSIS_GROUPS.arrow),
+        pa.Table.from_pylist(run_rows, schema=schema),
+    )
+
+
+def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median: dict) -> list[dict]:
+    """The group's Fourier-coefficient estimates and its fitted model at the same lines."""
+    n = round(config.timing.window * config.timing.output_rate)
+    rows = slice(0, n)
+    base = {"group": name, "n_runs": len(seeds)}
+    try:
+        fc = fc_estimate([records[s] for s in seeds], config.timing.output_rate, rows)
+    except DataError as exc:
+        nan = math.nan
+        return [{**base, "path": "", "omega": nan, "magnitude_db": nan, "phase_deg": nan, "sd_db": nan,
+                 "sd_deg": nan, "extrapolated": False, "model_db": nan, "model_deg": nan,
+                 "inversion": nan, "inversion_deg": nan, "inversion_sd": nan, "inversion_sd_deg": nan,
+                 "problem": str(exc)}]  # fmt: skip
+    yc = plant(config.loop)
+    out = []
+    inversion = fc.inversion(np.asarray(yc(1j * fc.omega_t), dtype=complex))
+    for path, omega, h, extrapolated in (
+        ("e", fc.omega_e, fc.he, np.zeros(fc.omega_e.size, dtype=bool)),
+        ("ft", fc.omega_t, fc.ht, fc.extrapolated),
+    ):
+        sd_db, sd_deg = fc.spread(path)
+        hft, he = hcfit.hc_response(median, yc, omega)
+        model = he if path == "e" else hft
+        inv = inversion if path == "ft" else tuple(np.full(omega.size, math.nan) for _ in range(4))
+        for i in range(omega.size):
+            out.append(
+                {**base, "path": path, "omega": float(omega[i]),
+                 "magnitude_db": float(20 * np.log10(abs(h[i]))),
+                 "phase_deg": float(np.degrees(np.angle(h[i]))), "sd_db": float(sd_db[i]),
+                 "sd_deg": float(sd_deg[i]), "extrapolated": bool(extrapolated[i]),
+                 "model_db": float(20 * np.log10(abs(model[i]))),
+                 "model_deg": float(np.degrees(np.angle(model[i] / h[i])) + np.degrees(np.angle(h[i]))),
+                 "inversion": float(inv[0][i]), "inversion_deg": float(inv[1][i]),
+                 "inversion_sd": float(inv[2][i]), "inversion_sd_deg": float(inv[3][i]),
+                 "problem": ""}
+            )  # fmt: skip
+    return out
+
+
+def _write_csv(table: pa.Table, path: str) -> None:
+    import pyarrow.csv as pacsv
+
+    pacsv.write_csv(table, path)
