@@ -1,7 +1,7 @@
 """Wall time of the default parametric fit per CPHS recording, in whichever checkout runs it.
 
 Fits every one of the 12 recordings of ../shared/data/cphs2017/ with and without feedforward by
-``hcid.hcfit.fit_hc(FitSettings(), ...)``, the checkout's default estimator, as ``hcid analyse``'s
+``hcid.hcfit.fit_parametric(FitSettings(), ...)``, the checkout's default estimator, as ``hcid analyse``'s
 step 2 does, one process, one fit at a time. Run it in two checkouts side by side to compare
 defaults (issue 33: before and after):
 
@@ -20,7 +20,7 @@ import control
 import numpy as np
 
 import hcid
-from hcid.hcfit import FitSettings, TrackingRecord, fit_hc
+from hcid.hcfit import FitSettings, TrackingRecord, fit_parametric
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "cphs2017"
 PLANTS = {"fo": control.tf([1.0], [1.0, 0.0]), "so": control.tf([1.0], [1.0, 1.0, 0.0])}
@@ -39,7 +39,7 @@ def main() -> None:
         record = TrackingRecord(x["ft"], x["e"], x["u"], 25.0, slice(63, 531), slice(531, 1000), fd=x["fd"])
         for ff in (True, False):
             start = time.perf_counter()
-            fit = fit_hc(settings, PLANTS[plant], ff, record=record, disturbance_at="input")
+            fit = fit_parametric(settings, PLANTS[plant], ff, record=record, disturbance_at="input")
             seconds[plant].append(time.perf_counter() - start)
             used.add((plant, fit.target))
     for plant, s in seconds.items():

@@ -3,7 +3,7 @@
 Seven estimator variants (``hcid.hcfit.FitSettings``): the default (``auto``, ``nms`` ``auto``) and
 the targets ``time``, ``closed_loop`` and ``lines``, each with ``nms`` ``free`` (the neuromuscular
 pair always fitted) and ``auto`` (held at 10.1 rad/s, 0.35 where the fit leaves it undetermined).
-Every fit is ``hcid.hcfit.fit_hc`` with feedforward, the disturbance at the plant's input,
+Every fit is ``hcid.hcfit.fit_parametric`` with feedforward, the disturbance at the plant's input,
 estimation rows 63..531 and validation rows 531..1000 of a 1000-sample record (40 s at 25 Hz:
 two 20 s periods of the forcing functions).
 
@@ -79,7 +79,7 @@ from hcid.hcfit import (
     FitSettings,
     TrackingRecord,
     closed_loop_u,
-    fit_hc,
+    fit_parametric,
     hc_response,
     simulate_hc,
 )
@@ -201,7 +201,7 @@ def _fit_job(signals: dict[str, np.ndarray], plant: str, variant: tuple[str, str
     settings = dataclasses.replace(FitSettings(), target=variant[0], nms=variant[1])
     start = time.perf_counter()
     try:
-        fit = fit_hc(settings, _plant(plant), True, record=_record(signals), disturbance_at="input")
+        fit = fit_parametric(settings, _plant(plant), True, record=_record(signals), disturbance_at="input")
         error = None
     except Exception:  # reported, not hidden: an exception inside hcid is a finding
         fit, error = None, traceback.format_exc()

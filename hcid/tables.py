@@ -395,13 +395,34 @@ RESIDUALS = _schema(
 HC_PARAMETER_NAMES = ("Kpe", "TL", "tau_pe", "w_nms", "zeta_nms", "Kpt", "TI", "tau_pt")
 #: Each parameter's unit ("-": none); hcid.config.fit.UNITS is this.
 PARAMETER_UNITS = {
-    "Kpe": "-", "TL": "s", "tau_pe": "s", "w_nms": "rad/s", "zeta_nms": "-",
-    "Kpt": "-", "TI": "s", "tau_pt": "s",
-}  # fmt: skip
+    "Kpe": "-",
+    "TL": "s",
+    "tau_pe": "s",
+    "w_nms": "rad/s",
+    "zeta_nms": "-",
+    "Kpt": "-",
+    "TI": "s",
+    "tau_pt": "s",
+}
 _SHARES = (
-    "fp_rate", "fp_low", "fp_high", "fn_rate", "fn_low", "fn_high", "p_w_star", "power_w_star", "p_fourier",
-    "power_fourier", "p_value", "power", "binomial_p", "median_power", "fc_p", "share_remnant", "alpha",
-)  # fmt: skip
+    "fp_rate",
+    "fp_low",
+    "fp_high",
+    "fn_rate",
+    "fn_low",
+    "fn_high",
+    "p_w_star",
+    "power_w_star",
+    "p_fourier",
+    "power_fourier",
+    "p_value",
+    "power",
+    "binomial_p",
+    "median_power",
+    "fc_p",
+    "share_remnant",
+    "alpha",
+)
 #: The units of the analysis tables' numeric columns (Parquet field metadata ``unit``; "-": none,
 #: "1": a share or probability, "%").
 _ANALYSIS_UNITS = tuple(
@@ -409,13 +430,21 @@ _ANALYSIS_UNITS = tuple(
         **dict.fromkeys(("w", "safe_low", "safe_high", "w_star", "fourier_size"), "-"),
         **dict.fromkeys(_SHARES, "1"),
         **dict.fromkeys(("vaf_arx_validation", "vaf_validation"), "%"),
-        **{f"{prefix}{p}{suffix}": u for p, u in PARAMETER_UNITS.items()
-           for prefix, suffix in (("", ""), ("", "_se"), ("twin_", ""), ("fitted_", ""))},
-        "crossover": "rad/s", "phase_margin": "deg", "he_error_db": "dB", "he_error_deg": "deg",
-        "ht_error_db": "dB", "ht_error_deg": "deg", "twin_w_n": "rad/s",
+        **{
+            f"{prefix}{p}{suffix}": u
+            for p, u in PARAMETER_UNITS.items()
+            for prefix, suffix in (("", ""), ("", "_se"), ("twin_", ""), ("fitted_", ""))
+        },
+        "crossover": "rad/s",
+        "phase_margin": "deg",
+        "he_error_db": "dB",
+        "he_error_deg": "deg",
+        "ht_error_db": "dB",
+        "ht_error_deg": "deg",
+        "twin_w_n": "rad/s",
         **dict.fromkeys(("fc_chi2", "twin_kn", "twin_zeta_n"), "-"),
     }.items()
-)  # fmt: skip
+)
 _RATE_FIELDS = [(c, _F64) for c in ("fp_rate", "fp_low", "fp_high", "fn_rate", "fn_low", "fn_high")]
 _CHOICE_FIELDS = (
     [
@@ -437,9 +466,16 @@ _CHOICE_FIELDS = (
 #: beside the lines, or ``across n runs``), and the median |error| of He at the disturbance
 #: lines and of Ht at the target lines against the Fourier-coefficient estimates (dB, deg).
 _CONSISTENCY_FIELDS = [
-    ("fc_chi2", _F64), ("fc_dof", _INT), ("fc_p", _F64), ("fc_verdict", _STR), ("fc_spread", _STR),
-    ("he_error_db", _F64), ("he_error_deg", _F64), ("ht_error_db", _F64), ("ht_error_deg", _F64),
-]  # fmt: skip
+    ("fc_chi2", _F64),
+    ("fc_dof", _INT),
+    ("fc_p", _F64),
+    ("fc_verdict", _STR),
+    ("fc_spread", _STR),
+    ("he_error_db", _F64),
+    ("he_error_deg", _F64),
+    ("ht_error_db", _F64),
+    ("ht_error_deg", _F64),
+]
 
 #: ``analysis.parquet`` (``hcid analyse``; also written as ``analysis.csv``): one row per
 #: measured run (``data_set`` the data name, ``run_id`` its number in the set, ``file`` and the file's own

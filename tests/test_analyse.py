@@ -187,7 +187,7 @@ def test_bad_requests_are_one_line(analysed, tmp_path):
         ),
         (
             [str(CONFIG), "--data", str(data), "--twins", "1"],
-            "--twins: must be an integer in [2, 1000], got 1",
+            "twins (--twins): must be an integer in [2, 1000], got 1",
         ),
         # A factor named like a column of the analysis tables (the review found a traceback).
         (
@@ -254,7 +254,8 @@ def test_unreadable_files_are_refused_or_set_aside_and_listed(tmp_path):
     refused = runner.invoke(app, args)
     # Every file is read once before any is taken to the analysis rate: the unreadable one is
     # named first (the short one's "run 1: 43 samples" comes with --skip-unreadable, below).
-    assert refused.exit_code == 2 and "S2_pursuit_trial1.csv: columns ['this is not'] differ" in refused.output
+    assert refused.exit_code == 2
+    assert "S2_pursuit_trial1.csv: columns ['this is not'] differ" in refused.output
     assert len(refused.output.strip().splitlines()) == 1 and not run.exists()
     result = runner.invoke(app, [*args, "--skip-unreadable"])
     assert result.exit_code == 0, result.output

@@ -142,7 +142,7 @@ def test_window_not_whole_samples_exit_2_nothing_written(tmp_path):
         (["simulate", "c.yaml", "--jobs", "0"], "hcid: error: Invalid value for '--jobs': "),
         (["run"], "hcid: error: Missing argument 'config'."),
         (["identify", "c.yaml", "--backend", "loky", "--scheduler", "tcp://127.0.0.1:1"],
-         "hcid: error: --scheduler: only with --backend dask (got --backend loky)"),
+         "hcid: error: scheduler (--scheduler): only with backend dask (got loky)"),
     ],
 )  # fmt: skip
 def test_misuse_is_one_line_exit_2(tmp_path, argv, message):

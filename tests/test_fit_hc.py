@@ -122,7 +122,7 @@ def test_a_bad_target_is_one_line_and_writes_nothing(fitted, tmp_path):
     result = runner.invoke(app, ["fit-hc", str(config), "--run", str(run), "--target", "ml", "--quiet"])
     assert result.exit_code == 2
     assert result.stderr.strip().splitlines() == [
-        "hcid: error: --target: must be one of auto, lines, time, closed_loop, frequency, got 'ml'"
+        "hcid: error: target (--target): must be one of auto, lines, time, closed_loop, frequency, got 'ml'"
     ]
     assert {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()} == before
 

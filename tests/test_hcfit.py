@@ -230,14 +230,14 @@ def test_fit_hc_dispatches_on_the_target(paper_config, loop_plant, noise_free):
     omega = hcfit.band_grid(BAND)
     _, he = true_response(paper_config.model("FB"), paper_config.loop, omega)
     settings = hcfit.FitSettings(target="frequency")
-    assert hcfit.fit_hc(settings, loop_plant, False, omega=omega, he=he) == hcfit.fit_frequency(
+    assert hcfit.fit_parametric(settings, loop_plant, False, omega=omega, he=he) == hcfit.fit_frequency(
         omega, he, None, loop_plant, settings
     )
     with pytest.raises(IdentificationError, match="hft exactly when feedforward"):
-        hcfit.fit_hc(settings, loop_plant, True, omega=omega, he=he)
+        hcfit.fit_parametric(settings, loop_plant, True, omega=omega, he=he)
     for target in ("time", "closed_loop"):
         with pytest.raises(IdentificationError, match="record"):
-            hcfit.fit_hc(dataclasses.replace(settings, target=target), loop_plant, False)
+            hcfit.fit_parametric(dataclasses.replace(settings, target=target), loop_plant, False)
 
 
 def test_bad_inputs_are_refused(loop_plant):

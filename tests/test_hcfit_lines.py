@@ -275,7 +275,7 @@ def test_nms_auto_holds_an_undetermined_pair_unless_the_data_reject_it():
     from hcid.hcfit.fit import nested_test
 
     def fit(record, nms):
-        return hcfit.fit_hc(hcfit.FitSettings(target="lines", nms=nms), PLANT, True, record=record,
+        return hcfit.fit_parametric(hcfit.FitSettings(target="lines", nms=nms), PLANT, True, record=record,
                             disturbance_at="input")  # fmt: skip
 
     record, _ = _record(remnant=6.0, seed=5)
@@ -290,7 +290,7 @@ def test_nms_auto_holds_an_undetermined_pair_unless_the_data_reject_it():
     record, _ = _record(values=slow_nms, remnant=0.05, seed=6)
     full, reduced = fit(record, "free"), fit(record, "fixed")
     assert nested_test(full, reduced, 24) < 1e-6
-    assert hcfit.fit_hc(settings, PLANT, True, record=record, disturbance_at="input").fixed == ()
+    assert hcfit.fit_parametric(settings, PLANT, True, record=record, disturbance_at="input").fixed == ()
 
 
 def test_the_model_free_feedforward_size_grows_with_the_feedforward_gain():

@@ -337,5 +337,5 @@ def test_bad_backend_exit_2_before_any_work(tmp_path):
     run = tmp_path / "nothing"
     result = runner.invoke(app, ["run", str(CI_CONFIG), "--run", str(run), "--backend", "spark", "--quiet"])
     assert result.exit_code == 2
-    assert "--backend: must be one of loky, dask, got 'spark'" in result.stderr
+    assert "backend (--backend): must be one of loky, dask, got 'spark'" in result.stderr
     assert not run.exists()

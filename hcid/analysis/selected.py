@@ -169,11 +169,17 @@ class SelectedModel:
     def to_arrow(self) -> pa.Table:
         """One row: W, orders, V, VAF, coefficients (list columns), method, rate and target shift."""
         row = {
-            "w": self.w, **dict(zip(ORDER_COLUMNS, self.orders, strict=True)), "v": self.v,
-            "vaf_validation": self.vaf_validation, "a": self.a.tolist(), "b_ft": self.b_ft.tolist(),
-            "b_e": self.b_e.tolist(), "method": self.method, "rate": self.rate,
+            "w": self.w,
+            **dict(zip(ORDER_COLUMNS, self.orders, strict=True)),
+            "v": self.v,
+            "vaf_validation": self.vaf_validation,
+            "a": self.a.tolist(),
+            "b_ft": self.b_ft.tolist(),
+            "b_e": self.b_e.tolist(),
+            "method": self.method,
+            "rate": self.rate,
             "target_shift": self.target_shift,
-        }  # fmt: skip
+        }
         return pa.Table.from_pylist([row])
 
 
@@ -340,7 +346,7 @@ def fit_selected(
     omega = hcfit.band_grid(settings.band, settings.points)
     paths = selected.frequency_response(omega)
     hft = paths["ft"] if selected.has_feedforward else None
-    return hcfit.fit_hc(
+    return hcfit.fit_parametric(
         settings,
         yc,
         selected.has_feedforward,

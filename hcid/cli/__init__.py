@@ -84,8 +84,13 @@ def _user_errors(func):
     return wrapper
 
 
-def _execution(jobs: int = 1, backend: str = "loky", scheduler: str | None = None,
-               worker_timeout: float = 60.0, quiet: bool = False):  # fmt: skip
+def _execution(
+    jobs: int = 1,
+    backend: str = "loky",
+    scheduler: str | None = None,
+    worker_timeout: float = 60.0,
+    quiet: bool = False,
+):
     """The command's execution settings; a bad --backend or --scheduler is refused before any work."""
     from hcid.pipeline import Execution
 

@@ -123,8 +123,11 @@ def print_analysis(result) -> None:
             f"{g['n_contradicted']} of {g['n_runs']} runs' own fits at W are contradicted by the data"
         )
         if g["fc_dof"] > 0:
-            ht = "" if g["ht_error_db"] != g["ht_error_db"] else (
-                f", Ht {g['ht_error_db']:.1f} dB {g['ht_error_deg']:.0f} deg")  # fmt: skip
+            ht = (
+                ""
+                if g["ht_error_db"] != g["ht_error_db"]
+                else (f", Ht {g['ht_error_db']:.1f} dB {g['ht_error_deg']:.0f} deg")
+            )
             typer.echo(
                 f"    data check: the group's model is {g['fc_verdict']} (chi-square {g['fc_chi2']:.1f} on "
                 f"{g['fc_dof']} dof, p = {format_p(g['fc_p'])}, spread {g['fc_spread']}; median |error| "

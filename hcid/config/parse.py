@@ -300,8 +300,15 @@ def data_identify_defaults(timing: Timing) -> dict:
         return max(1, round(seconds * rate))
 
     cut = (round(n / 16) / rate, round(17 * n / 32) / rate)
-    final = {"na": [1, 7], "nb1": [0, 7], "nb2": [0, 7], "nk1": [1, samples(2.0)], "nk2": [1, samples(0.4)],
-             "estimation": [cut[0], cut[1]], "validation": [cut[1], n / rate]}  # fmt: skip
+    final = {
+        "na": [1, 7],
+        "nb1": [0, 7],
+        "nb2": [0, 7],
+        "nk1": [1, samples(2.0)],
+        "nk2": [1, samples(0.4)],
+        "estimation": [cut[0], cut[1]],
+        "validation": [cut[1], n / rate],
+    }
     return {
         "target_shift": round(rate) / rate,
         "windows_in": "seconds",
@@ -316,7 +323,7 @@ def data_identify_defaults(timing: Timing) -> dict:
             "nk2": [1, samples(0.2)],
             "estimation": "auto",
             "validation": "auto",
-        },  # fmt: skip
+        },
         "stage2": dict(final),
     }
 

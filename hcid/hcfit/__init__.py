@@ -61,8 +61,8 @@ from hcid.hcfit.fit import (
     HCFit,
     fit_closed_loop,
     fit_frequency,
-    fit_hc,
     fit_lines,
+    fit_parametric,
     fit_time,
     resolve_target,
 )
@@ -84,7 +84,7 @@ __all__ = [
     "closed_loop_u",
     "fit_closed_loop",
     "fit_frequency",
-    "fit_hc",
+    "fit_parametric",
     "fit_lines",
     "fit_time",
     "hc_response",

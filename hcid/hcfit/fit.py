@@ -27,7 +27,7 @@ __all__ = [
     "MIN_DISTURBANCE_LINES",
     "fit_closed_loop",
     "fit_frequency",
-    "fit_hc",
+    "fit_parametric",
     "fit_lines",
     "fit_time",
     "nested_test",
@@ -493,7 +493,7 @@ def _resolve(target: str, record: TrackingRecord | None) -> tuple[str, LineData 
     return "lines", data
 
 
-def fit_hc(
+def fit_parametric(
     settings: FitSettings,
     plant: control.TransferFunction,
     feedforward: bool,

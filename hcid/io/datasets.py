@@ -157,7 +157,7 @@ def data_files(sources: Sequence[str | Path], pattern: str | None = None) -> lis
     if isinstance(sources, str | Path):
         sources = [sources]
     if not sources:
-        raise DataError("--data: no data given")
+        raise DataError("data (--data): no data given")
     files = [f for source in sources for f in _expand(source)]
     seen: dict[Path, Path] = {}
     for f in files:
@@ -229,7 +229,7 @@ def read_files(
         first that differs named against the first file), or an empty set.
     """
     if not files:
-        raise DataError("--data: the data set holds no file")
+        raise DataError("data (--data): the data set holds no file")
     suffixes = {f.path.suffix.lower().replace(".pq", ".parquet") for f in files}
     if len(suffixes) > 1:
         raise DataError(f"the data set mixes formats ({', '.join(sorted(suffixes))}): give one kind of file")
@@ -286,9 +286,14 @@ def set_at(
             run = len(records) + 1 if several else file_run
             records[run] = record
             runs.append(
-                {"run": run, "file": str(f.path), "file_run": int(file_run), **dict(f.factors),
-                 **natives[file_run]["factors"]}
-            )  # fmt: skip
+                {
+                    "run": run,
+                    "file": str(f.path),
+                    "file_run": int(file_run),
+                    **dict(f.factors),
+                    **natives[file_run]["factors"],
+                }
+            )
     if not records:
         raise DataError(f"no file of the data set can be read (the first: {aside[0][1]})")
     factors = tuple(n for n, _ in kept[0].factors) + tuple(

@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from hcid import methods
@@ -64,13 +65,16 @@ def _check_stage_names(identify: IdentifyConfig) -> None:
 
 
 def _read_forcing(name: str, spec: Any, timing) -> Any:
+    """A file's forcing function with its values: read from the file, unless already given
+    (the twins of ``hcid analyse``, built in memory from a run's record)."""
     if not isinstance(spec, FileSignal):
         return spec
-    try:
-        values = read_signal(spec.path, spec.column, spec.run, spec.run_column)
-    except DataError as exc:
-        raise ConfigError(f"signals.{name}: {exc}") from None
-    spec = dataclasses.replace(spec, values=values)
+    if spec.values is None:
+        try:
+            values = read_signal(spec.path, spec.column, spec.run, spec.run_column)
+        except DataError as exc:
+            raise ConfigError(f"signals.{name}: {exc}") from None
+        spec = dataclasses.replace(spec, values=values)
     check_forcing_values(name, spec, timing)
     return spec
 
@@ -147,10 +151,22 @@ def methods_of_run(run_dir: Path) -> tuple[str, ...] | None:
 
 
 def parse_config(
-    data: Any, name: str, base: Path | None = None, method_names: Sequence[str] | None = None
+    data: Any,
+    name: str,
+    base: Path | None = None,
+    method_names: Sequence[str] | None = None,
+    *,
+    forcing: dict[str, np.ndarray] | None = None,
 ) -> Config:
-    """:func:`~hcid.config.parse.describe_config` then :func:`resolve_config`."""
-    return resolve_config(describe_config(data, name, base), method_names)
+    """:func:`~hcid.config.parse.describe_config` then :func:`resolve_config`. ``forcing``: the
+    values of the file forcing functions by signal (``target``, ``disturbance``), given in
+    memory instead of read from their files (which hold the same values)."""
+    config = describe_config(data, name, base)
+    for signal, values in (forcing or {}).items():
+        spec = getattr(config, signal)
+        given = np.ascontiguousarray(values, dtype=np.float64)
+        config = dataclasses.replace(config, **{signal: dataclasses.replace(spec, values=given)})
+    return resolve_config(config, method_names)
 
 
 def described_name(path: str | Path) -> str:
@@ -274,8 +290,12 @@ def _reading(raw: dict, base: Path | None):
     """The config's data section described on its own, at a placeholder timing, to read files."""
     data = dict(raw["data"]) if isinstance(raw.get("data"), dict) else {}
     probe = {k: v for k, v in raw.items() if k in ("name", "data")}
-    probe["data"] = {**data, "analysis_rate": data.get("analysis_rate", 1000.0), "window": 1.0,
-                     "lead_in": 0.0}  # fmt: skip
+    probe["data"] = {
+        **data,
+        "analysis_rate": data.get("analysis_rate", 1000.0),
+        "window": 1.0,
+        "lead_in": 0.0,
+    }
     return describe_config(probe, "probe", base).data
 
 

@@ -110,9 +110,13 @@ def _fit_windows(config: Config) -> tuple[slice, slice]:
 
 def _tracking(record: dict, config: Config) -> hcfit.TrackingRecord:
     return hcfit.TrackingRecord(
-        record["ft"], record["e"], record["u"], config.timing.output_rate, *_fit_windows(config),
+        record["ft"],
+        record["e"],
+        record["u"],
+        config.timing.output_rate,
+        *_fit_windows(config),
         fd=record["fd"],
-    )  # fmt: skip
+    )
 
 
 def _fit_run(config: Config, seed: int, record: dict, kn_rate: float):
@@ -121,7 +125,7 @@ def _fit_run(config: Config, seed: int, record: dict, kn_rate: float):
     tracking = _tracking(record, config)
     settings = config.fit_hc
     fits = {
-        ff: hcfit.fit_hc(settings, yc, ff, record=tracking, disturbance_at=config.loop.disturbance_at)
+        ff: hcfit.fit_parametric(settings, yc, ff, record=tracking, disturbance_at=config.loop.disturbance_at)
         for ff in (True, False)
     }
     rows = slice(tracking.estimation.start, tracking.validation.stop)
@@ -178,16 +182,18 @@ class AnalysisOptions:
 
     def __post_init__(self) -> None:
         if not 2 <= self.twins <= 1000:
-            raise ConfigError(f"--twins: must be an integer in [2, 1000], got {self.twins}")
+            raise ConfigError(f"twins (--twins): must be an integer in [2, 1000], got {self.twins}")
         if not self.twins <= self.most_fb_twins <= 10000:
             raise ConfigError(
-                f"--max-fb-twins: must be an integer in [--twins ({self.twins}), 10000], "
+                f"max_fb_twins (--max-fb-twins): must be an integer in [twins ({self.twins}), 10000], "
                 f"got {self.max_fb_twins}"
             )
         if not (isinstance(self.alpha, float | int) and 0.0 < self.alpha < 1.0):
-            raise ConfigError(f"--alpha: must be a level in (0, 1), got {self.alpha!r}")
+            raise ConfigError(f"alpha (--alpha): must be a level in (0, 1), got {self.alpha!r}")
         if self.ff_twin not in FF_TWINS:
-            raise ConfigError(f"--ff-twin: must be one of {', '.join(FF_TWINS)}, got {self.ff_twin!r}")
+            raise ConfigError(
+                f"ff_twin (--ff-twin): must be one of {', '.join(FF_TWINS)}, got {self.ff_twin!r}"
+            )
 
     @property
     def most_fb_twins(self) -> int:
@@ -297,9 +303,15 @@ def _twin_sets(study: _Study, found: _Found, key, kind: str, model: dict, fb_fro
     made = []
     for i, members in enumerate(runs_of_set):
         source = TwinSource(
-            study.config, study.run_dir, key, study.records[members[0]], model, found.remnants[key],
-            study.kn_rate, i + 1 if len(runs_of_set) > 1 else 0,
-        )  # fmt: skip
+            study.config,
+            study.run_dir,
+            key,
+            study.records[members[0]],
+            model,
+            found.remnants[key],
+            study.kn_rate,
+            i + 1 if len(runs_of_set) > 1 else 0,
+        )
         previous = fb_from.sets[i] if fb_from is not None else None
         made.append(calibrate_twins(source, study.options.twins, kind, study.execution, previous))
     return pool_twins(kind, made, runs_of_set, study.config)
@@ -359,9 +371,15 @@ def _more_fb_twins(study: _Study, found: _Found, judge: Evidence, run_sizes: dic
                 for s in members
             ]
             source = TwinSource(
-                study.config, study.run_dir, key, study.records[members[0]], model, found.remnants[key],
-                study.kn_rate, i + 1 if len(sets) > 1 else 0,
-            )  # fmt: skip
+                study.config,
+                study.run_dir,
+                key,
+                study.records[members[0]],
+                model,
+                found.remnants[key],
+                study.kn_rate,
+                i + 1 if len(sets) > 1 else 0,
+            )
             while (drawn := judge.drawn(name, i + 1, twin_of[names[0]])) < most:
                 open_methods, fourier_open = judge.unsettled(
                     name, i + 1, twin_of, found.deciding[key], values
@@ -476,9 +494,16 @@ def analyse_study(
     lap_done("identify")
     runs = datasets.runs_table((config.data or default_data()).name, data)
     study = _Study(
-        config, run_dir, options, execution, by, runs, data.records, _groups(runs, by),
+        config,
+        run_dir,
+        options,
+        execution,
+        by,
+        runs,
+        data.records,
+        _groups(runs, by),
         twin_rate(config.timing.output_rate),
-    )  # fmt: skip
+    )
     found = _Found()
     _fit_runs(study, found)
     lap_done("fit runs")

@@ -94,13 +94,16 @@ class _Rows:
         ses = dict(zip(fit.names, fit.se, strict=True)) if fit else {}
         fitted_loop = next((d for d in a.loop if d.source == "fitted"), None)
         row = {
-            "data_set": config.data.name, "run_id": seed,
-            "file": str(factor_of[seed]["file"]), "file_run": int(factor_of[seed]["file_run"]),
+            "data_set": config.data.name,
+            "run_id": seed,
+            "file": str(factor_of[seed]["file"]),
+            "file_run": int(factor_of[seed]["file_run"]),
             **choice,
             **dict(zip(tables.ORDER_COLUMNS, sel.orders, strict=True)),
-            "feedforward": bool(sel.nb_ft > 0), "vaf_arx_validation": sel.vaf_validation,
+            "feedforward": bool(sel.nb_ft > 0),
+            "vaf_arx_validation": sel.vaf_validation,
             "vaf_validation": fit.vaf_validation if fit else math.nan,
-        }  # fmt: skip
+        }
         status = parameter_status(fit) if fit else {}
         row["estimator"] = fit.target if fit else config.fit_hc.target
         row["hc_form"] = ("nms fixed" if fit.fixed else "full") if fit else ""
@@ -125,18 +128,25 @@ class _Rows:
         pair, model = found.used[(key, method_name)], found.models[key]
         mine = [found.evidence[(seed, method_name)] for seed in seeds]
         return {
-            **choice, "n_runs": len(seeds), "n_feedforward": int(sum(r["feedforward"] for r in runs)),
+            **choice,
+            "n_runs": len(seeds),
+            "n_feedforward": int(sum(r["feedforward"] for r in runs)),
             **group_verdict(mine, self.study.options.alpha),
-            "forcing_sets": len(pair.sets), "decided_by": mine[0]["decided_by"],
+            "forcing_sets": len(pair.sets),
+            "decided_by": mine[0]["decided_by"],
             **{f"twin_{p}": pair.model[p] for p in tables.HC_PARAMETER_NAMES},
             **{f"fitted_{p}": model.values[p] for p in tables.HC_PARAMETER_NAMES},
-            "twin_kn": pair.remnant[0], "twin_w_n": pair.remnant[1], "twin_zeta_n": pair.remnant[2],
-            "twins": self.study.options.twins, "fb_twins": found.fb_drawn[(key, method_name)],
+            "twin_kn": pair.remnant[0],
+            "twin_w_n": pair.remnant[1],
+            "twin_zeta_n": pair.remnant[2],
+            "twins": self.study.options.twins,
+            "fb_twins": found.fb_drawn[(key, method_name)],
             "twins_folder": pair.folder,
-            "twin_source": model.source, "twin_undetermined": ", ".join(model.undetermined),
+            "twin_source": model.source,
+            "twin_undetermined": ", ".join(model.undetermined),
             "n_contradicted": int(n_contradicted),
             **consistency_columns(self.group_checks[key], self.checks.problem(seeds)),
-        }  # fmt: skip
+        }
 
 
 def _tables(study, found, checks: Checks) -> tuple[pa.Table, pa.Table]:
@@ -171,10 +181,25 @@ def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median:
         fc = fc_estimate([records[s] for s in seeds], config.timing.output_rate, rows)
     except DataError as exc:
         nan = math.nan
-        return [{**base, "path": "", "omega": nan, "magnitude_db": nan, "phase_deg": nan, "sd_db": nan,
-                 "sd_deg": nan, "extrapolated": False, "model_db": nan, "model_deg": nan,
-                 "inversion": nan, "inversion_deg": nan, "inversion_sd": nan, "inversion_sd_deg": nan,
-                 "problem": str(exc)}]  # fmt: skip
+        return [
+            {
+                **base,
+                "path": "",
+                "omega": nan,
+                "magnitude_db": nan,
+                "phase_deg": nan,
+                "sd_db": nan,
+                "sd_deg": nan,
+                "extrapolated": False,
+                "model_db": nan,
+                "model_deg": nan,
+                "inversion": nan,
+                "inversion_deg": nan,
+                "inversion_sd": nan,
+                "inversion_sd_deg": nan,
+                "problem": str(exc),
+            }
+        ]
     yc = plant(config.loop)
     out = []
     inversion = fc.inversion(np.asarray(yc(1j * fc.omega_t), dtype=complex))
@@ -188,16 +213,24 @@ def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median:
         inv = inversion if path == "ft" else tuple(np.full(omega.size, math.nan) for _ in range(4))
         for i in range(omega.size):
             out.append(
-                {**base, "path": path, "omega": float(omega[i]),
-                 "magnitude_db": float(20 * np.log10(abs(h[i]))),
-                 "phase_deg": float(np.degrees(np.angle(h[i]))), "sd_db": float(sd_db[i]),
-                 "sd_deg": float(sd_deg[i]), "extrapolated": bool(extrapolated[i]),
-                 "model_db": float(20 * np.log10(abs(model[i]))),
-                 "model_deg": float(np.degrees(np.angle(model[i] / h[i])) + np.degrees(np.angle(h[i]))),
-                 "inversion": float(inv[0][i]), "inversion_deg": float(inv[1][i]),
-                 "inversion_sd": float(inv[2][i]), "inversion_sd_deg": float(inv[3][i]),
-                 "problem": ""}
-            )  # fmt: skip
+                {
+                    **base,
+                    "path": path,
+                    "omega": float(omega[i]),
+                    "magnitude_db": float(20 * np.log10(abs(h[i]))),
+                    "phase_deg": float(np.degrees(np.angle(h[i]))),
+                    "sd_db": float(sd_db[i]),
+                    "sd_deg": float(sd_deg[i]),
+                    "extrapolated": bool(extrapolated[i]),
+                    "model_db": float(20 * np.log10(abs(model[i]))),
+                    "model_deg": float(np.degrees(np.angle(model[i] / h[i])) + np.degrees(np.angle(h[i]))),
+                    "inversion": float(inv[0][i]),
+                    "inversion_deg": float(inv[1][i]),
+                    "inversion_sd": float(inv[2][i]),
+                    "inversion_sd_deg": float(inv[3][i]),
+                    "problem": "",
+                }
+            )
     return out
 
 

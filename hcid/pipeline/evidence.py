@@ -110,14 +110,28 @@ def consistency_columns(check, problem: str) -> dict:
     or of none, with the reason as its verdict."""
     if check is None:
         nan = math.nan
-        return {"fc_chi2": nan, "fc_dof": 0, "fc_p": nan, "fc_verdict": problem, "fc_spread": "",
-                "he_error_db": nan, "he_error_deg": nan, "ht_error_db": nan, "ht_error_deg": nan}  # fmt: skip
+        return {
+            "fc_chi2": nan,
+            "fc_dof": 0,
+            "fc_p": nan,
+            "fc_verdict": problem,
+            "fc_spread": "",
+            "he_error_db": nan,
+            "he_error_deg": nan,
+            "ht_error_db": nan,
+            "ht_error_deg": nan,
+        }
     return {
-        "fc_chi2": check.chi2, "fc_dof": check.dof, "fc_p": check.p, "fc_verdict": check.verdict,
+        "fc_chi2": check.chi2,
+        "fc_dof": check.dof,
+        "fc_p": check.p,
+        "fc_verdict": check.verdict,
         "fc_spread": check.spread,
-        "he_error_db": check.he_db, "he_error_deg": check.he_deg, "ht_error_db": check.ht_db,
+        "he_error_db": check.he_db,
+        "he_error_deg": check.he_deg,
+        "ht_error_db": check.ht_db,
         "ht_error_deg": check.ht_deg,
-    }  # fmt: skip
+    }
 
 
 # --------------------------------------------------------------------------- each run's evidence
@@ -224,22 +238,30 @@ class Evidence:
         run (``runs``: (W* by method, feedforward size)) has a p-value more twins could change;
         and whether the feedforward size decides somewhere and has such a run."""
         methods_open = [
-            m for m, twin in twin_of.items()
-            if deciding[m] == "W*" and any(
-                not sequential_settled(w[m], self.fb_thresholds(group, forcing_set, twin, m), EXCEEDANCES,
-                                       self.max_fb) for w, _ in runs)
-        ]  # fmt: skip
+            m
+            for m, twin in twin_of.items()
+            if deciding[m] == "W*"
+            and any(
+                not sequential_settled(
+                    w[m], self.fb_thresholds(group, forcing_set, twin, m), EXCEEDANCES, self.max_fb
+                )
+                for w, _ in runs
+            )
+        ]
         sizes = self.fb_sizes(group, forcing_set, next(iter(twin_of.values())))
         fourier_open = (
             "Fourier coefficients" in deciding.values()
             and sizes is not None
-            and any(size is not None and not sequential_settled(size, sizes, EXCEEDANCES, self.max_fb)
-                    for _, size in runs)
-        )  # fmt: skip
+            and any(
+                size is not None and not sequential_settled(size, sizes, EXCEEDANCES, self.max_fb)
+                for _, size in runs
+            )
+        )
         return methods_open, fourier_open
 
-    def run(self, group: str, path, nb_ft, pair, seed: int, method: str, run_size: float | None,
-            deciding: str) -> dict:  # fmt: skip
+    def run(
+        self, group: str, path, nb_ft, pair, seed: int, method: str, run_size: float | None, deciding: str
+    ) -> dict:
         """The run's evidence columns (``decide`` adds the deciding ones). The ``deciding``
         statistic's p-value is over every FB twin drawn for it (each run stops at its own 5th, or
         all were drawn: Besag and Clifford's p); the other's over the calibration's FB twins only,
@@ -294,10 +316,17 @@ class Evidence:
                     w_stars = np.pad(w_stars, (0, n - w_stars.size), constant_values=math.nan)
                     fourier = np.pad(fourier, (0, n - fourier.size), constant_values=math.nan)
                     rows += [
-                        {"group": name, "method": method, "forcing_set": forcing_set, "twin": kind,
-                         "seed": i + 1, "w_star": float(w_stars[i]), "fourier_size": float(fourier[i])}
+                        {
+                            "group": name,
+                            "method": method,
+                            "forcing_set": forcing_set,
+                            "twin": kind,
+                            "seed": i + 1,
+                            "w_star": float(w_stars[i]),
+                            "fourier_size": float(fourier[i]),
+                        }
                         for i in range(n)
-                    ]  # fmt: skip
+                    ]
         return pa.Table.from_pylist(rows, schema=tables.EVIDENCE_TWINS.arrow)
 
 
@@ -306,8 +335,12 @@ def decide(rows: list[dict], alpha: float, statistic: str) -> None:
     ``decided_by``, ``p_value``, ``power`` and ``evidence``."""
     p_col, power_col = STATISTICS[statistic]
     for r in rows:
-        r.update(decided_by=statistic, p_value=r[p_col], power=r[power_col],
-                 evidence="feedforward" if r[p_col] <= alpha else "none shown")  # fmt: skip
+        r.update(
+            decided_by=statistic,
+            p_value=r[p_col],
+            power=r[power_col],
+            evidence="feedforward" if r[p_col] <= alpha else "none shown",
+        )
 
 
 def group_verdict(rows: list[dict], alpha: float) -> dict:
@@ -359,11 +392,14 @@ def summarise_parameters(rows: Sequence[dict]) -> list[ParameterSummary]:
                 left[reason(r[f"{p}_status"])] = left.get(reason(r[f"{p}_status"]), 0) + 1
         out.append(
             ParameterSummary(
-                name=p, unit=hcfit.UNITS[p], fitted=len(fitted), kept=int(x.size),
+                name=p,
+                unit=hcfit.UNITS[p],
+                fitted=len(fitted),
+                kept=int(x.size),
                 median=float(np.median(x)) if x.size else math.nan,
                 sd=float(np.std(x, ddof=1)) if x.size > 1 else math.nan,
                 median_se=float(np.median(se[np.isfinite(se)])) if np.isfinite(se).any() else math.nan,
                 left_out=left,
             )
-        )  # fmt: skip
+        )
     return out

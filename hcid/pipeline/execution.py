@@ -35,7 +35,7 @@ class Execution:
     >>> Execution(jobs=0)
     Traceback (most recent call last):
     ...
-    hcid.errors.HcidError: --jobs: must be at least 1, got 0
+    hcid.errors.HcidError: jobs (--jobs): must be at least 1, got 0
     """
 
     jobs: int = 2
@@ -46,10 +46,11 @@ class Execution:
 
     def __post_init__(self) -> None:
         if not isinstance(self.jobs, int) or self.jobs < 1:
-            raise HcidError(f"--jobs: must be at least 1, got {self.jobs!r}")
+            raise HcidError(f"jobs (--jobs): must be at least 1, got {self.jobs!r}")
         if not self.worker_timeout > 0:
             raise HcidError(
-                f"--worker-timeout: must be a positive number of seconds, got {self.worker_timeout!r}"
+                "worker_timeout (--worker-timeout): must be a positive number of seconds, "
+                f"got {self.worker_timeout!r}"
             )
         check_backend(self.backend, self.scheduler)
 

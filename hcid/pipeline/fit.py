@@ -92,7 +92,7 @@ def requested_w(
     if w_values:
         bad = [w for w in w_values if not (math.isfinite(w) and w > 0)]
         if bad:
-            raise HcidError(f"--w: must be positive numbers, got {bad}")
+            raise HcidError(f"w (--w): must be positive numbers, got {bad}")
         return {m: [(float(w), "--w") for w in sorted(set(w_values))] for m in method_names}
     calibration = results.read_optional(tables.CALIBRATION, run_dir, ("method", "recommended"))
     recommended = {}
@@ -431,7 +431,7 @@ def _fit_settings(config: Config, target: str | None):
         settings = dataclasses.replace(settings, band=config.disturbance.band)
     if target is not None:
         if target not in TARGETS:
-            raise ConfigError(f"--target: must be one of {', '.join(TARGETS)}, got {target!r}")
+            raise ConfigError(f"target (--target): must be one of {', '.join(TARGETS)}, got {target!r}")
         settings = dataclasses.replace(settings, target=target)
     return settings
 

@@ -50,9 +50,9 @@ def labelled(prefix: str):
 def check_backend(backend: str, scheduler: str | None = None) -> None:
     """One-line error for an unknown ``--backend``, or a scheduler given to a backend without one."""
     if backend not in BACKENDS:
-        raise HcidError(f"--backend: must be one of {', '.join(BACKENDS)}, got {backend!r}")
+        raise HcidError(f"backend (--backend): must be one of {', '.join(BACKENDS)}, got {backend!r}")
     if scheduler is not None and backend != "dask":
-        raise HcidError(f"--scheduler: only with --backend dask (got --backend {backend}); drop one of them")
+        raise HcidError(f"scheduler (--scheduler): only with backend dask (got {backend}); drop one of them")
 
 
 def parallel_map(
@@ -314,7 +314,7 @@ def _client(scheduler: str | None, jobs: int, timeout: float, stack: contextlib.
         client = stack.enter_context(Client(scheduler, timeout=f"{min(timeout, 20.0):g}s"))
     except Exception as exc:  # noqa: BLE001 (OSError, ValueError, TypeError, TimeoutError by address)
         reason = str(exc).splitlines()[0][:80] if str(exc) else type(exc).__name__
-        raise HcidError(f"--scheduler: cannot use {scheduler[:80]!r} ({reason})") from None
+        raise HcidError(f"scheduler (--scheduler): cannot use {scheduler[:80]!r} ({reason})") from None
     try:
         client.wait_for_workers(1, timeout=timeout)
     except Exception:  # noqa: BLE001 (dask raises TimeoutError of asyncio or builtins)

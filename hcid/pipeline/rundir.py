@@ -61,12 +61,27 @@ os.register_at_fork(after_in_child=_forget_held)
 def known_files() -> list[str]:
     """Every file name hcid writes in a run directory."""
     schemas = [
-        tables.SIMULATIONS, tables.SIMULATION_SUMMARY, tables.MEASURED, tables.RUNS, tables.FRONTIER,
-        tables.IDENTIFY_LOG, tables.SELECTION, tables.BREAKPOINTS, tables.thresholds(),
-        tables.CALIBRATION, tables.RUN_LOG, tables.HC_PARAMETERS, tables.RESIDUALS, tables.HC_LOOP,
-        tables.REMNANT_SPECTRUM, tables.ANALYSIS, tables.ANALYSIS_GROUPS, tables.FC_ESTIMATES,
-        tables.RATES, tables.HANDOFF,
-    ]  # fmt: skip
+        tables.SIMULATIONS,
+        tables.SIMULATION_SUMMARY,
+        tables.MEASURED,
+        tables.RUNS,
+        tables.FRONTIER,
+        tables.IDENTIFY_LOG,
+        tables.SELECTION,
+        tables.BREAKPOINTS,
+        tables.thresholds(),
+        tables.CALIBRATION,
+        tables.RUN_LOG,
+        tables.HC_PARAMETERS,
+        tables.RESIDUALS,
+        tables.HC_LOOP,
+        tables.REMNANT_SPECTRUM,
+        tables.ANALYSIS,
+        tables.ANALYSIS_GROUPS,
+        tables.FC_ESTIMATES,
+        tables.RATES,
+        tables.HANDOFF,
+    ]
     files = [s.file for s in schemas] + ["config.yaml", folders.MANIFEST, LOCK, "analysis.csv", "forcing.csv"]
     files += [tables.stage_choice(s.name, s.inputs).file for m in METHODS.values() for s in m.choice_stages]
     return files

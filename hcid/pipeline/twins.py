@@ -28,11 +28,27 @@ from hcid.pipeline.sweep import selections
 from hcid.selection.calibration import calibrate
 
 __all__ = [
-    "MIN_TWIN_KPT", "TWIN_SIM_RATE", "FbDraws", "TwinSets", "TwinSource", "Twins", "calibrate_twins",
-    "choose_w", "draw_fb_twins", "forcing_sets",
-    "forcing_text", "group_slug", "pool_twins", "separates", "twin_config_raw", "twin_dir_ready",
-    "twin_paths", "twin_rate", "twin_sizes", "twin_values",
-]  # fmt: skip
+    "MIN_TWIN_KPT",
+    "TWIN_SIM_RATE",
+    "FbDraws",
+    "TwinSets",
+    "TwinSource",
+    "Twins",
+    "calibrate_twins",
+    "choose_w",
+    "draw_fb_twins",
+    "forcing_sets",
+    "forcing_text",
+    "group_slug",
+    "pool_twins",
+    "separates",
+    "twin_config_raw",
+    "twin_dir_ready",
+    "twin_paths",
+    "twin_rate",
+    "twin_sizes",
+    "twin_values",
+]
 
 #: The twins' simulation rate: the smallest multiple of the analysis rate at or above this (Hz).
 TWIN_SIM_RATE = 100.0
@@ -87,7 +103,7 @@ def twin_config_raw(config: Config, fitted: dict, remnant: tuple, forcing: Path,
             "w_n": float(w_n),
             "zeta_n": float(zeta_n),
             "remnant_gain": float(kn),
-        },  # fmt: skip
+        },
         "signals": {
             "target": {"kind": "file", "path": str(forcing), "column": "ft", "rate": rate, "start": 0.0},
             "disturbance": {"kind": "file", "path": str(forcing), "column": "fd", "rate": rate, "start": 0.0},
@@ -98,7 +114,7 @@ def twin_config_raw(config: Config, fitted: dict, remnant: tuple, forcing: Path,
             "run_in": 10.0,
             "window": window,
             "periods": 2,
-        },  # fmt: skip
+        },
         "seeds": {"first": 1, "count": twins},
         "identify": config.raw["identify"],
         "selection": config.raw["selection"],
@@ -349,8 +365,10 @@ def _twin_folder(source: TwinSource, slug: str, kind: str, make_raw):
         twin_dir_ready(twin_dir, text)
         folders.atomic_write(forcing, lambda tmp: Path(tmp).write_text(text))
         raw = make_raw(forcing)
-        try:
-            twin_config = parse_config(raw, raw["name"])
+        n = round(config.timing.window * config.timing.output_rate)
+        given = {"target": source.record["ft"][:n], "disturbance": source.record["fd"][:n]}
+        try:  # forcing.csv holds these values (full precision); built in memory, not read back
+            twin_config = parse_config(raw, raw["name"], forcing=given)
         except ConfigError as exc:  # e.g. a median model that is unstable with the plant
             raise DataError(
                 f"group {', '.join(key) or 'all runs'}: its twins ({kind}: the group's fitted model, "
@@ -381,8 +399,12 @@ def _sizes(folder: Path, rate: float) -> dict[str, np.ndarray]:
     return {k: np.array(v) for k, v in out.items()}
 
 
-def twin_paths(twin_config: Config, twin_dir: Path, models: tuple[str, ...] = ("FB", "FF"),
-               method_names: Sequence[str] | None = None) -> dict[str, tuple]:  # fmt: skip
+def twin_paths(
+    twin_config: Config,
+    twin_dir: Path,
+    models: tuple[str, ...] = ("FB", "FF"),
+    method_names: Sequence[str] | None = None,
+) -> dict[str, tuple]:
     """Per method (``method_names``, default every registered one), the ``models`` twins'
     selection paths and nb_ft (for rates at any W)."""
     chosen = selections(results.read(tables.FRONTIER, twin_dir), twin_dir)

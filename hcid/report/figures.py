@@ -348,8 +348,13 @@ def plot_calibration(table, name: str, axes=None, used: dict[str, float] | None 
         if np.isfinite(rec):
             ax.axvline(rec, color="tab:green", lw=2, label=f"recommended W = {rec:.3g}")
         elif used is not None and method in used:
-            ax.axvline(used[method], color="0.2", lw=2, ls="--",
-                       label=f"W used = {used[method]:.3g} (least total error; no safe W)")  # fmt: skip
+            ax.axvline(
+                used[method],
+                color="0.2",
+                lw=2,
+                ls="--",
+                label=f"W used = {used[method]:.3g} (least total error; no safe W)",
+            )
         ax.axhline(r[0]["target_rate"], color="0.4", lw=0.8, ls=":")
         ax.set_xscale("log")
         ax.set_ylim(-0.02, 1.02)

@@ -146,8 +146,14 @@ def plot_fc(paths: dict[str, list[dict]], curves: dict, title: str = "", axes=No
         phase_model = None
         if model is not None:
             phase_model = np.degrees(np.unwrap(np.angle(model)))
-            ax_mag.plot(curves["omega"], 20 * np.log10(np.abs(model)), "-", color=color, lw=1.2,
-                        label=f"{label}: fitted model")  # fmt: skip
+            ax_mag.plot(
+                curves["omega"],
+                20 * np.log10(np.abs(model)),
+                "-",
+                color=color,
+                lw=1.2,
+                label=f"{label}: fitted model",
+            )
             ax_ph.plot(curves["omega"], phase_model, "-", color=color, lw=1.2)
         if not rows:
             continue
@@ -164,8 +170,9 @@ def plot_fc(paths: dict[str, list[dict]], curves: dict, title: str = "", axes=No
         ax_mag.plot(w, mag, "o", color=color, ms=4, label=f"{label}: model-free")
         ax_ph.plot(w, ph, "o", color=color, ms=4)
         if np.isfinite(sd_db).any():  # the estimates' spread across runs as a band
-            ax_mag.fill_between(w, mag - sd_db, mag + sd_db, color=color, alpha=0.2, lw=0,
-                                label=f"{label}: ±1 sd across runs")  # fmt: skip
+            ax_mag.fill_between(
+                w, mag - sd_db, mag + sd_db, color=color, alpha=0.2, lw=0, label=f"{label}: ±1 sd across runs"
+            )
             ax_ph.fill_between(w, ph - sd_deg, ph + sd_deg, color=color, alpha=0.2, lw=0)
     ax_mag.set_ylabel("magnitude (dB)")
     ax_ph.set_ylabel("phase (deg)")
@@ -192,15 +199,34 @@ def plot_inversion(rows: list[dict], title: str = "", axes=None):
     sd = np.array([r["inversion_sd"] for r in rows])
     sd_deg = np.array([r["inversion_sd_deg"] for r in rows])
     held = np.array([bool(r["extrapolated"]) for r in rows])
-    kinds = ((~held, "C1", "He interpolated between disturbance lines"),
-             (held, "white", "He held beyond the disturbance lines (less sure)"))  # fmt: skip
+    kinds = (
+        (~held, "C1", "He interpolated between disturbance lines"),
+        (held, "white", "He held beyond the disturbance lines (less sure)"),
+    )
     for mask, face, label in kinds:
         if not mask.any():
             continue
-        ax_mag.errorbar(w[mask], mag[mask], yerr=np.where(np.isfinite(sd), sd, 0.0)[mask], fmt="o",
-                        color="C1", mfc=face, ms=6, capsize=3, label=label)  # fmt: skip
-        ax_ph.errorbar(w[mask], ph[mask], yerr=np.where(np.isfinite(sd_deg), sd_deg, 0.0)[mask], fmt="o",
-                       color="C1", mfc=face, ms=6, capsize=3)  # fmt: skip
+        ax_mag.errorbar(
+            w[mask],
+            mag[mask],
+            yerr=np.where(np.isfinite(sd), sd, 0.0)[mask],
+            fmt="o",
+            color="C1",
+            mfc=face,
+            ms=6,
+            capsize=3,
+            label=label,
+        )
+        ax_ph.errorbar(
+            w[mask],
+            ph[mask],
+            yerr=np.where(np.isfinite(sd_deg), sd_deg, 0.0)[mask],
+            fmt="o",
+            color="C1",
+            mfc=face,
+            ms=6,
+            capsize=3,
+        )
     ax_mag.legend(fontsize=8, loc="upper right")
     ax_mag.axhline(1.0, color="0.3", lw=1, ls="--")
     ax_mag.axhline(0.5, color="0.6", lw=1, ls=":")
@@ -237,20 +263,29 @@ def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: f
         for offset, twin, color in ((0.0, "FB", "0.55"), (1.0, "FF", "C0")):
             w = np.array([t["w_star"] for t in twins if t["forcing_set"] == fs and t["twin"] == twin])
             w = w[np.isfinite(w)]  # an FB twin drawn for the Fourier statistic only has no W*
-            ax.plot(w, base + offset + rng.uniform(-0.25, 0.25, w.size), "o", color=color, ms=4, alpha=0.7,
-                    label=f"{twin} twins" if i == 0 else None)  # fmt: skip
+            ax.plot(
+                w,
+                base + offset + rng.uniform(-0.25, 0.25, w.size),
+                "o",
+                color=color,
+                ms=4,
+                alpha=0.7,
+                label=f"{twin} twins" if i == 0 else None,
+            )
             ticks.append(base + offset)
             labels.append(f"set {fs}: {w.size} {twin} twins")
         mine = [r for r in runs if r["forcing_set"] == fs]
         y = base + 2.0 + rng.uniform(-0.2, 0.2, len(mine))
         for r, yy in zip(mine, y, strict=True):
             hit = r["p_w_star"] <= alpha
-            ax.plot(r["w_star"], yy, "D", color="C3", mfc="C3" if hit else "white", ms=7,
-                    label=None)  # fmt: skip
+            ax.plot(r["w_star"], yy, "D", color="C3", mfc="C3" if hit else "white", ms=7, label=None)
             ax.annotate(  # alternately above and below: neighbours' numbers do not print over each other
-                str(r["run_id"]), (r["w_star"], yy), textcoords="offset points", fontsize=7,
+                str(r["run_id"]),
+                (r["w_star"], yy),
+                textcoords="offset points",
+                fontsize=7,
                 xytext=(4, 5 if len(ax.texts) % 2 == 0 else -10),
-            )  # fmt: skip
+            )
         ticks.append(base + 2.0)
         labels.append(f"set {fs}: runs")
     ax.plot([], [], "D", color="C3", ms=7, label=f"runs, p(W*) <= {alpha:g}")

@@ -78,9 +78,13 @@ def rates_at(
     fp_low, fp_high = clopper_pearson(fp, n_fb)
     fn_low, fn_high = clopper_pearson(fn, n_ff)
     return {
-        "fp_rate": float(fp[0] / n_fb), "fp_low": float(fp_low[0]), "fp_high": float(fp_high[0]),
-        "fn_rate": float(fn[0] / n_ff), "fn_low": float(fn_low[0]), "fn_high": float(fn_high[0]),
-    }  # fmt: skip
+        "fp_rate": float(fp[0] / n_fb),
+        "fp_low": float(fp_low[0]),
+        "fp_high": float(fp_high[0]),
+        "fn_rate": float(fn[0] / n_ff),
+        "fn_low": float(fn_low[0]),
+        "fn_high": float(fn_high[0]),
+    }
 
 
 @dataclass(frozen=True)

@@ -39,8 +39,18 @@ SECTIONS = (
 )
 #: The order a reader sees them: the answer (the paper's verdicts) first, then how it was found.
 RENDER_ORDER = (
-    verdicts, facts, experiment, simulation, curves, rates, responses, handoff, calibration, data, hcfit,
-)  # fmt: skip
+    verdicts,
+    facts,
+    experiment,
+    simulation,
+    curves,
+    rates,
+    responses,
+    handoff,
+    calibration,
+    data,
+    hcfit,
+)
 assert set(RENDER_ORDER) == set(SECTIONS)
 
 #: The sections of a measured study's report (a run of ``hcid analyse``): the answer first, no

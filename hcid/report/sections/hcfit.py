@@ -428,11 +428,24 @@ def render(data: HCFitSection | None, doc: Doc) -> None:
         )
         doc.table(
             [
-                "model", "method", "W", "source", "n", "wc (rad/s)", "true wc", "PM (deg)", "true PM",
-                "ft share", "e share", "remnant share", "Kn", "w_n", "zeta_n",
+                "model",
+                "method",
+                "W",
+                "source",
+                "n",
+                "wc (rad/s)",
+                "true wc",
+                "PM (deg)",
+                "true PM",
+                "ft share",
+                "e share",
+                "remnant share",
+                "Kn",
+                "w_n",
+                "zeta_n",
             ],
             data.loop_rows,
-        )  # fmt: skip
+        )
     if data.spectrum is not None:
         title, curves = data.spectrum
         doc.figure(

@@ -60,83 +60,136 @@ def _model_curves(run, twin: dict, lines: list[float]) -> dict:
     return {"omega": omega, "e": he, "ft": hft if values["Kpt"] > 0 else None}
 
 
-def compute(run, done) -> StudyData | None:
-    groups, runs = run.analysis_groups, run.analysis
-    if groups is None or runs is None:
-        return None
-    answers, uncertain, parameters = [], [], []
-    rows = runs.to_pylist()
-    summaries = summarise_groups(groups, runs)
-    for summary in summaries:
-        g = summary.group
-        safe = f"[{_num(g['safe_low'])}, {_num(g['safe_high'])})" if not g["uncertain"] else "none"
-        answers.append(
-            [g["group"], g["method"], g["verdict"], f"{g['n_evidence']} of {g['n_runs']}",
-             _num(g["binomial_p"], 2), _num(g["median_power"], 2),
-             f"{g['n_feedforward']} of {g['n_runs']}", _num(g["w"]), g["w_rule"],
-             "own" if g["ff_twin"] == "own" else f"study's FF (Kpt {_num(g['twin_Kpt'], 2)})",
-             safe, rate_interval(g["fp_rate"], g["fp_low"], g["fp_high"], long=False),
-             rate_interval(g["fn_rate"], g["fn_low"], g["fn_high"], long=False),
-             "UNCERTAIN" if g["uncertain"] else "yes"]
-        )  # fmt: skip
-        if g["uncertain"]:
-            uncertain.append(f"{g['group']} ({g['method']})")
-        for p in summary.parameters:
-            left_out = "; ".join(f"{n}: {why}" for why, n in p.left_out.items()) or "-"
-            parameters.append(
-                [g["group"], g["method"], p.name, p.unit, f"{p.kept} of {p.fitted}",
-                 _num(p.median), _num(p.sd, 2), _num(p.median_se, 2), left_out]
-            )  # fmt: skip
+def _answer(summary) -> list[str]:
+    """A group and method's answer row: verdict, evidence, W and the twins' rates."""
+    g = summary.group
+    safe = f"[{_num(g['safe_low'])}, {_num(g['safe_high'])})" if not g["uncertain"] else "none"
+    return [
+        g["group"],
+        g["method"],
+        g["verdict"],
+        f"{g['n_evidence']} of {g['n_runs']}",
+        _num(g["binomial_p"], 2),
+        _num(g["median_power"], 2),
+        f"{g['n_feedforward']} of {g['n_runs']}",
+        _num(g["w"]),
+        g["w_rule"],
+        "own" if g["ff_twin"] == "own" else f"study's FF (Kpt {_num(g['twin_Kpt'], 2)})",
+        safe,
+        rate_interval(g["fp_rate"], g["fp_low"], g["fp_high"], long=False),
+        rate_interval(g["fn_rate"], g["fn_low"], g["fn_high"], long=False),
+        "UNCERTAIN" if g["uncertain"] else "yes",
+    ]
+
+
+def _parameter_rows(summary) -> list[list[str]]:
+    """A group and method's parameters: median over the runs that determine each, and why not."""
+    g, out = summary.group, []
+    for p in summary.parameters:
+        left_out = "; ".join(f"{n}: {why}" for why, n in p.left_out.items()) or "-"
+        out.append(
+            [
+                g["group"],
+                g["method"],
+                p.name,
+                p.unit,
+                f"{p.kept} of {p.fitted}",
+                _num(p.median),
+                _num(p.sd, 2),
+                _num(p.median_se, 2),
+                left_out,
+            ]
+        )
+    return out
+
+
+def _checks(groups) -> tuple[list[list[str]], list[str]]:
+    """Each group's model against its data (once: the same for every method), and the groups
+    whose model the data contradict."""
     checks, contradicted = [], []
     for g in groups.to_pylist():
         if g["method"] != groups.column("method")[0].as_py():
             continue  # the group's model and its runs' own fits are the same for every method
         checks.append(
-            [g["group"], g["fc_verdict"], _num(g["fc_chi2"]), str(g["fc_dof"]), format_p(g["fc_p"]),
-             g["fc_spread"],
-             f"{_num(g['he_error_db'], 2)} dB, {_num(g['he_error_deg'], 2)} deg",
-             f"{_num(g['ht_error_db'], 2)} dB, {_num(g['ht_error_deg'], 2)} deg", g["twin_source"],
-             g["twin_undetermined"] or "-"]
-        )  # fmt: skip
+            [
+                g["group"],
+                g["fc_verdict"],
+                _num(g["fc_chi2"]),
+                str(g["fc_dof"]),
+                format_p(g["fc_p"]),
+                g["fc_spread"],
+                f"{_num(g['he_error_db'], 2)} dB, {_num(g['he_error_deg'], 2)} deg",
+                f"{_num(g['ht_error_db'], 2)} dB, {_num(g['ht_error_deg'], 2)} deg",
+                g["twin_source"],
+                g["twin_undetermined"] or "-",
+            ]
+        )
         if g["fc_dof"] > 0 and g["fc_p"] < CONTRADICTED:
             contradicted.append(g["group"])
+    return checks, contradicted
+
+
+#: The per-run table's parameters, in reading order.
+_SHOWN = ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
+
+
+def _with_se(r: dict, p: str) -> str:
+    """The estimate with its se; † where the data do not determine it (its reason in
+    analysis.csv's <p>_status), ° where held at a literature value."""
+    if not math.isfinite(r[p]):
+        return "-"
+    status = r[p + "_status"]
+    if status.startswith("fixed"):
+        return _num(r[p]) + "°"
+    se = f" ± {_num(r[p + '_se'], 2)}" if math.isfinite(r[p + "_se"]) else ""
+    return _num(r[p]) + se + ("†" if is_undetermined(status) else "")
+
+
+def _run_table(runs) -> tuple[list[str], list[list[str]]]:
+    """The per-run table: its header (the runs' factors, units) and one row per run and method."""
     factors = [c for c in runs.column_names if c not in tables.ANALYSIS.names]
-    shown = ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
-    units = {p: tables.PARAMETER_UNITS[p] for p in shown}
-    header = ["run", *factors, "method", "p (evidence)", "nb_ft at W", "feedforward at W",
-              *[f"{p} {units[p]}" if units[p] != "-" else p for p in shown], "wc rad/s", "PM deg",
-              "VAF %", "data check (p)"]  # fmt: skip
-    table_rows = []
-    for r in rows:
-
-        def with_se(p, r=r):
-            """The estimate with its se; † where the data do not determine it (its reason in
-            analysis.csv's <p>_status), ° where held at a literature value."""
-            if not math.isfinite(r[p]):
-                return "-"
-            status = r[p + "_status"]
-            if status.startswith("fixed"):
-                return _num(r[p]) + "°"
-            se = f" ± {_num(r[p + '_se'], 2)}" if math.isfinite(r[p + "_se"]) else ""
-            return _num(r[p]) + se + ("†" if is_undetermined(status) else "")
-
-        check = (
-            "-"
-            if r["fc_dof"] == 0
-            else format_p(r["fc_p"]) + (" contradicted" if r["fc_p"] < CONTRADICTED else "")
+    units = {p: tables.PARAMETER_UNITS[p] for p in _SHOWN}
+    header = [
+        "run",
+        *factors,
+        "method",
+        "p (evidence)",
+        "nb_ft at W",
+        "feedforward at W",
+        *[f"{p} {units[p]}" if units[p] != "-" else p for p in _SHOWN],
+        "wc rad/s",
+        "PM deg",
+        "VAF %",
+        "data check (p)",
+    ]
+    rows = []
+    for r in runs.to_pylist():
+        check = "-"
+        if r["fc_dof"] != 0:
+            check = format_p(r["fc_p"]) + (" contradicted" if r["fc_p"] < CONTRADICTED else "")
+        rows.append(
+            [
+                str(r["run_id"]),
+                *[str(r[f]) for f in factors],
+                r["method"],
+                f"{_num(r['p_value'], 2)} ({'W*' if r['decided_by'] == 'W*' else 'Fourier'})",
+                str(r["nb_ft"]),
+                ("yes" if r["feedforward"] else "no") + (" (uncertain)" if r["uncertain"] else ""),
+                *[_with_se(r, p) for p in _SHOWN],
+                _num(r["crossover"]),
+                _num(r["phase_margin"]),
+                "-" if not math.isfinite(r["vaf_validation"]) else f"{r['vaf_validation']:.1f}",
+                check,
+            ]
         )
-        table_rows.append(
-            [str(r["run_id"]), *[str(r[f]) for f in factors], r["method"],
-             f"{_num(r['p_value'], 2)} ({'W*' if r['decided_by'] == 'W*' else 'Fourier'})", str(r["nb_ft"]),
-             ("yes" if r["feedforward"] else "no") + (" (uncertain)" if r["uncertain"] else ""),
-             *[with_se(p) for p in shown], _num(r["crossover"]), _num(r["phase_margin"]),
-             "-" if not math.isfinite(r["vaf_validation"]) else f"{r['vaf_validation']:.1f}", check]
-        )  # fmt: skip
-    calibrations = []
-    group_rows = groups.to_pylist()
-    # Each group's twins: its own (calibrated unless --ff-twin study) and, where they were not
-    # separated or with --ff-twin study, the study's feedforward on its feedback; the W marked
-    # where it is not a safe interval's.
+    return header, rows
+
+
+def _calibrations(run, group_rows: list[dict]) -> list[tuple]:
+    """Each group's twins: its own (calibrated unless --ff-twin study) and, where they were not
+    separated or with --ff-twin study, the study's feedforward on its feedback; the W marked
+    where it is not a safe interval's."""
+    out = []
     folders = {(g["group"], g["twins_folder"].removesuffix("-study")): None for g in group_rows}
     folders.update({(g["group"], g["twins_folder"]): None for g in group_rows})
     for name, folder in folders:
@@ -151,40 +204,70 @@ def compute(run, done) -> StudyData | None:
             title, twins = name, "twins of its own fitted model"
         methods = ", ".join(g["method"] for g in mine) or "no method (no W separates them, below)"
         if table is not None:
-            calibrations.append((title, f"{name}, {twins}, used for {methods}", folder, table, used))
+            out.append((title, f"{name}, {twins}, used for {methods}", folder, table, used))
+    return out
+
+
+def _fourier(run, group_rows: list[dict]) -> tuple[list[tuple], list[str]]:
+    """Each group's Fourier-coefficient estimates beside its model's curves, and the groups
+    that have none (with the reason)."""
     fc, problems = [], []
-    if run.fc_estimates is not None:
-        for name in dict.fromkeys(run.fc_estimates.column("group").to_pylist()):
-            t = [r for r in run.fc_estimates.to_pylist() if r["group"] == name]
-            if t[0]["problem"]:
-                problems.append(f"{name}: {t[0]['problem']}")
-                continue
-            twin = next(g for g in group_rows if g["group"] == name)
-            by_path = {path: [r for r in t if r["path"] == path] for path in ("e", "ft")}
-            curves = _model_curves(run, twin, [r["omega"] for r in t])
-            fc.append((name, twin["twins_folder"].removesuffix("-study"), by_path, curves))
-    evidence = []
-    if run.evidence_twins is not None:
-        twins = run.evidence_twins.to_pylist()
-        for summary in summaries:
-            g, mine = summary.group, summary.runs
-            theirs = [t for t in twins if t["group"] == g["group"] and t["method"] == g["method"]]
-            if mine and theirs:
-                folder = _slug(g["twins_folder"].removesuffix("-study"))
-                evidence.append((g["group"], g["method"], theirs, mine, g["alpha"], folder))
+    if run.fc_estimates is None:
+        return fc, problems
+    for name in dict.fromkeys(run.fc_estimates.column("group").to_pylist()):
+        t = [r for r in run.fc_estimates.to_pylist() if r["group"] == name]
+        if t[0]["problem"]:
+            problems.append(f"{name}: {t[0]['problem']}")
+            continue
+        twin = next(g for g in group_rows if g["group"] == name)
+        by_path = {path: [r for r in t if r["path"] == path] for path in ("e", "ft")}
+        curves = _model_curves(run, twin, [r["omega"] for r in t])
+        fc.append((name, twin["twins_folder"].removesuffix("-study"), by_path, curves))
+    return fc, problems
+
+
+def _evidence(run, summaries) -> list[tuple]:
+    """Per group and method, its runs' statistics and the FB twins they were judged against."""
+    if run.evidence_twins is None:
+        return []
+    twins, out = run.evidence_twins.to_pylist(), []
+    for summary in summaries:
+        g, mine = summary.group, summary.runs
+        theirs = [t for t in twins if t["group"] == g["group"] and t["method"] == g["method"]]
+        if mine and theirs:
+            folder = _slug(g["twins_folder"].removesuffix("-study"))
+            out.append((g["group"], g["method"], theirs, mine, g["alpha"], folder))
+    return out
+
+
+def compute(run, done) -> StudyData | None:
+    groups, runs = run.analysis_groups, run.analysis
+    if groups is None or runs is None:
+        return None
+    summaries = summarise_groups(groups, runs)
+    answers = [_answer(s) for s in summaries]
+    uncertain = [f"{s.group['group']} ({s.group['method']})" for s in summaries if s.group["uncertain"]]
+    parameters = [row for s in summaries for row in _parameter_rows(s)]
+    checks, contradicted = _checks(groups)
+    header, table_rows = _run_table(runs)
+    group_rows = groups.to_pylist()
+    fc, problems = _fourier(run, group_rows)
+    set_aside = (
+        [[r["file"], r["reason"]] for r in run.set_aside.to_pylist()] if run.set_aside is not None else []
+    )
     return StudyData(
         answers,
         uncertain,
         parameters,
         header,
         table_rows,
-        calibrations,
+        _calibrations(run, group_rows),
         fc,
         problems,
         checks,
         contradicted,
-        evidence,
-        [[r["file"], r["reason"]] for r in run.set_aside.to_pylist()] if run.set_aside is not None else [],
+        _evidence(run, summaries),
+        set_aside,
     )
 
 
@@ -192,6 +275,24 @@ def render(data: StudyData | None, doc: Doc) -> None:
     if data is None:
         return
     doc.text(f"## {TITLE}")
+    _render_answers(data, doc)
+    _render_evidence(data, doc)
+    _render_checks(data, doc)
+    _render_parameters(data, doc)
+    doc.text(
+        "Every run (`analysis.csv` holds all columns, one row per run and method, ready for a "
+        "repeated-measures ANOVA or a mixed model). Estimates ± standard error; † a value the run "
+        "does not determine (the reason in `analysis.csv`'s `<p>_status`), ° held at a literature "
+        "value (`hc_form` nms fixed); p (evidence): the run's feedforward p-value by the statistic "
+        "that decides for its group (W* or the Fourier coefficients); nb_ft and feedforward at W: "
+        "its selection at the group's calibrated W (SPEC 10); data check: the p-value of the run's "
+        "own model against its data."
+    )
+    doc.table(data.runs_header, data.runs)
+
+
+def _render_answers(data: StudyData, doc: Doc) -> None:
+    """The files set aside, then the answer table per group and method."""
     if data.set_aside:
         doc.text(
             f"**Set aside:** {len(data.set_aside)} file(s) of the data set could not be read and are not in "
@@ -213,17 +314,34 @@ def render(data: StudyData | None, doc: Doc) -> None:
         "**uncertain**."
     )
     doc.table(
-        ["group", "method", "verdict", "runs at p <= alpha", "binomial p", "median power",
-         "feedforward at W", "W", "rule", "FF twin", "safe interval", "twins' FP at W (95% interval)",
-         "twins' FN at W (95% interval)", "decided"],
+        [
+            "group",
+            "method",
+            "verdict",
+            "runs at p <= alpha",
+            "binomial p",
+            "median power",
+            "feedforward at W",
+            "W",
+            "rule",
+            "FF twin",
+            "safe interval",
+            "twins' FP at W (95% interval)",
+            "twins' FN at W (95% interval)",
+            "decided",
+        ],
         data.answers,
-    )  # fmt: skip
+    )
     if data.uncertain:
         doc.text(
             "**No W separates the twins of** " + "; ".join(data.uncertain) + ": the feedforward decisions "
             "there cannot be trusted at any W (the group's fitted feedforward is too weak, or its "
             "feedback twin finds feedforward too often)."
         )
+
+
+def _render_evidence(data: StudyData, doc: Doc) -> None:
+    """Each run's evidence on its twins, then each group's calibration of W."""
     for group, method, twins, runs, alpha, folder in data.evidence:
         doc.figure(
             f"evidence_{folder}_{method}.png",
@@ -245,6 +363,10 @@ def render(data: StudyData | None, doc: Doc) -> None:
             f"{caption}: the twins' FP and FN rates over W (exact 95% bands), {what}.",
             lambda t=table, n=title, u=used: figures.plot_calibration(t, n, used=u),
         )
+
+
+def _render_checks(data: StudyData, doc: Doc) -> None:
+    """Each group's model against its data."""
     if data.checks:
         doc.text(
             "**Do the fitted models agree with the data's own frequency response?** (SPEC 11) Each "
@@ -256,15 +378,29 @@ def render(data: StudyData | None, doc: Doc) -> None:
             "beside the lines (the run table's last column)."
         )
         doc.table(
-            ["group", "verdict", "chi-square", "dof", "p", "spread", "He error", "Ht error",
-             "model built from", "no run determines"],
+            [
+                "group",
+                "verdict",
+                "chi-square",
+                "dof",
+                "p",
+                "spread",
+                "He error",
+                "Ht error",
+                "model built from",
+                "no run determines",
+            ],
             data.checks,
-        )  # fmt: skip
+        )
         if data.contradicted:
             doc.text(
                 "**Contradicted by the data:** the model of " + "; ".join(data.contradicted) + ". Its "
                 "parameters describe a model these runs do not support; read them as such."
             )
+
+
+def _render_parameters(data: StudyData, doc: Doc) -> None:
+    """The parameters per group and method, then the model-free estimates beside the models."""
     doc.text(
         "Parameters per group and method (SPEC 8, 11), from each run's fit at the group's W: the "
         "median and the sd over the runs that determine the parameter, and their median standard "
@@ -273,10 +409,19 @@ def render(data: StudyData | None, doc: Doc) -> None:
         "another) are left out, with their reasons."
     )
     doc.table(
-        ["group", "method", "parameter", "unit", "runs determining", "median", "sd over runs", "median se",
-         "left out (runs: reason)"],
+        [
+            "group",
+            "method",
+            "parameter",
+            "unit",
+            "runs determining",
+            "median",
+            "sd over runs",
+            "median se",
+            "left out (runs: reason)",
+        ],
         data.parameters,
-    )  # fmt: skip
+    )
     for name, folder, paths, curves in data.fc:
         doc.figure(
             f"fc_{_slug(folder)}.png",
@@ -295,13 +440,3 @@ def render(data: StudyData | None, doc: Doc) -> None:
             )
     for problem in data.fc_problems:
         doc.text(f"No model-free estimate for {problem}.")
-    doc.text(
-        "Every run (`analysis.csv` holds all columns, one row per run and method, ready for a "
-        "repeated-measures ANOVA or a mixed model). Estimates ± standard error; † a value the run "
-        "does not determine (the reason in `analysis.csv`'s `<p>_status`), ° held at a literature "
-        "value (`hc_form` nms fixed); p (evidence): the run's feedforward p-value by the statistic "
-        "that decides for its group (W* or the Fourier coefficients); nb_ft and feedforward at W: "
-        "its selection at the group's calibrated W (SPEC 10); data check: the p-value of the run's "
-        "own model against its data."
-    )
-    doc.table(data.runs_header, data.runs)
