@@ -1,10 +1,11 @@
 """The serial part of a study (issue 36): wall time outside the worker pool, measured.
 
-Runs ``hcid run CONFIG`` (default configs/paper.yaml) in this process with ``--jobs 1`` and
+Runs ``hcid run CONFIG`` (default configs/paper.yaml) in a fresh process with ``--jobs 1`` and
 ``--jobs 2`` into fresh run directories, side by side, and splits each command's wall time
-into the time inside :meth:`hcid.pipeline.Execution.map` (the pool at work; the main process
-only collects results) and the rest (imports, config, simulation set-up, writing the tables,
-the W sweep): that rest does not shrink with more workers. Amdahl's fit of the two walls,
+into the time inside the worker pool (:func:`hcid.pipeline.parallel.parallel_map`: the pool at
+work, the main process collecting and storing results) and the rest (imports, config,
+simulation set-up, writing the tables, the W sweep): that rest does not shrink with more
+workers. ``PYTHONPATH=CHECKOUT`` measures another checkout's code the same way. Amdahl's fit of the two walls,
 S = 2 T2 - T1, is printed beside it. The machine (CPU, load) is printed first.
 
 usage: python benchmarks/serial_part.py [CONFIG] [--repeat N]
@@ -23,18 +24,29 @@ import time
 from pathlib import Path
 
 CHILD = r"""
-import sys, time, json
+import importlib, json, sys, time
 t0 = time.perf_counter()
 spans = []
-import hcid.pipeline.execution as ex
-original = ex.Execution.map
-def timed(self, func, tasks, label):
-    start = time.perf_counter()
+
+
+def timed(original):
+    def parallel_map(func, tasks, **kwargs):
+        start = time.perf_counter()
+        try:
+            yield from original(func, tasks, **kwargs)
+        finally:
+            spans.append((kwargs.get("label", "?"), time.perf_counter() - start))
+    return parallel_map
+
+
+# Every module that calls the pool by name (this code's Execution, or an older checkout's stages).
+for name in ("hcid.pipeline.execution", "hcid.pipeline.studies", "hcid.pipeline.fit"):
     try:
-        yield from original(self, func, tasks, label)
-    finally:
-        spans.append((label, time.perf_counter() - start))
-ex.Execution.map = timed
+        module = importlib.import_module(name)
+    except ImportError:
+        continue
+    if hasattr(module, "parallel_map"):
+        module.parallel_map = timed(module.parallel_map)
 from hcid.cli import main
 sys.argv = ["hcid", "run", sys.argv[1], "--run", sys.argv[2], "--jobs", sys.argv[3], "--quiet"]
 try:

@@ -293,3 +293,24 @@ def test_can_fork_not_once_numba_threads_started():
         "print(before, parallel._can_fork())\n"
     )
     assert _in_a_fresh_process(code) == ["True", "False"]
+
+
+def _blas_threads(_: int) -> list[int]:
+    from threadpoolctl import threadpool_info
+
+    return [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_execution_runs_blas_single_threaded_and_puts_it_back(jobs):
+    # Issue 36: the pinning lives in Execution, for a library caller as for the CLI. Source:
+    # threadpoolctl's own count of each loaded BLAS's threads, in the worker that ran the task.
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    with threadpool_limits(2, user_api="blas"):  # a caller's BLAS with two threads
+        before = [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+        found = Execution(jobs, progress=False).run(_blas_threads, [(i,) for i in range(4)], "t")
+        after = [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+    assert before and set(before) == {2}
+    assert all(counts and set(counts) == {1} for counts in found)
+    assert after == before

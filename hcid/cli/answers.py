@@ -165,13 +165,14 @@ def _analysis_parameters(summaries) -> str:
     return text
 
 
-def print_hc_fit(result) -> None:
+def _num4(x: float) -> str:
     import numpy as np
 
-    from hcid import tables
+    return "-" if x is None or not np.isfinite(x) else f"{x:.4g}"
 
-    def num(x: float) -> str:
-        return "-" if x is None or not np.isfinite(x) else f"{x:.4g}"
+
+def print_hc_fit(result) -> None:
+    from hcid import tables
 
     for method, pairs in result.w_of.items():
         typer.echo(f"{method:<9} W = " + ", ".join(f"{w:.4g} ({source})" for w, source in pairs))
@@ -189,6 +190,21 @@ def print_hc_fit(result) -> None:
     header = f"{'model':<{m}}{'method':<10}{'W':>9} {'parameter':<10}{'unit':<6}{'estimate':>10} {'se':>9}"
     header += f" {'sd':>9} {'95% interval':>21} {'true':>9}{'n':>5}{'covers':>7}{'bound':>6}"
     typer.echo(header)
+    _print_fit_parameters(rows, m)
+    _print_fit_loop(result.loop.to_pylist(), m)
+    written = ", ".join(str(result.run_dir / t.file) for t in (tables.HC_PARAMETERS, tables.HC_LOOP))
+    typer.echo(
+        f"fitted {result.computed} record-methods, reused {result.reused}, in {result.seconds:.1f} s; "
+        f"wrote {written} (and residuals, remnant spectra)"
+    )
+
+
+def _print_fit_parameters(rows: list[dict], m: int) -> None:
+    """One line per (model, method, W, parameter): one record's estimate, se and 95% interval, or
+    over several the median estimate and se, the sd across them, the coverage and the bound hits."""
+    import numpy as np
+
+    num = _num4
     groups: dict[tuple, list[dict]] = {}
     for row in rows:
         groups.setdefault((row["model"], row["method"], row["w"], row["parameter"]), []).append(row)
@@ -214,7 +230,13 @@ def print_hc_fit(result) -> None:
             f"{se_text:>9} {sd:>9} {interval:>21}"
             f" {num(true):>9}{len(group):>5}{covers:>7}{hits:>6}"
         )
-    loop = result.loop.to_pylist()
+
+
+def _print_fit_loop(loop: list[dict], m: int) -> None:
+    """The loop's descriptors per (model, method, W, source), medians over records."""
+    import numpy as np
+
+    num = _num4
     if loop:
         typer.echo(
             f"{'model':<{m}}{'method':<10}{'W':>9} {'source':<8}{'wc rad/s':>9} {'PM deg':>7}"
@@ -234,8 +256,3 @@ def print_hc_fit(result) -> None:
                 f" {med('true_crossover'):>8} {med('true_phase_margin'):>7} {med('share_remnant'):>7}"
                 f" {med('remnant_w_n'):>6} {med('remnant_zeta_n'):>6}"
             )
-    written = ", ".join(str(result.run_dir / t.file) for t in (tables.HC_PARAMETERS, tables.HC_LOOP))
-    typer.echo(
-        f"fitted {result.computed} record-methods, reused {result.reused}, in {result.seconds:.1f} s; "
-        f"wrote {written} (and residuals, remnant spectra)"
-    )

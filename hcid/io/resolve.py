@@ -44,6 +44,7 @@ __all__ = [
     "methods_of_run",
     "parse_config",
     "read_study",
+    "with_data",
     "read_yaml",
     "recorded_methods",
     "resolve_config",
@@ -230,11 +231,17 @@ def read_study(
     read, aside = read_files(data_files(sources, reading.pattern), reading, skip_unreadable)
     if _needs_timing(raw):
         raw = data_timing(raw, [file_runs for _, file_runs in read], reading)
-    config = resolve_config(describe_config(raw, path.stem, path.parent), method_names)
-    data = config.data if config.data is not None else default_data()
+    config = with_data(resolve_config(describe_config(raw, path.stem, path.parent), method_names))
     need = samples_needed(config)
-    data_set = set_at(read, data, config.timing.output_rate, need, skip_unreadable, aside)
+    data_set = set_at(read, config.data, config.timing.output_rate, need, skip_unreadable, aside)
     return config, data_set
+
+
+def with_data(config: Config) -> Config:
+    """A config that reads measured data, its data section completed: the default column names
+    (:func:`~hcid.config.parse.default_data`) where it has none (a simulation config given
+    ``--data``). Its raw YAML, what a run directory records, stays as it was."""
+    return config if config.data is not None else dataclasses.replace(config, data=default_data())
 
 
 #: The analysis rate a measured study defaults to when its data are faster (Hz): SPEC 3's.

@@ -40,11 +40,11 @@ from hcid.analysis.descriptors import fit_remnant
 from hcid.analysis.selected import SelectedModel, analyse_selected
 from hcid.config import Config
 from hcid.config.fit import FEEDFORWARD_PARAMETERS
-from hcid.config.parse import default_data
 from hcid.errors import ConfigError, DataError, IdentificationError
 from hcid.hcfit.determined import group_model
 from hcid.io import datasets, folders, results
 from hcid.io.datasets import DataSet
+from hcid.io.resolve import with_data
 from hcid.loop.hcmodel import plant
 from hcid.pipeline.analysis_tables import write_tables
 from hcid.pipeline.evidence import (
@@ -347,7 +347,7 @@ def _twins(study: _Study, found: _Found) -> None:
 
 def _selection_paths(study: _Study, found: _Found) -> None:
     """Every run's frontier and selection path over W, per method."""
-    name = study.config.data.name if study.config.data is not None else default_data().name
+    name = study.config.data.name
     by_key = tables.split_by_key(results.read(tables.FRONTIER, study.run_dir), tables.FRONTIER.key)
     for seed in study.records:
         for method_name in methods.METHODS:
@@ -402,7 +402,7 @@ def _select_and_fit(study: _Study, found: _Found, judge: Evidence, run_sizes: di
     """Phase 5: every run's evidence, its selection at its group's W, and the selected
     structure's parametric fit."""
     config, run_dir = study.config, study.run_dir
-    data_name = config.data.name if config.data is not None else default_data().name
+    data_name = config.data.name
     stored = _choices(run_dir)
     tasks = []
     for key, seeds in study.groups.items():
@@ -479,6 +479,7 @@ def analyse_study(
         For a bad data set (one line, nothing written).
     """
     _check_config(config)
+    config = with_data(config)
     by = _factors_and_groups(data, options.by)
     start = time.perf_counter()
     stages, lap = {}, [start]
@@ -492,7 +493,7 @@ def analyse_study(
     with labelled("runs: "):
         identify_study(config, run_dir, tuple(methods.METHODS), data=data, execution=execution, force=force)
     lap_done("identify")
-    runs = datasets.runs_table((config.data or default_data()).name, data)
+    runs = datasets.runs_table(config.data.name, data)
     study = _Study(
         config,
         run_dir,

@@ -20,9 +20,9 @@ import pyarrow as pa
 
 from hcid import methods, tables
 from hcid.config import Config, IdentifyConfig
-from hcid.config.parse import default_data
 from hcid.errors import ConfigError, DataError
 from hcid.io import datasets, measured, results
+from hcid.io.resolve import with_data
 from hcid.loop.simulate import remnant_gain, simulate_realization
 from hcid.pipeline.execution import Execution
 from hcid.pipeline.parallel import compile_before_fork
@@ -253,7 +253,7 @@ def _import_data(config: Config, run_dir: Path, data_set: datasets.DataSet, forc
     """Keep a copy of a data set in ``measured.parquet`` and its runs' factors in
     ``runs.parquet``. Other data than the run's earlier identification results were made from
     are refused without ``force``: their results would be reused as if they were these data's."""
-    data = config.data if config.data is not None else default_data()
+    data = config.data
     check_run_dir(config, run_dir, "identify", force=force)
     table = measured.records_table(data.name, data_set.records)
     if not force:
@@ -330,6 +330,8 @@ def identify_study(
     names = tuple(methods.METHODS) if method_names is None else tuple(method_names)
     for name in names:
         methods.get(name)
+    if data is not None:
+        config = with_data(config)
     execution.check()  # a dask scheduler without workers is refused before anything is read or written
     records, keys, noise_free, simulation = _records_to_identify(config, run_dir, data, execution, force)
     start = time.perf_counter()
@@ -372,8 +374,7 @@ def _records_to_identify(config: Config, run_dir: Path, data, execution: Executi
     noise-free record, and the simulation if it was made here (a study without one yet)."""
     if data is not None:
         _import_data(config, run_dir, data, force)
-        name = (config.data or default_data()).name
-        records = {(name, run): rec for run, rec in data.records.items()}
+        records = {(config.data.name, run): rec for run, rec in data.records.items()}
         check_run_dir(config, run_dir, "identify", force=force)
         return records, list(records), {}, None
     config.require_simulation("identify (without --data)")

@@ -376,6 +376,13 @@ def render(data: HCFitSection | None, doc: Doc) -> None:
         f"no standard error there): {data.at_bound} parameter estimates at a bound; {data.not_fitted} "
         f"parameter rows not fitted."
     )
+    _render_parameters(data, doc)
+    _render_loop(data, doc)
+    _render_residuals(data, doc)
+
+
+def _render_parameters(data: HCFitSection, doc: Doc) -> None:
+    """The estimates' accuracy (simulations) or the runs' parameters (measured data)."""
     if data.bias_rows:
         doc.text(
             "Simulations: bias, spread and RMSE of the estimates across realizations (in % of the true "
@@ -418,6 +425,10 @@ def render(data: HCFitSection | None, doc: Doc) -> None:
         )
         doc.table(["run", "method", "W", "nb_ft", *PARAMETERS, "VAF par.", "VAF ARX"], data.measured_rows)
         doc.table(["method", "W", "parameter", "unit", "runs", "mean", "sd"], data.spread_rows)
+
+
+def _render_loop(data: HCFitSection, doc: Doc) -> None:
+    """The loop each model implies, its remnant spectrum and its responses."""
     if data.loop_rows:
         doc.text(
             "The loop each model implies (SPEC 8): crossover frequency and phase margin of He·Yc "
@@ -460,6 +471,10 @@ def render(data: HCFitSection | None, doc: Doc) -> None:
             f"{title}: each run's selected ARX model and its fitted parametric model.",
             lambda o=omega, b=band, c=curves, t=title: figures_hcfit.plot_parametric_bode(o, b, c, title=t),
         )
+
+
+def _render_residuals(data: HCFitSection, doc: Doc) -> None:
+    """The selected models' residual correlations."""
     if data.residual_rows:
         doc.text(
             "Residuals of the selected models (simulation residual on the validation rows): share of lags "
