@@ -49,10 +49,11 @@ indirect-variants: $(STAMP)
 	done
 	$(BIN)/python -m hcid.report.variants runs/indirect_variants $(VARIANTS)
 
+# Two pytest workers (pytest-xdist), each test file on one of them (its module fixtures made once).
 test: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -q -m "not slow" tests
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -q -n 2 --dist loadfile -m "not slow" tests
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -p no:cacheprovider --doctest-modules hcid
-	NUMBA_DISABLE_JIT=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -p no:cacheprovider \
+	NUMBA_DISABLE_JIT=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -p no:cacheprovider -n 2 \
 		tests/test_arx_engine.py tests/test_arx_grid.py
 
 # Every figure and answer line the README and docs quote, made again on this machine (named first)
