@@ -49,8 +49,10 @@ indirect-variants: $(STAMP)
 	done
 	$(BIN)/python -m hcid.report.variants runs/indirect_variants $(VARIANTS)
 
-# Two pytest workers (pytest-xdist), each test file on one of them (its module fixtures made once).
+# Two pytest workers (pytest-xdist), each test file on one of them (its module fixtures made once),
+# after the engine's kernels are compiled once into numba's cache (not by both workers at once).
 test: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -c "from hcid.pipeline.parallel import compile_before_fork as c; c()"
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -q -n 2 --dist loadfile -m "not slow" tests
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -p no:cacheprovider --doctest-modules hcid
 	NUMBA_DISABLE_JIT=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -p no:cacheprovider -n 2 \
