@@ -15,13 +15,14 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from cold_start import _cpu  # the machine, named as every benchmark names it
 
 CHILD = r"""
 import importlib, json, sys, time
@@ -56,16 +57,6 @@ except SystemExit:
 total = time.perf_counter() - t0
 print("SPANS " + json.dumps({"total": total, "spans": spans}))
 """
-
-
-def _cpu() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def run(config: str, jobs: int) -> dict:

@@ -297,21 +297,22 @@ def _group_models(study: _Study, found: _Found) -> None:
         )
 
 
+def _twin_source(study: _Study, found: _Found, key, sets: list[list[int]], i: int, model: dict) -> TwinSource:
+    """The twins of forcing set ``i`` (of a group's ``sets``): driven by its first run's record,
+    the group's remnant; numbered from 1 only where the group has several sets."""
+    record = study.records[sets[i][0]]
+    number = i + 1 if len(sets) > 1 else 0
+    return TwinSource(
+        study.config, study.run_dir, key, record, model, found.remnants[key], study.kn_rate, number
+    )
+
+
 def _twin_sets(study: _Study, found: _Found, key, kind: str, model: dict, fb_from=None):
     """One kind of twins of a group, for each of its forcing sets, pooled."""
     runs_of_set = forcing_sets(study.groups[key], study.records, study.config)  # each set its own twins
     made = []
-    for i, members in enumerate(runs_of_set):
-        source = TwinSource(
-            study.config,
-            study.run_dir,
-            key,
-            study.records[members[0]],
-            model,
-            found.remnants[key],
-            study.kn_rate,
-            i + 1 if len(runs_of_set) > 1 else 0,
-        )
+    for i in range(len(runs_of_set)):
+        source = _twin_source(study, found, key, runs_of_set, i, model)
         previous = fb_from.sets[i] if fb_from is not None else None
         made.append(calibrate_twins(source, study.options.twins, kind, study.execution, previous))
     return pool_twins(kind, made, runs_of_set, study.config)
@@ -370,16 +371,7 @@ def _more_fb_twins(study: _Study, found: _Found, judge: Evidence, run_sizes: dic
                 ({m: judge.w_star(*found.paths[(s, m)][1:]) for m in names}, run_sizes.get(s))
                 for s in members
             ]
-            source = TwinSource(
-                study.config,
-                study.run_dir,
-                key,
-                study.records[members[0]],
-                model,
-                found.remnants[key],
-                study.kn_rate,
-                i + 1 if len(sets) > 1 else 0,
-            )
+            source = _twin_source(study, found, key, sets, i, model)
             while (drawn := judge.drawn(name, i + 1, twin_of[names[0]])) < most:
                 open_methods, fourier_open = judge.unsettled(
                     name, i + 1, twin_of, found.deciding[key], values
