@@ -262,8 +262,9 @@ def test_unreadable_files_are_refused_or_set_aside_and_listed(tmp_path):
     assert "SET ASIDE (--skip-unreadable): 2 file(s)" in result.output
     assert "S2_pursuit_trial1.csv" in result.output
     aside = pq.read_table(run / tables.SET_ASIDE.file).to_pylist()
-    assert [Path(r["file"]).name for r in aside] == ["S2_pursuit_trial1.csv", "S2_compensatory_trial1.csv"]
-    assert "differ from" in aside[0]["reason"] and "S2_compensatory_trial1.csv" in aside[1]["reason"]
+    # Listed in the files' order, each with its reason.
+    assert [Path(r["file"]).name for r in aside] == ["S2_compensatory_trial1.csv", "S2_pursuit_trial1.csv"]
+    assert "run 1: 43 samples" in aside[0]["reason"] and "differ from" in aside[1]["reason"]
     assert {r["file"] for r in pq.read_table(run / tables.ANALYSIS.file).to_pylist()} == {
         "S1_compensatory_trial1.csv",
         "S1_pursuit_trial1.csv",

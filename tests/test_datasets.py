@@ -15,6 +15,7 @@ from hcid import tables
 from hcid.cli import app
 from hcid.errors import DataError
 from hcid.io import datasets
+from hcid.io.measured import samples_needed
 from hcid.io.resolve import parse_config
 
 from .conftest import CI_CONFIG, load_data
@@ -342,3 +343,52 @@ def test_a_pipe_or_a_csv_without_rows_is_one_line_and_nothing_is_written(tmp_pat
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and str(source) in lines[0], lines
         assert not run.exists()
+
+
+def test_a_first_file_set_aside_is_not_the_sets_reference(trial_folder, tmp_path):
+    # Source: the rule "each file against the set's first kept file": a first file too short for
+    # the windows is set aside, and the next, with a column more, is then the reference and kept.
+    folder = tmp_path / "set"
+    folder.mkdir()
+    lines = (trial_folder / "P01_easy_trial1.csv").read_text().splitlines()
+    (folder / "P00_easy_trial0.csv").write_text("\n".join(lines[:102]) + "\n")  # 100 samples
+    extra = [lines[0], f"{lines[1]},extra"] + [f"{row},0" for row in lines[2:]]
+    (folder / "P01_easy_trial1.csv").write_text("\n".join(extra) + "\n")
+    config = parse_config(yaml.safe_load(_config(tmp_path).read_text()), "lab")
+    files = datasets.data_files([folder], config.data.pattern)
+    got = datasets.read_set(files, config.data, 25.0, need=samples_needed(config), skip=True)
+    assert [Path(p).name for p, _ in got.set_aside] == ["P00_easy_trial0.csv"]
+    assert [r["file"] for r in got.runs] == ["P01_easy_trial1.csv"]
+
+
+def test_one_readable_file_beside_unreadable_ones_keeps_its_own_run_ids(tmp_path):
+    # Source: SPEC's run ids are the file's own for one file; a set aside file does not make the
+    # survivor a set of several (the run ids 13, 11, 12 stay, as with that file alone).
+    text = EXAMPLE.read_text().splitlines()
+    renumber = {"1": "13", "2": "11", "3": "12"}
+    rows = [text[0]] + [renumber[r.split(",", 1)[0]] + "," + r.split(",", 1)[1] for r in text[1:]]
+    (tmp_path / "a_runs.csv").write_text("\n".join(rows) + "\n")
+    (tmp_path / "b_junk.csv").write_text("not,a\ndata,file\n")
+    config = parse_config(yaml.safe_load(_config(tmp_path, None, COLUMNS).read_text()), "lab")
+    files = datasets.data_files([str(tmp_path / "*.csv")], config.data.pattern)
+    got = datasets.read_set(files, config.data, 25.0, need=samples_needed(config), skip=True)
+    assert sorted(got.records) == [11, 12, 13]
+    assert [Path(p).name for p, _ in got.set_aside] == ["b_junk.csv"]
+
+
+def test_a_data_set_read_for_another_rate_or_too_short_is_refused(trial_folder, tmp_path):
+    # Source: identify_study's own check (a library caller may build a DataSet otherwise than
+    # read_study does): the config's analysis rate, and the samples its windows need.
+    import dataclasses
+
+    from hcid.pipeline import identify_study
+
+    config = parse_config(yaml.safe_load(_config(tmp_path).read_text()), "lab")
+    files = datasets.data_files([trial_folder], config.data.pattern)
+    good = datasets.read_set(files, config.data, 25.0, need=samples_needed(config))
+    with pytest.raises(DataError, match="the data set is at 50 Hz, the config analyses at 25 Hz"):
+        identify_study(config, tmp_path / "a", data=dataclasses.replace(good, rate=50.0))
+    short = {run: {k: v[:100] for k, v in rec.items()} for run, rec in good.records.items()}
+    with pytest.raises(DataError, match="run 1 holds 100 samples"):
+        identify_study(config, tmp_path / "b", data=dataclasses.replace(good, records=short))
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()

@@ -301,11 +301,20 @@ def _blas_threads(_: int) -> list[int]:
     return [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
 
 
-@pytest.mark.parametrize("jobs", [1, 2])
-def test_execution_runs_blas_single_threaded_and_puts_it_back(jobs):
-    # Issue 36: the pinning lives in Execution, for a library caller as for the CLI. Source:
-    # threadpoolctl's own count of each loaded BLAS's threads, in the worker that ran the task.
+@pytest.mark.parametrize("jobs, fork", [(1, True), (2, True), (2, False)])
+def test_execution_runs_blas_single_threaded_and_puts_it_back(jobs, fork, monkeypatch):
+    # Issue 36: the pinning lives in Execution, for a library caller as for the CLI, in forked
+    # workers and in loky's fresh ones (as if on a machine of 8 CPUs, where loky would give each
+    # of 2 workers 4 threads). Source: threadpoolctl's count of each loaded BLAS's threads, in
+    # the worker that ran the task.
+    import joblib._parallel_backends
     from threadpoolctl import threadpool_info, threadpool_limits
+
+    if not fork:
+        monkeypatch.setattr(parallel, "_can_fork", lambda: False)
+        monkeypatch.setattr(joblib._parallel_backends, "cpu_count", lambda *a, **k: 8)
+        for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+            monkeypatch.delenv(name, raising=False)  # make test sets them; a library caller may not
 
     with threadpool_limits(2, user_api="blas"):  # a caller's BLAS with two threads
         before = [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]

@@ -190,7 +190,7 @@ def compile_kernels(part: str) -> None:
     other kernel a single-threaded fit of na up to 12, or :func:`simulate`, runs (a fit of na
     above 12 and ``threads > 1`` compile theirs when taken). Does nothing without the JIT.
     Compiling ahead changes no result; it lets a caller compile the two parts in two processes
-    at once and fork its workers after (:func:`hcid.pipeline.parallel.compile_kernels`).
+    at once and fork its workers after (:func:`hcid.pipeline.parallel.compile_before_fork`).
     """
     if part not in KERNEL_PARTS:
         raise ValueError(f"part: one of {KERNEL_PARTS}, got {part!r}")

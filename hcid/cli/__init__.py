@@ -121,11 +121,13 @@ def _load(
     return resolve_config(described, method_names), run_dir
 
 
-def _load_data(config: Path, run: Path | None, data: list[str], method_names=None, skip: bool = False):
+def _load_data(config: Path, run: Path | None, data: list[str], execution, method_names=None, skip=False):
     """A measured study's config, completed from its data where it leaves the analysis rate or
-    window out, its run directory and its data set, each file found and read once."""
+    window out, its run directory and its data set, each file found and read once; a dask
+    scheduler without workers is refused before anything is read."""
     from hcid.io.resolve import read_study
 
+    execution.check()
     run_dir = _run_dir(config, run)
     cfg, data_set = read_study(config, data, method_names, skip_unreadable=skip)
     return cfg, run_dir, data_set
@@ -187,7 +189,7 @@ def identify(
 
     execution = _execution(jobs, backend, scheduler, worker_timeout, quiet)
     if data:
-        cfg, run_dir, data_set = _load_data(config, run, data, _methods(method))
+        cfg, run_dir, data_set = _load_data(config, run, data, execution, _methods(method))
     else:
         (cfg, run_dir), data_set = _load(config, run, _methods(method)), None
     result = identify_study(cfg, run_dir, _methods(method), data=data_set, execution=execution, force=force)
@@ -348,7 +350,7 @@ def analyse(
     execution = _execution(jobs, backend, scheduler, worker_timeout, quiet)
     groups = None if by is None else tuple(b.strip() for b in by.split(",") if b.strip())
     options = AnalysisOptions(groups, twins, max_fb_twins, ff_twin, alpha, fdr)
-    cfg, run_dir, data_set = _load_data(config, run, data, skip=skip_unreadable)
+    cfg, run_dir, data_set = _load_data(config, run, data, execution, skip=skip_unreadable)
     result = analyse_study(cfg, run_dir, data_set, options, execution=execution, force=force)
     answers.print_analysis(result)
     from hcid.report import build_report

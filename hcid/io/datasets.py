@@ -23,7 +23,7 @@ import csv
 import glob
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,7 +34,7 @@ from hcid.config import DataConfig
 from hcid.config.parse import RESERVED_FACTORS, check_pattern
 from hcid.errors import ConfigError, DataError
 from hcid.io.formats import READERS, csv_layout
-from hcid.io.measured import FileRuns, read_file, runs_at
+from hcid.io.measured import FileAtRate, at_rate, read_file, records_of
 from hcid.tables import RUNS
 
 __all__ = ["DataFile", "DataSet", "data_files", "read_files", "read_set", "runs_table", "set_at"]
@@ -216,17 +216,21 @@ def _columns(path: Path) -> tuple[str, ...] | None:
 
 
 def read_files(
-    files: Sequence[DataFile], data: DataConfig, skip: bool = False
-) -> tuple[list[tuple[DataFile, FileRuns]], list[tuple[str, str]]]:
-    """Every file of a set read once (:func:`hcid.io.measured.read_file`) and checked against the
-    set's first readable file (one format, the same columns): ``([(file, its runs)], set aside)``.
-    With ``skip``, a file that fails is set aside with its one-line reason instead of refused.
+    files: Sequence[DataFile],
+    data: DataConfig,
+    rate: float | Callable[[float], float] | None = None,
+    skip: bool = False,
+) -> tuple[list[tuple[DataFile, FileAtRate, tuple[str, ...] | None]], list[tuple[str, str]]]:
+    """Every file of a set read once (:func:`hcid.io.measured.read_file`) and taken at once to
+    the analysis ``rate`` (:func:`hcid.io.measured.at_rate`; None: the first run's own; a
+    function: of the first run's own rate), so that only one file is held at its own rate:
+    ``([(file, its runs at the rate, its columns)], set aside)``. With ``skip``, a file that
+    cannot be read or resampled is set aside with its one-line reason instead of refused.
 
     Raises
     ------
     DataError
-        One line: a file's own problem (named), files of different formats or columns (the
-        first that differs named against the first file), or an empty set.
+        One line: a file's own problem (named), files of different formats, or an empty set.
     """
     if not files:
         raise DataError("data (--data): the data set holds no file")
@@ -234,53 +238,62 @@ def read_files(
     if len(suffixes) > 1:
         raise DataError(f"the data set mixes formats ({', '.join(sorted(suffixes))}): give one kind of file")
     read, aside = [], []
-    first = None  # the first readable file's (columns, path)
+    first = None  # the first file read: (columns, path), to name what differs in one that is not
     for f in files:
         try:
             columns = _columns(f.path)
-            if first is not None and columns != first[0]:
-                mine, theirs = list(columns or []), list(first[0] or [])
-                raise DataError(f"{f.path}: columns {mine} differ from {first[1].name}'s {theirs}")
-            read.append((f, read_file(f.path, data)))
+            try:
+                file_runs = read_file(f.path, data)
+            except DataError:
+                if first is not None and columns != first[0]:
+                    raise _columns_differ(f, columns, first) from None
+                raise
+            first = first or (columns, f.path)
+            if callable(rate):  # the first readable file's own rate decides
+                rate = rate(at_rate(file_runs, data).rate)
+            file = at_rate(file_runs, data, rate)
         except DataError as exc:
             if not skip:
                 raise
             aside.append((str(f.path), str(exc)))
             continue
-        first = first or (columns, f.path)
+        rate = file.rate
+        read.append((f, file, columns))
     if not read:
         raise DataError(f"no file of the data set can be read (the first: {aside[0][1]})")
     return read, aside
 
 
 def set_at(
-    read: Sequence[tuple[DataFile, FileRuns]],
+    read: Sequence[tuple[DataFile, FileAtRate, tuple[str, ...] | None]],
     data: DataConfig,
-    rate: float | None = None,
     need: int = 1,
     skip: bool = False,
     aside: Sequence[tuple[str, str]] = (),
+    order: Sequence[str] = (),
 ) -> DataSet:
-    """The files :func:`read_files` read, as a data set at the analysis ``rate`` (default: the
-    first run's own), every run holding ``need`` samples after the lead-in, all runs at one
-    native rate. With ``skip``, a file whose runs fail (too short, another sample rate) is set
-    aside with its reason, after those ``aside`` already holds."""
+    """The files :func:`read_files` read, as a data set: every run after ``data.lead_in``,
+    holding ``need`` samples, each file with the columns of the set's first kept file and all
+    runs at one own rate. With ``skip``, a file that fails is set aside with its reason, beside
+    those ``aside`` already holds, all listed in the files' ``order`` (their paths)."""
     records: dict[int, dict[str, np.ndarray]] = {}
     runs: list[dict[str, object]] = []
     aside = list(aside)
-    native = None  # the first run's (rate, path, run id)
-    several = len(read) + len(aside) > 1 or data.dimensions is not None
+    native = first = None  # the first kept file's first run's (rate, path, run id); (columns, path)
+    several = len(read) > 1 or data.dimensions is not None
     kept = []
-    for f, file_runs in read:
+    for f, file, columns in read:
         try:
-            file_records, file_rate, natives = runs_at(file_runs, data, rate, need)
-            native = _same_rate(f, natives, native)
+            if first is not None and columns != first[0]:
+                raise _columns_differ(f, columns, first)
+            file_records = records_of(file, data, need)
+            native = _same_rate(f, file.natives, native)
         except DataError as exc:
             if not skip:
                 raise
             aside.append((str(f.path), str(exc)))
             continue
-        rate = file_rate
+        first = first or (columns, f.path)
         kept.append(f)
         for file_run, record in file_records.items():
             run = len(records) + 1 if several else file_run
@@ -291,9 +304,11 @@ def set_at(
                     "file": str(f.path),
                     "file_run": int(file_run),
                     **dict(f.factors),
-                    **natives[file_run]["factors"],
+                    **file.natives[file_run]["factors"],
                 }
             )
+    position = {path: i for i, path in enumerate(order)}
+    aside.sort(key=lambda item: position.get(item[0], len(position)))
     if not records:
         raise DataError(f"no file of the data set can be read (the first: {aside[0][1]})")
     factors = tuple(n for n, _ in kept[0].factors) + tuple(
@@ -304,7 +319,7 @@ def set_at(
     names = {str(f.path): f.path.resolve().relative_to(root).as_posix() for f in kept}
     for r in runs:
         r["file"] = names[r["file"]]
-    return DataSet(records, runs, factors, float(rate), tuple(aside))
+    return DataSet(records, runs, factors, float(read[0][1].rate), tuple(aside))
 
 
 def read_set(
@@ -312,8 +327,8 @@ def read_set(
 ) -> DataSet:
     """Read and check every file of a set once (:func:`read_files`, then :func:`set_at`). With
     ``skip``, a file whose reading or checks fail (its own problem, or columns or a sample rate
-    that differ from the set's first readable file) is left out with its reason
-    (``DataSet.set_aside``) instead.
+    that differ from the set's first kept file) is left out with its reason
+    (``DataSet.set_aside``, in the files' order) instead.
 
     Raises
     ------
@@ -322,8 +337,13 @@ def read_set(
         columns or sample rates (the first that differs named against the first
         file), or an empty set.
     """
-    read, aside = read_files(files, data, skip)
-    return set_at(read, data, rate, need, skip, aside)
+    read, aside = read_files(files, data, rate, skip)
+    return set_at(read, data, need, skip, aside, [str(f.path) for f in files])
+
+
+def _columns_differ(f: DataFile, columns, first) -> DataError:
+    mine, theirs = list(columns or []), list(first[0] or [])
+    return DataError(f"{f.path}: columns {mine} differ from {first[1].name}'s {theirs}")
 
 
 def _same_rate(f: DataFile, natives: dict, native):

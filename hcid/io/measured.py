@@ -41,13 +41,15 @@ from hcid.tables import MEASURED, SIGNALS
 
 __all__ = [
     "LARGEST",
+    "FileAtRate",
     "FileRuns",
     "check_signal",
     "read_file",
     "read_file_runs",
     "read_signal",
+    "at_rate",
+    "records_of",
     "records_table",
-    "runs_at",
     "samples_needed",
 ]
 
@@ -333,12 +335,24 @@ def read_runs(
 class FileRuns:
     """One measured file as read, once (:func:`read_file`): per run id its checked columns at
     the file's own rate (the signals, and ``time`` or ``rate``) and the factors its position in
-    N-D arrays gives (``data.dimensions``, else none). :func:`runs_at` turns them into records
-    at an analysis rate."""
+    N-D arrays gives (``data.dimensions``, else none). :func:`at_rate` takes them to an
+    analysis rate."""
 
     path: Path
     runs: dict[int, dict[str, np.ndarray]]
     factors: dict[int, dict[str, object]]
+
+
+@dataclass(frozen=True)
+class FileAtRate:
+    """A file's runs at an analysis ``rate``, before the lead-in (:func:`at_rate`): per run id
+    its signals, and ``{"rate": its own sample rate (Hz), "factors": its factors}``.
+    :func:`records_of` cuts the lead-in and checks the length."""
+
+    path: Path
+    signals: dict[int, dict[str, np.ndarray]]
+    natives: dict[int, dict]
+    rate: float
 
 
 def read_file(path: str | Path, data: DataConfig) -> FileRuns:
@@ -364,23 +378,28 @@ def read_file(path: str | Path, data: DataConfig) -> FileRuns:
     return FileRuns(path, runs, factors)
 
 
-def runs_at(
-    file: FileRuns, data: DataConfig, rate: float | None = None, need: int = 1
-) -> tuple[dict[int, dict[str, np.ndarray]], float, dict[int, dict]]:
-    """A file's runs as records at the analysis ``rate`` (default: the first run's own), after
-    the lead-in, each holding at least ``need`` samples (:func:`read_runs`), and per run
-    ``{"rate": its own sample rate (Hz) before resampling, "factors": its factors}``."""
+def at_rate(file: FileRuns, data: DataConfig, rate: float | None = None) -> FileAtRate:
+    """A file's runs resampled once to the analysis ``rate`` (default: the first run's own;
+    :func:`resample`, zero phase); a run slower than it is refused."""
     given = rate is not None
-    records, natives = {}, {}
+    signals, natives = {}, {}
     for run_id, run in file.runs.items():
         where = f"{file.path}: run {run_id}"
         found = _run_rate(where, run, data, rate)
         if rate is None:
             rate = found
         natives[run_id] = {"rate": float(found), "factors": file.factors[run_id]}
-        signals_ = _at_rate(where, {name: run[name] for name in SIGNALS}, found, rate, given)
-        records[run_id] = _after_lead_in(where, signals_, rate, data, need)
-    return records, float(rate), natives
+        signals[run_id] = _at_rate(where, {name: run[name] for name in SIGNALS}, found, rate, given)
+    return FileAtRate(file.path, signals, natives, float(rate))
+
+
+def records_of(file: FileAtRate, data: DataConfig, need: int = 1) -> dict[int, dict[str, np.ndarray]]:
+    """Each run's record after ``data.lead_in``, holding at least ``need`` samples, no signal
+    constant over them (:func:`read_runs`)."""
+    return {
+        run_id: _after_lead_in(f"{file.path}: run {run_id}", signals_, file.rate, data, need)
+        for run_id, signals_ in file.signals.items()
+    }
 
 
 def read_file_runs(
@@ -388,7 +407,8 @@ def read_file_runs(
 ) -> tuple[dict[int, dict[str, np.ndarray]], float, dict[int, dict]]:
     """:func:`read_runs`, and per run ``{"rate": its own sample rate (Hz) before resampling,
     "factors": the factors its position in N-D arrays gives (data.dimensions), else {}}``."""
-    return runs_at(read_file(path, data), data, rate, need)
+    file = at_rate(read_file(path, data), data, rate)
+    return records_of(file, data, need), file.rate, file.natives
 
 
 def _named_signals(path: Path, cols: dict[str, np.ndarray], data: DataConfig) -> dict[str, np.ndarray]:

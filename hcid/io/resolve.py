@@ -27,14 +27,14 @@ import numpy as np
 import yaml
 
 from hcid import methods
-from hcid.config import Config, DataConfig, FileSignal, HCModel, IdentifyConfig
+from hcid.config import Config, FileSignal, HCModel, IdentifyConfig
 from hcid.config._checks import LIMITS
 from hcid.config.forcing import check_forcing_values
 from hcid.config.parse import default_data, describe_config
 from hcid.config.stages import build_stages, parse_identify, stage_raw
 from hcid.errors import ConfigError, DataError, quote
 from hcid.io.datasets import DataSet
-from hcid.io.measured import FileRuns, read_signal, resampling_factors, runs_at, samples_needed
+from hcid.io.measured import FileAtRate, read_signal, resampling_factors, samples_needed
 from hcid.loop.hcmodel import check_closed_loops
 from hcid.selection import criteria
 
@@ -228,13 +228,26 @@ def read_study(
     if not isinstance(raw, dict) or not isinstance(raw.get("data", {}), dict):
         raise ConfigError(f"{path}: data: must be a mapping")
     reading = _reading(raw, path.parent)
-    read, aside = read_files(data_files(sources, reading.pattern), reading, skip_unreadable)
+    files = data_files(sources, reading.pattern)
+    read, aside = read_files(files, reading, _reading_rate(raw, path), skip_unreadable)
     if _needs_timing(raw):
-        raw = data_timing(raw, [file_runs for _, file_runs in read], reading)
+        raw = data_timing(raw, [file for _, file, _ in read])
     config = with_data(resolve_config(describe_config(raw, path.stem, path.parent), method_names))
-    need = samples_needed(config)
-    data_set = set_at(read, config.data, config.timing.output_rate, need, skip_unreadable, aside)
+    order = [str(f.path) for f in files]
+    data_set = set_at(read, config.data, samples_needed(config), skip_unreadable, aside, order)
     return config, data_set
+
+
+def _reading_rate(raw: dict, path: Path):
+    """The rate a measured study's files are taken to as they are read: the config's analysis
+    rate, else :func:`analysis_rate` of the first run's own (a bad value is left to the config's
+    own checks)."""
+    if not _needs_timing(raw):
+        return describe_config(raw, path.stem, path.parent).timing.output_rate
+    given = raw["data"].get("analysis_rate")
+    if isinstance(given, int | float) and not isinstance(given, bool) and 0 < given < 1e6:
+        return float(given)
+    return analysis_rate
 
 
 def with_data(config: Config) -> Config:
@@ -258,14 +271,23 @@ def _needs_timing(raw: Any) -> bool:
     return "analysis_rate" not in raw["data"] or "window" not in raw["data"]
 
 
-def data_timing(raw: dict, read: Sequence[FileRuns], reading: DataConfig) -> dict:
-    """``raw`` with the data section's ``analysis_rate`` and ``window`` taken from the files
-    ``read`` (:func:`hcid.io.measured.read_file`, ``reading`` their data section) where the
-    config leaves them out.
+def analysis_rate(native: float) -> float:
+    """A measured study's default analysis rate for runs sampled at ``native`` Hz: their own if
+    at most :data:`DEFAULT_ANALYSIS_RATE`, else that rate (25 Hz, SPEC 3's; or their own when
+    25 Hz is no ratio p/q with p, q <= 100)."""
+    rate = native if native <= DEFAULT_ANALYSIS_RATE else DEFAULT_ANALYSIS_RATE
+    try:
+        resampling_factors(native, rate)
+    except DataError:
+        rate = native
+    return float(rate)
 
-    The analysis rate: the first run's own rate if at most :data:`DEFAULT_ANALYSIS_RATE`, else
-    that rate (25 Hz, SPEC 3's; or the data's own when 25 Hz is no ratio p/q with p, q <= 100).
-    The window: the shortest run after ``data.lead_in``, in whole samples at the analysis rate.
+
+def data_timing(raw: dict, read: Sequence[FileAtRate]) -> dict:
+    """``raw`` with the data section's ``analysis_rate`` and ``window`` taken from the files
+    ``read`` at the analysis rate (:func:`hcid.io.measured.at_rate`) where the config leaves
+    them out: the rate they were read at (:func:`analysis_rate`), and the shortest run after
+    ``data.lead_in``, in whole samples.
 
     Raises
     ------
@@ -274,17 +296,10 @@ def data_timing(raw: dict, read: Sequence[FileRuns], reading: DataConfig) -> dic
     """
     data = dict(raw["data"])
     lead_in = data.get("lead_in", 0.0)
-    _, native, _ = runs_at(read[0], reading)
-    if "analysis_rate" not in data:
-        rate = native if native <= DEFAULT_ANALYSIS_RATE else DEFAULT_ANALYSIS_RATE
-        try:
-            resampling_factors(native, rate)
-        except DataError:
-            rate = native
-        data["analysis_rate"] = float(rate)
-    rate = float(data["analysis_rate"])
+    rate = read[0].rate
+    data.setdefault("analysis_rate", float(rate))
     if "window" not in data:
-        shortest = min(len(r["ft"]) for f in read for r in runs_at(f, reading, rate)[0].values())
+        shortest = min(len(s["ft"]) for f in read for s in f.signals.values())
         skip = round(float(lead_in) * rate)
         if shortest - skip < 2:
             where = read[0].path

@@ -182,11 +182,11 @@ def _local_stream(func, tasks, jobs, stack: contextlib.ExitStack) -> Iterator:
         return (func(*task) for task in tasks)
     if _can_fork():
         return _forked_stream(func, tasks, jobs, stack)
-    from joblib import Parallel, delayed
+    from joblib import Parallel, delayed, parallel_config
 
-    return Parallel(n_jobs=jobs, backend="loky", return_as="generator")(
-        delayed(func)(*task) for task in tasks
-    )
+    # loky's fresh workers: BLAS and OpenMP single-threaded, as forked ones inherit it.
+    with parallel_config(backend="loky", inner_max_num_threads=1):
+        return Parallel(n_jobs=jobs, return_as="generator")(delayed(func)(*task) for task in tasks)
 
 
 def _can_fork() -> bool:

@@ -332,7 +332,7 @@ def identify_study(
         methods.get(name)
     if data is not None:
         config = with_data(config)
-    execution.check()  # a dask scheduler without workers is refused before anything is read or written
+    execution.check()  # a dask scheduler without workers is refused before anything is written
     records, keys, noise_free, simulation = _records_to_identify(config, run_dir, data, execution, force)
     start = time.perf_counter()
     done = _done(run_dir, keys, names, force)
@@ -369,10 +369,29 @@ def identify_study(
     )
 
 
+def _check_data(config: Config, data: datasets.DataSet) -> None:
+    """A data set made for this config: at its analysis rate, every run as long as its windows
+    need (what :func:`hcid.io.resolve.read_study` gives; a data set read otherwise may not be)."""
+    rate = config.timing.output_rate
+    if not np.isclose(data.rate, rate, rtol=1e-9):
+        raise DataError(
+            f"data: the data set is at {data.rate:g} Hz, the config analyses at {rate:g} Hz; read it "
+            "for this config (hcid.io.resolve.read_study)"
+        )
+    need = measured.samples_needed(config)
+    short = next((run for run, rec in data.records.items() if rec["u"].size < need), None)
+    if short is not None:
+        raise DataError(
+            f"data: run {short} holds {data.records[short]['u'].size} samples, the config's windows "
+            f"need {need}; read it for this config (hcid.io.resolve.read_study)"
+        )
+
+
 def _records_to_identify(config: Config, run_dir: Path, data, execution: Execution, force: bool):
     """The records to identify by (model, seed) and their keys in order, each simulated model's
     noise-free record, and the simulation if it was made here (a study without one yet)."""
     if data is not None:
+        _check_data(config, data)
         _import_data(config, run_dir, data, force)
         records = {(config.data.name, run): rec for run, rec in data.records.items()}
         check_run_dir(config, run_dir, "identify", force=force)
