@@ -206,27 +206,11 @@ def plot_inversion(rows: list[dict], title: str = "", axes=None):
     for mask, face, label in kinds:
         if not mask.any():
             continue
+        style = {"fmt": "o", "color": "C1", "mfc": face, "ms": 6, "capsize": 3}
         ax_mag.errorbar(
-            w[mask],
-            mag[mask],
-            yerr=np.where(np.isfinite(sd), sd, 0.0)[mask],
-            fmt="o",
-            color="C1",
-            mfc=face,
-            ms=6,
-            capsize=3,
-            label=label,
+            w[mask], mag[mask], yerr=np.where(np.isfinite(sd), sd, 0.0)[mask], label=label, **style
         )
-        ax_ph.errorbar(
-            w[mask],
-            ph[mask],
-            yerr=np.where(np.isfinite(sd_deg), sd_deg, 0.0)[mask],
-            fmt="o",
-            color="C1",
-            mfc=face,
-            ms=6,
-            capsize=3,
-        )
+        ax_ph.errorbar(w[mask], ph[mask], yerr=np.where(np.isfinite(sd_deg), sd_deg, 0.0)[mask], **style)
     ax_mag.legend(fontsize=8, loc="upper right")
     ax_mag.axhline(1.0, color="0.3", lw=1, ls="--")
     ax_mag.axhline(0.5, color="0.6", lw=1, ls=":")
