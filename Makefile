@@ -64,7 +64,7 @@ docs-figures: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/docs_figures.py
 
 test-all: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -q tests
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -q -n 2 --dist loadfile tests
 
 lint: $(STAMP)
 	$(BIN)/ruff check hcid tests benchmarks configs
