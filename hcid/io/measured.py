@@ -45,7 +45,6 @@ __all__ = [
     "FileRuns",
     "check_signal",
     "read_file",
-    "read_file_runs",
     "read_signal",
     "at_rate",
     "records_of",
@@ -327,8 +326,8 @@ def read_runs(
     DataError
         One line naming the file and the problem.
     """
-    records, rate, _ = read_file_runs(path, data, rate, need)
-    return records, rate
+    file = at_rate(read_file(path, data), data, rate)
+    return records_of(file, data, need), file.rate
 
 
 @dataclass(frozen=True)
@@ -400,15 +399,6 @@ def records_of(file: FileAtRate, data: DataConfig, need: int = 1) -> dict[int, d
         run_id: _after_lead_in(f"{file.path}: run {run_id}", signals_, file.rate, data, need)
         for run_id, signals_ in file.signals.items()
     }
-
-
-def read_file_runs(
-    path: str | Path, data: DataConfig, rate: float | None = None, need: int = 1
-) -> tuple[dict[int, dict[str, np.ndarray]], float, dict[int, dict]]:
-    """:func:`read_runs`, and per run ``{"rate": its own sample rate (Hz) before resampling,
-    "factors": the factors its position in N-D arrays gives (data.dimensions), else {}}``."""
-    file = at_rate(read_file(path, data), data, rate)
-    return records_of(file, data, need), file.rate, file.natives
 
 
 def _named_signals(path: Path, cols: dict[str, np.ndarray], data: DataConfig) -> dict[str, np.ndarray]:

@@ -32,7 +32,7 @@ from hcid.config._checks import LIMITS
 from hcid.config.forcing import check_forcing_values
 from hcid.config.parse import default_data, describe_config
 from hcid.config.stages import build_stages, parse_identify, stage_raw
-from hcid.errors import ConfigError, DataError, quote
+from hcid.errors import ConfigError, DataError, checked_rate, quote
 from hcid.io.datasets import DataSet
 from hcid.io.measured import FileAtRate, read_signal, resampling_factors, samples_needed
 from hcid.loop.hcmodel import check_closed_loops
@@ -229,25 +229,20 @@ def read_study(
         raise ConfigError(f"{path}: data: must be a mapping")
     reading = _reading(raw, path.parent)
     files = data_files(sources, reading.pattern)
-    read, aside = read_files(files, reading, _reading_rate(raw, path), skip_unreadable)
-    if _needs_timing(raw):
-        raw = data_timing(raw, [file for _, file, _ in read])
-    config = with_data(resolve_config(describe_config(raw, path.stem, path.parent), method_names))
+    if _needs_timing(raw):  # the files taken to the analysis rate as read, then the window from them
+        try:
+            rate = checked_rate(raw["data"].get("analysis_rate"))
+        except ConfigError:  # none given (or a bad one, which the config's own checks name)
+            rate = analysis_rate
+        read, aside = read_files(files, reading, rate, skip_unreadable)
+        described = describe_config(data_timing(raw, [file for _, file, _ in read]), path.stem, path.parent)
+    else:
+        described = describe_config(raw, path.stem, path.parent)
+        read, aside = read_files(files, reading, described.timing.output_rate, skip_unreadable)
+    config = with_data(resolve_config(described, method_names))
     order = [str(f.path) for f in files]
     data_set = set_at(read, config.data, samples_needed(config), skip_unreadable, aside, order)
     return config, data_set
-
-
-def _reading_rate(raw: dict, path: Path):
-    """The rate a measured study's files are taken to as they are read: the config's analysis
-    rate, else :func:`analysis_rate` of the first run's own (a bad value is left to the config's
-    own checks)."""
-    if not _needs_timing(raw):
-        return describe_config(raw, path.stem, path.parent).timing.output_rate
-    given = raw["data"].get("analysis_rate")
-    if isinstance(given, int | float) and not isinstance(given, bool) and 0 < given < 1e6:
-        return float(given)
-    return analysis_rate
 
 
 def with_data(config: Config) -> Config:

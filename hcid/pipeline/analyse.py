@@ -42,7 +42,7 @@ from hcid.config import Config
 from hcid.config.fit import FEEDFORWARD_PARAMETERS
 from hcid.errors import ConfigError, DataError, IdentificationError
 from hcid.hcfit.determined import group_model
-from hcid.io import datasets, folders, results
+from hcid.io import datasets, folders
 from hcid.io.datasets import DataSet
 from hcid.io.resolve import with_data
 from hcid.loop.hcmodel import plant
@@ -346,10 +346,10 @@ def _twins(study: _Study, found: _Found) -> None:
             found.used[(key, method_name)] = twins_of[use]
 
 
-def _selection_paths(study: _Study, found: _Found) -> None:
-    """Every run's frontier and selection path over W, per method."""
+def _selection_paths(study: _Study, found: _Found, frontier: pa.Table) -> None:
+    """Every run's frontier (of the run's ``frontier`` table) and selection path over W, per method."""
     name = study.config.data.name
-    by_key = tables.split_by_key(results.read(tables.FRONTIER, study.run_dir), tables.FRONTIER.key)
+    by_key = tables.split_by_key(frontier, tables.FRONTIER.key)
     for seed in study.records:
         for method_name in methods.METHODS:
             t = by_key[(name, seed, method_name)]
@@ -483,7 +483,9 @@ def analyse_study(
     if force:
         _forget_twins(run_dir)
     with labelled("runs: "):
-        identify_study(config, run_dir, tuple(methods.METHODS), data=data, execution=execution, force=force)
+        identified = identify_study(
+            config, run_dir, tuple(methods.METHODS), data=data, execution=execution, force=force
+        )
     lap_done("identify")
     runs = datasets.runs_table(config.data.name, data)
     study = _Study(
@@ -502,7 +504,7 @@ def analyse_study(
     lap_done("fit runs")
     _twins(study, found)
     lap_done("twins")
-    _selection_paths(study, found)
+    _selection_paths(study, found, identified.frontier)
     checks = Checks(config, data.records)
     run_sizes = checks.sizes()
     judge = Evidence(config, run_dir, options.alpha, options.most_fb_twins)

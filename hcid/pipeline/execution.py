@@ -10,7 +10,6 @@ limit; two workers each running a BLAS pool of their own are also five times slo
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -53,10 +52,6 @@ class Execution:
                 f"got {self.worker_timeout!r}"
             )
         check_backend(self.backend, self.scheduler)
-
-    def quiet(self) -> Execution:
-        """The same settings without progress bars."""
-        return dataclasses.replace(self, progress=False)
 
     def check(self) -> None:
         """Refuse, before any work, a dask scheduler that cannot be reached or has no worker."""

@@ -12,7 +12,7 @@ import os
 import socket
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -463,6 +463,33 @@ class CalibrationRun:
     calibrations: list
     study: StudyRun
     run_dir: Path
+    #: Per method, the FB and FF twins' selection paths and nb_ft (:func:`model_paths`).
+    paths: dict = field(default_factory=dict)
+
+
+def model_paths(
+    config: Config, run_dir: Path, models: Sequence[str], method_names: Sequence[str] | None = None
+) -> dict[str, tuple]:
+    """Per method (``method_names``, default every registered one), each of ``models``' seeds'
+    selection paths and nb_ft, in the order of ``models``: what rates at any W are taken from."""
+    chosen = selections(results.read(tables.FRONTIER, run_dir), run_dir)
+    out = {}
+    for method in methods.METHODS if method_names is None else method_names:
+        pair = []
+        for model in models:
+            keys = [(model, s, method) for s in config.seeds]
+            pair.append(([chosen[k][0] for k in keys], [chosen[k][1]["nb_ft"] for k in keys]))
+        out[method] = tuple(pair)
+    return out
+
+
+def calibrate_paths(config: Config, run_dir: Path, paths: dict[str, tuple]) -> list:
+    """Per method, W calibrated on its (FB, FF) twins' selection ``paths`` over the config's W
+    grid; written to ``calibration.parquet``."""
+    w = np.asarray(config.selection.w_grid)
+    out = [calibrate(m, *paths[m], w, config.selection.target_rate) for m in methods.METHODS]
+    results.write(tables.CALIBRATION, tables.concat([c.to_arrow() for c in out]), run_dir)
+    return out
 
 
 @holds_run_dir(create=True)
@@ -487,14 +514,5 @@ def calibrate_study(
             f"model (Kpt > 0), got {[m.name for m in config.models]}"
         )
     study = run_study(config, run_dir, execution=execution)
-    chosen = selections(results.read(tables.FRONTIER, run_dir), run_dir)
-    out = []
-    for method in methods.METHODS:
-        twins = []
-        for model in (fb, ff):
-            keys = [(model.name, s, method) for s in config.seeds]
-            twins.append(([chosen[k][0] for k in keys], [chosen[k][1]["nb_ft"] for k in keys]))
-        w = np.asarray(config.selection.w_grid)
-        out.append(calibrate(method, twins[0], twins[1], w, config.selection.target_rate))
-    results.write(tables.CALIBRATION, tables.concat([c.to_arrow() for c in out]), run_dir)
-    return CalibrationRun(out, study, run_dir)
+    paths = model_paths(config, run_dir, (fb.name, ff.name))
+    return CalibrationRun(calibrate_paths(config, run_dir, paths), study, run_dir, paths)

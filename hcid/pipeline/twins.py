@@ -23,8 +23,14 @@ from hcid.io.resolve import parse_config
 from hcid.pipeline.execution import Execution
 from hcid.pipeline.parallel import labelled
 from hcid.pipeline.rundir import check_run_dir, using
-from hcid.pipeline.studies import calibrate_study, identify_study, run_study, simulate_study
-from hcid.pipeline.sweep import selections
+from hcid.pipeline.studies import (
+    calibrate_paths,
+    calibrate_study,
+    identify_study,
+    model_paths,
+    run_study,
+    simulate_study,
+)
 from hcid.selection.calibration import calibrate
 
 __all__ = [
@@ -44,7 +50,6 @@ __all__ = [
     "separates",
     "twin_config_raw",
     "twin_dir_ready",
-    "twin_paths",
     "twin_rate",
     "twin_sizes",
     "twin_values",
@@ -232,7 +237,7 @@ class Twins:
     remnant: tuple  # kn, w_n, zeta_n
     folder: str  # under the run directory
     calibrations: dict  # method -> Calibration
-    paths: dict  # method -> the twins' selection paths and nb_ft (twin_paths)
+    paths: dict  # method -> the twins' selection paths and nb_ft (studies.model_paths)
     fb_folder: str = ""  # where the FB twin was simulated when not in ``folder`` (shared)
 
 
@@ -297,16 +302,14 @@ def calibrate_twins(
     ):
         if fb_from is None:
             run = calibrate_study(twin_config, twin_dir, execution=execution)
-            calibrations, fb_folder = {c.method: c for c in run.calibrations}, ""
-            paths = twin_paths(twin_config, twin_dir)
+            found, paths, fb_folder = run.calibrations, run.paths, ""
         else:
             run_study(twin_config, twin_dir, execution=execution)
-            ff = twin_paths(twin_config, twin_dir, ("FF",))
+            ff = model_paths(twin_config, twin_dir, ("FF",))
             paths = {m: (fb_from.paths[m][0], ff[m][0]) for m in methods.METHODS}
-            w = np.asarray(twin_config.selection.w_grid)
-            found = [calibrate(m, *paths[m], w, twin_config.selection.target_rate) for m in methods.METHODS]
-            results.write(tables.CALIBRATION, tables.concat([c.to_arrow() for c in found]), twin_dir)
-            calibrations, fb_folder = {c.method: c for c in found}, fb_from.fb_folder or fb_from.folder
+            found = calibrate_paths(twin_config, twin_dir, paths)
+            fb_folder = fb_from.fb_folder or fb_from.folder
+        calibrations = {c.method: c for c in found}
     simulated = {**model, **twin_values(model, source.kn_rate)}
     return Twins(kind, simulated, source.remnant, f"twins/{slug}", calibrations, paths, fb_folder)
 
@@ -347,7 +350,7 @@ def draw_fb_twins(
             identify_study(twin_config, twin_dir, method_names, execution=execution)
         elif not (twin_dir / tables.SIMULATIONS.file).exists():
             simulate_study(twin_config, twin_dir, execution=execution)
-    found = twin_paths(twin_config, twin_dir, ("FB",), method_names) if method_names else {}
+    found = model_paths(twin_config, twin_dir, ("FB",), method_names) if method_names else {}
     paths = {method: fb for method, (fb,) in found.items()}
     return FbDraws(first, count, paths, _sizes(twin_dir, config.timing.output_rate).get("FB"))
 
@@ -361,11 +364,11 @@ def _twin_folder(source: TwinSource, slug: str, kind: str, make_raw):
     twin_dir = source.run_dir / "twins" / slug
     with using(twin_dir):
         forcing = twin_dir / "forcing.csv"
-        text = forcing_text(source.record, round(config.timing.window * config.timing.output_rate))
+        n = round(config.timing.window * config.timing.output_rate)
+        text = forcing_text(source.record, n)
         twin_dir_ready(twin_dir, text)
         folders.atomic_write(forcing, lambda tmp: Path(tmp).write_text(text))
         raw = make_raw(forcing)
-        n = round(config.timing.window * config.timing.output_rate)
         given = {"target": source.record["ft"][:n], "disturbance": source.record["fd"][:n]}
         try:  # forcing.csv holds these values (full precision); built in memory, not read back
             twin_config = parse_config(raw, raw["name"], forcing=given)
@@ -397,25 +400,6 @@ def _sizes(folder: Path, rate: float) -> dict[str, np.ndarray]:
     except DataError:
         return {}
     return {k: np.array(v) for k, v in out.items()}
-
-
-def twin_paths(
-    twin_config: Config,
-    twin_dir: Path,
-    models: tuple[str, ...] = ("FB", "FF"),
-    method_names: Sequence[str] | None = None,
-) -> dict[str, tuple]:
-    """Per method (``method_names``, default every registered one), the ``models`` twins'
-    selection paths and nb_ft (for rates at any W)."""
-    chosen = selections(results.read(tables.FRONTIER, twin_dir), twin_dir)
-    out = {}
-    for method in methods.METHODS if method_names is None else method_names:
-        pair = []
-        for model in models:
-            keys = [(model, s, method) for s in twin_config.seeds]
-            pair.append(([chosen[k][0] for k in keys], [chosen[k][1]["nb_ft"] for k in keys]))
-        out[method] = tuple(pair)
-    return out
 
 
 def twin_dir_ready(twin_dir: Path, text: str) -> None:
