@@ -38,20 +38,7 @@ SECTIONS = (
     hcfit,
 )
 #: The order a reader sees them: the answer (the paper's verdicts) first, then how it was found.
-RENDER_ORDER = (
-    verdicts,
-    facts,
-    experiment,
-    simulation,
-    curves,
-    rates,
-    responses,
-    handoff,
-    calibration,
-    data,
-    hcfit,
-)
-assert set(RENDER_ORDER) == set(SECTIONS)
+RENDER_ORDER = (verdicts, *(section for section in SECTIONS if section is not verdicts))
 
 #: The sections of a measured study's report (a run of ``hcid analyse``): the answer first, no
 #: paper sections.
