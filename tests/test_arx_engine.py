@@ -520,6 +520,22 @@ def test_threads_give_bit_identical_results_small(paper_record):
     _assert_same_fit(*fits)
 
 
+def test_a_grids_layout_is_made_once_and_nothing_writes_into_it(paper_record):
+    # engine._layout caches each grid's work units, order blocks and candidate orders for the
+    # next fit: after fits on two records (one keeping every candidate) they still equal the
+    # uncached functions' arrays, and the second fit is the first's, bit for bit, on a repeat.
+    grid = Grid(na=(1, 3), nb1=(0, 2), nb2=(0, 2), nk1=(20, 22), nk2=(4, 5))
+    first = fit_grid(*_direct(paper_record), grid, *DIRECT_ROWS, keep_candidates=True)
+    i1, i2, o = _direct(paper_record)
+    fit_grid(i1, i2[::-1].copy(), o, grid, *DIRECT_ROWS)
+    units, blocks, orders = engine._layout(grid)
+    assert engine._layout.cache_info().hits >= 1
+    np.testing.assert_array_equal(units, engine._units(grid))
+    for cached, fresh in zip((*blocks, *orders), (*engine_grid.order_blocks(grid), *candidates(grid)), strict=True):
+        np.testing.assert_array_equal(cached, fresh)
+    _assert_same_fit(first, fit_grid(*_direct(paper_record), grid, *DIRECT_ROWS, keep_candidates=True))
+
+
 @needs_jit
 def test_threads_give_bit_identical_results_stage1(paper_record, stage1_fit):
     two = fit_grid(*_stage1(paper_record), STAGE1_GRID, *STAGE1_ROWS, threads=2, keep_candidates=True)

@@ -10,6 +10,7 @@ interface; the kernels live in :mod:`hcid.arx._kernels` (fitting) and
 
 from __future__ import annotations
 
+import functools
 import operator
 
 import numpy as np
@@ -56,6 +57,14 @@ def _record_factor(i1p, i2p, o, grid: Grid, pad: int, start: int, stop: int) -> 
     rt[:p, :rows] = r[:rows, :p].T
     rt[p, :rows] = r[:rows, p]
     return rt
+
+
+@functools.lru_cache(maxsize=8)
+def _layout(grid: Grid):
+    """``(units, order_blocks(grid), candidates(grid))`` of a grid, made once per process for the
+    grids a study fits again and again (every record and twin): they depend on the grid alone.
+    Nothing writes into them (the kernels read them; ``tests/test_arx_engine.py`` checks)."""
+    return _units(grid), order_blocks(grid), candidates(grid)
 
 
 def _units(grid: Grid) -> np.ndarray:
@@ -288,9 +297,9 @@ def _fit_grid(
     i1p, i2p = padded(i1, pad), padded(i2, pad)
     tv1, tv2 = _tap_vectors(i1p), _tap_vectors(i2p)
     rt = _record_factor(i1p, i2p, o, grid, pad, est_start, est_stop)
-    units = _units(grid)
+    units, blocks, candidate_orders = _layout(grid)
     bounds = np.array([grid.na, grid.nb1, grid.nb2, grid.nk1, grid.nk2], dtype=np.int64)
-    block_na, block_nb1, block_nb2, start, size = order_blocks(grid)
+    block_na, block_nb1, block_nb2, start, size = blocks
     offset, v_all, theta_all, score, counts = _outputs(grid, start, size)
 
     args = (
@@ -363,7 +372,7 @@ def _fit_grid(
     # Frontier: equal V keep the candidate order, in which nk1 and then nk2
     # increase inside a block. Its V and VAF come from the frontier rows' outputs:
     # the values simulate() gives, bit for bit, whatever arithmetic the search used.
-    cand_na, cand_nb1, cand_nb2, cand_nk1, cand_nk2 = candidates(grid)
+    cand_na, cand_nb1, cand_nb2, cand_nk1, cand_nk2 = candidate_orders
     layout = (block_na, block_nb1, block_nb2, cand_nk1, cand_nk2)
     windows = ((est_start, est_stop), (val_start, val_stop))
     first = _blocks.block_best(v_all, start, size)
