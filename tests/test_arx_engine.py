@@ -531,7 +531,9 @@ def test_a_grids_layout_is_made_once_and_nothing_writes_into_it(paper_record):
     units, blocks, orders = engine._layout(grid)
     assert engine._layout.cache_info().hits >= 1
     np.testing.assert_array_equal(units, engine._units(grid))
-    for cached, fresh in zip((*blocks, *orders), (*engine_grid.order_blocks(grid), *candidates(grid)), strict=True):
+    for cached, fresh in zip(
+        (*blocks, *orders), (*engine_grid.order_blocks(grid), *candidates(grid)), strict=True
+    ):
         np.testing.assert_array_equal(cached, fresh)
     _assert_same_fit(first, fit_grid(*_direct(paper_record), grid, *DIRECT_ROWS, keep_candidates=True))
 
