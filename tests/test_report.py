@@ -363,3 +363,41 @@ def test_report_folder_is_reused_and_keeps_user_files(ci_run, tmp_path):
     assert runner.invoke(app, ["report", str(ci_run), "--out", str(out)]).exit_code == 0
     assert (out / "notes.txt").read_text() == "mine" and (out / "stale.png").read_bytes() == b"mine too"
     assert set(FIGURES) <= set(os.listdir(out))
+
+
+def test_the_runs_numbers_print_clear_of_each_other_and_of_the_twins():
+    # Issue 35: no text over text, no text over data. Fourteen runs per forcing set, two sets, with
+    # W* so close that alternating above/below (the layout before) printed numbers over each other.
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from hcid.report.figures_hcfit import plot_evidence
+
+    rng = np.random.default_rng(3)
+    twins = [
+        {"forcing_set": fs, "twin": twin, "w_star": w}
+        for fs in (1, 2)
+        for twin, scale in (("FB", 0.05), ("FF", 0.4))
+        for w in scale * np.exp(rng.normal(0, 0.3, 20))
+    ]
+    runs = [
+        {"forcing_set": fs, "run_id": 10 + k, "w_star": 0.1 * 1.004 ** (k * (fs * k % 5)), "p_w_star": 0.2}
+        for fs in (1, 2)
+        for k in range(14)
+    ]
+    fig = plot_evidence(twins, runs, "clustered runs")
+    FigureCanvasAgg(fig).draw()
+    ax = fig.axes[0]
+    boxes = [t.get_window_extent() for t in ax.texts]
+    assert len(boxes) == 28
+    for i, a in enumerate(boxes):
+        for b in boxes[i + 1 :]:
+            assert not a.overlaps(b), (a, b)
+    twin_lines = [line for line in ax.lines if line.get_marker() == "o" and len(line.get_xdata())]
+    assert len(twin_lines) == 4  # FB and FF twins of each set
+    twin_points = np.concatenate([ax.transData.transform(line.get_xydata()) for line in twin_lines])
+    for box in boxes:
+        inside = (
+            (box.x0 <= twin_points[:, 0]) & (twin_points[:, 0] <= box.x1)
+            & (box.y0 <= twin_points[:, 1]) & (twin_points[:, 1] <= box.y1)
+        )  # fmt: skip
+        assert not inside.any(), box

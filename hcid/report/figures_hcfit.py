@@ -238,12 +238,12 @@ def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: f
     ``twins``: rows of ``evidence_twins.parquet`` for one group and method; ``runs``: its rows of
     ``analysis.parquet`` (``forcing_set``, ``w_star``, ``p_w_star``, ``run_id``)."""
     sets = sorted({r["forcing_set"] for r in runs})
-    fig, axes = _figure(axes, 1, 1, figsize=(8.0, 1.2 + 1.1 * len(sets)))
+    fig, axes = _figure(axes, 1, 1, figsize=(8.0, 1.2 + 1.4 * len(sets)))
     ax = axes[0][0]
     rng = np.random.default_rng(0)  # a fixed jitter: the same picture for the same tables
     ticks, labels = [], []
     for i, fs in enumerate(sets):
-        base = 3.0 * i
+        base = _SET_ROWS * i
         for offset, twin, color in ((0.0, "FB", "0.55"), (1.0, "FF", "C0")):
             w = np.array([t["w_star"] for t in twins if t["forcing_set"] == fs and t["twin"] == twin])
             w = w[np.isfinite(w)]  # an FB twin drawn for the Fourier statistic only has no W*
@@ -259,24 +259,17 @@ def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: f
             ticks.append(base + offset)
             labels.append(f"set {fs}: {w.size} {twin} twins")
         mine = [r for r in runs if r["forcing_set"] == fs]
-        y = base + 2.0 + rng.uniform(-0.2, 0.2, len(mine))
+        y = base + 2.0 + rng.uniform(-0.12, 0.12, len(mine))
         for r, yy in zip(mine, y, strict=True):
             hit = r["p_w_star"] <= alpha
             ax.plot(r["w_star"], yy, "D", color="C3", mfc="C3" if hit else "white", ms=7, label=None)
-            ax.annotate(  # alternately above and below: neighbours' numbers do not print over each other
-                str(r["run_id"]),
-                (r["w_star"], yy),
-                textcoords="offset points",
-                fontsize=7,
-                xytext=(4, 5 if len(ax.texts) % 2 == 0 else -10),
-            )
         ticks.append(base + 2.0)
         labels.append(f"set {fs}: runs")
     ax.plot([], [], "D", color="C3", ms=7, label=f"runs, p(W*) <= {alpha:g}")
     ax.plot([], [], "D", color="C3", mfc="white", ms=7, label=f"runs, p(W*) > {alpha:g}")
     ax.set_yticks(ticks)
     ax.set_yticklabels(labels, fontsize=8)
-    ax.set_ylim(-0.7, 3.0 * (len(sets) - 1) + 2.9)  # room for the runs' numbers above their row
+    ax.set_ylim(-0.7, _SET_ROWS * (len(sets) - 1) + 3.8)  # room for the runs' numbers above their row
     ax.set_xscale("log")
     # Plain numbers on the log axis (0.02, 0.05, 0.1), not 2x10^-2 crowding each other.
     ax.xaxis.set_major_locator(ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
@@ -287,4 +280,38 @@ def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: f
     fig.legend(*ax.get_legend_handles_labels(), fontsize=7, loc="lower center", ncol=4)
     fig.suptitle(title)
     fig.tight_layout(rect=(0, 0.12, 1, 1))
+    for i, fs in enumerate(sets):  # the runs' numbers, laid out once the axes have their size
+        _label_runs(ax, [r for r in runs if r["forcing_set"] == fs], _SET_ROWS * i + 2.0)
     return fig
+
+
+#: Rows of a forcing set (FB twins, FF twins, runs) and the room for its runs' numbers above them.
+_SET_ROWS = 4.0
+#: Vertical offsets (points) of the runs' numbers from their row, tried in this order.
+_LABEL_LANES = (7.0, 17.0, 27.0, -12.0)
+_LABEL_FONT = 7.0
+
+
+def _label_runs(ax, runs: list[dict], row: float) -> None:
+    """Each run's number beside its W* on the runs' row of a forcing set, in the first lane
+    (:data:`_LABEL_LANES`) where it prints clear of the numbers placed before it (runs from the
+    smallest W* up); where every lane is taken, in the lane whose last number ends first, moved
+    right to start after it. No number prints over another."""
+    fig = ax.figure
+    width = ax.get_window_extent().width * 72.0 / fig.dpi  # the axes' width in points
+    low, high = np.log10(ax.get_xlim())
+    ends = [-np.inf] * len(_LABEL_LANES)
+    gap = 3.0
+    drawn = [r for r in runs if np.isfinite(r["w_star"]) and r["w_star"] > 0]
+    for r in sorted(drawn, key=lambda r: (r["w_star"], str(r["run_id"]))):
+        text = str(r["run_id"])
+        at = (np.log10(r["w_star"]) - low) / (high - low) * width  # the marker, in points
+        start = at + 4.0
+        free = [k for k, end in enumerate(ends) if end + gap <= start]
+        lane = free[0] if free else int(np.argmin(ends))
+        start = max(start, ends[lane] + gap)
+        ends[lane] = start + 0.65 * _LABEL_FONT * len(text)
+        ax.annotate(
+            text, (r["w_star"], row), textcoords="offset points", fontsize=_LABEL_FONT,
+            xytext=(start - at, _LABEL_LANES[lane]), va="center",
+        )  # fmt: skip
