@@ -272,7 +272,8 @@ def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: f
     ax.set_ylim(-0.7, _SET_ROWS * (len(sets) - 1) + 3.8)  # room for the runs' numbers above their row
     ax.set_xscale("log")
     # Plain numbers on the log axis (0.02, 0.05, 0.1), not 2x10^-2 crowding each other.
-    ax.xaxis.set_major_locator(ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
+    decades = np.log10(ax.get_xlim()[1] / ax.get_xlim()[0])  # beyond ~3, 1-2-5 ticks print into each other
+    ax.xaxis.set_major_locator(ticker.LogLocator(subs=(1.0, 2.0, 5.0) if decades <= 3.2 else (1.0,)))
     ax.xaxis.set_major_formatter(ticker.FuncFormatter(lambda x, _: f"{x:g}"))
     ax.xaxis.set_minor_formatter(ticker.NullFormatter())
     ax.set_xlabel("W* (largest W keeping feedforward, -)")
