@@ -522,20 +522,24 @@ def test_threads_give_bit_identical_results_small(paper_record):
 
 def test_a_grids_layout_is_made_once_and_nothing_writes_into_it(paper_record):
     # engine._layout caches each grid's work units, order blocks and candidate orders for the
-    # next fit: after fits on two records (one keeping every candidate) they still equal the
-    # uncached functions' arrays, and the second fit is the first's, bit for bit, on a repeat.
+    # next fit: made once for three fits (one keeping every candidate, one on another record);
+    # afterwards still the uncached functions' arrays, even after a caller wrote into a returned
+    # GridFit; and a repeat fit is the first's, bit for bit.
     grid = Grid(na=(1, 3), nb1=(0, 2), nb2=(0, 2), nk1=(20, 22), nk2=(4, 5))
+    engine._layout.cache_clear()
     first = fit_grid(*_direct(paper_record), grid, *DIRECT_ROWS, keep_candidates=True)
     i1, i2, o = _direct(paper_record)
-    fit_grid(i1, i2[::-1].copy(), o, grid, *DIRECT_ROWS)
+    other = fit_grid(i1, i2[::-1].copy(), o, grid, *DIRECT_ROWS)
+    other.na[:] = 99  # a caller's own copy
+    other.nb1[:] = 99
+    again = fit_grid(*_direct(paper_record), grid, *DIRECT_ROWS, keep_candidates=True)
+    assert (engine._layout.cache_info().misses, engine._layout.cache_info().hits) == (1, 2)
     units, blocks, orders = engine._layout(grid)
-    assert engine._layout.cache_info().hits >= 1
     np.testing.assert_array_equal(units, engine._units(grid))
-    for cached, fresh in zip(
-        (*blocks, *orders), (*engine_grid.order_blocks(grid), *candidates(grid)), strict=True
-    ):
-        np.testing.assert_array_equal(cached, fresh)
-    _assert_same_fit(first, fit_grid(*_direct(paper_record), grid, *DIRECT_ROWS, keep_candidates=True))
+    fresh = (*engine_grid.order_blocks(grid), *candidates(grid))
+    for cached, made in zip((*blocks, *orders), fresh, strict=True):
+        np.testing.assert_array_equal(cached, made)
+    _assert_same_fit(first, again)
 
 
 @needs_jit

@@ -63,7 +63,8 @@ def _record_factor(i1p, i2p, o, grid: Grid, pad: int, start: int, stop: int) -> 
 def _layout(grid: Grid):
     """``(units, order_blocks(grid), candidates(grid))`` of a grid, made once per process for the
     grids a study fits again and again (every record and twin): they depend on the grid alone.
-    Nothing writes into them (the kernels read them; ``tests/test_arx_engine.py`` checks)."""
+    Nothing writes into them: the kernels read them, and a :class:`GridFit` gets copies
+    (``tests/test_arx_engine.py`` checks both)."""
     return _units(grid), order_blocks(grid), candidates(grid)
 
 
@@ -434,9 +435,9 @@ def _grid_fit(grid, blocks, candidate_orders, first, v_all, theta_all, scores, k
         )
     return GridFit(
         grid=grid,
-        na=block_na,
-        nb1=block_nb1,
-        nb2=block_nb2,
+        na=block_na.copy(),  # copies: the grid's layout is cached for the next fit (_layout)
+        nb1=block_nb1.copy(),
+        nb2=block_nb2.copy(),
         nk1=nk1,
         nk2=nk2,
         d=n_parameters(block_na, block_nb1, block_nb2),
