@@ -229,6 +229,18 @@ def plot_inversion(rows: list[dict], title: str = "", axes=None):
     return fig
 
 
+#: Rows of a forcing set in the evidence figure (FB twins, FF twins, runs) and the room for its
+#: runs' numbers above them, in data units; the runs' markers' jitter about their row.
+_SET_ROWS = 4.0
+_RUN_JITTER = 0.12
+#: The runs' numbers: font size, and their offsets (points) above the runs' row, tried in this
+#: order: the lowest clears a diamond (half-height 0.71 x 7 pt) at the top of its jitter.
+_LABEL_FONT = 7.0
+_LABEL_LANES = (13.0, 22.5, 32.0)
+#: Points per data unit the lanes need: the highest lane's numbers clear of the next set's FB twins.
+_MIN_POINTS_PER_ROW = 23.0
+
+
 def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: float = 0.05, axes=None):
     """Each run's feedforward threshold W* on its forcing set's twins (SPEC 11): the FB twins'
     W* (what a person without feedforward shows), the FF twins' (what one with the group's
@@ -236,7 +248,10 @@ def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: f
     each per forcing set, each twins' row labelled with its count.
 
     ``twins``: rows of ``evidence_twins.parquet`` for one group and method; ``runs``: its rows of
-    ``analysis.parquet`` (``forcing_set``, ``w_star``, ``p_w_star``, ``run_id``)."""
+    ``analysis.parquet`` (``forcing_set``, ``w_star``, ``p_w_star``, ``run_id``). The runs' numbers
+    print clear of each other and of the twins (:func:`_label_runs`); on the figure's own axes, made
+    tall enough for that, not on a caller's ``axes``, whose size is the caller's."""
+    own = axes is None
     sets = sorted({r["forcing_set"] for r in runs})
     fig, axes = _figure(axes, 1, 1, figsize=(8.0, 1.2 + 1.4 * len(sets)))
     ax = axes[0][0]
@@ -259,7 +274,7 @@ def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: f
             ticks.append(base + offset)
             labels.append(f"set {fs}: {w.size} {twin} twins")
         mine = [r for r in runs if r["forcing_set"] == fs]
-        y = base + 2.0 + rng.uniform(-0.12, 0.12, len(mine))
+        y = base + 2.0 + rng.uniform(-_RUN_JITTER, _RUN_JITTER, len(mine))
         for r, yy in zip(mine, y, strict=True):
             hit = r["p_w_star"] <= alpha
             ax.plot(r["w_star"], yy, "D", color="C3", mfc="C3" if hit else "white", ms=7, label=None)
@@ -281,23 +296,24 @@ def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: f
     fig.legend(*ax.get_legend_handles_labels(), fontsize=7, loc="lower center", ncol=4)
     fig.suptitle(title)
     fig.tight_layout(rect=(0, 0.12, 1, 1))
+    for _ in range(3 if own else 0):  # tall enough for the numbers' lanes
+        low, high = ax.get_ylim()
+        per_row = ax.get_window_extent().height * 72.0 / fig.dpi / (high - low)
+        if per_row >= _MIN_POINTS_PER_ROW:
+            break
+        fig.set_figheight(fig.get_figheight() * 1.02 * _MIN_POINTS_PER_ROW / per_row)
+        fig.tight_layout(rect=(0, 0.12, 1, 1))
     for i, fs in enumerate(sets):  # the runs' numbers, laid out once the axes have their size
         _label_runs(ax, [r for r in runs if r["forcing_set"] == fs], _SET_ROWS * i + 2.0)
     return fig
 
 
-#: Rows of a forcing set (FB twins, FF twins, runs) and the room for its runs' numbers above them.
-_SET_ROWS = 4.0
-#: Vertical offsets (points) of the runs' numbers from their row, tried in this order.
-_LABEL_LANES = (7.0, 17.0, 27.0, -12.0)
-_LABEL_FONT = 7.0
-
-
 def _label_runs(ax, runs: list[dict], row: float) -> None:
-    """Each run's number beside its W* on the runs' row of a forcing set, in the first lane
+    """Each run's number beside its W* above the runs' row of a forcing set, in the first lane
     (:data:`_LABEL_LANES`) where it prints clear of the numbers placed before it (runs from the
     smallest W* up); where every lane is taken, in the lane whose last number ends first, moved
-    right to start after it. No number prints over another."""
+    right to start after it (past the last run, beyond the axes' right edge if need be). No number
+    prints over another or over a marker."""
     fig = ax.figure
     width = ax.get_window_extent().width * 72.0 / fig.dpi  # the axes' width in points
     low, high = np.log10(ax.get_xlim())
