@@ -409,3 +409,23 @@ def test_the_runs_numbers_print_clear_of_each_other_and_of_every_marker(n_sets):
         for x, y, h in markers:
             clear = x + h <= box.x0 or box.x1 <= x - h or y + h <= box.y0 or box.y1 <= y - h
             assert clear, (box, x, y, h)
+
+
+@pytest.mark.parametrize("low", [1e-4, 5e-4, 0.02])
+def test_the_w_axis_labels_print_clear_of_each_other(low):
+    # W* from the grid's smallest W (1e-4) to 0.8, as on the CPHS fo plant, and narrower spans:
+    # 1-2-5 ticks over four decades printed 0.0001 into 0.0002; one per decade there.
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from hcid.report.figures_hcfit import plot_evidence
+
+    twins = [{"forcing_set": 1, "twin": t, "w_star": w} for t in ("FB", "FF") for w in (low, 0.8)]
+    runs = [{"forcing_set": 1, "run_id": 1, "w_star": 0.1, "p_w_star": 0.2}]
+    fig = plot_evidence(twins, runs)
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    labels = [t for t in fig.axes[0].get_xticklabels() if t.get_visible() and t.get_text()]
+    assert len(labels) >= 3
+    boxes = sorted((t.get_window_extent(renderer) for t in labels), key=lambda b: b.x0)
+    for a, b in zip(boxes, boxes[1:], strict=False):
+        assert a.x1 + 2 <= b.x0, (a, b)
