@@ -1171,6 +1171,7 @@ def test_pruned_frontier_equals_the_old_kernel_on_random_records(seed, fused):
         (7, Grid(na=(11, 13), nb1=(8, 9), nb2=(0, 1), nk1=(3, 12), nk2=(2, 2)), 2),
     ],
 )
+@_NO_JIT  # the affine groups are vector steps; the plain path: the pruned-frontier test above
 def test_affine_groups_give_the_old_kernels_frontier_on_random_records(seed, grid, threads):
     # Affine groups (and groups with more than two unstable candidates left
     # to the general lanes): frontier and, unfused, every V of keep_candidates
