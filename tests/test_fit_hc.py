@@ -294,3 +294,32 @@ def test_fit_hc_on_a_data_only_config_is_one_line(tmp_path):
     assert result.exit_code == 2, result.output
     assert result.stderr.startswith("hcid: error: loop: missing; `hcid fit-hc` needs the plant")
     assert len(result.stderr.strip().splitlines()) == 1 and sorted(p.name for p in run.iterdir()) == before
+
+
+def test_the_summary_of_a_parameter_over_records_the_cli_and_the_report_share():
+    # hcid.pipeline.summary.summarise_fits, by hand: four records of one parameter, one without a
+    # feedback path (no estimate), one whose parameter the data do not see (infinite se).
+    import math
+
+    import numpy as np
+    import pyarrow as pa
+
+    from hcid.pipeline.summary import summarise_fits
+
+    def row(estimate, se, at_bound=False):
+        low, high = estimate - 1.96 * se, estimate + 1.96 * se
+        key = {"model": "FB", "method": "direct", "w": 0.1, "parameter": "Kpe", "true_value": 2.0}
+        return {**key, "estimate": estimate, "se": se, "ci_low": low, "ci_high": high, "at_bound": at_bound}
+
+    nan = math.nan
+    rows = [row(2.1, 0.1), row(1.5, 0.1), row(2.6, math.inf, True), row(nan, nan)]
+    ((key, f),) = summarise_fits(pa.Table.from_pylist(rows)).items()
+    assert key == ("FB", "direct", 0.1, "Kpe") and (f.records, f.fitted) == (4, 3)
+    x = np.array([2.1, 1.5, 2.6])
+    assert f.mean == pytest.approx(x.mean()) and f.median == 2.1
+    assert f.sd == pytest.approx(np.std(x, ddof=1))
+    assert f.rmse == pytest.approx(np.sqrt(np.mean((x - 2) ** 2)))
+    assert f.median_se == 0.1  # of 0.1, 0.1, inf: the infinite one counts
+    assert f.rms_se == pytest.approx(0.1)  # over the finite ones
+    # 2.0 in [1.904, 2.296], not in [1.304, 1.696]; the infinite se gives no interval.
+    assert (f.covered, f.n_se, f.at_bound) == (1, 2, 1)

@@ -3,6 +3,8 @@ this module only words and lays out)."""
 
 from __future__ import annotations
 
+import math
+
 import typer
 
 from hcid.tables import PARAMETER_UNITS
@@ -190,7 +192,7 @@ def print_hc_fit(result) -> None:
     header = f"{'model':<{m}}{'method':<10}{'W':>9} {'parameter':<10}{'unit':<6}{'estimate':>10} {'se':>9}"
     header += f" {'sd':>9} {'95% interval':>21} {'true':>9}{'n':>5}{'covers':>7}{'bound':>6}"
     typer.echo(header)
-    _print_fit_parameters(rows, m)
+    _print_fit_parameters(result.parameters, m)
     _print_fit_loop(result.loop.to_pylist(), m)
     written = ", ".join(str(result.run_dir / t.file) for t in (tables.HC_PARAMETERS, tables.HC_LOOP))
     typer.echo(
@@ -199,36 +201,24 @@ def print_hc_fit(result) -> None:
     )
 
 
-def _print_fit_parameters(rows: list[dict], m: int) -> None:
+def _print_fit_parameters(params, m: int) -> None:
     """One line per (model, method, W, parameter): one record's estimate, se and 95% interval, or
-    over several the median estimate and se, the sd across them, the coverage and the bound hits."""
-    import numpy as np
+    over several the median estimate and se, the sd across them, the coverage and the bound hits
+    (:func:`hcid.pipeline.summary.summarise_fits`)."""
+    from hcid.pipeline.summary import summarise_fits
 
     num = _num4
-    groups: dict[tuple, list[dict]] = {}
-    for row in rows:
-        groups.setdefault((row["model"], row["method"], row["w"], row["parameter"]), []).append(row)
-    for (model, method, w, name), group in groups.items():
-        column = {
-            c: np.array([r[c] for r in group], dtype=float) for c in ("estimate", "se", "ci_low", "ci_high")
-        }
-        est, se = column["estimate"], column["se"]
-        true = group[0]["true_value"]
-        one = len(group) == 1
-        median = num(est[0]) if one else num(np.nanmedian(est)) if np.isfinite(est).any() else "-"
-        se_text = num(se[0]) if one else num(np.nanmedian(se)) if np.isfinite(se).any() else "-"
-        sd = "-" if one or np.isfinite(est).sum() < 2 else num(np.nanstd(est, ddof=1))
-        interval = f"[{num(column['ci_low'][0])}, {num(column['ci_high'][0])}]" if one else "-"
-        covers = "-"
-        if true is not None and np.isfinite(true):
-            given = np.isfinite(column["se"])  # rows with an interval (none on a bound)
-            held = given & (column["ci_low"] <= true) & (true <= column["ci_high"])
-            covers = f"{int(held.sum())}/{int(given.sum())}"
-        hits = sum(bool(r["at_bound"]) for r in group)
+    for (model, method, w, name), f in summarise_fits(params).items():
+        one = f.records == 1
+        median = num(f.first["estimate"]) if one else num(f.median)
+        se_text = num(f.first["se"]) if one else num(f.median_se)
+        sd = "-" if one else num(f.sd)
+        interval = f"[{num(f.first['ci_low'])}, {num(f.first['ci_high'])}]" if one else "-"
+        covers = f"{f.covered}/{f.n_se}" if math.isfinite(f.true) else "-"
         typer.echo(
             f"{model:<{m}}{method:<10}{w:>9.4g} {name:<10}{PARAMETER_UNITS.get(name, ''):<6}{median:>10} "
             f"{se_text:>9} {sd:>9} {interval:>21}"
-            f" {num(true):>9}{len(group):>5}{covers:>7}{hits:>6}"
+            f" {num(f.first['true_value']):>9}{f.records:>5}{covers:>7}{f.at_bound:>6}"
         )
 
 

@@ -1,7 +1,8 @@
 """What ``hcid analyse`` found, summed up once per group and method from its tables: the
-answer line's evidence, the parameters its runs determine, the loop's medians. The CLI prints
-these summaries and the report draws them (:mod:`hcid.cli.answers`,
-:mod:`hcid.report.sections.study`)."""
+answer line's evidence, the parameters its runs determine, the loop's medians; and what ``hcid
+fit-hc`` found, per model, method, W and parameter over its records. The CLI prints these
+summaries and the report draws them (:mod:`hcid.cli.answers`, :mod:`hcid.report.sections.study`,
+:mod:`hcid.report.sections.hcfit`)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import pyarrow as pa
 
 from hcid.pipeline.evidence import ParameterSummary, summarise_parameters
 
-__all__ = ["GroupSummary", "rate_interval", "summarise_groups"]
+__all__ = ["GroupSummary", "ParameterFits", "rate_interval", "summarise_fits", "summarise_groups"]
 
 
 @dataclass(frozen=True)
@@ -66,3 +67,59 @@ def rate_interval(rate: float, low: float, high: float, *, long: bool = True) ->
     if long:
         return f"{100 * rate:.0f}% (95% interval {100 * low:.0f} to {100 * high:.0f}%)"
     return f"{100 * rate:.0f}% [{100 * low:.0f}, {100 * high:.0f}]"
+
+
+@dataclass(frozen=True)
+class ParameterFits:
+    """One (model, method, W, parameter) of ``hc_parameters``, over its records: ``records`` rows,
+    ``fitted`` of them with an estimate (a record without a feedback path has none); the true
+    value (NaN on measured data); over the estimates their ``mean``, ``median``, ``sd`` (ddof 1,
+    NaN below two) and ``rmse`` against the truth; ``median_se`` over the rows with a standard
+    error, an infinite one (a parameter the data do not see) included, and ``rms_se`` over the
+    finite ones; ``covered`` of ``n_se`` rows with a finite standard error whose 95% interval holds
+    the truth; ``at_bound`` rows on a search bound; and ``first``, the first record's row."""
+
+    records: int
+    fitted: int
+    true: float
+    mean: float
+    median: float
+    sd: float
+    rmse: float
+    median_se: float
+    rms_se: float
+    covered: int
+    n_se: int
+    at_bound: int
+    first: dict
+
+
+def summarise_fits(params: pa.Table) -> dict[tuple, ParameterFits]:
+    """Every (model, method, W, parameter) of an ``hc_parameters`` table, in the table's order."""
+    groups: dict[tuple, list[dict]] = {}
+    for row in params.to_pylist():
+        groups.setdefault((row["model"], row["method"], row["w"], row["parameter"]), []).append(row)
+    out = {}
+    for key, rows in groups.items():
+        x, se, low, high = (
+            np.array([r[c] for r in rows], dtype=float) for c in ("estimate", "se", "ci_low", "ci_high")
+        )
+        true = rows[0]["true_value"]
+        true = math.nan if true is None else float(true)
+        est, has_se = x[np.isfinite(x)], np.isfinite(se)
+        out[key] = ParameterFits(
+            records=len(rows),
+            fitted=int(est.size),
+            true=true,
+            mean=float(np.mean(est)) if est.size else math.nan,
+            median=float(np.median(est)) if est.size else math.nan,
+            sd=float(np.std(est, ddof=1)) if est.size > 1 else math.nan,
+            rmse=float(np.sqrt(np.mean((est - true) ** 2))) if est.size else math.nan,
+            median_se=float(np.nanmedian(se)) if not np.isnan(se).all() else math.nan,  # inf counts
+            rms_se=float(np.sqrt(np.mean(se[has_se] ** 2))) if has_se.any() else math.nan,
+            covered=int(np.count_nonzero(has_se & (low <= true) & (true <= high))),
+            n_se=int(np.count_nonzero(has_se)),
+            at_bound=sum(bool(r["at_bound"]) for r in rows),
+            first=rows[0],
+        )
+    return out

@@ -12,6 +12,7 @@ import pyarrow.compute  # noqa: F401  (pa.compute)
 from hcid import methods
 from hcid.hcfit import PARAMETERS, UNITS, hc_response
 from hcid.loop.hcmodel import plant
+from hcid.pipeline.summary import summarise_fits
 from hcid.report import compute as calc
 from hcid.report import figures_hcfit
 from hcid.report.document import Doc
@@ -65,58 +66,20 @@ def _rank(run):
     )
 
 
-def accuracy(params: pa.Table) -> dict[tuple, dict[str, float]]:
-    """Per (model, method, W, parameter) of fitted rows with a true value: how good the estimates are.
-
-    ``n``; ``true``; ``mean``; ``bias`` (mean - true); ``sd`` (across records, ddof 1);
-    ``rmse`` (``sqrt(mean((x - true)^2))``); ``se`` (RMS of the rows' standard errors);
-    ``se_ratio`` (``se / sd``: 1 when the standard errors are right); ``covered`` (rows whose
-    95% interval holds the true value) of ``n_se`` (rows with a standard error);
-    ``at_bound``. The three in % of ``|true|`` as ``*_pct`` where true is not 0.
-    """
-    out = {}
-    fitted = params.filter(pa.compute.equal(params.column("status"), "fitted"))
-    for key, t in split_by_key(fitted, ("model", "method", "w", "parameter")).items():
-        true = t.column("true_value")[0].as_py()
-        if true is None or not math.isfinite(true):
-            continue
-        x = t.column("estimate").to_numpy()
-        se = t.column("se").to_numpy()
-        low, high = t.column("ci_low").to_numpy(), t.column("ci_high").to_numpy()
-        has_se = np.isfinite(se)
-        sd = float(np.std(x, ddof=1)) if x.size > 1 else math.nan
-        row = {
-            "n": int(x.size),
-            "true": true,
-            "mean": float(np.mean(x)),
-            "bias": float(np.mean(x) - true),
-            "sd": sd,
-            "rmse": float(np.sqrt(np.mean((x - true) ** 2))),
-            "se": float(np.sqrt(np.mean(se[has_se] ** 2))) if has_se.any() else math.nan,
-            "covered": int(np.count_nonzero(has_se & (low <= true) & (true <= high))),
-            "n_se": int(np.count_nonzero(has_se)),
-            "at_bound": int(np.count_nonzero(t.column("at_bound").to_numpy(zero_copy_only=False))),
-        }
-        row["se_ratio"] = row["se"] / sd if sd > 0 else math.nan
-        for name in ("bias", "sd", "rmse"):
-            row[f"{name}_pct"] = 100 * row[name] / abs(true) if true != 0 else math.nan
-        out[key] = row
-    return out
-
-
 def bias_rows(params: pa.Table, order) -> list[list[str]]:
     """Per simulated model, method, W and parameter: n, true, mean, bias, sd, RMSE (% of true),
     the standard errors against the spread, the 95% intervals' coverage (with its exact 95% band)
     and the estimates at a bound."""
     rows = []
-    found = accuracy(params)
+    found = {k: f for k, f in summarise_fits(params).items() if f.fitted and math.isfinite(f.true)}
     for key in sorted(found, key=lambda k: (*order(k[:2]), k[2], PARAMETERS.index(k[3]))):
         model, method, w, name = key
-        a = found[key]
-        pct = a["true"] != 0
-        if a["n_se"]:
-            lo, hi = clopper_pearson(np.array([a["covered"]]), a["n_se"])
-            coverage = f"{a['covered']}/{a['n_se']} ({100 * lo[0]:.0f}-{100 * hi[0]:.0f}%)"
+        f = found[key]
+        pct = f.true != 0
+        bias = f.mean - f.true
+        if f.n_se:
+            lo, hi = clopper_pearson(np.array([f.covered]), f.n_se)
+            coverage = f"{f.covered}/{f.n_se} ({100 * lo[0]:.0f}-{100 * hi[0]:.0f}%)"
         else:
             coverage = "-"
         rows.append(
@@ -126,16 +89,16 @@ def bias_rows(params: pa.Table, order) -> list[list[str]]:
                 f"{w:.4g}",
                 name,
                 UNITS[name],
-                str(a["n"]),
-                _num(a["true"]),
-                _num(a["mean"]),
-                f"{a['bias_pct']:+.1f}" if pct else _num(a["bias"], 3),
-                f"{a['sd_pct']:.1f}" if pct else _num(a["sd"], 3),
-                f"{a['rmse_pct']:.1f}" if pct else _num(a["rmse"], 3),
-                _num(a["se"], 3),
-                _num(a["se_ratio"], 3),
+                str(f.fitted),
+                _num(f.true),
+                _num(f.mean),
+                f"{100 * bias / abs(f.true):+.1f}" if pct else _num(bias, 3),
+                f"{100 * f.sd / abs(f.true):.1f}" if pct else _num(f.sd, 3),
+                f"{100 * f.rmse / abs(f.true):.1f}" if pct else _num(f.rmse, 3),
+                _num(f.rms_se, 3),
+                _num(f.rms_se / f.sd if f.sd > 0 else math.nan, 3),  # 1 when the standard errors are right
                 coverage,
-                str(a["at_bound"]),
+                str(f.at_bound),
             ]
         )
     return rows
