@@ -30,7 +30,7 @@ import pyarrow.parquet as pq
 from hcid.hcfit import parse_fit_settings
 from hcid.io.resolve import load_config
 from hcid.pipeline import Execution, fit_hc_study
-from hcid.report.sections.hcfit import accuracy
+from hcid.pipeline.summary import summarise_fits
 
 VARIANTS = [
     ("closed_loop", "sandwich"),
@@ -70,18 +70,24 @@ def main() -> None:
         wall = time.perf_counter() - start
         pq.write_table(run.parameters, args.out / f"{target}_{cov}.parquet")
         pq.write_table(run.loop, args.out / f"{target}_{cov}_loop.parquet")
-        found = accuracy(run.parameters)
+        fits = summarise_fits(run.parameters).items()
+        found = {k: f for k, f in fits if f.fitted and math.isfinite(f.true)}
         print(f"\n== {target}, standard errors {cov}: {run.computed} record-methods in {wall:.1f} s (2 jobs)")
         print(
             f"{'model':<6}{'method':<10}{'parameter':<10}{'true':>7}{'bias%':>8}{'sd%':>7}{'RMSE%':>7}"
             f"{'se/sd':>7}{'covered':>9}{'bound':>6}"
         )
-        for (model, method, _w, name), a in found.items():
+        rmse = []
+        for (model, method, _w, name), f in found.items():
+            pct = 100 / abs(f.true) if f.true != 0 else math.nan
+            ratio = f.rms_se / f.sd if f.sd > 0 else math.nan
             print(
-                f"{model:<6}{method:<10}{name:<10}{a['true']:>7.3g}{a['bias_pct']:>+8.1f}{a['sd_pct']:>7.1f}"
-                f"{a['rmse_pct']:>7.1f}{a['se_ratio']:>7.2f}{a['covered']:>5}/{a['n_se']:<3}{a['at_bound']:>6}"
+                f"{model:<6}{method:<10}{name:<10}{f.true:>7.3g}{(f.mean - f.true) * pct:>+8.1f}"
+                f"{f.sd * pct:>7.1f}{f.rmse * pct:>7.1f}{ratio:>7.2f}"
+                f"{f.covered:>5}/{f.n_se:<3}{f.at_bound:>6}"
             )
-        rmse = [a["rmse_pct"] for a in found.values() if math.isfinite(a["rmse_pct"])]
+            if math.isfinite(f.rmse * pct):
+                rmse.append(f.rmse * pct)
         summary.append((target, cov, float(np.mean(rmse)), wall, run.computed))
     print("\n== per estimator: mean RMSE % over (model, method, parameter) with a nonzero true value")
     for target, cov, rmse, wall, n in summary:
