@@ -328,7 +328,12 @@ def _label_runs(ax, runs: list[dict], row: float) -> None:
         lane = free[0] if free else int(np.argmin(ends))
         start = max(start, ends[lane] + gap)
         ends[lane] = start + 0.65 * _LABEL_FONT * len(text)
+        offset = (start - at, _LABEL_LANES[lane])
         ax.annotate(
-            text, (r["w_star"], row), textcoords="offset points", fontsize=_LABEL_FONT,
-            xytext=(start - at, _LABEL_LANES[lane]), va="center",
-        )  # fmt: skip
+            text,
+            (r["w_star"], row),
+            xytext=offset,
+            textcoords="offset points",
+            fontsize=_LABEL_FONT,
+            va="center",
+        )
