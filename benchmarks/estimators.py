@@ -70,8 +70,7 @@ def main() -> None:
         wall = time.perf_counter() - start
         pq.write_table(run.parameters, args.out / f"{target}_{cov}.parquet")
         pq.write_table(run.loop, args.out / f"{target}_{cov}_loop.parquet")
-        fits = summarise_fits(run.parameters).items()
-        found = {k: f for k, f in fits if f.fitted and math.isfinite(f.true)}
+        found = {k: f for k, f in summarise_fits(run.parameters).items() if f.scored}
         print(f"\n== {target}, standard errors {cov}: {run.computed} record-methods in {wall:.1f} s (2 jobs)")
         print(
             f"{'model':<6}{'method':<10}{'parameter':<10}{'true':>7}{'bias%':>8}{'sd%':>7}{'RMSE%':>7}"
@@ -79,15 +78,13 @@ def main() -> None:
         )
         rmse = []
         for (model, method, _w, name), f in found.items():
-            pct = 100 / abs(f.true) if f.true != 0 else math.nan
-            ratio = f.rms_se / f.sd if f.sd > 0 else math.nan
             print(
-                f"{model:<6}{method:<10}{name:<10}{f.true:>7.3g}{(f.mean - f.true) * pct:>+8.1f}"
-                f"{f.sd * pct:>7.1f}{f.rmse * pct:>7.1f}{ratio:>7.2f}"
+                f"{model:<6}{method:<10}{name:<10}{f.true:>7.3g}{f.percent(f.bias):>+8.1f}"
+                f"{f.percent(f.sd):>7.1f}{f.percent(f.rmse):>7.1f}{f.se_ratio:>7.2f}"
                 f"{f.covered:>5}/{f.n_se:<3}{f.at_bound:>6}"
             )
-            if math.isfinite(f.rmse * pct):
-                rmse.append(f.rmse * pct)
+            if math.isfinite(f.percent(f.rmse)):
+                rmse.append(f.percent(f.rmse))
         summary.append((target, cov, float(np.mean(rmse)), wall, run.computed))
     print("\n== per estimator: mean RMSE % over (model, method, parameter) with a nonzero true value")
     for target, cov, rmse, wall, n in summary:

@@ -323,3 +323,6 @@ def test_the_summary_of_a_parameter_over_records_the_cli_and_the_report_share():
     assert f.rms_se == pytest.approx(0.1)  # over the finite ones
     # 2.0 in [1.904, 2.296], not in [1.304, 1.696]; the infinite se gives no interval.
     assert (f.covered, f.n_se, f.at_bound) == (1, 2, 1)
+    assert f.scored and f.bias == pytest.approx(x.mean() - 2)
+    assert f.percent(f.bias) == pytest.approx(50 * f.bias)  # in % of the true 2
+    assert f.se_ratio == pytest.approx(0.1 / np.std(x, ddof=1))

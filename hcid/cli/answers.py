@@ -218,7 +218,7 @@ def _print_fit_parameters(params, m: int) -> None:
         typer.echo(
             f"{model:<{m}}{method:<10}{w:>9.4g} {name:<10}{PARAMETER_UNITS.get(name, ''):<6}{median:>10} "
             f"{se_text:>9} {sd:>9} {interval:>21}"
-            f" {num(f.first['true_value']):>9}{f.records:>5}{covers:>7}{f.at_bound:>6}"
+            f" {num(f.true):>9}{f.records:>5}{covers:>7}{f.at_bound:>6}"
         )
 
 

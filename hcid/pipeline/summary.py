@@ -93,6 +93,24 @@ class ParameterFits:
     at_bound: int
     first: dict
 
+    @property
+    def scored(self) -> bool:
+        """Estimates to score against a true value (a simulated model's)."""
+        return self.fitted > 0 and math.isfinite(self.true)
+
+    @property
+    def bias(self) -> float:
+        return self.mean - self.true
+
+    @property
+    def se_ratio(self) -> float:
+        """RMS se over the sd across records: 1 when the standard errors are right."""
+        return self.rms_se / self.sd if self.sd > 0 else math.nan
+
+    def percent(self, x: float) -> float:
+        """``x`` in % of the true value's size (NaN where it is 0)."""
+        return 100 * x / abs(self.true) if self.true != 0 else math.nan
+
 
 def summarise_fits(params: pa.Table) -> dict[tuple, ParameterFits]:
     """Every (model, method, W, parameter) of an ``hc_parameters`` table, in the table's order."""

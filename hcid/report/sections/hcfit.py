@@ -71,12 +71,11 @@ def bias_rows(params: pa.Table, order) -> list[list[str]]:
     the standard errors against the spread, the 95% intervals' coverage (with its exact 95% band)
     and the estimates at a bound."""
     rows = []
-    found = {k: f for k, f in summarise_fits(params).items() if f.fitted and math.isfinite(f.true)}
+    found = {k: f for k, f in summarise_fits(params).items() if f.scored}
     for key in sorted(found, key=lambda k: (*order(k[:2]), k[2], PARAMETERS.index(k[3]))):
         model, method, w, name = key
         f = found[key]
         pct = f.true != 0
-        bias = f.mean - f.true
         if f.n_se:
             lo, hi = clopper_pearson(np.array([f.covered]), f.n_se)
             coverage = f"{f.covered}/{f.n_se} ({100 * lo[0]:.0f}-{100 * hi[0]:.0f}%)"
@@ -92,11 +91,11 @@ def bias_rows(params: pa.Table, order) -> list[list[str]]:
                 str(f.fitted),
                 _num(f.true),
                 _num(f.mean),
-                f"{100 * bias / abs(f.true):+.1f}" if pct else _num(bias, 3),
-                f"{100 * f.sd / abs(f.true):.1f}" if pct else _num(f.sd, 3),
-                f"{100 * f.rmse / abs(f.true):.1f}" if pct else _num(f.rmse, 3),
+                f"{f.percent(f.bias):+.1f}" if pct else _num(f.bias, 3),
+                f"{f.percent(f.sd):.1f}" if pct else _num(f.sd, 3),
+                f"{f.percent(f.rmse):.1f}" if pct else _num(f.rmse, 3),
                 _num(f.rms_se, 3),
-                _num(f.rms_se / f.sd if f.sd > 0 else math.nan, 3),  # 1 when the standard errors are right
+                _num(f.se_ratio, 3),
                 coverage,
                 str(f.at_bound),
             ]
