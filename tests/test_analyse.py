@@ -276,3 +276,21 @@ def test_unreadable_files_are_refused_or_set_aside_and_listed(tmp_path):
         "S1_pursuit_trial1.csv",
     }
     assert "**Set aside:** 2 file(s)" in (run / "report" / "report.md").read_text()
+
+
+def test_undetermined_parameters_are_one_entry_per_parameter_with_each_reason_counted():
+    # One entry per parameter: its runs left out in total, then the count of each reason
+    # (a run has one status, so the counts add up; SPEC 11's reasons as the fits give them).
+    from hcid.cli.answers import _analysis_parameters
+    from hcid.pipeline.evidence import ParameterSummary
+
+    reasons = {"correlated with Kpe": 4, "correlated with tau_pe": 4, "at a search bound": 1}
+    tl = ParameterSummary("TL", "s", 12, 3, 0.091, 0.018, 0.01, reasons)
+    kpe = ParameterSummary("Kpe", "-", 12, 12, 2.28, 0.16, 0.05, {})
+    w_nms = ParameterSummary("w_nms", "rad/s", 12, 4, 11.6, 0.62, 1.0, {"fixed at a literature value": 8})
+    text = _analysis_parameters([kpe, tl, w_nms])
+    assert "Kpe 2.28 (12 of 12 runs, sd 0.16), TL 0.091 s (3 of 12 runs, sd 0.018)" in text
+    assert text.endswith(
+        "not determined, left out: TL in 9 of 12 runs (4 correlated with Kpe, "
+        "4 correlated with tau_pe, 1 at a search bound); w_nms in 8 of 12 runs (fixed at a literature value)"
+    )

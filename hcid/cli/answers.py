@@ -160,7 +160,9 @@ def _analysis_parameters(summaries) -> str:
         if s.kept:
             sd = f", sd {s.sd:.2g}" if s.kept > 1 else ""
             parts.append(f"{s.name} {s.median:.3g}{unit} ({s.kept} of {s.fitted} runs{sd})")
-        left_out += [f"{s.name} in {n} of {s.fitted} runs ({why})" for why, n in s.left_out.items()]
+        if s.left_out:
+            whys = ", ".join(f"{n} {why}" if len(s.left_out) > 1 else why for why, n in s.left_out.items())
+            left_out.append(f"{s.name} in {sum(s.left_out.values())} of {s.fitted} runs ({whys})")
     text = "    runs' fits at W (median over the runs that determine each; sd over them): " + ", ".join(parts)
     if left_out:
         text += "\n    not determined, left out: " + "; ".join(left_out)
