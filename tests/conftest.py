@@ -80,3 +80,17 @@ def interrupt_after(monkeypatch, module, name: str, calls: int):
 
     monkeypatch.setattr(module, name, interrupted)
     return real
+
+
+def report_without_figures(run_dir, draw=(), out=None):
+    """``(report.md's text, names of the figures it links)`` of a run as ``hcid report`` renders
+    it (the same compute and render), drawing only the figures named in ``draw`` (PNGs into
+    ``out``): a test of the text need not draw every figure (about 1 s each)."""
+    from hcid.report import figures
+    from hcid.report.build import compute_report, render
+    from hcid.report.document import to_markdown
+
+    doc = render(compute_report(Path(run_dir)))
+    for name in draw:
+        figures.save(doc.drawings[name](), Path(out) / name)
+    return to_markdown(doc), set(doc.drawings)
