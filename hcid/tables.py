@@ -552,9 +552,10 @@ ANALYSIS_GROUPS = _schema(
 #: across runs (sd, dB and deg), and the group's fitted parametric model there (``model_db``,
 #: ``model_deg``). At a target line, the model inversion ``Ht Yc`` (SPEC 11: 1 is the exact
 #: inverse of the plant): ``inversion`` its magnitude (linear) and ``inversion_deg`` its phase
-#: of the group's estimate, ``inversion_sd`` and ``inversion_sd_deg`` their spread across runs
-#: (NaN at a disturbance line). A group whose design allows no estimate has one row with
-#: ``problem`` set.
+#: of the group's estimate, ``inversion_sd`` and ``inversion_sd_deg`` their spread across runs,
+#: ``inversion_median``, ``inversion_q25`` and ``inversion_q75`` the median and quartiles of the
+#: runs' own magnitudes (NaN at a disturbance line). A group whose design allows no estimate has
+#: one row with ``problem`` set.
 #: ``evidence_twins.parquet`` (``hcid analyse``): the twins each run's p-value is judged against
 #: (SPEC 11): per group, method, forcing set, twin (``FB`` or ``FF``) and realization in the
 #: order drawn, its feedforward threshold ``w_star`` (NaN for an FB twin drawn for the
@@ -574,6 +575,8 @@ FC_ESTIMATES = _schema(
     + [("sd_db", _F64), ("sd_deg", _F64), ("extrapolated", _BOOL), ("n_runs", _INT)]
     + [("model_db", _F64), ("model_deg", _F64)]
     + [("inversion", _F64), ("inversion_deg", _F64), ("inversion_sd", _F64), ("inversion_sd_deg", _F64)]
+    + [("inversion_median", _F64), ("inversion_q25", _F64), ("inversion_q75", _F64)]
     + [("problem", _STR)],
     ("group", "path", "omega"),
+    optional=("inversion_median", "inversion_q25", "inversion_q75"),  # absent before 2026-11-27
 )

@@ -66,8 +66,9 @@ def test_every_run_and_group_is_answered_with_its_factors(analysed):
         # the target rate (0): never presented as certain otherwise.
         if g["w_rule"] == "safe interval":
             assert not g["uncertain"] and g["safe_low"] <= g["w"] < g["safe_high"]
-        else:
+        else:  # no interval: none in the table either (not the calibration's backward pair)
             assert g["uncertain"] == (max(g["fp_rate"], g["fn_rate"]) > 0)
+            assert np.isnan(g["safe_low"]) and np.isnan(g["safe_high"])
         assert 0 <= g["fp_low"] <= g["fp_rate"] <= g["fp_high"] <= 1
     # The pursuit condition's twins separate: there the direct method finds the feedforward
     # every subject used (Kpt 0.8 and 1.0, configs/lab_example/make.py).

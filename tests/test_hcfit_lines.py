@@ -25,6 +25,7 @@ from hcid.hcfit.determined import (
     LITERATURE_NMS,
     group_model,
     is_undetermined,
+    nms_undetermined,
     parameter_status,
 )
 from hcid.hcfit.fit import HCFit, fit_lines, resolve_target
@@ -185,13 +186,13 @@ def test_the_group_test_holds_its_level_at_a_persons_remnant():
     assert low <= np.sum(np.array(p) < 0.05) <= high
 
 
-def _fit(values, at_bound=(), se=None, partner=None, correlation=None, fixed=()):
+def _fit(values, at_bound=(), se=None, partner=None, correlation=None, fixed=(), vaf=50.0):
     names = tuple(values)
     se = se or {}
     return HCFit(
         target="lines", names=names, estimates=tuple(values.values()),
         at_bound=tuple(n in at_bound for n in names), cost=1.0, starts=1, start_costs=(1.0,),
-        vaf_validation=50.0, se=tuple(se.get(n, 0.01) for n in names), fixed=fixed,
+        vaf_validation=vaf, se=tuple(se.get(n, 0.01) for n in names), fixed=fixed,
         partner=tuple((partner or {}).get(n, "") for n in names),
         correlation=tuple((correlation or {}).get(n, 0.1) for n in names),
     )  # fmt: skip
@@ -218,6 +219,21 @@ def test_each_reason_for_an_undetermined_parameter():
     assert parameter_status(_fit({**TRUTH, "tau_pe": 0.02}))["tau_pe"] == "outside its plausible range"
     # No standard error at all (the frequency target, n <= p): not a finding either.
     assert is_undetermined(parameter_status(_fit(TRUTH, se={"Kpe": math.nan}))["Kpe"])
+
+
+def test_a_fit_that_describes_u_worse_than_zero_determines_nothing():
+    # A fit whose validation VAF is below 0% (the CPHS fo runs of subject gy fitted without
+    # feedforward: VAF -9950%, Kpe 33.5 +- 3.8e-09) leaves every parameter undetermined, with the
+    # reason, whatever its se say; a held one stays "fixed"; no record (VAF NaN) is no failure.
+    failed = _fit({**TRUTH, "Kpe": 33.5}, se={"Kpe": 3.8e-9}, fixed=("w_nms",), vaf=-9949.8)
+    status = parameter_status(failed)
+    assert status["w_nms"] == "fixed at a literature value"
+    assert {status[p] for p in TRUTH if p != "w_nms"} == {"in a failed fit (validation VAF below 0%)"}
+    assert all(is_undetermined(status[p]) for p in TRUTH)
+    assert parameter_status(_fit(TRUTH, vaf=math.nan)) == parameter_status(_fit(TRUTH, vaf=0.0))
+    assert parameter_status(_fit(TRUTH, vaf=0.0))["Kpt"] == DETERMINED
+    # The neuromuscular refit looks at the pair's own estimates, not at the failure.
+    assert not nms_undetermined(_fit(TRUTH, vaf=-50.0))
 
 
 def test_a_group_model_uses_only_what_its_runs_determine():

@@ -172,6 +172,16 @@ class FCEstimate:
             np.std(np.degrees(np.angle(runs / mean)), axis=0, ddof=1),
         )
 
+    def inversion_runs(self, yc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The runs' own ``|Ht Yc|`` at the target lines: their median and quartiles (25%, 75%).
+
+        Beside :meth:`inversion`'s coefficient average: where the runs' phases scatter (large
+        remnant, or people who differ) the average's magnitude falls below the runs' own, which
+        are in turn biased upward by the remnant in each run's coefficients; both are shown."""
+        runs = np.abs(self.ht_runs * yc)
+        q25, median, q75 = np.percentile(runs, [25.0, 50.0, 75.0], axis=0)
+        return median, q25, q75
+
 
 def interpolate(omega_from: np.ndarray, h: np.ndarray, omega_to: np.ndarray) -> np.ndarray:
     """He between the disturbance lines (SPEC 10): linear in log-frequency, on magnitude (dB) and

@@ -97,7 +97,10 @@ def print_analysis(result) -> None:
                 )
         elif g["uncertain"]:
             whose = " (with the study's feedforward)" if g["ff_twin"] == "study" else ""
-            safe = f"NO W separates the twins{whose}: W of least total error, every decision UNCERTAIN"
+            safe = (
+                f"NO W separates the twins{whose}: W of least total error, every decision at this W "
+                "UNCERTAIN (the verdict above needs no W)"
+            )
         else:
             safe = (
                 "no contiguous safe interval; W of least total error, where the twins' rates are "
@@ -114,7 +117,7 @@ def print_analysis(result) -> None:
         typer.echo(
             f"    calibrated W (SPEC 10): feedforward in {g['n_feedforward']} of {g['n_runs']} runs at "
             f"W = {g['w']:.3g} ({safe}; twins' FP {rate_interval(g['fp_rate'], g['fp_low'], g['fp_high'])}, "
-            f"FN {rate_interval(g['fn_rate'], g['fn_low'], g['fn_high'])})"
+            f"FN {rate_interval(g['fn_rate'], g['fn_low'], g['fn_high'])})" + _without_feedback(summary)
         )
         typer.echo(_analysis_parameters(summary.parameters))
         typer.echo(
@@ -131,7 +134,8 @@ def print_analysis(result) -> None:
                 else (f", Ht {g['ht_error_db']:.1f} dB {g['ht_error_deg']:.0f} deg")
             )
             typer.echo(
-                f"    data check: the group's model is {g['fc_verdict']} (chi-square {g['fc_chi2']:.1f} on "
+                f"    data check: the group's model{_model_source(g)} is {g['fc_verdict']} "
+                f"(chi-square {g['fc_chi2']:.1f} on "
                 f"{g['fc_dof']} dof, p = {format_p(g['fc_p'])}, spread {g['fc_spread']}; median |error| "
                 f"against the Fourier-coefficient estimates He {g['he_error_db']:.1f} dB "
                 f"{g['he_error_deg']:.0f} deg{ht}); {contradicted} (p < {CONTRADICTED:g})"
@@ -151,6 +155,29 @@ def print_analysis(result) -> None:
     )
 
 
+def _flat(reason: str) -> str:
+    """A status read inside the answer's own parentheses: ``x (y)`` as ``x, y``."""
+    return reason.replace(" (", ", ").removesuffix(")")
+
+
+def _model_source(group: dict) -> str:
+    """Where the group's model is not the medians of its runs' fits: whose it is, and why."""
+    from hcid.hcfit.determined import FROM_MEDIANS
+
+    return "" if group["twin_source"] == FROM_MEDIANS else f" ({_flat(group['twin_source'])})"
+
+
+def _without_feedback(summary) -> str:
+    """What the calibrated W line adds where some runs' selection at W keeps no path at all."""
+    n = summary.without_feedback
+    if not n:
+        return ""
+    return (
+        f"; at this W {n} of {len(summary.runs)} runs keep no feedback path either (nb_e = 0): "
+        "W is beyond what their data support"
+    )
+
+
 def _analysis_parameters(summaries) -> str:
     """The runs' fits at W (hcid.pipeline.evidence.summarise_parameters): median over the runs that
     determine each, their sd and count, units; then what some runs leave undetermined, and why."""
@@ -159,9 +186,12 @@ def _analysis_parameters(summaries) -> str:
         unit = "" if s.unit == "-" else f" {s.unit}"
         if s.kept:
             sd = f", sd {s.sd:.2g}" if s.kept > 1 else ""
-            parts.append(f"{s.name} {s.median:.3g}{unit} ({s.kept} of {s.fitted} runs{sd})")
+            care = "".join(f"; {n} of them {_flat(flag)}" for flag, n in s.flagged.items())
+            parts.append(f"{s.name} {s.median:.3g}{unit} ({s.kept} of {s.fitted} runs{sd}{care})")
         if s.left_out:
-            whys = ", ".join(f"{n} {why}" if len(s.left_out) > 1 else why for why, n in s.left_out.items())
+            whys = ", ".join(
+                f"{n} {_flat(why)}" if len(s.left_out) > 1 else _flat(why) for why, n in s.left_out.items()
+            )
             left_out.append(f"{s.name} in {sum(s.left_out.values())} of {s.fitted} runs ({whys})")
     text = "    runs' fits at W (median over the runs that determine each; sd over them): " + ", ".join(parts)
     if left_out:

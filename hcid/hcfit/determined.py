@@ -4,6 +4,10 @@ A parameter is **undetermined** when its estimate lies on a search bound, its 95
 interval is wider than its plausible range (or its standard error is infinite: the
 record does not see it at all), or its correlation with another parameter exceeds
 :data:`CORRELATED` in magnitude (tau_pe with the neuromuscular pair, TI with tau_pt).
+Every parameter of a fit that does not describe the record (its simulated u is further
+from the measured u than u = 0 is: validation VAF below 0%, e.g. a model without
+feedforward fitted to a person who uses it, whose loop the fit brings near instability)
+is undetermined, whatever its standard error says.
 Its value stays in the tables with the reason; group summaries and answer lines
 leave it out. Two further flags mark a value that is determined but should be read
 with care: outside its plausible range, or not told from 0 (se above |value|).
@@ -32,6 +36,7 @@ __all__ = [
     "LITERATURE_NMS",
     "PLAUSIBLE",
     "group_model",
+    "is_flagged",
     "is_undetermined",
     "nms_undetermined",
     "parameter_status",
@@ -67,10 +72,11 @@ _INFINITE = "not seen by the data (infinite se)"
 _WIDE = "95% interval wider than its plausible range"
 _FIXED = "fixed at a literature value"
 _NO_SE = "no standard error (its quadratic approximation fails or the estimator gives none)"
+_FAILED = "in a failed fit (validation VAF below 0%)"
 # Flags on a determined value.
 _OUTSIDE = "outside its plausible range"
 _ZERO = "not told from 0 (se above |value|)"
-_UNDETERMINED_PREFIXES = (_AT_BOUND, _INFINITE, _WIDE, _FIXED, _NO_SE, "correlated with")
+_UNDETERMINED_PREFIXES = (_AT_BOUND, _INFINITE, _WIDE, _FIXED, _NO_SE, _FAILED, "correlated with")
 
 
 def _correlated(partner: str, r: float) -> str:
@@ -80,6 +86,15 @@ def _correlated(partner: str, r: float) -> str:
 def parameter_status(fit) -> dict[str, str]:
     """``{parameter: status}`` of an :class:`hcid.hcfit.HCFit`: :data:`DETERMINED`, or the reason
     it is undetermined or flagged (the first that holds, in the module notes' order)."""
+    failed = fit.vaf_validation < 0.0  # NaN (no record given) is not a failure
+    return {
+        name: _FAILED if failed and name not in fit.fixed else status
+        for name, status in _own_status(fit).items()
+    }
+
+
+def _own_status(fit) -> dict[str, str]:
+    """Each parameter's status from its own estimate, se and correlation (the fit's VAF aside)."""
     out = {}
     for i, name in enumerate(fit.names):
         value, se = fit.estimates[i], fit.se[i]
@@ -111,6 +126,12 @@ def is_undetermined(status: str) -> bool:
     return status.startswith(_UNDETERMINED_PREFIXES)
 
 
+def is_flagged(status: str) -> bool:
+    """Whether a status marks a determined value to read with care (outside its plausible range,
+    or not told from 0): kept in summaries, marked where shown."""
+    return status in (_OUTSIDE, _ZERO)
+
+
 def reason(status: str) -> str:
     """A status without its figures, to count runs by reason: ``correlated with TL``."""
     return status.split(" (r =")[0]
@@ -119,8 +140,8 @@ def reason(status: str) -> str:
 def nms_undetermined(fit) -> bool:
     """Whether the fit leaves either neuromuscular parameter undetermined (not counting ``fixed``,
     nor "no standard error": an estimator without standard errors, the frequency target, says
-    nothing either way)."""
-    status = parameter_status(fit)
+    nothing either way; nor a failed fit's: the pair's own estimates decide the refit)."""
+    status = _own_status(fit)
     return any(
         is_undetermined(status[n]) and status[n] != _NO_SE and n not in fit.fixed for n in LITERATURE_NMS
     )

@@ -26,6 +26,7 @@ from hcid.pipeline.evidence import (
     group_name,
     group_verdict,
 )
+from hcid.pipeline.twins import separates
 from hcid.selection.calibration import rates_at
 
 __all__ = ["write_tables"]
@@ -79,8 +80,10 @@ class _Rows:
             "w_rule": rule,
             "uncertain": uncertain,
             "ff_twin": pair.kind,
-            "safe_low": float(cal.safe_low),
-            "safe_high": float(cal.safe_high),
+            # The safe interval, NaN where there is none (the calibration's backward pair, false
+            # positives up to safe_low and negatives from safe_high, would read as an interval).
+            "safe_low": float(cal.safe_low) if separates(cal) else math.nan,
+            "safe_high": float(cal.safe_high) if separates(cal) else math.nan,
             # Exactly at W, from the twins' selection paths (W need not be on the grid).
             **rates_at(*pair.paths[method_name], w),
         }
@@ -197,12 +200,16 @@ def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median:
                 "inversion_deg": nan,
                 "inversion_sd": nan,
                 "inversion_sd_deg": nan,
+                "inversion_median": nan,
+                "inversion_q25": nan,
+                "inversion_q75": nan,
                 "problem": str(exc),
             }
         ]
     yc = plant(config.loop)
     out = []
-    inversion = fc.inversion(np.asarray(yc(1j * fc.omega_t), dtype=complex))
+    yc_t = np.asarray(yc(1j * fc.omega_t), dtype=complex)
+    inversion = fc.inversion(yc_t) + fc.inversion_runs(yc_t)
     for path, omega, h, extrapolated in (
         ("e", fc.omega_e, fc.he, np.zeros(fc.omega_e.size, dtype=bool)),
         ("ft", fc.omega_t, fc.ht, fc.extrapolated),
@@ -210,7 +217,7 @@ def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median:
         sd_db, sd_deg = fc.spread(path)
         hft, he = hcfit.hc_response(median, yc, omega)
         model = he if path == "e" else hft
-        inv = inversion if path == "ft" else tuple(np.full(omega.size, math.nan) for _ in range(4))
+        inv = inversion if path == "ft" else tuple(np.full(omega.size, math.nan) for _ in range(7))
         for i in range(omega.size):
             out.append(
                 {
@@ -228,6 +235,9 @@ def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median:
                     "inversion_deg": float(inv[1][i]),
                     "inversion_sd": float(inv[2][i]),
                     "inversion_sd_deg": float(inv[3][i]),
+                    "inversion_median": float(inv[4][i]),
+                    "inversion_q25": float(inv[5][i]),
+                    "inversion_q75": float(inv[6][i]),
                     "problem": "",
                 }
             )

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +16,7 @@ from hcid import hcfit, tables
 from hcid.config import Config
 from hcid.errors import DataError
 from hcid.hcfit.consistency import consistency, group_consistency
-from hcid.hcfit.determined import is_undetermined, reason
+from hcid.hcfit.determined import is_flagged, is_undetermined, reason
 from hcid.hcfit.lines import feedforward_size, record_lines
 from hcid.loop.hcmodel import plant
 from hcid.pipeline.twins import twin_sizes
@@ -364,7 +364,8 @@ def group_verdict(rows: list[dict], alpha: float) -> dict:
 class ParameterSummary:
     """One parameter over a group's runs (rows of ``analysis.parquet``), from the runs that
     determine it (SPEC 11): ``median``, ``sd`` (over those runs) and ``median_se`` (NaN where
-    none or one), ``kept`` of ``fitted`` runs, and ``left_out``: ``{reason: runs}``."""
+    none or one), ``kept`` of ``fitted`` runs, ``left_out``: ``{reason: runs}``, and ``flagged``:
+    ``{flag: runs}`` among the kept (outside the plausible range, not told from 0)."""
 
     name: str
     unit: str
@@ -374,6 +375,7 @@ class ParameterSummary:
     sd: float
     median_se: float
     left_out: dict
+    flagged: dict = field(default_factory=dict)
 
 
 def summarise_parameters(rows: Sequence[dict]) -> list[ParameterSummary]:
@@ -387,9 +389,13 @@ def summarise_parameters(rows: Sequence[dict]) -> list[ParameterSummary]:
         x = np.array([r[p] for r in kept], dtype=float)
         se = np.array([r[f"{p}_se"] for r in kept], dtype=float)
         left: dict[str, int] = {}
+        flagged: dict[str, int] = {}
         for r in fitted:
-            if is_undetermined(r[f"{p}_status"]):
-                left[reason(r[f"{p}_status"])] = left.get(reason(r[f"{p}_status"]), 0) + 1
+            status = r[f"{p}_status"]
+            if is_undetermined(status):
+                left[reason(status)] = left.get(reason(status), 0) + 1
+            elif is_flagged(status):
+                flagged[status] = flagged.get(status, 0) + 1
         out.append(
             ParameterSummary(
                 name=p,
@@ -400,6 +406,7 @@ def summarise_parameters(rows: Sequence[dict]) -> list[ParameterSummary]:
                 sd=float(np.std(x, ddof=1)) if x.size > 1 else math.nan,
                 median_se=float(np.median(se[np.isfinite(se)])) if np.isfinite(se).any() else math.nan,
                 left_out=left,
+                flagged=flagged,
             )
         )
     return out

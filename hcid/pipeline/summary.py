@@ -30,6 +30,12 @@ class GroupSummary:
     crossover: float
     phase_margin: float
 
+    @property
+    def without_feedback(self) -> int:
+        """Runs whose selection at the group's W keeps no feedback path either (nb_e = 0): a W
+        beyond what their data support (the selection has dropped both paths)."""
+        return sum(r["nb_e"] == 0 for r in self.runs)
+
 
 def summarise_groups(groups: pa.Table, runs: pa.Table) -> list[GroupSummary]:
     """Every group and method of an analysis, in the groups table's order."""

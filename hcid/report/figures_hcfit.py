@@ -128,6 +128,17 @@ def plot_remnant_spectra(
     return fig
 
 
+def _plain_log_x(ax) -> None:
+    """A log x axis with plain numbers (0.02, 0.05, 0.1), not 2x10^-2 and the minor ticks' own
+    labels crowding each other: 1-2-5 ticks up to ~3 decades (beyond, they print into each
+    other), decades beyond that. Call once the data are drawn (it reads the limits)."""
+    ax.set_xscale("log")
+    decades = np.log10(ax.get_xlim()[1] / ax.get_xlim()[0])
+    ax.xaxis.set_major_locator(ticker.LogLocator(subs=(1.0, 2.0, 5.0) if decades <= 3.2 else (1.0,)))
+    ax.xaxis.set_major_formatter(ticker.FuncFormatter(lambda x, _: f"{x:g}"))
+    ax.xaxis.set_minor_formatter(ticker.NullFormatter())
+
+
 def plot_fc(paths: dict[str, list[dict]], curves: dict, title: str = "", axes=None):
     """Bode plot of the model-free estimates (points with their spread across runs) and the
     fitted model on a dense grid (lines, phase unwrapped from low frequency): He at the
@@ -152,7 +163,7 @@ def plot_fc(paths: dict[str, list[dict]], curves: dict, title: str = "", axes=No
                 "-",
                 color=color,
                 lw=1.2,
-                label=f"{label}: fitted model",
+                label=f"{label}: the group's model",
             )
             ax_ph.plot(curves["omega"], phase_model, "-", color=color, lw=1.2)
         if not rows:
@@ -178,7 +189,7 @@ def plot_fc(paths: dict[str, list[dict]], curves: dict, title: str = "", axes=No
     ax_ph.set_ylabel("phase (deg)")
     ax_ph.set_xlabel("frequency (rad/s)")
     for ax in (ax_mag, ax_ph):
-        ax.set_xscale("log")
+        _plain_log_x(ax)
         ax.grid(True, which="both", alpha=0.3)
     # Below the axes, so that no label covers a point or a band.
     fig.legend(*ax_mag.get_legend_handles_labels(), fontsize=7, loc="lower center", ncol=2)
@@ -189,43 +200,61 @@ def plot_fc(paths: dict[str, list[dict]], curves: dict, title: str = "", axes=No
 
 def plot_inversion(rows: list[dict], title: str = "", axes=None):
     """Model inversion ``Ht Yc`` at the target lines (rows of ``fc_estimates.parquet`` with path
-    ``ft``): magnitude (linear, 1 the plant's exact inverse, 0.5 half of it) and phase, points
-    with +-1 sd across runs; open points where He was held beyond the disturbance lines."""
-    fig, axes = _figure(axes, 2, 1, figsize=(7.5, 5.5), sharex=True)
+    ``ft``): magnitude (linear, 1 the plant's exact inverse, 0.5 half of it) of the coefficient
+    average (circles) beside the median of the runs' own (diamonds, bars from the 25% to the 75%
+    quartile; tables before these columns: the average alone), and phase of the average with
+    +-1 sd across runs; open markers where He was held beyond the disturbance lines."""
+    fig, axes = _figure(axes, 2, 1, figsize=(7.5, 6.5), sharex=True)
     ax_mag, ax_ph = axes[0][0], axes[1][0]
-    w = np.array([r["omega"] for r in rows])
-    mag = np.array([r["inversion"] for r in rows])
-    ph = np.array([r["inversion_deg"] for r in rows])
-    sd = np.array([r["inversion_sd"] for r in rows])
-    sd_deg = np.array([r["inversion_sd_deg"] for r in rows])
+
+    def column(name):
+        return np.array([r.get(name, np.nan) for r in rows], dtype=float)
+
+    w, mag, ph = column("omega"), column("inversion"), column("inversion_deg")
+    sd_deg = column("inversion_sd_deg")
+    median, q25, q75 = column("inversion_median"), column("inversion_q25"), column("inversion_q75")
     held = np.array([bool(r["extrapolated"]) for r in rows])
-    kinds = (
-        (~held, "C1", "He interpolated between disturbance lines"),
-        (held, "white", "He held beyond the disturbance lines (less sure)"),
-    )
-    for mask, face, label in kinds:
+    for mask, face, label in (
+        (~held, "C1", "coefficient average (He interpolated between disturbance lines)"),
+        (held, "white", "coefficient average (He held beyond the disturbance lines: less sure)"),
+    ):
         if not mask.any():
             continue
         style = {"fmt": "o", "color": "C1", "mfc": face, "ms": 6, "capsize": 3}
-        ax_mag.errorbar(
-            w[mask], mag[mask], yerr=np.where(np.isfinite(sd), sd, 0.0)[mask], label=label, **style
-        )
+        ax_mag.plot(w[mask], mag[mask], "o", color="C1", mfc=face, ms=6, label=label)
         ax_ph.errorbar(w[mask], ph[mask], yerr=np.where(np.isfinite(sd_deg), sd_deg, 0.0)[mask], **style)
-    ax_mag.legend(fontsize=8, loc="upper right")
+    if np.isfinite(median).any():
+        beside = w * 1.07  # just right of the average at the same line
+        ax_mag.errorbar(
+            beside,
+            median,
+            yerr=np.vstack([median - q25, q75 - median]),
+            fmt="D",
+            color="0.25",
+            ms=4.5,
+            capsize=2,
+            lw=1,
+            label="median of the runs' own (bar: 25% to 75% of runs)",
+        )
     ax_mag.axhline(1.0, color="0.3", lw=1, ls="--")
     ax_mag.axhline(0.5, color="0.6", lw=1, ls=":")
-    ax_mag.text(w.min(), 1.0, " exact inverse", va="bottom", fontsize=8, color="0.3")
-    ax_mag.text(w.min(), 0.5, " half", va="bottom", fontsize=8, color="0.5")
+    # Named outside the axes, on the right: never over a point.
+    right = ax_mag.get_yaxis_transform()
+    for y, name, grey in ((1.0, "exact\ninverse", "0.3"), (0.5, "half", "0.5")):
+        ax_mag.text(1.01, y, name, transform=right, va="center", fontsize=8, color=grey, clip_on=False)
     ax_ph.axhline(0.0, color="0.3", lw=1, ls="--")
     ax_mag.set_ylabel("|Ht Yc| (-)")
-    ax_mag.set_ylim(0, max(1.9, float(np.nanmax(mag + np.nan_to_num(sd))) * 1.25))
+    shown = np.concatenate([mag, median])
+    ax_mag.set_ylim(0, max(1.9, float(np.nanmax(shown)) * 1.25))  # quartile bars may run off the top
+    handles, labels = ax_mag.get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=1, frameon=False)  # below the data
     ax_ph.set_ylabel("phase of Ht Yc (deg)")
     ax_ph.set_xlabel("frequency (rad/s)")
     for ax in (ax_mag, ax_ph):
-        ax.set_xscale("log")
+        _plain_log_x(ax)
         ax.grid(True, which="both", alpha=0.3)
     fig.suptitle(title)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.02 + 0.03 * len(labels), 1, 1))
     return fig
 
 
@@ -285,12 +314,7 @@ def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: f
     ax.set_yticks(ticks)
     ax.set_yticklabels(labels, fontsize=8)
     ax.set_ylim(-0.7, _SET_ROWS * (len(sets) - 1) + 3.8)  # room for the runs' numbers above their row
-    ax.set_xscale("log")
-    # Plain numbers on the log axis (0.02, 0.05, 0.1), not 2x10^-2 crowding each other.
-    decades = np.log10(ax.get_xlim()[1] / ax.get_xlim()[0])  # beyond ~3, 1-2-5 ticks print into each other
-    ax.xaxis.set_major_locator(ticker.LogLocator(subs=(1.0, 2.0, 5.0) if decades <= 3.2 else (1.0,)))
-    ax.xaxis.set_major_formatter(ticker.FuncFormatter(lambda x, _: f"{x:g}"))
-    ax.xaxis.set_minor_formatter(ticker.NullFormatter())
+    _plain_log_x(ax)
     ax.set_xlabel("W* (largest W keeping feedforward, -)")
     ax.grid(True, axis="x", which="both", alpha=0.3)
     fig.legend(*ax.get_legend_handles_labels(), fontsize=7, loc="lower center", ncol=4)

@@ -11,7 +11,7 @@ import pyarrow as pa
 
 from hcid import tables
 from hcid.hcfit.consistency import CONTRADICTED, format_p
-from hcid.hcfit.determined import is_undetermined
+from hcid.hcfit.determined import is_flagged, is_undetermined
 from hcid.io import results
 from hcid.pipeline.summary import rate_interval, summarise_groups
 from hcid.report import figures, figures_hcfit
@@ -35,6 +35,7 @@ class StudyData:
     contradicted: list[str] = field(default_factory=list)
     evidence: list[tuple[str, str, list, list, float, str]] = field(default_factory=list)
     set_aside: list[list[str]] = field(default_factory=list)
+    without_feedback: list[str] = field(default_factory=list)
 
 
 def _num(x, digits: int = 3) -> str:
@@ -63,7 +64,7 @@ def _model_curves(run, twin: dict, lines: list[float]) -> dict:
 def _answer(summary) -> list[str]:
     """A group and method's answer row: verdict, evidence, W and the twins' rates."""
     g = summary.group
-    safe = f"[{_num(g['safe_low'])}, {_num(g['safe_high'])})" if not g["uncertain"] else "none"
+    safe = f"[{_num(g['safe_low'])}, {_num(g['safe_high'])})" if math.isfinite(g["safe_low"]) else "none"
     return [
         g["group"],
         g["method"],
@@ -78,7 +79,7 @@ def _answer(summary) -> list[str]:
         safe,
         rate_interval(g["fp_rate"], g["fp_low"], g["fp_high"], long=False),
         rate_interval(g["fn_rate"], g["fn_low"], g["fn_high"], long=False),
-        "UNCERTAIN" if g["uncertain"] else "yes",
+        "UNCERTAIN" if g["uncertain"] else "certain",
     ]
 
 
@@ -87,6 +88,7 @@ def _parameter_rows(summary) -> list[list[str]]:
     g, out = summary.group, []
     for p in summary.parameters:
         left_out = "; ".join(f"{n}: {why}" for why, n in p.left_out.items()) or "-"
+        care = "; ".join(f"{n}: {flag}" for flag, n in p.flagged.items()) or "-"
         out.append(
             [
                 g["group"],
@@ -98,6 +100,7 @@ def _parameter_rows(summary) -> list[list[str]]:
                 _num(p.sd, 2),
                 _num(p.median_se, 2),
                 left_out,
+                care,
             ]
         )
     return out
@@ -135,14 +138,15 @@ _SHOWN = ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
 
 def _with_se(r: dict, p: str) -> str:
     """The estimate with its se; † where the data do not determine it (its reason in
-    analysis.csv's <p>_status), ° where held at a literature value."""
+    analysis.csv's <p>_status), ‡ where determined but to read with care (outside its plausible
+    range, or not told from 0), ° where held at a literature value."""
     if not math.isfinite(r[p]):
         return "-"
     status = r[p + "_status"]
     if status.startswith("fixed"):
         return _num(r[p]) + "°"
     se = f" ± {_num(r[p + '_se'], 2)}" if math.isfinite(r[p + "_se"]) else ""
-    return _num(r[p]) + se + ("†" if is_undetermined(status) else "")
+    return _num(r[p]) + se + ("†" if is_undetermined(status) else "‡" if is_flagged(status) else "")
 
 
 def _run_table(runs) -> tuple[list[str], list[list[str]]]:
@@ -247,6 +251,11 @@ def compute(run, done) -> StudyData | None:
     summaries = summarise_groups(groups, runs)
     answers = [_answer(s) for s in summaries]
     uncertain = [f"{s.group['group']} ({s.group['method']})" for s in summaries if s.group["uncertain"]]
+    without_feedback = [
+        f"{s.group['group']} ({s.group['method']}): {s.without_feedback} of {len(s.runs)} runs"
+        for s in summaries
+        if s.without_feedback
+    ]
     parameters = [row for s in summaries for row in _parameter_rows(s)]
     checks, contradicted = _checks(groups)
     header, table_rows = _run_table(runs)
@@ -268,6 +277,7 @@ def compute(run, done) -> StudyData | None:
         contradicted,
         _evidence(run, summaries),
         set_aside,
+        without_feedback,
     )
 
 
@@ -282,7 +292,8 @@ def render(data: StudyData | None, doc: Doc) -> None:
     doc.text(
         "Every run (`analysis.csv` holds all columns, one row per run and method, ready for a "
         "repeated-measures ANOVA or a mixed model). Estimates ± standard error; † a value the run "
-        "does not determine (the reason in `analysis.csv`'s `<p>_status`), ° held at a literature "
+        "does not determine (the reason in `analysis.csv`'s `<p>_status`), ‡ a value it determines "
+        "but outside the parameter's plausible range or not told from 0, ° held at a literature "
         "value (`hc_form` nms fixed); p (evidence): the run's feedforward p-value by the statistic "
         "that decides for its group (W* or the Fourier coefficients); nb_ft and feedforward at W: "
         "its selection at the group's calibrated W (SPEC 10); data check: the p-value of the run's "
@@ -328,15 +339,24 @@ def _render_answers(data: StudyData, doc: Doc) -> None:
             "safe interval",
             "twins' FP at W (95% interval)",
             "twins' FN at W (95% interval)",
-            "decided",
+            "decisions at W",
         ],
         data.answers,
     )
     if data.uncertain:
         doc.text(
-            "**No W separates the twins of** " + "; ".join(data.uncertain) + ": the feedforward decisions "
-            "there cannot be trusted at any W (the group's fitted feedforward is too weak, or its "
-            "feedback twin finds feedforward too often)."
+            "**No W separates the twins of** " + "; ".join(data.uncertain) + ": the yes/no at the "
+            "calibrated W (feedforward at W) cannot be trusted there, whether the group's fitted "
+            "feedforward is too weak to tell from none or its FB twin keeps feedforward up to W where "
+            "its FF twin loses it. The verdict (each run's p-value against its own FB twins) needs no "
+            "W and stands on its stated power."
+        )
+    if data.without_feedback:
+        doc.text(
+            "**At the calibrated W some runs keep no feedback path either** (nb_e = 0: the selection "
+            "has dropped both paths, a W beyond what their data support): "
+            + "; ".join(data.without_feedback)
+            + ". Their yes/no at W says nothing about feedforward; their p-values need no W."
         )
 
 
@@ -405,8 +425,9 @@ def _render_parameters(data: StudyData, doc: Doc) -> None:
         "Parameters per group and method (SPEC 8, 11), from each run's fit at the group's W: the "
         "median and the sd over the runs that determine the parameter, and their median standard "
         "error; runs whose fit leaves it undetermined (on a "
-        "search bound, a 95% interval wider than its plausible range, or correlated above 0.95 with "
-        "another) are left out, with their reasons."
+        "search bound, a 95% interval wider than its plausible range, correlated above 0.95 with "
+        "another, or a fit that describes u worse than u = 0) are left out, with their reasons; "
+        "values kept but to read with care are counted in the last column."
     )
     doc.table(
         [
@@ -419,6 +440,7 @@ def _render_parameters(data: StudyData, doc: Doc) -> None:
             "sd over runs",
             "median se",
             "left out (runs: reason)",
+            "kept, read with care (runs: why)",
         ],
         data.parameters,
     )
@@ -434,8 +456,11 @@ def _render_parameters(data: StudyData, doc: Doc) -> None:
             doc.figure(
                 f"inversion_{_slug(folder)}.png",
                 f"{name}: model inversion, the feedforward path times the plant (Ht Yc) at every "
-                "target line, from the model-free estimates (points: the group's average; bars: "
-                "+-1 sd across runs). 1 is the plant's exact inverse.",
+                "target line, from the model-free estimates: the group's coefficient average "
+                "(circles; its phase with +-1 sd across runs) and the median of the runs' own "
+                "magnitudes (diamonds, bars from 25% to 75% of the runs). Where the runs' phases "
+                "scatter (large remnant, or people who differ) the average falls below the runs' "
+                "own, which the remnant in each run biases upward. 1 is the plant's exact inverse.",
                 lambda p=paths["ft"], n=name: figures_hcfit.plot_inversion(p, title=n),
             )
     for problem in data.fc_problems:
