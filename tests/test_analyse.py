@@ -295,3 +295,32 @@ def test_undetermined_parameters_are_one_entry_per_parameter_with_each_reason_co
         "not determined, left out: TL in 9 of 12 runs (4 correlated with Kpe, "
         "4 correlated with tau_pe, 1 at a search bound); w_nms in 8 of 12 runs (fixed at a literature value)"
     )
+
+
+def test_runs_without_any_path_at_w_are_counted_and_said():
+    # The CPHS fo direct selection at its calibrated W (0.288): 5 of 6 runs keep neither path
+    # (na = 1, nb_ft = nb_e = 0); the answer line says so instead of reading "no feedforward".
+    from hcid.cli.answers import _without_feedback
+    from hcid.pipeline.summary import GroupSummary
+
+    runs = [{"nb_e": n} for n in (0, 1, 0, 0, 0, 0)]
+    summary = GroupSummary({}, runs, (0.9, 1.0), [], 1.5, 55.0)
+    assert summary.without_feedback == 5
+    assert _without_feedback(summary) == (
+        "; at this W 5 of 6 runs keep no feedback path either (nb_e = 0): W is beyond what their data support"
+    )
+    assert _without_feedback(GroupSummary({}, runs[1:2], (0.9, 1.0), [], 1.5, 55.0)) == ""
+
+
+def test_flagged_values_are_counted_inside_their_entry_without_nested_parentheses():
+    # A kept value outside its plausible range or not told from 0 is counted where it is shown
+    # (SPEC 11's flags; the CPHS fo direct runs: tau_pe 0.053 s in 2 of its 4 runs).
+    from hcid.cli.answers import _analysis_parameters
+    from hcid.pipeline.evidence import ParameterSummary
+
+    tau = ParameterSummary("tau_pe", "s", 6, 4, 0.0981, 0.064, 0.01, {}, {"outside its plausible range": 2})
+    ti = ParameterSummary("TI", "s", 1, 1, 0.0843, 0.0, 0.1, {}, {"not told from 0 (se above |value|)": 1})
+    assert _analysis_parameters([tau, ti]).endswith(
+        "tau_pe 0.0981 s (4 of 6 runs, sd 0.064; 2 of them outside its plausible range), "
+        "TI 0.0843 s (1 of 1 runs; 1 of them not told from 0, se above |value|)"
+    )

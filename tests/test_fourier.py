@@ -102,3 +102,18 @@ def test_runs_with_other_forcing_functions_are_not_averaged(integrator):
     other = {**r, "fd": 2.0 * r["fd"]}
     with pytest.raises(DataError, match="run 2 of the set has other forcing functions"):
         fc_estimate([r, other], 20.0, slice(0, 800))
+
+
+def test_the_runs_own_inversion_beside_the_coefficient_average():
+    # Three runs whose Ht Yc are 1, 0.5 at +90 deg and 2 at -90 deg (exact values, yc = 1):
+    # their magnitudes' median is 1 and quartiles 0.75 and 1.5 (linear interpolation between
+    # order statistics); the coefficient average |1 + 0.5j - 2j| / 3 = 0.601 lies below them all
+    # but the smallest, as where real runs' phases scatter (docs/tables.md, fc_estimates).
+    from hcid.analysis.fourier import FCEstimate
+
+    runs = np.array([[1.0 + 0j], [0.5j], [-2.0j]])
+    one = np.ones(1)
+    fc = FCEstimate(one, one, one, runs.mean(axis=0), runs[:, :1], runs, one, np.zeros(1, bool))
+    median, q25, q75 = fc.inversion_runs(np.ones(1))
+    assert (median[0], q25[0], q75[0]) == (1.0, 0.75, 1.5)
+    assert fc.inversion(np.ones(1))[0][0] == pytest.approx(abs(1 - 1.5j) / 3)
