@@ -143,6 +143,8 @@ def test_window_not_whole_samples_exit_2_nothing_written(tmp_path):
         (["run"], "hcid: error: Missing argument 'config'."),
         (["identify", "c.yaml", "--backend", "loky", "--scheduler", "tcp://127.0.0.1:1"],
          "hcid: error: scheduler (--scheduler): only with backend dask (got loky)"),
+        (["analyse", "c.yaml", "--data", "a.csv", "b.csv"],  # an unquoted glob, as the shell expands it
+         "hcid: error: Got unexpected extra argument(s) (b.csv) (a glob the shell expanded? quote it"),
     ],
 )  # fmt: skip
 def test_misuse_is_one_line_exit_2(tmp_path, argv, message):

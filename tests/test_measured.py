@@ -672,3 +672,21 @@ def test_identify_data_force_redoes_a_changed_identify(tmp_path, data_config_pat
     refused = runner.invoke(app, [argv[0], str(second), *argv[2:]])
     assert refused.exit_code == 2 and "identify.direct.nk1 differs" in refused.stderr
     assert runner.invoke(app, [argv[0], str(second), *argv[2:], "--force"]).exit_code == 0
+
+
+def test_a_missing_error_column_names_its_way_out_and_the_files_width(tmp_path, data_config):
+    # Two mapping mistakes at once keep the e = ft - theta hint (it was dropped when e was not the
+    # last missing column), and a position past the file's last column says how many it has.
+    import dataclasses
+
+    from hcid.errors import DataError
+    from hcid.io.measured import read_runs
+
+    path = tmp_path / "one.csv"
+    _write(_one_run(pacsv.read_csv(EXAMPLE)).drop_columns(["error"]), path)  # 5 columns
+    columns = {**data_config.data.columns, "u": "joystick", "theta": 9}  # e stays 'error': absent
+    data = dataclasses.replace(data_config.data, columns=columns)
+    with pytest.raises(DataError) as err:
+        read_runs(path, data, 25.0, 2048)
+    assert "missing columns" in str(err.value) and "joystick" in str(err.value)
+    assert "(or a system output 'column 9' for e = ft - theta); the file has 5 columns" in str(err.value)

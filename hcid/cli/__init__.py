@@ -428,6 +428,10 @@ def main() -> None:
         code = app(standalone_mode=False)
     except typer.TyperException as exc:  # typer's usage errors: a bad option value, a missing argument
         message = exc.format_message() if hasattr(exc, "format_message") else str(exc)
+        if "unexpected extra argument" in message and "--data" in sys.argv:
+            message += (
+                " (a glob the shell expanded? quote it, --data 'trials/*.csv', or give --data once per file)"
+            )
         typer.echo(f"hcid: error: {' '.join(message.split())}", err=True)
         code = getattr(exc, "exit_code", 2)
     except typer.Abort:

@@ -36,7 +36,7 @@ import pyarrow as pa
 
 from hcid.config import Config, DataConfig
 from hcid.errors import DataError, quote
-from hcid.io.formats import column_label, read_columns
+from hcid.io.formats import column_label, csv_layout, read_columns
 from hcid.tables import MEASURED, SIGNALS
 
 __all__ = [
@@ -413,13 +413,14 @@ def _named_signals(path: Path, cols: dict[str, np.ndarray], data: DataConfig) ->
             )
         cols["e"] = cols["ft"] - cols["theta"]  # e = ft - theta
     cols.pop("theta", None)
-    missing = [column_label(data.columns[n]) for n in SIGNALS if n not in cols]
-    if missing:
-        hint = (
-            f" (or a system output '{data.columns['theta']}' for e = ft - theta)"
-            if "e" in missing[-1:]
-            else ""
-        )
+    absent = [n for n in SIGNALS if n not in cols]
+    if absent:
+        missing = [column_label(data.columns[n]) for n in absent]
+        theta = column_label(data.columns["theta"])
+        hint = f" (or a system output '{theta}' for e = ft - theta)" if "e" in absent else ""
+        wanted = [data.columns[n] for n in (*absent, "theta") if n in data.columns]
+        if any(isinstance(c, int) for c in wanted) and path.suffix.lower() in (".csv", ".txt"):
+            hint += f"; the file has {csv_layout(path)[2]} columns"
         raise DataError(f"{path}: missing columns {missing}{hint} (mapped in the config's data.columns)")
     if "time" not in cols and "rate" not in cols:
         raise DataError(
