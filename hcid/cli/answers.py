@@ -111,8 +111,12 @@ def print_analysis(result) -> None:
             f"feedforward at p <= {g['alpha']:g} (decided by their {g['decided_by']} against their own "
             f"forcing set's FB twins, up to {g['fb_twins']} drawn: the statistic with the higher power; "
             f"binomial p = {g['binomial_p']:.2g}; power (FF twins found at this level) "
-            f"{summary.power[0]:.2f} to {summary.power[1]:.2f} over the runs, "
-            f"{g['forcing_sets']} forcing set{'s' if g['forcing_sets'] > 1 else ''})"
+            + (
+                f"{summary.power[0]:.2f} for every run, "
+                if f"{summary.power[0]:.2f}" == f"{summary.power[1]:.2f}"
+                else f"{summary.power[0]:.2f} to {summary.power[1]:.2f} over the runs, "
+            )
+            + f"{g['forcing_sets']} forcing set{'s' if g['forcing_sets'] > 1 else ''})"
         )
         typer.echo(
             f"    calibrated W (SPEC 10): feedforward in {g['n_feedforward']} of {g['n_runs']} runs at "

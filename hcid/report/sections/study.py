@@ -164,6 +164,7 @@ def _run_table(runs) -> tuple[list[str], list[list[str]]]:
         "wc rad/s",
         "PM deg",
         "VAF %",
+        "remnant % of var(u)",
         "data check (p)",
     ]
     rows = []
@@ -183,6 +184,7 @@ def _run_table(runs) -> tuple[list[str], list[list[str]]]:
                 _num(r["crossover"]),
                 _num(r["phase_margin"]),
                 "-" if not math.isfinite(r["vaf_validation"]) else f"{r['vaf_validation']:.1f}",
+                "-" if not math.isfinite(r["share_remnant"]) else f"{100 * r['share_remnant']:.0f}",
                 check,
             ]
         )
