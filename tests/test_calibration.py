@@ -130,7 +130,9 @@ def test_the_binomial_summary_and_the_false_discovery_rate():
 
 def test_runs_share_a_forcing_set_when_their_forcing_functions_agree():
     # Source: SPEC 11: within 0.1% RMS over the window. Runs 1 and 3 share theirs, run 2 has the
-    # sign flipped, run 4 differs from run 1 by 0.05% RMS (same set), run 5 by 0.2% (a set of its own).
+    # sign flipped (the same set: its twins are the set's, exactly; test_a_flipped_record_...),
+    # run 6 only ft's sign (a set of its own), run 4 differs from run 1 by 0.05% RMS (same set),
+    # run 5 by 0.2% (a set of its own).
     from types import SimpleNamespace
 
     from hcid.pipeline.twins import forcing_sets
@@ -139,9 +141,33 @@ def test_runs_share_a_forcing_set_when_their_forcing_functions_agree():
     ft, fd = np.sin(0.5 * t), np.cos(0.7 * t)
     bump = np.sin(3.0 * t)  # RMS 1/sqrt(2), as ft's
     records = {1: {"ft": ft, "fd": fd}, 2: {"ft": -ft, "fd": -fd}, 3: {"ft": ft.copy(), "fd": fd.copy()},
-               4: {"ft": ft + 0.0005 * bump, "fd": fd}, 5: {"ft": ft + 0.002 * bump, "fd": fd}}  # fmt: skip
+               4: {"ft": ft + 0.0005 * bump, "fd": fd}, 5: {"ft": ft + 0.002 * bump, "fd": fd},
+               6: {"ft": -ft, "fd": fd}}  # fmt: skip
     config = SimpleNamespace(timing=SimpleNamespace(window=40.0, output_rate=10.0))
-    assert forcing_sets([1, 2, 3, 4, 5], records, config) == [[1, 3, 4], [2], [5]]
+    assert forcing_sets([1, 2, 3, 4, 5, 6], records, config) == [[1, 2, 3, 4], [5], [6]]
+
+
+@pytest.mark.parametrize("method", ["direct", "indirect"])
+def test_a_flipped_record_is_identified_exactly_as_the_record(ci_config, method):
+    # Why a forcing set and its sign flip share their twins (hcid.pipeline.twins.forcing_sets):
+    # every signal negated (forcing, e, u: a linear loop's response to -f with the remnant
+    # negated) gives bit for bit the same candidates' V, so the same selection path and W*
+    # (IEEE arithmetic rounds symmetrically: -a * -b = a * b, -a + -b = -(a + b)).
+    from hcid.methods import identify
+
+    from .conftest import _record
+
+    record = {k: v for k, v in _record(ci_config, "FB", 3).items() if k in ("ft", "fd", "e", "u")}
+    flipped = {k: -v for k, v in record.items()}
+    rate = ci_config.timing.output_rate
+    one = identify(record, ci_config.identify, method, rate=rate)
+    other = identify(flipped, ci_config.identify, method, rate=rate)
+    for name in ("na", "nb1", "nb2", "nk1", "nk2", "v", "vaf_validation", "n_unstable"):
+        a, b = getattr(one.fit, name), getattr(other.fit, name)
+        assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), name  # NaN: a row without candidates
+    for a, b in zip(one.choices, other.choices, strict=True):  # stage 1's choice and its e_r
+        assert (a.na, a.nb1, a.nb2, a.nk1, a.nk2, a.v) == (b.na, b.nb1, b.nb2, b.nk1, b.nk2, b.v)
+        assert np.array_equal(a.signal, -b.signal)
 
 
 def test_sequential_p_value_has_its_level_under_the_null():

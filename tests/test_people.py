@@ -77,17 +77,18 @@ def test_nothing_undetermined_reads_as_a_finding(analysed):
 
 
 @pytest.mark.slow
-def test_by_plant_puts_both_signs_in_one_group_with_a_forcing_set_each(tmp_path):
+def test_by_plant_puts_both_signs_in_one_group_and_one_forcing_set(tmp_path):
     # Source: the data's README: each -1 trial's forcing functions are the +1 trial's with the sign
-    # flipped, so --by plant gives one group of two forcing sets, each with twins of its own, and
-    # every run a p-value (1 + k) / (1 + N) with N its set's FB twins (SPEC 11; 4 at most, so that
-    # no run reaches the 5 at or above that would stop it early).
+    # flipped, so --by plant gives one group, and the sign flip shares the set's twins (exact:
+    # test_calibration.test_a_flipped_record_is_identified_exactly_as_the_record): one twins
+    # folder, and every run a p-value (1 + k) / (1 + N) with N the set's FB twins (SPEC 11; 4 at
+    # most, so that no run reaches the 5 at or above that would stop it early).
     config, data = read_study(ROOT / "configs" / "cphs2017_fo.yaml", [str(DATA / "*_fo_*.csv")])
     options = AnalysisOptions(by=("plant",), twins=4, max_fb_twins=4)
     result = analyse_study(config, tmp_path / "run", data, options, execution=QUIET)
-    assert set(result.groups.column("forcing_sets").to_pylist()) == {2}
+    assert set(result.groups.column("forcing_sets").to_pylist()) == {1}
     rows = result.runs.to_pylist()
-    assert {r["forcing_set"] for r in rows if r["trial"] == "+1"} == {1}
-    assert {r["forcing_set"] for r in rows if r["trial"] == "-1"} == {2}
+    assert {r["trial"] for r in rows} == {"+1", "-1"} and {r["forcing_set"] for r in rows} == {1}
+    assert len([d for d in (tmp_path / "run" / "twins").iterdir() if "-fb" not in d.name]) == 1
     for r in rows:
         assert r["p_value"] * 5 == pytest.approx(round(r["p_value"] * 5)) and 0.2 <= r["p_value"] <= 1.0

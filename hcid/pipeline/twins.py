@@ -130,17 +130,27 @@ def twin_config_raw(config: Config, fitted: dict, remnant: tuple, forcing: Path,
 def forcing_sets(seeds: list[int], records: dict, config: Config) -> list[list[int]]:
     """The group's runs by their forcing functions (SPEC 11): runs whose ft and fd both agree
     within 0.1% RMS over the window share a set (each set gets twins of its own), in the order of
-    their first run."""
+    their first run; so do runs whose ft and fd agree with the set's with both signs flipped.
+
+    A flipped set needs no twins of its own: the twins' loop is linear and their remnant
+    symmetric, so a twin driven by -ft, -fd with remnant n is exactly the negative of one driven
+    by ft, fd with remnant -n, a remnant as likely as n; W* and the Fourier size do not see the
+    sign (every signal of the identification and of the coefficients flips together). The set's
+    twins, driven by its first run's functions, are therefore a sample of exactly the same
+    distribution for its flipped runs."""
     n = round(config.timing.window * config.timing.output_rate)
+
+    def agree(a: dict, b: dict, sign: float) -> bool:
+        return all(
+            np.sqrt(np.mean((a[k][:n] - sign * b[k][:n]) ** 2)) <= 1e-3 * np.sqrt(np.mean(a[k][:n] ** 2))
+            for k in ("ft", "fd")
+        )
+
     sets: list[list[int]] = []
     for seed in seeds:
         for members in sets:
             first = records[members[0]]
-            if all(
-                np.sqrt(np.mean((first[k][:n] - records[seed][k][:n]) ** 2))
-                <= 1e-3 * np.sqrt(np.mean(first[k][:n] ** 2))
-                for k in ("ft", "fd")
-            ):
+            if agree(first, records[seed], 1.0) or agree(first, records[seed], -1.0):
                 members.append(seed)
                 break
         else:
