@@ -69,6 +69,7 @@ BAD = [
     (("timing", "periods"), 0, "timing.periods: must be an integer in [1, 100], got 0"),
     (("signals", "disturbance", "phase"), [0.0, 1.0], "signals.disturbance.phase: must have 20 entries"),
     (("models", "FF", "tau_pt"), 0.355, "models.FF.tau_pt: must be whole samples"),
+    (("models", "FF", "tau_pt"), -2.5, "models.FF.tau_pt: must be a number in [-2, 2], got -2.5"),
     (("selection", "w_grid", "min"), -1.0, "selection.w_grid.min: must be a number in (0, 1000], got -1.0"),
     (("loop", "w_n"), _DELETE, "loop.w_n: missing"),
     (("bogus",), 1, "bogus: unknown key"),

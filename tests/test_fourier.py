@@ -35,13 +35,19 @@ def test_the_lines_are_the_multisines_frequencies(integrator):
     assert lines.disturbance.tolist() == list(integrator.disturbance.k)
 
 
-def test_noise_free_loop_gives_the_true_paths(integrator):
+@pytest.mark.parametrize("tau_pt", [None, -0.3])
+def test_noise_free_loop_gives_the_true_paths(integrator, tau_pt):
     # Source: the discrete loop hcid.loop.simulate runs (Tustin at 100 Hz, whole-sample delays; its
     # response by DiscreteLoop.response), in periodic steady state and decimated by an FFT brick
     # wall, so every line is exact: He = U/E at the disturbance lines to 1e-6. At the target
     # lines Ht = (U - He_i E)/Ft differs from the true Hft by exactly (He - He_i) E/Ft, He_i the
     # interpolated He: checked to 1e-6, and the interpolation itself within 1.5 dB and 6 deg.
+    # tau_pt -0.3 s: an anticipating feedforward (30 samples ahead of the periodic target), whose
+    # Hft holds exp(+0.3 j w): the simulation reads the target ahead exactly.
+    import dataclasses
+
     model = integrator.model("FF")
+    model = model if tau_pt is None else dataclasses.replace(model, tau_pt=tau_pt)
     r = simulate_realization(integrator, model, 1, kn=0.0)
     fc = fc_estimate([_run(r)], 20.0, slice(0, 800))
     _, he_true = _true(integrator, model, fc.omega_e)

@@ -67,7 +67,7 @@ def _model(name: Any, data: Any) -> HCModel:
         name=name,
         Kpt=Kpt,
         TI=s.number("TI", 0.0, 10.0, 0.0),
-        tau_pt=s.number("tau_pt", 0.0, 2.0, 0.0),
+        tau_pt=s.number("tau_pt", -2.0, 2.0, 0.0),  # negative: anticipation of the target
         Kpe=s.number("Kpe", 0.0, 100.0, open_lo=True),
         TL=s.number("TL", 0.0, 10.0),
         tau_pe=s.number("tau_pe", 0.0, 2.0, open_lo=True),

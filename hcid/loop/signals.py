@@ -93,51 +93,56 @@ def segments_in_period(tau: np.ndarray, spec: Segments) -> np.ndarray:
     return out
 
 
-def simulation_time(timing: Timing) -> np.ndarray:
+def simulation_time(timing: Timing, ahead: int = 0) -> np.ndarray:
     """Time of every simulation sample (s), 0 at the start of the kept window.
 
     ``timing.periods`` periods of run-in plus window at ``timing.sim_rate``;
     the last ``timing.window_samples`` samples are the kept window (t >= 0).
+    ``ahead``: that many samples more, past the last (what an anticipating feedforward reads).
     """
     n = timing.periods * timing.period_samples
     start = n - timing.window_samples
-    return (np.arange(n) - start) / timing.sim_rate
+    return (np.arange(n + ahead) - start) / timing.sim_rate
 
 
-def segments(timing: Timing, spec: Segments) -> np.ndarray:
-    """At every simulation sample (rad): each period is run-in (0) then the segments."""
+def segments(timing: Timing, spec: Segments, ahead: int = 0) -> np.ndarray:
+    """At every simulation sample (rad): each period is run-in (0) then the segments (``ahead``:
+    samples past the last, the next period's)."""
     n = timing.periods * timing.period_samples
     run_in = round(timing.run_in * timing.sim_rate)
-    in_period = np.arange(n) % timing.period_samples - run_in
+    in_period = np.arange(n + ahead) % timing.period_samples - run_in
     return segments_in_period(in_period / timing.sim_rate, spec)
 
 
-def file_signal(timing: Timing, spec: FileSignal) -> np.ndarray:
+def file_signal(timing: Timing, spec: FileSignal, ahead: int = 0) -> np.ndarray:
     """A file's column at every simulation sample (rad), its window repeated as one period.
 
     The ``timing.window`` seconds from ``spec.start`` are resampled from the file's
     rate to the simulation rate by the FFT method (exact for a signal periodic in
     the window and band-limited below both Nyquist frequencies) and repeated
-    backwards over the run-in and earlier periods.
+    backwards over the run-in and earlier periods (and ``ahead`` samples past the last).
     """
     first = round(spec.start * spec.rate)
     window = spec.values[first : first + round(timing.window * spec.rate)]
     one = sps.resample(window, timing.window_samples) if window.size != timing.window_samples else window
     n = timing.periods * timing.period_samples
-    return one[(np.arange(n) - (n - timing.window_samples)) % timing.window_samples]
+    return one[(np.arange(n + ahead) - (n - timing.window_samples)) % timing.window_samples]
 
 
-#: Kinds of forcing function by their config type: ``f(timing, spec)`` at every simulation sample.
+#: Kinds of forcing function by their config type: ``f(timing, spec, ahead)`` at every simulation
+#: sample and ``ahead`` samples past the last.
 FORCING = {
-    Multisine: lambda timing, spec: multisine(simulation_time(timing), spec),
+    Multisine: lambda timing, spec, ahead: multisine(simulation_time(timing, ahead), spec),
     Segments: segments,
     FileSignal: file_signal,
 }
 
 
-def forcing(timing: Timing, spec: Forcing) -> np.ndarray:
-    """A forcing function at every simulation sample (rad), whatever its kind."""
-    return FORCING[type(spec)](timing, spec)
+def forcing(timing: Timing, spec: Forcing, ahead: int = 0) -> np.ndarray:
+    """A forcing function at every simulation sample (rad), whatever its kind, and ``ahead``
+    samples past the last (as the kind continues: a multisine or a file's window periodically,
+    segments into the next period's run-in)."""
+    return FORCING[type(spec)](timing, spec, ahead)
 
 
 def forcing_frequencies(spec: Forcing) -> np.ndarray | None:

@@ -83,7 +83,7 @@ def white_noise(seed: int, n: int) -> np.ndarray:
 
 
 def simulate_loop(
-    dloop: DiscreteLoop, ft: np.ndarray, fd: np.ndarray, n: np.ndarray
+    dloop: DiscreteLoop, ft: np.ndarray, fd: np.ndarray, n: np.ndarray, *, ft_ahead: np.ndarray | None = None
 ) -> dict[str, np.ndarray]:
     """Simulate the closed loop from rest at the simulation rate.
 
@@ -93,6 +93,9 @@ def simulate_loop(
         Discretised paths and delays; the feedback delay must be >= 1 sample.
     ft, fd, n : ndarray, shape (m,)
         Target, disturbance and remnant (rad), one value per simulation sample.
+    ft_ahead : ndarray, optional
+        The target past the last sample: what a feedforward with a negative delay (anticipation,
+        ``tau_pt < 0``) reads at the end; at least that many samples.
 
     Returns
     -------
@@ -104,10 +107,16 @@ def simulate_loop(
     if block < 1:
         raise ValueError("simulate_loop: the feedback delay must be at least one sample")
     u_open = n.copy()
-    if dloop.has_feedforward:
+    if dloop.has_feedforward and dloop.delay_ft >= 0:
         b, a = dloop.feedforward
         u_ff = sps.lfilter(b, a, ft)
         u_open[dloop.delay_ft :] += u_ff[: m - dloop.delay_ft]
+    elif dloop.has_feedforward:  # anticipation: the path reads the target -delay_ft samples ahead
+        ahead = -dloop.delay_ft
+        if ft_ahead is None or ft_ahead.size < ahead:
+            raise ValueError(f"simulate_loop: an anticipating feedforward needs ft {ahead} samples ahead")
+        b, a = dloop.feedforward
+        u_open += sps.lfilter(b, a, np.concatenate([ft, ft_ahead[:ahead]]))[ahead:]
 
     e = np.zeros(m + block)  # e[block + k] is e(k); the first `block` entries are the rest state
     u = np.empty(m)
@@ -197,13 +206,13 @@ def decimate(x: np.ndarray, factor: int) -> np.ndarray:
     return np.fft.irfft(spectrum, n=x.size)[::factor]
 
 
-def _forcing(timing, spec) -> np.ndarray:
+def _forcing(timing, spec, ahead: int = 0) -> np.ndarray:
     """:func:`hcid.loop.signals.forcing`, computed once per process for the kinds made from
     the config alone (every seed and model of a study shares them); any other kind
     (a data file's column) is made each time. A copy: callers may write to it."""
     if isinstance(spec, _CONFIG_ONLY):
-        return _config_forcing(timing, spec).copy()
-    return signals.forcing(timing, spec)
+        return _config_forcing(timing, spec, ahead).copy()
+    return signals.forcing(timing, spec, ahead)
 
 
 # Forcing kinds that are a function of their (frozen, hashable) config section alone.
@@ -211,8 +220,8 @@ _CONFIG_ONLY = (Multisine, Segments)
 
 
 @functools.lru_cache(maxsize=16)
-def _config_forcing(timing, spec) -> np.ndarray:
-    return signals.forcing(timing, spec)
+def _config_forcing(timing, spec, ahead: int) -> np.ndarray:
+    return signals.forcing(timing, spec, ahead)
 
 
 @functools.lru_cache(maxsize=16)
@@ -320,13 +329,12 @@ def simulate_realization(
     fd = _forcing(timing, config.disturbance)
     if disturbance_only:
         model = _feedback_only(model)
-        ft = np.zeros_like(t)
-    else:
-        ft = _forcing(timing, config.target)
     dloop = _discrete_loop(model, config.loop, timing.sim_dt)
+    ahead = max(0, -dloop.delay_ft)  # an anticipating feedforward reads the target past the end
+    ft = np.zeros_like(t) if disturbance_only else _forcing(timing, config.target, ahead)
     b_n, a_n = dloop.remnant
     n = kn * sps.lfilter(b_n, a_n, white_noise(seed, t.size))
-    out = simulate_loop(dloop, ft, fd, n)
+    out = simulate_loop(dloop, ft[: t.size], fd, n, ft_ahead=ft[t.size :])
 
     keep = slice(t.size - timing.window_samples, t.size)
     factor = timing.decimation

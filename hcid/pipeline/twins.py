@@ -77,12 +77,11 @@ MIN_TWIN_KPT = 1e-3
 
 
 def twin_values(fitted: dict, sim_rate: float) -> dict[str, float]:
-    """The FF twin's HC parameters as simulated: delays in whole samples at ``sim_rate``, an
-    anticipating tau_pt (< 0, which the simulation cannot delay by) at 0, Kpt at least
+    """The FF twin's HC parameters as simulated: delays in whole samples at ``sim_rate`` (an
+    anticipating tau_pt, < 0, reads the twins' periodic target ahead), Kpt at least
     :data:`MIN_TWIN_KPT`."""
     ff = {k: float(fitted[k]) for k in ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe")}
     ff["Kpt"] = max(ff["Kpt"], MIN_TWIN_KPT)
-    ff["tau_pt"] = max(ff["tau_pt"], 0.0)
     for k in ("tau_pt", "tau_pe"):  # the simulation delays by whole samples (SPEC 1)
         ff[k] = round(ff[k] * sim_rate) / sim_rate
     return ff
