@@ -90,6 +90,11 @@ def test_every_run_and_group_is_answered_with_its_factors(analysed):
     # The answer line leads with the verdict; the command ends with the report it wrote.
     assert "condition=pursuit, direct: " in output
     assert output.strip().splitlines()[-1] == f"report: {run / 'report' / 'report.html'}"
+    # The group's model is the same for both methods: its data check printed in full once per
+    # group (2 groups), referred to under the other method.
+    checks = [line for line in output.splitlines() if line.startswith("    data check: ")]
+    assert len(checks) == 4 and sum("chi-square" in line for line in checks) == 2
+    assert sum(line.startswith("    data check: the group's model as above; ") for line in checks) == 2
     assert (run / "report" / "report.html").is_file()
 
 

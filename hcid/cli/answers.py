@@ -86,6 +86,7 @@ def print_analysis(result) -> None:
     from hcid.hcfit.consistency import CONTRADICTED, format_p
     from hcid.pipeline.summary import rate_interval, summarise_groups
 
+    checked = set()  # groups whose model's data check is printed (the same for every method)
     for summary in summarise_groups(result.groups, result.runs):
         g = summary.group
         if g["w_rule"] == "safe interval":
@@ -131,7 +132,10 @@ def print_analysis(result) -> None:
         contradicted = (
             f"{g['n_contradicted']} of {g['n_runs']} runs' own fits at W are contradicted by the data"
         )
-        if g["fc_dof"] > 0:
+        if g["fc_dof"] > 0 and g["group"] in checked:
+            typer.echo(f"    data check: the group's model as above; {contradicted} (p < {CONTRADICTED:g})")
+        elif g["fc_dof"] > 0:
+            checked.add(g["group"])
             ht = (
                 ""
                 if g["ht_error_db"] != g["ht_error_db"]
