@@ -518,7 +518,7 @@ ANALYSIS = _schema(
 #: ``analysis_groups.parquet`` (``hcid analyse``): one row per group of runs (``--by``) and
 #: method: the W used and why, the safe interval, the twins' rates at W, the runs and how
 #: many of them have feedforward there, and the twins (the group's fitted model as simulated,
-#: ``twin_<p>``: delays in whole samples, tau_pt at least 0, Kpt at least 0.001; the FB twin has
+#: ``twin_<p>``: delays in whole samples, Kpt at least 0.001; the FB twin has
 #: Kpt = 0) with their remnant filter, number of realizations each (``twins``: the calibration's;
 #: ``fb_twins``: the FB twins drawn for the runs' p-values, the most over the forcing sets) and
 #: run directory; ``ff_twin``

@@ -303,18 +303,20 @@ def test_undetermined_parameters_are_one_entry_per_parameter_with_each_reason_co
 
 
 def test_runs_without_any_path_at_w_are_counted_and_said():
-    # The CPHS fo direct selection at its calibrated W (0.288): 5 of 6 runs keep neither path
-    # (na = 1, nb_ft = nb_e = 0); the answer line says so instead of reading "no feedforward".
-    from hcid.cli.answers import _without_feedback
+    # The CPHS fo direct selection at its calibrated W of 0.288 (2af54b2's twins, which did not
+    # anticipate): 5 of 6 runs kept neither path (na = 1, nb_ft = nb_e = 0); the answer line says
+    # so instead of reading "no feedforward". A run with feedforward but no feedback path (CPHS
+    # so gy +1, direct: nb_ft 1, nb_e 0) keeps a path: not counted.
+    from hcid.cli.answers import _without_paths
     from hcid.pipeline.summary import GroupSummary
 
-    runs = [{"nb_e": n} for n in (0, 1, 0, 0, 0, 0)]
+    runs = [{"nb_ft": 0, "nb_e": n} for n in (0, 1, 0, 0, 0, 0)] + [{"nb_ft": 1, "nb_e": 0}]
     summary = GroupSummary({}, runs, (0.9, 1.0), [], 1.5, 55.0)
-    assert summary.without_feedback == 5
-    assert _without_feedback(summary) == (
-        "; at this W 5 of 6 runs keep no feedback path either (nb_e = 0): W is beyond what their data support"
+    assert summary.without_paths == 5
+    assert _without_paths(summary) == (
+        "; at this W 5 of 7 runs keep no path at all (nb_ft = nb_e = 0): W is beyond what their data support"
     )
-    assert _without_feedback(GroupSummary({}, runs[1:2], (0.9, 1.0), [], 1.5, 55.0)) == ""
+    assert _without_paths(GroupSummary({}, runs[1:2] + runs[-1:], (0.9, 1.0), [], 1.5, 55.0)) == ""
 
 
 def test_flagged_values_are_counted_inside_their_entry_without_nested_parentheses():

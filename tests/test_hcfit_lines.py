@@ -222,8 +222,8 @@ def test_each_reason_for_an_undetermined_parameter():
 
 
 def test_a_fit_that_describes_u_worse_than_zero_determines_nothing():
-    # A fit whose validation VAF is below 0% (the CPHS fo runs of subject gy fitted without
-    # feedforward: VAF -9950%, Kpe 33.5 +- 3.8e-09) leaves every parameter undetermined, with the
+    # A fit whose validation VAF is below 0% (at 2af54b2's W the CPHS fo runs of subject gy fitted
+    # without feedforward: VAF -9950%, Kpe 33.5 +- 3.8e-09) leaves every parameter undetermined, with the
     # reason, whatever its se say; a held one stays "fixed"; no record (VAF NaN) is no failure.
     failed = _fit({**TRUTH, "Kpe": 33.5}, se={"Kpe": 3.8e-9}, fixed=("w_nms",), vaf=-9949.8)
     status = parameter_status(failed)
@@ -263,6 +263,12 @@ def test_an_unstable_group_median_falls_back_to_the_nearest_stable_run():
     assert model.values == TRUTH
     with pytest.raises(DataError, match="neither the medians"):
         group_model(fits[:2], ["run 1", "run 2"], *plant)
+    # A failed fit (validation VAF below 0%) is never the fallback, however near the medians.
+    failed = [*fits[:2], _fit(TRUTH, vaf=-10.2), _fit({**TRUTH, "Kpe": 3.0})]
+    model = group_model(failed, ["run 1", "run 2", "run 3", "run 4"], *plant)
+    assert model.source.startswith("run 4's own model") and model.values["Kpe"] == 3.0
+    with pytest.raises(DataError, match="of those that describe their data"):
+        group_model(failed[:3], ["run 1", "run 2", "run 3"], *plant)
 
 
 def test_model_inversion_is_close_to_the_true_hft_times_the_plant():

@@ -179,9 +179,11 @@ def test_sweep_and_report_on_data_run(three_formats, data_config_path):
     sel = pq.read_table(run / "selection.parquet")
     assert set(sel.column("model").to_pylist()) == {"subject01"}
     assert pq.read_table(run / "thresholds.parquet").num_rows == 0  # no truth, no thresholds
-    md, figures = report_without_figures(run)  # report.md as `hcid report` writes it
+    # report.md as `hcid report` writes it, and the data section's own figure drawn
+    md, figures = report_without_figures(run, draw=["data_structure.png"], out=run)
     assert "## 10. Measured data: subject01" in md
     assert {"data_structure.png", "bode_data_w0.00715.png"} <= figures
+    assert (run / "data_structure.png").stat().st_size > 0
     assert "true" not in md.split("## 10.")[1].lower().replace("no true dynamics", "")
 
 

@@ -84,12 +84,12 @@ def print_analysis(result) -> None:
     """Per group and method: the answer first (feedforward in k of N runs at W, how sure), then
     the parameters the runs determine, the loop, and the data check (SPEC 11)."""
     from hcid.hcfit.consistency import CONTRADICTED, format_p
-    from hcid.pipeline.summary import rate_interval, summarise_groups
+    from hcid.pipeline.summary import has_safe_interval, rate_interval, summarise_groups
 
     checked = set()  # groups whose model's data check is printed (the same for every method)
     for summary in summarise_groups(result.groups, result.runs):
         g = summary.group
-        if g["w_rule"] == "safe interval":
+        if has_safe_interval(g):
             safe = f"safe interval [{g['safe_low']:.3g}, {g['safe_high']:.3g})"
             if g["ff_twin"] == "study":
                 safe += (
@@ -122,7 +122,7 @@ def print_analysis(result) -> None:
         typer.echo(
             f"    calibrated W (SPEC 10): feedforward in {g['n_feedforward']} of {g['n_runs']} runs at "
             f"W = {g['w']:.3g} ({safe}; twins' FP {rate_interval(g['fp_rate'], g['fp_low'], g['fp_high'])}, "
-            f"FN {rate_interval(g['fn_rate'], g['fn_low'], g['fn_high'])})" + _without_feedback(summary)
+            f"FN {rate_interval(g['fn_rate'], g['fn_low'], g['fn_high'])})" + _without_paths(summary)
         )
         typer.echo(_analysis_parameters(summary.parameters))
         typer.echo(
@@ -175,13 +175,13 @@ def _model_source(group: dict) -> str:
     return "" if group["twin_source"] == FROM_MEDIANS else f" ({_flat(group['twin_source'])})"
 
 
-def _without_feedback(summary) -> str:
+def _without_paths(summary) -> str:
     """What the calibrated W line adds where some runs' selection at W keeps no path at all."""
-    n = summary.without_feedback
+    n = summary.without_paths
     if not n:
         return ""
     return (
-        f"; at this W {n} of {len(summary.runs)} runs keep no feedback path either (nb_e = 0): "
+        f"; at this W {n} of {len(summary.runs)} runs keep no path at all (nb_ft = nb_e = 0): "
         "W is beyond what their data support"
     )
 

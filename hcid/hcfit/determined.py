@@ -181,10 +181,13 @@ def group_model(fits: Sequence, labels: Sequence[str], num_c, den_c) -> GroupMod
     (:func:`is_undetermined`). Where that model's loop with the plant (``num_c``, ``den_c``)
     is unstable, the fallback is the run whose own model makes a stable loop and lies nearest
     the medians (the sum over parameters of the squared difference over the parameter's
-    plausible range); :class:`hcid.errors.DataError` if no run's model does.
+    plausible range); :class:`hcid.errors.DataError` if no run's model does. A failed fit
+    (validation VAF below 0%) is never the fallback, nor in the medians of parameters no run
+    determines (unless every fit failed).
     """
     statuses = [parameter_status(f) for f in fits]
     names = fits[0].names
+    described = [f for f in fits if not f.vaf_validation < 0.0] or list(fits)
     values, none = {}, []
     for p in names:
         kept = [f.values[p] for f, st in zip(fits, statuses, strict=True) if not is_undetermined(st[p])]
@@ -194,17 +197,24 @@ def group_model(fits: Sequence, labels: Sequence[str], num_c, den_c) -> GroupMod
         none.append(p)
         if p in LITERATURE_NMS:
             values[p] = LITERATURE_NMS[p]
-        else:  # the data say little: the median over all runs, brought into its plausible range
-            values[p] = float(np.clip(np.median([f.values[p] for f in fits]), *PLAUSIBLE[p]))
+        else:  # the data say little: the median over the runs, brought into its plausible range
+            values[p] = float(np.clip(np.median([f.values[p] for f in described]), *PLAUSIBLE[p]))
     if loop_is_stable(values, num_c, den_c):
         return GroupModel(values, FROM_MEDIANS, tuple(none))
 
     def distance(fit) -> float:
         return sum(((fit.values[p] - values[p]) / (PLAUSIBLE[p][1] - PLAUSIBLE[p][0])) ** 2 for p in names)
 
-    stable = [(distance(f), i) for i, f in enumerate(fits) if loop_is_stable(f.values, num_c, den_c)]
+    stable = [
+        (distance(f), i)
+        for i, f in enumerate(fits)
+        if not f.vaf_validation < 0.0 and loop_is_stable(f.values, num_c, den_c)
+    ]
     if not stable:
-        raise DataError("neither the medians of its runs' fits nor any run's own model makes a stable loop")
+        raise DataError(
+            "neither the medians of its runs' fits nor any run's own model (of those that describe "
+            "their data) makes a stable loop"
+        )
     i = min(stable)[1]
     source = f"{labels[i]}'s own model (the medians make an unstable loop with the plant)"
     its_own = tuple(p for p in names if is_undetermined(statuses[i][p]))

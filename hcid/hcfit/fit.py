@@ -513,7 +513,7 @@ def fit_parametric(
 
     ``settings.nms``: ``free`` fits the neuromuscular pair; ``fixed`` holds it at
     :data:`hcid.hcfit.determined.LITERATURE_NMS`; ``auto`` (the default) fits it and, where
-    the fit leaves either of the pair undetermined (:func:`hcid.hcfit.determined.parameter_status`),
+    the fit leaves either of the pair undetermined (:func:`hcid.hcfit.determined.nms_undetermined`),
     fits again with the pair held there (``HCFit.fixed`` says so) and keeps that reduced model,
     unless (``lines`` target, whose residuals allow the test) the nested F test
     (:func:`nested_test`) rejects the held values at

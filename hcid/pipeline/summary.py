@@ -31,10 +31,10 @@ class GroupSummary:
     phase_margin: float
 
     @property
-    def without_feedback(self) -> int:
-        """Runs whose selection at the group's W keeps no feedback path either (nb_e = 0): a W
-        beyond what their data support (the selection has dropped both paths)."""
-        return sum(r["nb_e"] == 0 for r in self.runs)
+    def without_paths(self) -> int:
+        """Runs whose selection at the group's W keeps neither path (nb_ft = nb_e = 0): a W beyond
+        what their data support, where "no feedforward" says nothing."""
+        return sum(r["nb_ft"] == 0 and r["nb_e"] == 0 for r in self.runs)
 
 
 def summarise_groups(groups: pa.Table, runs: pa.Table) -> list[GroupSummary]:
@@ -60,6 +60,12 @@ def summarise_groups(groups: pa.Table, runs: pa.Table) -> list[GroupSummary]:
 def _median(values: list[float]) -> float:
     finite = [v for v in values if math.isfinite(v)]
     return float(np.median(finite)) if finite else math.nan
+
+
+def has_safe_interval(group: dict) -> bool:
+    """Whether a group's W came from a safe interval of its twins (an ``analysis_groups`` row;
+    tables before NaN marked a missing interval hold a backward pair there)."""
+    return group["w_rule"] == "safe interval"
 
 
 def rate_interval(rate: float, low: float, high: float, *, long: bool = True) -> str:

@@ -36,12 +36,18 @@ def compute(run, done) -> CalibrationData | None:
             [
                 method,
                 f"{r['target_rate']:g}",
-                f"{r['safe_low']:.4g}",
-                f"{r['safe_high']:.4g}",
-                f"{r['recommended']:.4g}" if np.isfinite(r["recommended"]) else "no safe W",
+                *_interval(r),
             ]
         )
     return CalibrationData(run.calibration, run.config.name, rows, recommended)
+
+
+def _interval(r: dict) -> tuple[str, str, str]:
+    """The safe interval's ends and the recommended W; without a safe interval the calibration's
+    pair is false positives up to, false negatives from (backward), not an interval."""
+    if np.isfinite(r["recommended"]):
+        return f"{r['safe_low']:.4g}", f"{r['safe_high']:.4g}", f"{r['recommended']:.4g}"
+    return f"none (FP up to {r['safe_low']:.4g})", f"none (FN from {r['safe_high']:.4g})", "no safe W"
 
 
 def render(data: CalibrationData | None, doc: Doc) -> None:

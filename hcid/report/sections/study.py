@@ -13,7 +13,7 @@ from hcid import tables
 from hcid.hcfit.consistency import CONTRADICTED, format_p
 from hcid.hcfit.determined import is_flagged, is_undetermined
 from hcid.io import results
-from hcid.pipeline.summary import rate_interval, summarise_groups
+from hcid.pipeline.summary import has_safe_interval, rate_interval, summarise_groups
 from hcid.report import figures, figures_hcfit
 from hcid.report.document import Doc
 from hcid.tables import HC_PARAMETER_NAMES
@@ -35,7 +35,7 @@ class StudyData:
     contradicted: list[str] = field(default_factory=list)
     evidence: list[tuple[str, str, list, list, float, str]] = field(default_factory=list)
     set_aside: list[list[str]] = field(default_factory=list)
-    without_feedback: list[str] = field(default_factory=list)
+    without_paths: list[str] = field(default_factory=list)
 
 
 def _num(x, digits: int = 3) -> str:
@@ -64,7 +64,7 @@ def _model_curves(run, twin: dict, lines: list[float]) -> dict:
 def _answer(summary) -> list[str]:
     """A group and method's answer row: verdict, evidence, W and the twins' rates."""
     g = summary.group
-    safe = f"[{_num(g['safe_low'])}, {_num(g['safe_high'])})" if math.isfinite(g["safe_low"]) else "none"
+    safe = f"[{_num(g['safe_low'])}, {_num(g['safe_high'])})" if has_safe_interval(g) else "none"
     return [
         g["group"],
         g["method"],
@@ -253,10 +253,10 @@ def compute(run, done) -> StudyData | None:
     summaries = summarise_groups(groups, runs)
     answers = [_answer(s) for s in summaries]
     uncertain = [f"{s.group['group']} ({s.group['method']})" for s in summaries if s.group["uncertain"]]
-    without_feedback = [
-        f"{s.group['group']} ({s.group['method']}): {s.without_feedback} of {len(s.runs)} runs"
+    without_paths = [
+        f"{s.group['group']} ({s.group['method']}): {s.without_paths} of {len(s.runs)} runs"
         for s in summaries
-        if s.without_feedback
+        if s.without_paths
     ]
     parameters = [row for s in summaries for row in _parameter_rows(s)]
     checks, contradicted = _checks(groups)
@@ -279,7 +279,7 @@ def compute(run, done) -> StudyData | None:
         contradicted,
         _evidence(run, summaries),
         set_aside,
-        without_feedback,
+        without_paths,
     )
 
 
@@ -353,11 +353,11 @@ def _render_answers(data: StudyData, doc: Doc) -> None:
             "its FF twin loses it. The verdict (each run's p-value against its own FB twins) needs no "
             "W and stands on its stated power."
         )
-    if data.without_feedback:
+    if data.without_paths:
         doc.text(
-            "**At the calibrated W some runs keep no feedback path either** (nb_e = 0: the selection "
+            "**At the calibrated W some runs keep no path at all** (nb_ft = nb_e = 0: the selection "
             "has dropped both paths, a W beyond what their data support): "
-            + "; ".join(data.without_feedback)
+            + "; ".join(data.without_paths)
             + ". Their yes/no at W says nothing about feedforward; their p-values need no W."
         )
 
