@@ -123,3 +123,22 @@ def test_the_runs_own_inversion_beside_the_coefficient_average():
     median, q25, q75 = fc.inversion_runs(np.ones(1))
     assert (median[0], q25[0], q75[0]) == (1.0, 0.75, 1.5)
     assert fc.inversion(np.ones(1))[0][0] == pytest.approx(abs(1 - 1.5j) / 3)
+
+
+def test_a_group_without_an_estimate_gets_one_row_saying_why(ci_config):
+    # A constant target has no lines: fc_estimates.parquet gets the group's one row with the
+    # reason and NaN in every number, and the row fits the table's schema exactly.
+    import math
+
+    import pyarrow as pa
+
+    from hcid import tables
+    from hcid.pipeline.analysis_tables import _fc_rows
+
+    record = {k: np.zeros(2048) for k in ("ft", "fd", "e", "u")}
+    (row,) = _fc_rows(ci_config, "g", [1], {1: record}, {})
+    assert row["problem"].startswith("no Fourier-coefficient estimate: the target is constant")
+    assert math.isnan(row["inversion_q75"]) and row["n_runs"] == 1 and row["path"] == ""
+    schema = pa.schema([pa.field(n, k) for n, k in tables.FC_ESTIMATES.fields])
+    assert tables.FC_ESTIMATES.problem(pa.Table.from_pylist([row], schema=schema)) is None
+    assert set(row) == set(schema.names)

@@ -81,75 +81,23 @@ def print_thresholds(sweep, is_paper: bool) -> None:
 
 
 def print_analysis(result) -> None:
-    """Per group and method: the answer first (feedforward in k of N runs at W, how sure), then
-    the parameters the runs determine, the loop, and the data check (SPEC 11)."""
-    from hcid.hcfit.consistency import CONTRADICTED, format_p
-    from hcid.pipeline.summary import has_safe_interval, rate_interval, summarise_groups
+    """Per group and method: the answer first (the verdict, then the counts and the evidence),
+    SPEC 10's calibrated W, the parameters the runs determine, the loop, and the data check
+    (SPEC 11); then what was set aside and where the tables are."""
+    from hcid.pipeline.summary import summarise_groups
 
     checked = set()  # groups whose model's data check is printed (the same for every method)
     for summary in summarise_groups(result.groups, result.runs):
         g = summary.group
-        if has_safe_interval(g):
-            safe = f"safe interval [{g['safe_low']:.3g}, {g['safe_high']:.3g})"
-            if g["ff_twin"] == "study":
-                safe += (
-                    f" for the study's feedforward (Kpt {g['twin_Kpt']:.2g}; this group's own fitted "
-                    f"Kpt is {g['fitted_Kpt']:.2g})"
-                )
-        elif g["uncertain"]:
-            whose = " (with the study's feedforward)" if g["ff_twin"] == "study" else ""
-            safe = (
-                f"NO W separates the twins{whose}: W of least total error, every decision at this W "
-                "UNCERTAIN (the verdict above needs no W)"
-            )
-        else:
-            safe = (
-                "no contiguous safe interval; W of least total error, where the twins' rates are "
-                "within the target"
-            )
-        typer.echo(
-            f"{g['group']}, {g['method']}: {g['verdict']}: {g['n_evidence']} of {g['n_runs']} runs show "
-            f"feedforward at p <= {g['alpha']:g} (decided by their {g['decided_by']} against their own "
-            f"forcing set's FB twins, up to {g['fb_twins']} drawn: the statistic with the higher power; "
-            f"binomial p = {g['binomial_p']:.2g}; power (FF twins found at this level) "
-            + (
-                f"{summary.power[0]:.2f} for every run, "
-                if f"{summary.power[0]:.2f}" == f"{summary.power[1]:.2f}"
-                else f"{summary.power[0]:.2f} to {summary.power[1]:.2f} over the runs, "
-            )
-            + f"{g['forcing_sets']} forcing set{'s' if g['forcing_sets'] > 1 else ''})"
-        )
-        typer.echo(
-            f"    calibrated W (SPEC 10): feedforward in {g['n_feedforward']} of {g['n_runs']} runs at "
-            f"W = {g['w']:.3g} ({safe}; twins' FP {rate_interval(g['fp_rate'], g['fp_low'], g['fp_high'])}, "
-            f"FN {rate_interval(g['fn_rate'], g['fn_low'], g['fn_high'])})" + _without_paths(summary)
-        )
+        typer.echo(_verdict_line(summary))
+        typer.echo(_calibrated_line(summary))
         typer.echo(_analysis_parameters(summary.parameters))
         typer.echo(
             f"    loop: crossover {summary.crossover:.3g} rad/s, phase margin {summary.phase_margin:.3g} deg "
             "(medians over runs)"
         )
-        contradicted = (
-            f"{g['n_contradicted']} of {g['n_runs']} runs' own fits at W are contradicted by the data"
-        )
-        if g["fc_dof"] > 0 and g["group"] in checked:
-            typer.echo(f"    data check: the group's model as above; {contradicted} (p < {CONTRADICTED:g})")
-        elif g["fc_dof"] > 0:
-            checked.add(g["group"])
-            ht = (
-                ""
-                if g["ht_error_db"] != g["ht_error_db"]
-                else (f", Ht {g['ht_error_db']:.1f} dB {g['ht_error_deg']:.0f} deg")
-            )
-            typer.echo(
-                f"    data check: the group's model{_model_source(g)} is {g['fc_verdict']} "
-                f"(chi-square {g['fc_chi2']:.1f} on "
-                f"{g['fc_dof']} dof, p = {format_p(g['fc_p'])}, spread {g['fc_spread']}; median |error| "
-                f"against the Fourier-coefficient estimates He {g['he_error_db']:.1f} dB "
-                f"{g['he_error_deg']:.0f} deg{ht}); {contradicted} (p < {CONTRADICTED:g})"
-            )
-        else:
-            typer.echo(f"    data check: {g['fc_verdict']}")
+        typer.echo(_data_check_line(g, full=g["group"] not in checked))
+        checked.add(g["group"])
     if result.set_aside:
         typer.echo(
             f"SET ASIDE (--skip-unreadable): {len(result.set_aside)} file(s) could not be read and are "
@@ -160,6 +108,74 @@ def print_analysis(result) -> None:
         + ", ".join(f"{name} {sec:.1f}" for name, sec in result.stages.items())
         + f"); wrote {result.run_dir / 'analysis.parquet'} (and .csv: one row "
         f"per run and method, with its factors) and {result.run_dir / 'analysis_groups.parquet'}"
+    )
+
+
+def _verdict_line(summary) -> str:
+    """The group and method's verdict, its runs at p <= alpha and the evidence behind it."""
+    g, (low, high) = summary.group, summary.power
+    same = f"{low:.2f}" == f"{high:.2f}"
+    power = f"{low:.2f} for every run" if same else f"{low:.2f} to {high:.2f} over the runs"
+    return (
+        f"{g['group']}, {g['method']}: {g['verdict']}: {g['n_evidence']} of {g['n_runs']} runs show "
+        f"feedforward at p <= {g['alpha']:g} (decided by their {g['decided_by']} against their own "
+        f"forcing set's FB twins, up to {g['fb_twins']} drawn: the statistic with the higher power; "
+        f"binomial p = {g['binomial_p']:.2g}; power (FF twins found at this level) {power}, "
+        f"{g['forcing_sets']} forcing set{'s' if g['forcing_sets'] > 1 else ''})"
+    )
+
+
+def _calibrated_line(summary) -> str:
+    """SPEC 10's calibrated W: feedforward in how many runs there, how W was chosen, the twins' rates."""
+    from hcid.pipeline.summary import has_safe_interval, rate_interval
+
+    g = summary.group
+    if has_safe_interval(g):
+        safe = f"safe interval [{g['safe_low']:.3g}, {g['safe_high']:.3g})"
+        if g["ff_twin"] == "study":
+            safe += (
+                f" for the study's feedforward (Kpt {g['twin_Kpt']:.2g}; this group's own fitted "
+                f"Kpt is {g['fitted_Kpt']:.2g})"
+            )
+    elif g["uncertain"]:
+        whose = " (with the study's feedforward)" if g["ff_twin"] == "study" else ""
+        safe = (
+            f"NO W separates the twins{whose}: W of least total error, every decision at this W "
+            "UNCERTAIN (the verdict above needs no W)"
+        )
+    else:
+        safe = (
+            "no contiguous safe interval; W of least total error, where the twins' rates are "
+            "within the target"
+        )
+    return (
+        f"    calibrated W (SPEC 10): feedforward in {g['n_feedforward']} of {g['n_runs']} runs at "
+        f"W = {g['w']:.3g} ({safe}; twins' FP {rate_interval(g['fp_rate'], g['fp_low'], g['fp_high'])}, "
+        f"FN {rate_interval(g['fn_rate'], g['fn_low'], g['fn_high'])})" + _without_paths(summary)
+    )
+
+
+def _data_check_line(g: dict, *, full: bool) -> str:
+    """The group's model against the data's own frequency response (in ``full`` once per group:
+    the model is the same for every method), and the method's runs whose own fits it contradicts."""
+    from hcid.hcfit.consistency import CONTRADICTED, format_p
+
+    if g["fc_dof"] <= 0:
+        return f"    data check: {g['fc_verdict']}"
+    contradicted = (
+        f"{g['n_contradicted']} of {g['n_runs']} runs' own fits at W are contradicted by the data "
+        f"(p < {CONTRADICTED:g})"
+    )
+    if not full:
+        return f"    data check: the group's model as above; {contradicted}"
+    ht = ""
+    if g["ht_error_db"] == g["ht_error_db"]:  # NaN without feedforward lines
+        ht = f", Ht {g['ht_error_db']:.1f} dB {g['ht_error_deg']:.0f} deg"
+    return (
+        f"    data check: the group's model{_model_source(g)} is {g['fc_verdict']} "
+        f"(chi-square {g['fc_chi2']:.1f} on {g['fc_dof']} dof, p = {format_p(g['fc_p'])}, spread "
+        f"{g['fc_spread']}; median |error| against the Fourier-coefficient estimates He "
+        f"{g['he_error_db']:.1f} dB {g['he_error_deg']:.0f} deg{ht}); {contradicted}"
     )
 
 

@@ -182,30 +182,9 @@ def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median:
     base = {"group": name, "n_runs": len(seeds)}
     try:
         fc = fc_estimate([records[s] for s in seeds], config.timing.output_rate, rows)
-    except DataError as exc:
-        nan = math.nan
-        return [
-            {
-                **base,
-                "path": "",
-                "omega": nan,
-                "magnitude_db": nan,
-                "phase_deg": nan,
-                "sd_db": nan,
-                "sd_deg": nan,
-                "extrapolated": False,
-                "model_db": nan,
-                "model_deg": nan,
-                "inversion": nan,
-                "inversion_deg": nan,
-                "inversion_sd": nan,
-                "inversion_sd_deg": nan,
-                "inversion_median": nan,
-                "inversion_q25": nan,
-                "inversion_q75": nan,
-                "problem": str(exc),
-            }
-        ]
+    except DataError as exc:  # one row saying why, NaN in every number
+        numbers = {name: math.nan for name, kind in tables.FC_ESTIMATES.fields if pa.types.is_floating(kind)}
+        return [{**base, **numbers, "path": "", "extrapolated": False, "problem": str(exc)}]
     yc = plant(config.loop)
     out = []
     yc_t = np.asarray(yc(1j * fc.omega_t), dtype=complex)
