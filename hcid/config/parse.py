@@ -344,19 +344,7 @@ def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataC
         raise ConfigError(
             f"data.name: must be an identifier other than the model names {model_names}, got {fmt(name)}"
         )
-    cs = s.section("columns", {})
-    columns = {}
-    for key, default in _DATA_COLUMNS.items():
-        col = cs.get(key, default)
-        position = isinstance(col, int) and not isinstance(col, bool) and 1 <= col <= 10_000
-        if not position and (not isinstance(col, str) or not col):
-            raise ConfigError(
-                f"data.columns.{key}: must be a column or variable name, or a CSV column's position "
-                f"(1 for the first), got {fmt(col)}"
-            )
-        columns[key] = col
-    time_default = "time" not in cs.data
-    cs.done()
+    columns, time_default = _data_columns(s.section("columns", {}))
     w_raw = s.get("w_report", [0.00715, 0.47])
     if (
         not isinstance(w_raw, list)
@@ -370,21 +358,7 @@ def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataC
     struct = s.get("struct", None)
     if struct is not None and (not isinstance(struct, str) or not struct.isidentifier()):
         raise ConfigError(f"data.struct: must be a MATLAB variable name, got {fmt(struct)}")
-    dimensions = s.get("dimensions", None)
-    if dimensions is not None:
-        ok = isinstance(dimensions, list) and all(isinstance(d, str) for d in dimensions)
-        if not ok or dimensions.count("sample") != 1 or len(set(dimensions)) != len(dimensions):
-            raise ConfigError(
-                f"data.dimensions: must name each axis once, 'sample' among them (e.g. [sample, trial, "
-                f"subject]), got {fmt(dimensions)}"
-            )
-        for d in dimensions:
-            if d != "sample" and (not d.isidentifier() or d in RESERVED_FACTORS):
-                raise ConfigError(
-                    f"data.dimensions: factor {fmt(d)} must be an identifier other than "
-                    f"{', '.join(RESERVED_FACTORS)}"
-                )
-        dimensions = tuple(dimensions)
+    dimensions = _data_dimensions(s.get("dimensions", None))
     lead_in = s.number("lead_in", 0.0, 1e4, 0.0)
     rate = timing.output_rate
     if abs(lead_in * rate - round(lead_in * rate)) > 1e-6:
@@ -402,6 +376,44 @@ def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataC
         struct=struct,
         dimensions=dimensions,
     )
+
+
+def _data_columns(cs: Section) -> tuple[dict[str, str | int], bool]:
+    """``data.columns``: each signal's column (a name, or a CSV position from 1), and whether the
+    time column is the default's (the file may then have none)."""
+    columns = {}
+    for key, default in _DATA_COLUMNS.items():
+        col = cs.get(key, default)
+        position = isinstance(col, int) and not isinstance(col, bool) and 1 <= col <= 10_000
+        if not position and (not isinstance(col, str) or not col):
+            raise ConfigError(
+                f"data.columns.{key}: must be a column or variable name, or a CSV column's position "
+                f"(1 for the first), got {fmt(col)}"
+            )
+        columns[key] = col
+    time_default = "time" not in cs.data
+    cs.done()
+    return columns, time_default
+
+
+def _data_dimensions(dimensions) -> tuple[str, ...] | None:
+    """``data.dimensions`` (a MATLAB array's axes): each named once, ``sample`` among them, the
+    others factor names."""
+    if dimensions is None:
+        return None
+    ok = isinstance(dimensions, list) and all(isinstance(d, str) for d in dimensions)
+    if not ok or dimensions.count("sample") != 1 or len(set(dimensions)) != len(dimensions):
+        raise ConfigError(
+            f"data.dimensions: must name each axis once, 'sample' among them (e.g. [sample, trial, "
+            f"subject]), got {fmt(dimensions)}"
+        )
+    for d in dimensions:
+        if d != "sample" and (not d.isidentifier() or d in RESERVED_FACTORS):
+            raise ConfigError(
+                f"data.dimensions: factor {fmt(d)} must be an identifier other than "
+                f"{', '.join(RESERVED_FACTORS)}"
+            )
+    return tuple(dimensions)
 
 
 #: Names a file-name pattern's factors may not take: hcid's own columns in the tables.
