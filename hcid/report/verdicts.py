@@ -322,8 +322,18 @@ def _response_verdicts(config, fb, ff, bic: Responses | None, w047: Responses | 
     split = paper.FEEDFORWARD_ACCURATE_BELOW
     band = _band(omega, low_end, split)
 
-    # FB false positives at W_BIC vs FF feedforward with Kpt = 0.2
-    ref = reference_feedforward(config, omega)
+    out.append(_false_positive_verdict(config, fb, bic, methods, band))
+    hft_true, he_true = true_response(ff, config.loop, omega)
+    out += _feedforward_at_bic_verdicts(ff, bic, hft_true, methods, band, _band(omega, split, high_end))
+    out += _w047_verdicts(ff, w047, he_true, methods)
+    out += _error_verdicts(ff, bic, hft_true, he_true, methods, low_end)
+    return out
+
+
+def _false_positive_verdict(config, fb, bic: Responses, methods, band) -> Verdict:
+    """Fig. 8: FB false positives at W_BIC against FF feedforward with Kpt = 0.2 (magnitude alike,
+    phase 180 deg off) on the band below 3 rad/s."""
+    ref = reference_feedforward(config, bic.omega)
     ratios, phases, n_fp = [], [], 0
     for me in methods:
         key = (fb.name, me)
@@ -333,62 +343,51 @@ def _response_verdicts(config, fb, ff, bic: Responses | None, w047: Responses | 
             h = bic.hft[key][fp][:, band]
             ratios.append(np.median(np.abs(h) / np.abs(ref[band])))
             phases.append(np.median(np.abs(np.degrees(np.angle(h * np.conj(ref[band]))))))
-    if n_fp:
-        ratio, phase = float(np.median(ratios)), float(np.median(phases))
-        out.append(
-            Verdict(
-                "FB false positives at W_BIC",
-                "magnitude like FF feedforward with Kpt ~ 0.2, phase 180 deg off",
-                f"{n_fp} false positives; median |H|/|H(Kpt=0.2)| {ratio:.2f}, "
-                f"median phase offset {phase:.0f} deg "
-                "(0.23-3 rad/s)",
-                bool(0.5 <= ratio <= 2.0 and phase >= 135.0),
-                "median magnitude ratio in [0.5, 2] and median phase offset >= 135 deg, 0.23..3 rad/s",
-            )
+    if not n_fp:
+        return Verdict(
+            "FB false positives at W_BIC",
+            "magnitude like Kpt ~ 0.2, phase 180 deg off",
+            "no false positive at W_BIC",
+            None,
+            "needs a false positive to compare",
         )
-    else:
-        out.append(
-            Verdict(
-                "FB false positives at W_BIC",
-                "magnitude like Kpt ~ 0.2, phase 180 deg off",
-                "no false positive at W_BIC",
-                None,
-                "needs a false positive to compare",
-            )
-        )
+    ratio, phase = float(np.median(ratios)), float(np.median(phases))
+    return Verdict(
+        "FB false positives at W_BIC",
+        "magnitude like FF feedforward with Kpt ~ 0.2, phase 180 deg off",
+        f"{n_fp} false positives; median |H|/|H(Kpt=0.2)| {ratio:.2f}, "
+        f"median phase offset {phase:.0f} deg "
+        "(0.23-3 rad/s)",
+        bool(0.5 <= ratio <= 2.0 and phase >= 135.0),
+        "median magnitude ratio in [0.5, 2] and median phase offset >= 135 deg, 0.23..3 rad/s",
+    )
 
-    # FF feedforward at W_BIC: accurate below 3 rad/s, NMS-like peak above
-    hft_true, he_true = true_response(ff, config.loop, omega)
+
+def _feedforward_at_bic_verdicts(ff, bic: Responses, hft_true, methods, band, high) -> list[Verdict]:
+    """FF feedforward at W_BIC: accurate below 3 rad/s (``band``), an NMS-like peak above (``high``)."""
     rel_err, peaks = {}, {}
-    high = _band(omega, split, high_end)
     for me in methods:
         h = bic.hft[(ff.name, me)]
         rel_err[me] = float(
             np.mean(np.abs(np.abs(h[:, band]) - np.abs(hft_true[band])) / np.abs(hft_true[band]))
         )
         peaks[me] = float(np.median(np.max(np.abs(h[:, high]) / np.abs(hft_true[high]), axis=1)))
-    out.append(
+    return [
         Verdict(
             "FF feedforward at W_BIC accurate below 3 rad/s",
             "accurate below 3 rad/s",
             ", ".join(f"{me} mean rel. magnitude error {rel_err[me]:.1%}" for me in methods),
             bool(all(v <= 0.2 for v in rel_err.values())),
             "mean relative magnitude error <= 20% on 0.23..3 rad/s",
-        )
-    )
-    out.append(
+        ),
         Verdict(
             "FF feedforward at W_BIC: NMS-like peak above 3 rad/s",
             "peak not in the true path",
             ", ".join(f"{me} median peak |H|/|Htrue| {peaks[me]:.2f}" for me in methods),
             bool(all(v >= 1.2 for v in peaks.values())),
             "median over realizations of max |H|/|Htrue| on 3..17 rad/s >= 1.2",
-        )
-    )
-
-    out += _w047_verdicts(ff, w047, he_true, methods)
-    out += _error_verdicts(ff, bic, hft_true, he_true, methods, low_end)
-    return out
+        ),
+    ]
 
 
 def _w047_verdicts(ff, w047: Responses | None, he_true: np.ndarray, methods) -> list[Verdict]:
