@@ -180,19 +180,12 @@ def _covariance_kind(target: str, settings: FitSettings) -> str:
     return {"frequency": "none", "lines": "gauss_newton"}.get(target, settings.covariance)
 
 
-def _solve(
-    problem, settings: FitSettings, target: str, record: TrackingRecord | None, fixed: dict | None = None
-) -> HCFit:
-    full_names = problem.names
-    fixed = {n: float(v) for n, v in (fixed or {}).items() if n in full_names}
-    if fixed:
-        problem = Fixed(problem, fixed)
-    bounds = [settings.bound(n) for n in problem.names]
-    lower = np.array([b.lower for b in bounds])
-    upper = np.array([b.upper for b in bounds])
-    start_box = [(b.start_lower, b.start_upper) for b in bounds]
-    # A zero-width starting range is a fixed start: widen it by a hair for DE.
-    start_box = [(lo, hi if hi > lo else lo + 1e-12 * max(1.0, abs(lo))) for lo, hi in start_box]
+def _optimum(
+    problem, settings: FitSettings, lower, upper, start_box
+) -> tuple[float, np.ndarray, list[float]]:
+    """The least cost over a global stage (differential evolution over the starting box) and
+    ``settings.starts`` random starts, each polished by bounded least squares: ``(cost, x, the
+    cost reached from every start, the global stage's first)``."""
     glob = optimize.differential_evolution(
         # Clipped, so a widened zero-width start never leaves the bounds.
         lambda thetas: problem.costs(np.clip(thetas, lower[:, None], upper[:, None])),
@@ -207,7 +200,7 @@ def _solve(
     )
     rng = np.random.default_rng([settings.seed, 1])
     randoms = rng.uniform(
-        [lo for lo, _ in start_box], [hi for _, hi in start_box], (settings.starts, len(bounds))
+        [lo for lo, _ in start_box], [hi for _, hi in start_box], (settings.starts, len(start_box))
     )
     best = None
     costs = []
@@ -228,7 +221,30 @@ def _solve(
         costs.append(cost)
         if best is None or cost < best[0]:
             best = (cost, fit.x)
-    cost, x = best
+    return best[0], best[1], costs
+
+
+def _validation_vaf(values: dict, plant, record: TrackingRecord, oversample: int) -> float:
+    """``(1 - sum (u - u_par)^2 / sum u^2) * 100`` (%) over the record's validation rows."""
+    u_par = simulate_hc(values, plant, record, oversample)
+    u = record.u[record.validation]
+    return float((1.0 - np.sum((u - u_par[record.validation]) ** 2) / np.sum(u**2)) * 100.0)
+
+
+def _solve(
+    problem, settings: FitSettings, target: str, record: TrackingRecord | None, fixed: dict | None = None
+) -> HCFit:
+    full_names = problem.names
+    fixed = {n: float(v) for n, v in (fixed or {}).items() if n in full_names}
+    if fixed:
+        problem = Fixed(problem, fixed)
+    bounds = [settings.bound(n) for n in problem.names]
+    lower = np.array([b.lower for b in bounds])
+    upper = np.array([b.upper for b in bounds])
+    start_box = [(b.start_lower, b.start_upper) for b in bounds]
+    # A zero-width starting range is a fixed start: widen it by a hair for DE.
+    start_box = [(lo, hi if hi > lo else lo + 1e-12 * max(1.0, abs(lo))) for lo, hi in start_box]
+    cost, x, costs = _optimum(problem, settings, lower, upper, start_box)
     width = upper - lower
     at_bound = tuple(
         bool(v - lo <= BOUND_TOLERANCE * w or hi - v <= BOUND_TOLERANCE * w)
@@ -241,11 +257,7 @@ def _solve(
     )
     free = dict(zip(problem.names, (float(v) for v in x), strict=True))
     values = {n: fixed.get(n, free.get(n)) for n in full_names}
-    vaf = math.nan
-    if record is not None:
-        u_par = simulate_hc(values, problem.plant, record, settings.oversample)
-        u = record.u[record.validation]
-        vaf = float((1.0 - np.sum((u - u_par[record.validation]) ** 2) / np.sum(u**2)) * 100.0)
+    vaf = math.nan if record is None else _validation_vaf(values, problem.plant, record, settings.oversample)
 
     def spread(per_free, default):
         got = dict(zip(problem.names, per_free, strict=True))
