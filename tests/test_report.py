@@ -428,3 +428,23 @@ def test_the_w_axis_labels_print_clear_of_each_other(low):
     boxes = sorted((t.get_window_extent(renderer) for t in labels), key=lambda b: b.x0)
     for a, b in zip(boxes, boxes[1:], strict=False):
         assert a.x1 + 2 <= b.x0, (a, b)
+
+
+def test_a_variant_is_summarised_from_its_own_tables(ci_run):
+    # hcid.report.variants (make indirect-variants) had no test: on the ci run (3 seeds), its W_FP
+    # is thresholds.parquet's indirect FB row, no block of 50 realizations is complete, the most
+    # frequent stage-1 structure among the FB realizations is counted, and the rates are the FB
+    # twin's under the indirect method.
+    from hcid.io.resolve import load_config
+    from hcid.report.variants import compute_variant
+
+    variant = compute_variant(load_config(CI_CONFIG), ci_run)
+    rows = pq.read_table(ci_run / "thresholds.parquet").to_pylist()
+    fb = next(r for r in rows if r["method"] == "indirect" and r["model"] == "FB")
+    assert (variant.n, variant.w_fp, variant.block_w_fp) == (3, fb["w_fp"], ())
+    columns = ("na", "nb_ft", "nb_fd", "nk_ft", "nk_fd")
+    chosen = [tuple(r[c] for c in columns) for r in pq.read_table(ci_run / "stage1.parquet").to_pylist()
+              if r["model"] == "FB"]  # fmt: skip
+    assert int(variant.stage1_top.rsplit(" x", 1)[1]) == max(chosen.count(s) for s in chosen)
+    assert set(variant.rates.column("model").to_pylist()) == {"FB"}
+    assert set(variant.rates.column("method").to_pylist()) == {"indirect"}

@@ -63,6 +63,42 @@ def _fb(config: Config):
     return fb
 
 
+def _block_w_fp(run_dir: Path, fb: str, hint: str) -> tuple[float, ...]:
+    """W_FP of each block of :data:`BLOCK` FB realizations (in seed order): the largest W at which
+    any of them selects feedforward under the indirect method, from the breakpoints."""
+    bp = results.read(tables.BREAKPOINTS, run_dir, hint=hint).to_pydict()
+    extent: dict[int, float] = {}
+    for model, seed, method, w_to, nb in zip(
+        bp["model"], bp["seed"], bp["method"], bp["w_to"], bp["nb_ft"], strict=True
+    ):
+        if model == fb and method == METHOD:
+            extent.setdefault(seed, 0.0)
+            if nb > 0:
+                extent[seed] = max(extent[seed], w_to)
+    seeds = sorted(extent)
+    return tuple(
+        max(extent[s] for s in seeds[i : i + BLOCK]) for i in range(0, len(seeds) - BLOCK + 1, BLOCK)
+    )
+
+
+def _stage1_choices(config: Config, run_dir: Path, fb: str, hint: str) -> tuple[float, str]:
+    """Stage 1's choices for the FB realizations: the share at the grid's largest nb_ft, and the
+    most frequent structure with its count."""
+    stage1 = results.read(tables.stage_choice("stage1", ("ft", "fd", "e")), run_dir, hint=hint).to_pydict()
+    chosen = [
+        tuple(stage1[c][i] for c in ("na", "nb_ft", "nb_fd", "nk_ft", "nk_fd"))
+        for i in range(len(stage1["model"]))
+        if stage1["model"][i] == fb
+    ]
+    bound = config.identify.stage("stage1").grid.nb1[1]
+    counts: dict[tuple, int] = {}
+    for c in chosen:
+        counts[c] = counts.get(c, 0) + 1
+    top = max(counts.items(), key=lambda x: x[1]) if counts else ((), 0)
+    at_bound = float(np.mean([c[1] == bound for c in chosen])) if chosen else np.nan
+    return at_bound, f"{list(top[0])} x{top[1]}"
+
+
 def compute_variant(config: Config, run_dir: Path) -> Variant:
     """The figures of one variant's run directory (after ``identify --method indirect``, ``sweep-w``)."""
     fb = _fb(config).name
@@ -76,19 +112,7 @@ def compute_variant(config: Config, run_dir: Path) -> Variant:
             f"{run_dir}: thresholds.parquet has no {METHOD} row for {fb} with sampling columns; {hint}"
         )
     row = th[(METHOD, fb)]
-    bp = results.read(tables.BREAKPOINTS, run_dir, hint=hint).to_pydict()
-    extent: dict[int, float] = {}
-    for model, seed, method, w_to, nb in zip(
-        bp["model"], bp["seed"], bp["method"], bp["w_to"], bp["nb_ft"], strict=True
-    ):
-        if model == fb and method == METHOD:
-            extent.setdefault(seed, 0.0)
-            if nb > 0:
-                extent[seed] = max(extent[seed], w_to)
-    seeds = sorted(extent)
-    blocks = tuple(
-        max(extent[s] for s in seeds[i : i + BLOCK]) for i in range(0, len(seeds) - BLOCK + 1, BLOCK)
-    )
+    blocks = _block_w_fp(run_dir, fb, hint)
     handoff = results.read(tables.HANDOFF, run_dir, hint=hint).to_pydict()
     mine = [
         i
@@ -98,17 +122,7 @@ def compute_variant(config: Config, run_dir: Path) -> Variant:
     vafs = np.array([handoff["vaf_noise_free"][i] for i in mine])
     vafs_record = np.array([handoff["vaf_noise_free_record"][i] for i in mine])
     med, p5, lo = summarize(vafs) if vafs.size else (np.nan, np.nan, np.nan)
-    stage1 = results.read(tables.stage_choice("stage1", ("ft", "fd", "e")), run_dir, hint=hint).to_pydict()
-    chosen = [
-        tuple(stage1[c][i] for c in ("na", "nb_ft", "nb_fd", "nk_ft", "nk_fd"))
-        for i in range(len(stage1["model"]))
-        if stage1["model"][i] == fb
-    ]
-    bound = config.identify.stage("stage1").grid.nb1[1]
-    counts: dict[tuple, int] = {}
-    for c in chosen:
-        counts[c] = counts.get(c, 0) + 1
-    top = max(counts.items(), key=lambda x: x[1]) if counts else ((), 0)
+    at_bound, top = _stage1_choices(config, run_dir, fb, hint)
     rates = results.read(tables.RATES, run_dir, hint=hint)
     mask = [
         m == fb and me == METHOD
@@ -127,8 +141,8 @@ def compute_variant(config: Config, run_dir: Path) -> Variant:
         vaf_p5=p5,
         vaf_min=lo,
         vaf_record_median=float(np.median(vafs_record)) if vafs_record.size else np.nan,
-        nb_ft_at_bound=float(np.mean([c[1] == bound for c in chosen])) if chosen else np.nan,
-        stage1_top=f"{list(top[0])} x{top[1]}",
+        nb_ft_at_bound=at_bound,
+        stage1_top=top,
         rates=rates.filter(pa.array(mask)),
     )
 
