@@ -408,8 +408,7 @@ def _select_and_fit(study: _Study, found: _Found, judge: Evidence, run_sizes: di
                 t, path, nb_ft = found.paths[(seed, method_name)]
                 found.evidence[(seed, method_name)] = judge.run(
                     group_name(study.by, key),
-                    path,
-                    nb_ft,
+                    judge.w_star(path, nb_ft),
                     pair,
                     seed,
                     method_name,

@@ -260,9 +260,10 @@ class Evidence:
         return methods_open, fourier_open
 
     def run(
-        self, group: str, path, nb_ft, pair, seed: int, method: str, run_size: float | None, deciding: str
+        self, group: str, w_star: float, pair, seed: int, method: str, run_size: float | None, deciding: str
     ) -> dict:
-        """The run's evidence columns (``decide`` adds the deciding ones). The ``deciding``
+        """The run's evidence columns from its W* (:meth:`w_star`) and its Fourier size
+        (``run_size``; ``decide`` adds the deciding ones). The ``deciding``
         statistic's p-value is over every FB twin drawn for it (each run stops at its own 5th, or
         all were drawn: Besag and Clifford's p); the other's over the calibration's FB twins only,
         a fixed number, since how many more were drawn depended on the deciding statistic. Each
@@ -273,7 +274,6 @@ class Evidence:
         forcing_set = pair.sets.index(own) + 1
         self._judged[(group, method, forcing_set)] = own
         fb, fb_sizes = self.used(group, forcing_set, own, method, deciding)
-        w_star = self.w_star(path, nb_ft)
         p_w, n_w = sequential_p_value(w_star, fb, EXCEEDANCES)
         sizes = self.sizes(own)
         fourier = (math.nan, math.nan, math.nan, 0)
