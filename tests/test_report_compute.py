@@ -30,3 +30,18 @@ def test_each_status_has_its_mark_in_the_run_table():
     assert _with_se(row("not told from 0 (se above |value|)"), "Kpe") == "33.5 ± 0.1‡"
     assert _with_se(row("in a failed fit (validation VAF below 0%)", 3.8e-9), "Kpe") == "33.5 ± 3.8e-09†"
     assert _with_se(row("fixed at a literature value", float("nan")), "Kpe") == "33.5°"
+
+
+def test_the_evidence_caption_names_each_run_by_the_factors_that_differ():
+    # The figure numbers runs; its caption keys them to the factors that differ within the group
+    # (the group's own factor is the same for all), up to 24 runs (beyond: the run table).
+    from hcid.report.sections.study import _run_names
+
+    runs = [
+        {"run_id": i + 1, "method": "direct", "subject": s, "plant": "fo", "trial": t}
+        for i, (s, t) in enumerate([("dp", "+1"), ("dp", "-1"), ("ef", "+1")])
+    ]
+    assert _run_names(runs) == " Runs (subject, trial): 1 dp +1; 2 dp -1; 3 ef +1."
+    assert _run_names([{**r, "subject": "dp", "trial": "+1"} for r in runs]) == ""  # nothing differs
+    many = [{"run_id": i, "method": "direct", "subject": f"S{i}"} for i in range(25)]
+    assert _run_names(many) == "" and _run_names(many[:24]).startswith(" Runs (subject): 0 S0; 1 S1;")

@@ -362,6 +362,21 @@ def _render_answers(data: StudyData, doc: Doc) -> None:
         )
 
 
+#: The most runs whose factors an evidence figure's caption lists (beyond: the run table has them).
+_NAMED_RUNS = 24
+
+
+def _run_names(runs: list[dict]) -> str:
+    """The caption's key from the figure's run numbers to the factors that differ between them
+    (e.g. ``1 dp +1``); empty where none differ or the runs are too many to list."""
+    factors = [c for c in runs[0] if c not in tables.ANALYSIS.names] if runs else []
+    varying = [f for f in factors if len({str(r[f]) for r in runs}) > 1]
+    if not varying or len(runs) > _NAMED_RUNS:
+        return ""
+    names = "; ".join(f"{r['run_id']} {' '.join(str(r[f]) for f in varying)}" for r in runs)
+    return f" Runs ({', '.join(varying)}): {names}."
+
+
 def _render_evidence(data: StudyData, doc: Doc) -> None:
     """Each run's evidence on its twins, then each group's calibration of W."""
     for group, method, twins, runs, alpha, folder in data.evidence:
@@ -371,7 +386,8 @@ def _render_evidence(data: StudyData, doc: Doc) -> None:
             "feedforward) on its own forcing set's twins: a run shows feedforward where its p-value is "
             f"at most {alpha:g} (filled). FB twins are drawn until 5 are at or above the run's W* (p = 5 "
             "over the draws), else p = (1 + those at or above) / (1 + all drawn), Besag and Clifford's "
-            "sequential p-value; the FF twins show how often such a run would be found (the power).",
+            "sequential p-value; the FF twins show how often such a run would be found (the power)."
+            + _run_names(runs),
             lambda t=twins, r=runs, n=f"{group}, {method}", a=alpha: figures_hcfit.plot_evidence(t, r, n, a),
         )
     for title, caption, folder, table, used in data.calibrations:
