@@ -315,9 +315,10 @@ def _render_answers(data: StudyData, doc: Doc) -> None:
     doc.text(
         "Per group of runs and method, first the runs' own evidence (SPEC 11): each run's W* against "
         "its forcing set's FB twins gives a p-value; the verdict is FEEDFORWARD where the number of runs "
-        "at p <= alpha is itself unlikely without feedforward (binomial p), UNCERTAIN where the twins' "
-        "power is below 0.8. Then SPEC 10's calibrated W: feedforward (nb_ft > 0) in how many runs "
-        "at the group's W, "
+        "at p <= alpha is itself unlikely without feedforward (binomial p), else UNCERTAIN where the "
+        "twins' power is below 0.8 (a finding needs no power, an answer of none does) and NO "
+        "FEEDFORWARD SHOWN where it is not. Then SPEC 10's calibrated W: feedforward (nb_ft > 0) in "
+        "how many runs at the group's W, "
         "calibrated on twins of the group's own fitted model (FF twin) and the same without "
         "feedforward (FB twin), with the twins' false-positive and false-negative rates there and "
         "their exact 95% bands. Where no W separates a group's own twins (nobody there uses "
