@@ -137,16 +137,18 @@ _SHOWN = ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
 
 
 def _with_se(r: dict, p: str) -> str:
-    """The estimate with its se; † where the data do not determine it (its reason in
-    analysis.csv's <p>_status), ‡ where determined but to read with care (outside its plausible
-    range, or not told from 0), ° where held at a literature value."""
+    """The estimate with its se; † where the data do not determine it (no se then: its reason
+    in analysis.csv's <p>_status), ‡ where determined but to read with care (outside its
+    plausible range, or not told from 0), ° where held at a literature value."""
     if not math.isfinite(r[p]):
         return "-"
     status = r[p + "_status"]
     if status.startswith("fixed"):
         return _num(r[p]) + "°"
+    if is_undetermined(status):  # its se says nothing (3e+05 in a correlated pair, 4e-09 in a failed fit)
+        return _num(r[p]) + "†"
     se = f" ± {_num(r[p + '_se'], 2)}" if math.isfinite(r[p + "_se"]) else ""
-    return _num(r[p]) + se + ("†" if is_undetermined(status) else "‡" if is_flagged(status) else "")
+    return _num(r[p]) + se + ("‡" if is_flagged(status) else "")
 
 
 def _run_table(runs) -> tuple[list[str], list[list[str]]]:
@@ -294,8 +296,8 @@ def render(data: StudyData | None, doc: Doc) -> None:
     doc.text(
         "Every run (`analysis.csv` holds all columns, one row per run and method, ready for a "
         "repeated-measures ANOVA or a mixed model). Estimates ± standard error; † a value the run "
-        "does not determine (the reason in `analysis.csv`'s `<p>_status`), ‡ a value it determines "
-        "but outside the parameter's plausible range or not told from 0, ° held at a literature "
+        "does not determine, without its se (the reason and the se in `analysis.csv`), ‡ a value it "
+        "determines but outside the parameter's plausible range or not told from 0, ° held at a literature "
         "value (`hc_form` nms fixed); p (evidence): the run's feedforward p-value by the statistic "
         "that decides for its group (W* or the Fourier coefficients); nb_ft and feedforward at W: "
         "its selection at the group's calibrated W (SPEC 10); data check: the p-value of the run's "
