@@ -331,3 +331,27 @@ def test_flagged_values_are_counted_inside_their_entry_without_nested_parenthese
         "tau_pe 0.0981 s (4 of 6 runs, sd 0.064; 2 of them outside its plausible range), "
         "TI 0.0843 s (1 of 1 runs; 1 of them not told from 0, se above |value|)"
     )
+
+
+def test_a_verdict_carried_by_one_subject_is_said_with_each_subjects_count():
+    # The CPHS so direct group: 2 of 6 runs at p <= 0.05 (binomial p 0.033, FEEDFORWARD), both of
+    # subject ef's two trials; the binomial counts runs, so the answer says it rests on one person.
+    # Source for the per-subject p: Binomial(2, 0.05), P(2 of 2) = 0.0025.
+    from hcid.cli.answers import _subjects_line
+    from hcid.pipeline.summary import GroupSummary
+
+    p = {"dp": (0.5, 0.3), "ef": (0.03, 0.01), "gy": (0.45, 0.71)}
+    runs = [{"subject": s, "p_value": v} for s, pair in p.items() for v in pair]
+    group = {"alpha": 0.05, "verdict": "FEEDFORWARD"}
+    summary = GroupSummary(group, runs, (0.3, 0.3), [], 1.5, 55.0)
+    assert [(s, k, n) for s, k, n, _ in summary.by_subject()] == [("dp", 0, 2), ("ef", 2, 2), ("gy", 0, 2)]
+    assert summary.by_subject()[1][3] == pytest.approx(0.05**2)
+    assert _subjects_line(summary) == (
+        "    by subject, runs at p <= 0.05: dp 0 of 2, ef 2 of 2 (binomial p = 0.0025), gy 0 of 2; "
+        "every run at p <= 0.05 is ef's: the verdict rests on one person"
+    )
+    # Several subjects with evidence, or no FEEDFORWARD verdict, or one subject only: not said.
+    runs[0]["p_value"] = 0.01
+    assert GroupSummary(group, runs, (0.3, 0.3), [], 1.5, 55.0).one_subject is None
+    one = GroupSummary({**group, "verdict": "UNCERTAIN"}, runs[2:4], (0.3, 0.3), [], 1.5, 55.0)
+    assert one.by_subject() == [] and one.one_subject is None  # runs of one subject: no split

@@ -90,6 +90,8 @@ def print_analysis(result) -> None:
     for summary in summarise_groups(result.groups, result.runs):
         g = summary.group
         typer.echo(_verdict_line(summary))
+        if summary.by_subject():
+            typer.echo(_subjects_line(summary))
         typer.echo(_calibrated_line(summary))
         typer.echo(_analysis_parameters(summary.parameters))
         typer.echo(
@@ -123,6 +125,18 @@ def _verdict_line(summary) -> str:
         f"binomial p = {g['binomial_p']:.2g}; power (FF twins found at this level) {power}, "
         f"{g['forcing_sets']} forcing set{'s' if g['forcing_sets'] > 1 else ''})"
     )
+
+
+def _subjects_line(summary) -> str:
+    """Each subject's runs at p <= alpha (with the binomial p where there are any): whether the
+    group's verdict rests on one person."""
+    subjects, alpha = summary.by_subject(), summary.group["alpha"]
+    parts = [f"{s} {k} of {n}" + (f" (binomial p = {p:.2g})" if k else "") for s, k, n, p in subjects]
+    text = f"    by subject, runs at p <= {alpha:g}: " + ", ".join(parts)
+    one = summary.one_subject
+    if one is not None:
+        text += f"; every run at p <= {alpha:g} is {one}'s: the verdict rests on one person"
+    return text
 
 
 def _calibrated_line(summary) -> str:

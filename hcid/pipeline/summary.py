@@ -13,6 +13,7 @@ import numpy as np
 import pyarrow as pa
 
 from hcid.pipeline.evidence import ParameterSummary, summarise_parameters
+from hcid.selection.calibration import binomial_summary
 
 __all__ = ["GroupSummary", "ParameterFits", "rate_interval", "summarise_fits", "summarise_groups"]
 
@@ -29,6 +30,28 @@ class GroupSummary:
     parameters: list[ParameterSummary]
     crossover: float
     phase_margin: float
+
+    def by_subject(self, factor: str = "subject") -> list[tuple[str, int, int, float]]:
+        """Per subject (the runs' ``factor``, where the data have it and the group holds more than
+        one): ``(subject, runs at p <= alpha, runs, binomial p)``, so that a verdict carried by
+        one person's runs is seen as such (the group's binomial counts runs, not people)."""
+        subjects = sorted({str(r[factor]) for r in self.runs if factor in r})
+        if len(subjects) < 2:
+            return []
+        alpha = self.group["alpha"]
+        out = []
+        for s in subjects:
+            p = np.array([r["p_value"] for r in self.runs if str(r[factor]) == s])
+            out.append((s, *binomial_summary(p, alpha)))
+        return out
+
+    @property
+    def one_subject(self) -> str | None:
+        """The subject all of a FEEDFORWARD verdict's runs at p <= alpha belong to, where there is
+        one (and the group has several); else None."""
+        with_evidence = [s for s, k, _, _ in self.by_subject() if k]
+        one = self.group["verdict"] == "FEEDFORWARD" and len(with_evidence) == 1
+        return with_evidence[0] if one else None
 
     @property
     def without_paths(self) -> int:

@@ -36,6 +36,8 @@ class StudyData:
     evidence: list[tuple[str, str, list, list, float, str]] = field(default_factory=list)
     set_aside: list[list[str]] = field(default_factory=list)
     without_paths: list[str] = field(default_factory=list)
+    subjects: list[list[str]] = field(default_factory=list)
+    one_person: list[str] = field(default_factory=list)
 
 
 def _num(x, digits: int = 3) -> str:
@@ -261,6 +263,14 @@ def compute(run, done) -> StudyData | None:
         if s.without_paths
     ]
     parameters = [row for s in summaries for row in _parameter_rows(s)]
+    subjects = [
+        [s.group["group"], s.group["method"], subject, f"{k} of {n}", _num(p, 2) if k else "-"]
+        for s in summaries
+        for subject, k, n, p in s.by_subject()
+    ]
+    one_person = [
+        f"{s.group['group']} ({s.group['method']}): {s.one_subject}" for s in summaries if s.one_subject
+    ]
     checks, contradicted = _checks(groups)
     header, table_rows = _run_table(runs)
     group_rows = groups.to_pylist()
@@ -282,6 +292,8 @@ def compute(run, done) -> StudyData | None:
         _evidence(run, summaries),
         set_aside,
         without_paths,
+        subjects if len(subjects) <= _SUBJECT_ROWS else [],
+        one_person,
     )
 
 
@@ -348,6 +360,14 @@ def _render_answers(data: StudyData, doc: Doc) -> None:
         ],
         data.answers,
     )
+    if data.one_person:
+        doc.text(
+            "**A verdict that rests on one person:** " + "; ".join(data.one_person) + ": every run "
+            "at p <= alpha is that subject's (the binomial counts runs, not people)."
+        )
+    if data.subjects:
+        doc.text("Per subject within each group: runs at p <= alpha and their binomial p (where any).")
+        doc.table(["group", "method", "subject", "runs at p <= alpha", "binomial p"], data.subjects)
     if data.uncertain:
         doc.text(
             "**No W separates the twins of** " + "; ".join(data.uncertain) + ": the yes/no at the "
@@ -364,6 +384,9 @@ def _render_answers(data: StudyData, doc: Doc) -> None:
             + ". Their yes/no at W says nothing about feedforward; their p-values need no W."
         )
 
+
+#: The most rows of the per-subject table (beyond, the console's lines and analysis.csv have them).
+_SUBJECT_ROWS = 48
 
 #: The most runs whose factors an evidence figure's caption lists (beyond: the run table has them).
 _NAMED_RUNS = 24
