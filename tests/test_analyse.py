@@ -236,6 +236,14 @@ def test_the_report_answers_first(analysed):
     # The compensatory condition's study twins (the test above) have their figure too.
     assert sum(n.startswith("calibration_compensatory-") and n.endswith("-study.png") for n in names) == 1
     assert "study's FF (Kpt" in text
+    # Each calibration figure's caption says, per method, what it marks: a safe interval's
+    # recommended W, or the W used where there is none (the groups table says which).
+    for g in pq.read_table(run / tables.ANALYSIS_GROUPS.file).to_pylist():
+        figure = f"calibration_{g['twins_folder'].split('/')[-1]}.png"
+        caption = next(line for line in text.splitlines() if figure in line)
+        safe = g["w_rule"] == "safe interval"
+        said = "the safe interval and its recommended W" if safe else "the W used, the least total error"
+        assert f"{g['method']}: {said}" in caption, (g["group"], g["method"], caption)
 
 
 def test_every_group_has_its_own_twins_folder():

@@ -417,10 +417,12 @@ def _render_evidence(data: StudyData, doc: Doc) -> None:
             lambda t=twins, r=runs, n=f"{group}, {method}", a=alpha: figures_hcfit.plot_evidence(t, r, n, a),
         )
     for title, caption, folder, table, used in data.calibrations:
-        what = (
-            "the W used, the least total error: no W is safe"
-            if used
-            else "the safe interval and its recommended W where there is one"
+        drawn = dict.fromkeys(table.column("method").to_pylist())
+        what = "; ".join(
+            f"{m}: the W used, the least total error (no W is safe)"
+            if m in used
+            else f"{m}: the safe interval and its recommended W where there is one"
+            for m in drawn
         )
         doc.figure(
             f"calibration_{_slug(folder)}.png",
