@@ -115,12 +115,12 @@ def compare(spec: dict, run: Path, config: Path) -> None:
     for g in groups:
         mine = [r for r in rows if r["group"] == g["group"] and r["method"] == g["method"]]
         ff = mine[0]["condition"].startswith("pursuit")
-        errors = sum(r["feedforward"] != ff for r in mine)
+        errors = sum(r["feedforward_at_w"] != ff for r in mine)
         made = f"- / {errors} of {len(mine)}" if ff else f"{errors} of {len(mine)} / -"
         stated = f"{_pct(g, 'fp')} / {_pct(g, 'fn')}"
         rule = g["w_rule"] + ("; UNCERTAIN" if g["uncertain"] else "")
         print(f"| {g['group']} | {g['method']} | {g['w']:.3g} | {rule} ({g['ff_twin']}) | {stated} | "
-              f"{g['n_feedforward']} of {g['n_runs']} | {made} |")  # fmt: skip
+              f"{g['n_feedforward_at_w']} of {g['n_runs']} | {made} |")  # fmt: skip
     # Each run's own evidence (SPEC 11) against the truth: runs at p <= 0.05 with and without
     # feedforward, the power the twins stated, the statistic that decided, the FB twins drawn.
     print("\n| condition | method | decided by | FB twins drawn | runs at p <= 0.05 | truth | median power |"

@@ -501,7 +501,8 @@ ANALYSIS = _schema(
     [("data_set", _STR), ("run_id", _INT), ("file", _STR), ("file_run", _INT)]
     + _CHOICE_FIELDS
     + [(c, _INT) for c in ORDER_COLUMNS]
-    + [("feedforward", _BOOL), ("vaf_arx_validation", _F64), ("estimator", _STR), ("vaf_validation", _F64)]
+    + [("feedforward_at_w", _BOOL), ("vaf_arx_validation", _F64)]
+    + [("estimator", _STR), ("vaf_validation", _F64)]
     + [("forcing_set", _INT), ("w_star", _F64), ("p_w_star", _F64), ("power_w_star", _F64)]
     + [("fb_twins_w_star", _INT)]
     + [("fourier_size", _F64), ("p_fourier", _F64), ("power_fourier", _F64), ("fb_twins_fourier", _INT)]
@@ -532,7 +533,7 @@ ANALYSIS = _schema(
 ANALYSIS_GROUPS = _schema(
     "analysis_groups.parquet",
     _CHOICE_FIELDS
-    + [("n_runs", _INT), ("n_feedforward", _INT)]
+    + [("n_runs", _INT), ("n_feedforward_at_w", _INT)]
     + [("verdict", _STR), ("n_evidence", _INT), ("binomial_p", _F64), ("median_power", _F64)]
     + [("alpha", _F64), ("forcing_sets", _INT), ("decided_by", _STR)]
     + [(f"twin_{p}", _F64) for p in HC_PARAMETER_NAMES]

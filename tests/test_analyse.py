@@ -60,7 +60,7 @@ def test_every_run_and_group_is_answered_with_its_factors(analysed):
     }
     for g in groups:
         mine = [r for r in rows if r["group"] == g["group"] and r["method"] == g["method"]]
-        assert g["n_runs"] == 4 and g["n_feedforward"] == sum(r["feedforward"] for r in mine)
+        assert g["n_runs"] == 4 and g["n_feedforward_at_w"] == sum(r["feedforward_at_w"] for r in mine)
         assert all(r["w"] == g["w"] for r in mine)
         # A W outside a safe interval is certain only where both twins' rates there are within
         # the target rate (0): never presented as certain otherwise.
@@ -73,7 +73,7 @@ def test_every_run_and_group_is_answered_with_its_factors(analysed):
     # The pursuit condition's twins separate: there the direct method finds the feedforward
     # every subject used (Kpt 0.8 and 1.0, configs/lab_example/make.py).
     pursuit = next(g for g in groups if g["group"] == "condition=pursuit" and g["method"] == "direct")
-    assert not pursuit["uncertain"] and pursuit["n_feedforward"] == 4
+    assert not pursuit["uncertain"] and pursuit["n_feedforward_at_w"] == 4
     assert (
         (run / "analysis.csv")
         .read_text()

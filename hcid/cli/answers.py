@@ -163,7 +163,7 @@ def _calibrated_line(summary) -> str:
             "within the target"
         )
     return (
-        f"    calibrated W (SPEC 10): feedforward in {g['n_feedforward']} of {g['n_runs']} runs at "
+        f"    calibrated W (SPEC 10): feedforward in {g['n_feedforward_at_w']} of {g['n_runs']} runs at "
         f"W = {g['w']:.3g} ({safe}; twins' FP {rate_interval(g['fp_rate'], g['fp_low'], g['fp_high'])}, "
         f"FN {rate_interval(g['fn_rate'], g['fn_low'], g['fn_high'])})" + _without_paths(summary)
     )

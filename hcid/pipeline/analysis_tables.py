@@ -103,7 +103,7 @@ class _Rows:
             "file_run": int(factor_of[seed]["file_run"]),
             **choice,
             **dict(zip(tables.ORDER_COLUMNS, sel.orders, strict=True)),
-            "feedforward": bool(sel.nb_ft > 0),
+            "feedforward_at_w": bool(sel.nb_ft > 0),
             "vaf_arx_validation": sel.vaf_validation,
             "vaf_validation": fit.vaf_validation if fit else math.nan,
         }
@@ -133,7 +133,7 @@ class _Rows:
         return {
             **choice,
             "n_runs": len(seeds),
-            "n_feedforward": int(sum(r["feedforward"] for r in runs)),
+            "n_feedforward_at_w": int(sum(r["feedforward_at_w"] for r in runs)),
             **group_verdict(mine, self.study.options.alpha),
             "forcing_sets": len(pair.sets),
             "decided_by": mine[0]["decided_by"],
