@@ -305,8 +305,8 @@ def test_undetermined_parameters_are_one_entry_per_parameter_with_each_reason_co
     text = _analysis_parameters([kpe, tl, w_nms])
     assert "Kpe 2.28 (12 of 12 runs, sd 0.16), TL 0.091 s (3 of 12 runs, sd 0.018)" in text
     assert text.endswith(
-        "not determined, left out: TL in 9 of 12 runs (4 correlated with Kpe, "
-        "4 correlated with tau_pe, 1 at a search bound); w_nms in 8 of 12 runs (fixed at a literature value)"
+        "not determined, left out: TL in 9 of 12 runs (4\u00d7 correlated with Kpe, 4\u00d7 correlated with "
+        "tau_pe, 1\u00d7 at a search bound); w_nms in 8 of 12 runs (fixed at a literature value)"
     )
 
 
@@ -327,6 +327,22 @@ def test_runs_without_any_path_at_w_are_counted_and_said():
     assert _without_paths(GroupSummary({}, runs[1:2] + runs[-1:], (0.9, 1.0), [], 1.5, 55.0)) == ""
 
 
+def test_feedforward_parameters_fitted_in_fewer_runs_say_so():
+    # The lab example's pursuit direct group: Kpt "10 of 10 runs" read as the whole group of 12;
+    # the two runs whose selection at W drops feedforward were fitted without it.
+    from hcid.cli.answers import _analysis_parameters
+    from hcid.pipeline.evidence import ParameterSummary
+
+    kpe = ParameterSummary("Kpe", "-", 12, 12, 2.28, 0.16, 0.05, {})
+    kpt = ParameterSummary("Kpt", "-", 10, 10, 0.891, 0.11, 0.04, {})
+    text = _analysis_parameters([kpe, kpt], 12)
+    assert text.endswith(
+        "Kpt 0.891 (10 of 10 runs, sd 0.11); Kpt fitted only in the 10 of 12 runs whose selection at W "
+        "keeps feedforward (the others' fits have none)"
+    )
+    assert "fitted only" not in _analysis_parameters([kpe, kpt], 10)
+
+
 def test_flagged_values_are_counted_inside_their_entry_without_nested_parentheses():
     # A kept value outside its plausible range or not told from 0 is counted where it is shown
     # (SPEC 11's flags; the CPHS fo direct runs: tau_pe 0.053 s in 2 of its 4 runs).
@@ -337,7 +353,7 @@ def test_flagged_values_are_counted_inside_their_entry_without_nested_parenthese
     ti = ParameterSummary("TI", "s", 1, 1, 0.0843, 0.0, 0.1, {}, {"not told from 0 (se above |value|)": 1})
     assert _analysis_parameters([tau, ti]).endswith(
         "tau_pe 0.0981 s (4 of 6 runs, sd 0.064; 2 of them outside its plausible range), "
-        "TI 0.0843 s (1 of 1 runs; 1 of them not told from 0, se above |value|)"
+        "TI 0.0843 s (1 of 1 runs; 1 of them not told from 0: se above |value|)"
     )
 
 

@@ -7,6 +7,7 @@ import math
 
 import typer
 
+from hcid.config.fit import FEEDFORWARD_PARAMETERS
 from hcid.tables import PARAMETER_UNITS
 
 
@@ -93,7 +94,7 @@ def print_analysis(result) -> None:
         if summary.by_subject():
             typer.echo(_subjects_line(summary))
         typer.echo(_calibrated_line(summary))
-        typer.echo(_analysis_parameters(summary.parameters))
+        typer.echo(_analysis_parameters(summary.parameters, len(summary.runs)))
         typer.echo(
             f"    loop: crossover {summary.crossover:.3g} rad/s, phase margin {summary.phase_margin:.3g} deg "
             "(medians over runs)"
@@ -118,6 +119,8 @@ def _verdict_line(summary) -> str:
     g, (low, high) = summary.group, summary.power
     same = f"{low:.2f}" == f"{high:.2f}"
     power = f"{low:.2f} for every run" if same else f"{low:.2f} to {high:.2f} over the runs"
+    if g["ff_twin"] == "study":  # the power is that of the study's feedforward, not the group's own
+        power += f" (FF twins with the study's feedforward, Kpt {g['twin_Kpt']:.2g})"
     return (
         f"{g['group']}, {g['method']}: {g['verdict']}: {g['n_evidence']} of {g['n_runs']} runs show "
         f"feedforward at p <= {g['alpha']:g} (decided by their {g['decided_by']} against their own "
@@ -194,8 +197,8 @@ def _data_check_line(g: dict, *, full: bool) -> str:
 
 
 def _flat(reason: str) -> str:
-    """A status read inside the answer's own parentheses: ``x (y)`` as ``x, y``."""
-    return reason.replace(" (", ", ").removesuffix(")")
+    """A status read inside the answer's own parentheses: ``x (y)`` as ``x: y``."""
+    return reason.replace(" (", ": ").removesuffix(")")
 
 
 def _model_source(group: dict) -> str:
@@ -216,9 +219,10 @@ def _without_paths(summary) -> str:
     )
 
 
-def _analysis_parameters(summaries) -> str:
+def _analysis_parameters(summaries, n_runs: int | None = None) -> str:
     """The runs' fits at W (hcid.pipeline.evidence.summarise_parameters): median over the runs that
-    determine each, their sd and count, units; then what some runs leave undetermined, and why."""
+    determine each, their sd and count, units; the feedforward parameters' runs where fewer than
+    the group's ``n_runs`` have them; then what some runs leave undetermined, and why."""
     parts, left_out = [], []
     for s in summaries:
         unit = "" if s.unit == "-" else f" {s.unit}"
@@ -227,11 +231,20 @@ def _analysis_parameters(summaries) -> str:
             care = "".join(f"; {n} of them {_flat(flag)}" for flag, n in s.flagged.items())
             parts.append(f"{s.name} {s.median:.3g}{unit} ({s.kept} of {s.fitted} runs{sd}{care})")
         if s.left_out:
+            several = len(s.left_out) > 1  # then each reason with its count of runs
             whys = ", ".join(
-                f"{n} {_flat(why)}" if len(s.left_out) > 1 else _flat(why) for why, n in s.left_out.items()
+                f"{n}\u00d7 {_flat(why)}" if several else _flat(why) for why, n in s.left_out.items()
             )
             left_out.append(f"{s.name} in {sum(s.left_out.values())} of {s.fitted} runs ({whys})")
     text = "    runs' fits at W (median over the runs that determine each; sd over them): " + ", ".join(parts)
+    partial = [
+        s for s in summaries if n_runs is not None and s.name in FEEDFORWARD_PARAMETERS and s.fitted < n_runs
+    ]
+    if partial:
+        text += (
+            f"; {', '.join(s.name for s in partial)} fitted only in the {partial[0].fitted} of {n_runs} runs "
+            "whose selection at W keeps feedforward (the others' fits have none)"
+        )
     if left_out:
         text += "\n    not determined, left out: " + "; ".join(left_out)
     return text

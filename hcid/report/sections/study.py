@@ -301,6 +301,16 @@ def render(data: StudyData | None, doc: Doc) -> None:
     if data is None:
         return
     doc.text(f"## {TITLE}")
+    doc.text(
+        "*Words used here.* A run's **W\\*** is the largest penalty W at which its selected ARX model "
+        "still has a feedforward path (nb_ft > 0): the larger, the more its data ask for feedforward. "
+        "**Twins** are simulations of the group's fitted HC model: the **FF twin** as fitted, the "
+        "**FB twin** the same without feedforward (Kpt = 0), driven by the group's recorded forcing "
+        "functions (a **forcing set**: the runs whose target and disturbance agree, or agree with both "
+        "signs flipped), identified exactly as the runs are. A run's **p-value** is how often FB "
+        "twins reach its W\\*; the **power**, how often FF twins would be found at the level alpha. "
+        "SPEC n names a section of the specification hcid follows (docs/methodology.md)."
+    )
     _render_answers(data, doc)
     _render_evidence(data, doc)
     _render_checks(data, doc)
@@ -461,7 +471,9 @@ def _render_checks(data: StudyData, doc: Doc) -> None:
         if data.contradicted:
             doc.text(
                 "**Contradicted by the data:** the model of " + "; ".join(data.contradicted) + ". Its "
-                "parameters describe a model these runs do not support; read them as such."
+                "parameters describe a model these runs do not support as one group; read them as such. "
+                "The test also rejects a group's model where its people differ from one another even "
+                "when each run's own fit holds: the run table's last column tests each run."
             )
 
 
