@@ -86,11 +86,17 @@ def _correlated(partner: str, r: float) -> str:
 def parameter_status(fit) -> dict[str, str]:
     """``{parameter: status}`` of an :class:`hcid.hcfit.HCFit`: :data:`DETERMINED`, or the reason
     it is undetermined or flagged (the first that holds, in the module notes' order)."""
-    failed = fit.vaf_validation < 0.0  # NaN (no record given) is not a failure
+    failed = _failed(fit)
     return {
         name: _FAILED if failed and name not in fit.fixed else status
         for name, status in _own_status(fit).items()
     }
+
+
+def _failed(fit) -> bool:
+    """Whether a fit describes its record worse than u = 0 (validation VAF below 0%; NaN, no
+    record given, is no failure)."""
+    return fit.vaf_validation < 0.0
 
 
 def _own_status(fit) -> dict[str, str]:
@@ -187,7 +193,7 @@ def group_model(fits: Sequence, labels: Sequence[str], num_c, den_c) -> GroupMod
     """
     statuses = [parameter_status(f) for f in fits]
     names = fits[0].names
-    described = [f for f in fits if not f.vaf_validation < 0.0] or list(fits)
+    described = [f for f in fits if not _failed(f)] or list(fits)
     values, none = {}, []
     for p in names:
         kept = [f.values[p] for f, st in zip(fits, statuses, strict=True) if not is_undetermined(st[p])]
@@ -208,7 +214,7 @@ def group_model(fits: Sequence, labels: Sequence[str], num_c, den_c) -> GroupMod
     stable = [
         (distance(f), i)
         for i, f in enumerate(fits)
-        if not f.vaf_validation < 0.0 and loop_is_stable(f.values, num_c, den_c)
+        if not _failed(f) and loop_is_stable(f.values, num_c, den_c)
     ]
     if not stable:
         raise DataError(

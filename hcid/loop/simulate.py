@@ -107,16 +107,18 @@ def simulate_loop(
     if block < 1:
         raise ValueError("simulate_loop: the feedback delay must be at least one sample")
     u_open = n.copy()
-    if dloop.has_feedforward and dloop.delay_ft >= 0:
+    if dloop.has_feedforward:
         b, a = dloop.feedforward
-        u_ff = sps.lfilter(b, a, ft)
-        u_open[dloop.delay_ft :] += u_ff[: m - dloop.delay_ft]
-    elif dloop.has_feedforward:  # anticipation: the path reads the target -delay_ft samples ahead
-        ahead = -dloop.delay_ft
-        if ft_ahead is None or ft_ahead.size < ahead:
-            raise ValueError(f"simulate_loop: an anticipating feedforward needs ft {ahead} samples ahead")
-        b, a = dloop.feedforward
-        u_open += sps.lfilter(b, a, np.concatenate([ft, ft_ahead[:ahead]]))[ahead:]
+        delay = dloop.delay_ft
+        if delay >= 0:
+            u_ff = sps.lfilter(b, a, ft)
+            u_open[delay:] += u_ff[: m - delay]
+        else:  # anticipation: the path reads the target -delay samples ahead
+            if ft_ahead is None or ft_ahead.size < -delay:
+                raise ValueError(
+                    f"simulate_loop: an anticipating feedforward needs ft {-delay} samples ahead"
+                )
+            u_open += sps.lfilter(b, a, np.concatenate([ft, ft_ahead[:-delay]]))[-delay:]
 
     e = np.zeros(m + block)  # e[block + k] is e(k); the first `block` entries are the rest state
     u = np.empty(m)

@@ -6,6 +6,7 @@ summaries and the report draws them (:mod:`hcid.cli.answers`, :mod:`hcid.report.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -31,19 +32,19 @@ class GroupSummary:
     crossover: float
     phase_margin: float
 
-    def by_subject(self, factor: str = "subject") -> list[tuple[str, int, int, float]]:
-        """Per subject (the runs' ``factor``, where the data have it and the group holds more than
-        one): ``(subject, runs at p <= alpha, runs, binomial p)``, so that a verdict carried by
-        one person's runs is seen as such (the group's binomial counts runs, not people)."""
-        subjects = sorted({str(r[factor]) for r in self.runs if factor in r})
+    def by_subject(self) -> list[tuple[str, int, int, float]]:
+        """Per subject (the runs' ``subject`` factor, where the data have it and the group holds
+        more than one): ``(subject, runs at p <= alpha, runs, binomial p)``, so that a verdict
+        carried by one person's runs is seen as such (the group's binomial counts runs, not people)."""
+        return self._subjects
+
+    @functools.cached_property
+    def _subjects(self) -> list[tuple[str, int, int, float]]:
+        subjects = sorted({str(r["subject"]) for r in self.runs if "subject" in r})
         if len(subjects) < 2:
             return []
-        alpha = self.group["alpha"]
-        out = []
-        for s in subjects:
-            p = np.array([r["p_value"] for r in self.runs if str(r[factor]) == s])
-            out.append((s, *binomial_summary(p, alpha)))
-        return out
+        p = {s: np.array([r["p_value"] for r in self.runs if str(r["subject"]) == s]) for s in subjects}
+        return [(s, *binomial_summary(p[s], self.group["alpha"])) for s in subjects]
 
     @property
     def one_subject(self) -> str | None:

@@ -153,9 +153,14 @@ def _with_se(r: dict, p: str) -> str:
     return _num(r[p]) + se + ("‡" if is_flagged(status) else "")
 
 
+def _factors(columns) -> list[str]:
+    """The runs' own factor columns (subject, condition, trial, ...): those not hcid's."""
+    return [c for c in columns if c not in tables.ANALYSIS.names]
+
+
 def _run_table(runs) -> tuple[list[str], list[list[str]]]:
     """The per-run table: its header (the runs' factors, units) and one row per run and method."""
-    factors = [c for c in runs.column_names if c not in tables.ANALYSIS.names]
+    factors = _factors(runs.column_names)
     units = {p: tables.PARAMETER_UNITS[p] for p in _SHOWN}
     header = [
         "run",
@@ -407,7 +412,7 @@ _NAMED_RUNS = 24
 def _run_names(runs: list[dict]) -> str:
     """The caption's key from the figure's run numbers to the factors that differ between them
     (e.g. ``1 dp +1``); empty where none differ or the runs are too many to list."""
-    factors = [c for c in runs[0] if c not in tables.ANALYSIS.names] if runs else []
+    factors = _factors(runs[0]) if runs else []
     varying = [f for f in factors if len({str(r[f]) for r in runs}) > 1]
     if not varying or len(runs) > _NAMED_RUNS:
         return ""
