@@ -189,3 +189,22 @@ def test_sequential_settled_needs_h_at_or_above_or_the_most_drawn():
     assert not sequential_settled(0.9, np.linspace(0, 1, 20), 5, 99)  # 2 at or above 0.9
     assert sequential_settled(0.5, np.linspace(0, 1, 20), 5, 99)  # 10 at or above
     assert sequential_settled(0.99, np.linspace(0, 1, 99), 5, 99)  # the most drawn
+
+
+def test_clopper_pearson_is_scipy_stats_beta_ppf_bit_for_bit():
+    # Source: the interval's definition, scipy.stats.beta.ppf at alpha/2 and 1 - alpha/2
+    # (Clopper and Pearson 1934); calibration calls beta.ppf's own ufunc to spare every
+    # command the import of scipy.stats, so its 64 bits must be beta.ppf's.
+    from scipy import stats
+
+    from hcid.selection.calibration import clopper_pearson
+
+    for n in (1, 5, 20, 99, 400):
+        for level in (0.9, 0.95, 0.99):
+            k = np.arange(n + 1, dtype=np.float64)
+            alpha = 1.0 - level
+            low = np.where(k > 0, stats.beta.ppf(alpha / 2, k, n - k + 1), 0.0)
+            high = np.where(k < n, stats.beta.ppf(1 - alpha / 2, k + 1, n - k), 1.0)
+            got_low, got_high = clopper_pearson(k, n, level)
+            assert np.array_equal(got_low.view(np.int64), low.view(np.int64))
+            assert np.array_equal(got_high.view(np.int64), high.view(np.int64))

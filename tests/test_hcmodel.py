@@ -49,3 +49,109 @@ def test_paths_are_proper_products_with_the_nms(paper_config):
         assert len(den) - len(num) == rel_degree
     # Yc = Kc wb / (s (s + wb)) at s = j: 2.75 * 2 / (j (j + 2)).
     assert complex(plant(loop)(1j)) == pytest.approx(5.5 / (1j * (1j + 2)))
+
+
+# --------------------------------------------------------------------------- python-control's bits
+
+
+def _control_discrete_loop(model, loop, dt):
+    """The reference: the paths formed and discretised by python-control itself (what
+    hcid.loop.hcmodel did before hcid.loop._lti), as (b, a) pairs."""
+    import control
+
+    def disc(sys, method):
+        d = control.sample_system(sys, dt, method=method)
+        num = np.atleast_1d(np.squeeze(np.asarray(d.num[0][0], dtype=np.float64)))
+        den = np.atleast_1d(np.squeeze(np.asarray(d.den[0][0], dtype=np.float64)))
+        b = np.concatenate([np.zeros(den.size - num.size), num])
+        return b / den[0], den / den[0]
+
+    yc = loop.plant
+    nms = control.tf([loop.w_nms**2], [1.0, 2 * loop.zeta_nms * loop.w_nms, loop.w_nms**2])
+    out = {
+        "feedback": disc(nms * control.tf([model.Kpe * model.TL, model.Kpe], [1.0]), "bilinear"),
+        "plant": disc(control.tf(list(yc.num), list(yc.den)), "bilinear"),
+        "remnant": disc(
+            control.tf(
+                [loop.w_n**3],
+                np.polymul([1.0, 2 * loop.zeta_n * loop.w_n, loop.w_n**2], [1.0, loop.w_n]),
+            ),
+            "zoh",
+        ),
+    }
+    if model.has_feedforward:
+        inverse = control.tf(list(yc.den), list(yc.num))
+        lag = control.tf([1.0], [model.TI**2, 2 * model.TI, 1.0])
+        out["feedforward"] = disc(control.minreal(model.Kpt * nms * inverse * lag, verbose=False), "bilinear")
+    return out
+
+
+def _bits(x):
+    return np.ascontiguousarray(x, dtype=np.float64).view(np.int64)
+
+
+def _loops():
+    """Every config's loop and models, and 40 random ones over the plants hcid knows."""
+    from pathlib import Path
+
+    from hcid.config.types import HCModel, Loop, Plant
+    from hcid.io.resolve import load_config
+
+    root = Path(__file__).resolve().parent.parent / "configs"
+    for path in sorted(root.glob("*.yaml")):
+        config = load_config(path)
+        if config.models:
+            for model in config.models:
+                yield f"{path.stem}:{model.name}", model, config.loop, config.timing.sim_dt
+    rng = np.random.default_rng(20261127)
+    plants = [
+        Plant.second_order(2.75, 2.0),
+        Plant.integrator(1.5),
+        Plant.double_integrator(3.0),
+        Plant("transfer_function", (2.0, 1.0), (1.0, 3.0, 2.0, 0.0), "custom"),
+    ]
+    for i in range(40):
+        yc = plants[i % len(plants)]
+        loop = Loop(
+            yc, rng.uniform(6, 14), rng.uniform(0.1, 0.6), rng.uniform(5, 20), rng.uniform(0.1, 0.7), 0.15
+        )
+        kpt = 0.0 if i % 5 == 0 else rng.uniform(0.3, 1.2)
+        model = HCModel(
+            f"r{i}",
+            kpt,
+            rng.uniform(0.05, 0.5),
+            rng.uniform(0.1, 0.5),
+            rng.uniform(0.5, 3),
+            rng.uniform(0.05, 1.0),
+            rng.uniform(0.1, 0.4),
+        )
+        yield f"random {i} ({yc.kind})", model, loop, [0.01, 0.005, 0.002][i % 3]
+
+
+@pytest.mark.parametrize(
+    ("name", "model", "loop", "dt"), list(_loops()), ids=lambda x: x if isinstance(x, str) else ""
+)
+def test_discretised_paths_are_python_controls_bits(name, model, loop, dt):
+    # Source: python-control's own tf products, minreal and sample_system (the reference path,
+    # _control_discrete_loop); hcid.loop._lti repeats its numpy calls, so every coefficient
+    # must be the same 64 bits, not merely close.
+    built = DiscreteLoop.build(model, loop, dt)
+    for which, (b_ref, a_ref) in _control_discrete_loop(model, loop, dt).items():
+        b, a = getattr(built, which)
+        assert np.array_equal(_bits(b), _bits(b_ref)), (name, which, b, b_ref)
+        assert np.array_equal(_bits(a), _bits(a_ref)), (name, which, a, a_ref)
+
+
+def test_public_paths_are_the_same_transfer_functions(paper_config):
+    # The python-control objects the report and the fits read: the same coefficients as
+    # python-control's own products.
+    import control
+
+    model, loop = paper_config.model("FF"), paper_config.loop
+    nms = control.tf([loop.w_nms**2], [1.0, 2 * loop.zeta_nms * loop.w_nms, loop.w_nms**2])
+    inverse = control.tf(list(loop.plant.den), list(loop.plant.num))
+    lag = control.tf([1.0], [model.TI**2, 2 * model.TI, 1.0])
+    ref = control.minreal(model.Kpt * nms * inverse * lag, verbose=False)
+    got = feedforward_path(model, loop)
+    assert np.array_equal(_bits(got.num[0][0]), _bits(ref.num[0][0]))
+    assert np.array_equal(_bits(got.den[0][0]), _bits(ref.den[0][0]))

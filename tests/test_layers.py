@@ -154,3 +154,29 @@ def test_the_core_reads_no_files(module):
     path = PACKAGE / (module.replace("hcid.", "").replace(".", "/") + ".py")
     text = path.read_text()
     assert "open(" not in text and "read_signal" not in text and "read_text" not in text
+
+
+#: What a simulating and identifying command never needs (issue 36's serial part: together
+#: about 1 s of imports before any work): python-control and what it pulls in.
+HEAVY = ("control", "scipy.signal", "scipy.stats", "matplotlib")
+
+
+def test_a_study_run_imports_neither_python_control_nor_scipy_signal(tmp_path):
+    # Source: the import graph, read from sys.modules after `hcid run configs/ci.yaml --jobs 1`
+    # (every stage in this process: simulate, identify both methods, sweep W). hcid.loop._lti
+    # does python-control's arithmetic bit for bit (tests/test_hcmodel.py), the loop's filters
+    # are compiled (tests/test_simulate.py) and fit-hc is imported on first use.
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\nfrom hcid.cli import main\n"
+        f"sys.argv = ['hcid', 'run', 'configs/ci.yaml', '--run', {str(tmp_path / 'run')!r}, "
+        "'--jobs', '1', '--quiet']\n"
+        "try:\n    main()\nexcept SystemExit as exc:\n    assert not exc.code, exc.code\n"
+        f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=PACKAGE.parent, capture_output=True, text=True, check=True
+    ).stdout
+    assert out.strip().splitlines()[-1] == "[]", out

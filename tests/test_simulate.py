@@ -273,3 +273,20 @@ def test_a_remnant_ratio_the_loop_cannot_show_is_refused_in_one_line():
         ConfigError, match=r"^loop.remnant_ratio: 0.5 is more than this loop can show .*0.472"
     ):
         remnant_gain(parse_config(raw, "x"))
+
+
+def test_compiled_filter_is_lfilters_bits(paper_config):
+    # Source: scipy.signal.lfilter itself. The remnant (ZOH) and feedforward (Tustin) paths are
+    # filtered by the compiled _df2t loop so that a simulating process need not import
+    # scipy.signal; it must give lfilter's 64 bits, and lfilter's own result for a filter it
+    # does not replicate (a length-1 denominator).
+    from scipy import signal as sps
+
+    from hcid.loop.hcmodel import DiscreteLoop
+    from hcid.loop.simulate import _lfilter, white_noise
+
+    dloop = DiscreteLoop.build(paper_config.model("FF"), paper_config.loop, paper_config.timing.sim_dt)
+    x = white_noise(7, 5000)
+    for b, a in (dloop.remnant, dloop.feedforward, dloop.feedback, (np.array([0.5, 0.25]), np.array([1.0]))):
+        got, ref = _lfilter(b, a, x), sps.lfilter(b, a, x)
+        assert np.array_equal(got.view(np.int64), ref.view(np.int64))

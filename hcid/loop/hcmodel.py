@@ -1,21 +1,29 @@
-"""The human-controller model and its loop as python-control transfer functions.
+"""The human-controller model and its loop as transfer functions.
 
 SPEC section 1. ``Ypt`` and ``Ype`` are improper alone, so the paths are built
 as the proper products with the neuromuscular system, ``Hft = Ynms*Ypt`` and
 ``He = Ynms*Ype``, without their delays; the delays are whole samples at the
 simulation rate and are applied separately (:class:`DiscreteLoop`).
+
+The paths are formed and discretised as polynomial pairs by :mod:`hcid.loop._lti`
+(python-control's arithmetic, the same bits, without its import cost); the public
+functions return python-control transfer functions of those polynomials.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import control
 import numpy as np
 
 from hcid.config import HCModel, Loop, Plant
 from hcid.config.types import MAX_INVERTIBLE_DEGREE
 from hcid.errors import ConfigError, quote
+from hcid.loop import _lti
+
+if TYPE_CHECKING:
+    import control
 
 #: Discretisation of the deterministic paths (Hft, He, Yc). Tustin keeps the
 #: phase of these smooth signals (ZOH would add half a sample of lag to each);
@@ -33,6 +41,12 @@ __all__ = [
 ]
 
 
+def _tf(polynomials: _lti.Polynomials) -> control.TransferFunction:
+    import control
+
+    return control.tf(*polynomials)
+
+
 def plant(loop: Loop) -> control.TransferFunction:
     """The configured plant ``Yc`` (the paper's ``Kc wb / (s (s + wb))`` by default), theta per u."""
     return transfer_function(loop.plant)
@@ -40,12 +54,28 @@ def plant(loop: Loop) -> control.TransferFunction:
 
 def transfer_function(yc: Plant) -> control.TransferFunction:
     """A plant as a python-control transfer function, theta per u."""
-    return control.tf(list(yc.num), list(yc.den))
+    return _tf(_lti.tf(yc.num, yc.den))
 
 
-def _nms(loop: Loop) -> control.TransferFunction:
+def _nms(loop: Loop) -> _lti.Polynomials:
     w, z = loop.w_nms, loop.zeta_nms
-    return control.tf([w**2], [1.0, 2 * z * w, w**2])
+    return _lti.tf([w**2], [1.0, 2 * z * w, w**2])
+
+
+def _feedforward(model: HCModel, loop: Loop) -> _lti.Polynomials:
+    if not model.has_feedforward:
+        return _lti.tf([0.0], [1.0])
+    yc = loop.plant
+    inverse_plant = _lti.tf(yc.den, yc.num)
+    lag = _lti.tf([1.0], [model.TI**2, 2 * model.TI, 1.0])
+    path = _lti.product(_lti.product(_lti.gain(model.Kpt, _nms(loop)), inverse_plant), lag)
+    if yc.relative_degree > MAX_INVERTIBLE_DEGREE:
+        raise ConfigError(
+            f"models.{model.name}: the feedforward path Ynms Kpt / Yc / (TI s + 1)^2 is improper "
+            f"for the plant {quote(yc.text)} (relative degree {yc.relative_degree} > "
+            f"{MAX_INVERTIBLE_DEGREE}); no proper Inverse Feedforward Model exists for it"
+        )
+    return _lti.minreal(path)
 
 
 def feedforward_path(model: HCModel, loop: Loop) -> control.TransferFunction:
@@ -59,39 +89,33 @@ def feedforward_path(model: HCModel, loop: Loop) -> control.TransferFunction:
     ConfigError
         If the product is improper for this plant (its relative degree exceeds 4).
     """
-    if not model.has_feedforward:
-        return control.tf([0.0], [1.0])
-    yc = loop.plant
-    inverse_plant = control.tf(list(yc.den), list(yc.num))
-    lag = control.tf([1.0], [model.TI**2, 2 * model.TI, 1.0])
-    path = control.minreal(model.Kpt * _nms(loop) * inverse_plant * lag, verbose=False)
-    if yc.relative_degree > MAX_INVERTIBLE_DEGREE:
-        raise ConfigError(
-            f"models.{model.name}: the feedforward path Ynms Kpt / Yc / (TI s + 1)^2 is improper "
-            f"for the plant {quote(yc.text)} (relative degree {yc.relative_degree} > "
-            f"{MAX_INVERTIBLE_DEGREE}); no proper Inverse Feedforward Model exists for it"
-        )
-    return path
+    return _tf(_feedforward(model, loop))
+
+
+def _feedback(model: HCModel, loop: Loop) -> _lti.Polynomials:
+    return _lti.product(_nms(loop), _lti.tf([model.Kpe * model.TL, model.Kpe], [1.0]))
 
 
 def feedback_path(model: HCModel, loop: Loop) -> control.TransferFunction:
     """``Ynms * Kpe (TL s + 1)`` without its delay: u per e."""
-    return _nms(loop) * control.tf([model.Kpe * model.TL, model.Kpe], [1.0])
+    return _tf(_feedback(model, loop))
+
+
+def _remnant(loop: Loop) -> _lti.Polynomials:
+    w, z = loop.w_n, loop.zeta_n
+    return _lti.tf([w**3], np.polymul([1.0, 2 * z * w, w**2], [1.0, w]))
 
 
 def remnant_filter(loop: Loop) -> control.TransferFunction:
     """``Yn`` with ``Kn = 1``: remnant n per unit white noise."""
-    w, z = loop.w_n, loop.zeta_n
-    return control.tf([w**3], np.polymul([1.0, 2 * z * w, w**2], [1.0, w]))
+    return _tf(_remnant(loop))
 
 
-def discretise(
-    sys: control.TransferFunction, dt: float, method: str = "zoh"
-) -> tuple[np.ndarray, np.ndarray]:
-    """Discretise with python-control; returns ``(b, a)`` for ``scipy.signal.lfilter``."""
-    d = control.sample_system(sys, dt, method=method)
-    num = np.atleast_1d(np.squeeze(np.asarray(d.num[0][0], dtype=np.float64)))
-    den = np.atleast_1d(np.squeeze(np.asarray(d.den[0][0], dtype=np.float64)))
+def discretise(sys, dt: float, method: str = "zoh") -> tuple[np.ndarray, np.ndarray]:
+    """Discretise a SISO transfer function (python-control's, or a ``(num, den)`` pair) as
+    ``control.sample_system`` does; returns ``(b, a)`` for ``scipy.signal.lfilter``."""
+    polynomials = sys if isinstance(sys, tuple) else _lti.tf(sys.num[0][0], sys.den[0][0])
+    num, den = _lti.sample(polynomials, dt, method)
     # Pad the numerator to the denominator's length so coefficient k is lag k.
     b = np.concatenate([np.zeros(den.size - num.size), num])
     return b / den[0], den / den[0]
@@ -130,12 +154,12 @@ class DiscreteLoop:
     def build(cls, model: HCModel, loop: Loop, dt: float) -> DiscreteLoop:
         return cls(
             dt=dt,
-            feedforward=discretise(feedforward_path(model, loop), dt, PATH_METHOD)
+            feedforward=discretise(_feedforward(model, loop), dt, PATH_METHOD)
             if model.has_feedforward
             else (np.zeros(1), np.ones(1)),
-            feedback=discretise(feedback_path(model, loop), dt, PATH_METHOD),
-            plant=discretise(plant(loop), dt, PATH_METHOD),
-            remnant=discretise(remnant_filter(loop), dt),
+            feedback=discretise(_feedback(model, loop), dt, PATH_METHOD),
+            plant=discretise(_lti.tf(loop.plant.num, loop.plant.den), dt, PATH_METHOD),
+            remnant=discretise(_remnant(loop), dt),
             delay_ft=round(model.tau_pt / dt) if model.has_feedforward else 0,
             delay_e=round(model.tau_pe / dt),
             has_feedforward=model.has_feedforward,
@@ -178,8 +202,8 @@ def closed_loop_poles(model: HCModel, loop: Loop, dt: float) -> np.ndarray:
     >>> bool(np.max(np.abs(closed_loop_poles(fb, loop, 0.01))) < 1)
     True
     """
-    b_e, a_e = discretise(feedback_path(model, loop), dt, PATH_METHOD)
-    b_c, a_c = discretise(plant(loop), dt, PATH_METHOD)
+    b_e, a_e = discretise(_feedback(model, loop), dt, PATH_METHOD)
+    b_c, a_c = discretise(_lti.tf(loop.plant.num, loop.plant.den), dt, PATH_METHOD)
     delay = round(model.tau_pe / dt)
     den = np.polymul(a_c, a_e)
     num = np.concatenate([np.zeros(delay), np.polymul(b_c, b_e)])
@@ -206,9 +230,9 @@ def check_closed_loops(models, loop: Loop, dt: float) -> None:
     """
 
     for model in models:
-        ff = feedforward_path(model, loop)
+        ff = _feedforward(model, loop)
         if model.has_feedforward:
-            ff_poles = np.atleast_1d(ff.poles())
+            ff_poles = _lti.poles(ff)
             if ff_poles.size and np.max(ff_poles.real) >= 0:
                 p = ff_poles[np.argmax(ff_poles.real)]
                 raise ConfigError(

@@ -9,7 +9,6 @@ values at every simulation sample with :func:`forcing`.
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal as sps
 
 from hcid.config import FileSignal, Forcing, Multisine, Segments, Timing
 
@@ -124,7 +123,12 @@ def file_signal(timing: Timing, spec: FileSignal, ahead: int = 0) -> np.ndarray:
     """
     first = round(spec.start * spec.rate)
     window = spec.values[first : first + round(timing.window * spec.rate)]
-    one = sps.resample(window, timing.window_samples) if window.size != timing.window_samples else window
+    if window.size == timing.window_samples:
+        one = window
+    else:
+        from scipy import signal as sps
+
+        one = sps.resample(window, timing.window_samples)
     n = timing.periods * timing.period_samples
     return one[(np.arange(n + ahead) - (n - timing.window_samples)) % timing.window_samples]
 

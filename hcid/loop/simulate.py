@@ -22,7 +22,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy import signal as sps
 
 from hcid.config import Config, HCModel, Multisine, Segments
 from hcid.errors import ConfigError
@@ -111,14 +110,14 @@ def simulate_loop(
         b, a = dloop.feedforward
         delay = dloop.delay_ft
         if delay >= 0:
-            u_ff = sps.lfilter(b, a, ft)
+            u_ff = _lfilter(b, a, ft)
             u_open[delay:] += u_ff[: m - delay]
         else:  # anticipation: the path reads the target -delay samples ahead
             if ft_ahead is None or ft_ahead.size < -delay:
                 raise ValueError(
                     f"simulate_loop: an anticipating feedforward needs ft {-delay} samples ahead"
                 )
-            u_open += sps.lfilter(b, a, np.concatenate([ft, ft_ahead[:-delay]]))[-delay:]
+            u_open += _lfilter(b, a, np.concatenate([ft, ft_ahead[:-delay]]))[-delay:]
 
     e = np.zeros(m + block)  # e[block + k] is e(k); the first `block` entries are the rest state
     u = np.empty(m)
@@ -133,6 +132,8 @@ def simulate_loop(
 
 def _loop_blocks(dloop, block, u_open, ft, fd, at_input, e, u, theta):
     """The loop in blocks of ``block`` samples, two ``lfilter`` calls with carried state each."""
+    from scipy import signal as sps
+
     b_fb, a_fb = dloop.feedback
     b_c, a_c = dloop.plant
     z_fb = np.zeros(max(a_fb.size, b_fb.size) - 1)
@@ -174,6 +175,27 @@ def _df2t(b, a, x, z):
     for i in range(last - 1):
         z[i] = (z[i + 1] + x * b[i + 1]) - y * a[i + 1]
     z[last - 1] = x * b[last] - y * a[last]
+    return y
+
+
+def _lfilter(b: np.ndarray, a: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``scipy.signal.lfilter(b, a, x)`` from rest: the compiled :func:`_df2t` where it does
+    lfilter's arithmetic (:func:`_replicable`; the same bits), lfilter itself otherwise. A
+    simulating process then need not import scipy.signal."""
+    if _replicable(b, a):
+        return _filter_kernel(b, a, np.ascontiguousarray(x, dtype=np.float64))
+    from scipy import signal as sps
+
+    return sps.lfilter(b, a, x)
+
+
+@njit(cache=True)
+def _filter_kernel(b, a, x):
+    """:func:`_df2t` over ``x`` from a zero state."""
+    z = np.zeros(b.shape[0] - 1)
+    y = np.empty_like(x)
+    for k in range(x.shape[0]):
+        y[k] = _df2t(b, a, x[k], z)
     return y
 
 
@@ -335,7 +357,7 @@ def simulate_realization(
     ahead = max(0, -dloop.delay_ft)  # an anticipating feedforward reads the target past the end
     ft = np.zeros_like(t) if disturbance_only else _forcing(timing, config.target, ahead)
     b_n, a_n = dloop.remnant
-    n = kn * sps.lfilter(b_n, a_n, white_noise(seed, t.size))
+    n = kn * _lfilter(b_n, a_n, white_noise(seed, t.size))
     out = simulate_loop(dloop, ft[: t.size], fd, n, ft_ahead=ft[t.size :])
 
     keep = slice(t.size - timing.window_samples, t.size)

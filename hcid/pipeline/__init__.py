@@ -13,7 +13,6 @@
 """
 
 from hcid.pipeline.execution import Execution
-from hcid.pipeline.fit import HCFitRun, fit_hc_study
 from hcid.pipeline.parallel import BACKENDS, check_backend, parallel_map
 from hcid.pipeline.rundir import check_run_dir
 from hcid.pipeline.studies import (
@@ -27,6 +26,17 @@ from hcid.pipeline.studies import (
     simulate_study,
 )
 from hcid.pipeline.sweep import SweepRun, sweep_study
+
+
+def __getattr__(name: str):
+    """``fit_hc_study`` and ``HCFitRun`` on first use: fit-hc's modules import python-control and
+    scipy.stats (about 1 s), which simulating and identifying never need."""
+    if name in ("HCFitRun", "fit_hc_study"):
+        from hcid.pipeline import fit
+
+        return getattr(fit, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "BACKENDS",

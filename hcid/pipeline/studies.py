@@ -449,7 +449,7 @@ def run_study(
     config.require_simulation("run")
     start = time.perf_counter()
     identification = identify_study(config, run_dir, execution=execution)
-    sweep = sweep_study(config, run_dir)
+    sweep = sweep_study(config, run_dir, identification.frontier)
     return StudyRun(identification, sweep, time.perf_counter() - start)
 
 

@@ -36,7 +36,7 @@ class SweepRun:
 
 
 @holds_run_dir(create=False)
-def sweep_study(config: Config, run_dir: Path) -> SweepRun:
+def sweep_study(config: Config, run_dir: Path, frontier: pa.Table | None = None) -> SweepRun:
     """Select by ``MSC = log V + W d`` for every realization, method and W of the grid.
 
     Writes ``selection.parquet`` (one row per model, seed, method and W),
@@ -46,14 +46,17 @@ def sweep_study(config: Config, run_dir: Path) -> SweepRun:
     the error rate at each criterion's W, computed from the breakpoints) and
     ``rates.parquet`` (the false-positive rate of a model without feedforward,
     the false-negative rate of one with it, over the W grid with exact 95% bands).
+    ``frontier`` is the run's frontier table where the caller holds it (``run_study``, which
+    has just written it); otherwise it is read from ``run_dir``.
     """
     check_run_dir(config, run_dir, "select")
-    frontier = results.read(
-        tables.FRONTIER,
-        run_dir,
-        (*tables.FRONTIER.key, *tables.SELECTED_COLUMNS),
-        hint="run `hcid identify` first",
-    )
+    if frontier is None:  # given by a caller that has just written it (run_study): not read again
+        frontier = results.read(
+            tables.FRONTIER,
+            run_dir,
+            (*tables.FRONTIER.key, *tables.SELECTED_COLUMNS),
+            hint="run `hcid identify` first",
+        )
     results.check_against_config(frontier, config, run_dir / tables.FRONTIER.file)
     w = np.asarray(config.selection.w_grid)
     sel_parts, bp_parts = [], []
