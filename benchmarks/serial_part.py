@@ -41,12 +41,14 @@ def timed(original):
 
 
 # Every module that calls the pool by name (this code's Execution, or an older checkout's stages).
+# fit-hc's module only where the code imported it already: importing it here would add
+# python-control's import to a run that does not need it.
 for name in ("hcid.pipeline.execution", "hcid.pipeline.studies", "hcid.pipeline.fit"):
     try:
-        module = importlib.import_module(name)
+        module = sys.modules.get(name) or (name != "hcid.pipeline.fit" and importlib.import_module(name))
     except ImportError:
         continue
-    if hasattr(module, "parallel_map"):
+    if module and hasattr(module, "parallel_map"):
         module.parallel_map = timed(module.parallel_map)
 from hcid.cli import main
 sys.argv = ["hcid", "run", sys.argv[1], "--run", sys.argv[2], "--jobs", sys.argv[3], "--quiet"]

@@ -183,7 +183,7 @@ def test_full_disk_is_one_line_and_keeps_the_table(tmp_path, monkeypatch):
     table = pa.table({"x": [1]})
     results.write_table(table, tmp_path / "t.parquet")
 
-    def enospc(table, where):
+    def enospc(table, where, **options):
         raise OSError(errno.ENOSPC, "No space left on device")
 
     monkeypatch.setattr(pq, "write_table", enospc)

@@ -81,14 +81,6 @@ def parallel_map(
     (``contextlib.closing``): that stops the workers; an abandoned one lets
     them finish every task first.
     """
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
     check_backend(backend)
     if not tasks:
         return
@@ -99,19 +91,10 @@ def parallel_map(
                 stream = _dask_stream(func, tasks, jobs, scheduler, worker_timeout, stack)
             else:
                 stream = _local_stream(func, tasks, jobs, stack)
-            progress = stack.enter_context(
-                Progress(
-                    "[progress.description]{task.description}",
-                    BarColumn(),
-                    MofNCompleteColumn(),
-                    TimeElapsedColumn(),
-                    TimeRemainingColumn(),
-                    disable=not show_progress,
-                )
-            )
-            bar = progress.add_task(_LABEL.get() + label, total=len(tasks))
+            advance = _progress_bar(stack, _LABEL.get() + label, len(tasks)) if show_progress else None
             for result in stream:
-                progress.advance(bar)
+                if advance is not None:
+                    advance()
                 finished += 1
                 yield result
         except BrokenProcessPool:  # loky's TerminatedWorkerError is one too
@@ -119,6 +102,24 @@ def parallel_map(
                 f"a worker process died (killed, or out of memory?) with {finished} of {len(tasks)} "
                 "tasks finished; rerun (identify and fit-hc resume from the finished ones)"
             ) from None
+
+
+def _progress_bar(stack: contextlib.ExitStack, label: str, total: int) -> Callable[[], None]:
+    """A rich progress bar on stderr, open until ``stack`` closes; returns its advance step.
+    (rich is imported here: a quiet run does without its 0.1 s import.)"""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
+
+    progress = stack.enter_context(
+        Progress(
+            "[progress.description]{task.description}",
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TimeRemainingColumn(),
+        )
+    )
+    bar = progress.add_task(label, total=total)
+    return lambda: progress.advance(bar)
 
 
 _compiled = False
