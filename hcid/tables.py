@@ -110,6 +110,9 @@ class Schema:
     units: tuple[tuple[str, str], ...] = ()
     #: The command that writes the table, for the next step a refusal names ("" where several do).
     command: str = ""
+    #: Columns written without dictionary encoding (every value its own: a record's noisy
+    #: signals, a fit's V); list columns never are. The values read back are the same.
+    plain: tuple[str, ...] = ()
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -176,6 +179,7 @@ SIMULATIONS = _schema(
     "simulations.parquet",
     [("model", _STR), ("seed", _INT), ("k", _INT), ("t", _F64)] + [(c, _F64) for c in CHANNELS],
     _REALIZATION_KEY,
+    plain=("e", "u", "theta", "n"),  # ft, fd and t repeat in every realization
 )
 SIMULATION_SUMMARY = _schema(
     "simulation_summary.parquet",
@@ -187,6 +191,7 @@ MEASURED = _schema(
     "measured.parquet",
     [("model", _STR), ("seed", _INT), ("k", _INT), ("t", _F64)] + [(c, _F64) for c in SIGNALS],
     _REALIZATION_KEY,
+    plain=("e", "u"),
 )
 #: ``runs.parquet`` (``hcid identify --data``): one row per imported run: ``model`` (the data
 #: name), ``seed`` (the run id every table uses), ``file`` (as given), ``file_run`` (the file's
@@ -203,6 +208,7 @@ FRONTIER = _schema(
     + _SELECTED_FIELDS
     + [("n_unstable", _INT), ("a", _LIST), ("b_ft", _LIST), ("b_e", _LIST)],
     _METHOD_KEY,
+    plain=("v", "vaf_estimation", "vaf_validation"),
 )
 IDENTIFY_LOG = _schema(
     "identify_log.parquet",

@@ -230,8 +230,13 @@ def _existing(run_dir: Path) -> dict[tuple[str, int, str], dict[str, pa.Table]]:
     return out
 
 
-def _load_records(config: Config, run_dir: Path) -> dict[tuple[str, int], dict[str, np.ndarray]]:
-    table = results.read(tables.SIMULATIONS, run_dir, hint="run `hcid simulate` first")
+def _load_records(
+    config: Config, run_dir: Path, table: pa.Table | None = None
+) -> dict[tuple[str, int], dict[str, np.ndarray]]:
+    """Each simulated record by (model, seed): from ``table`` where the caller has just made the
+    simulations (not read back), else from the run's ``simulations.parquet``."""
+    if table is None:
+        table = results.read(tables.SIMULATIONS, run_dir, hint="run `hcid simulate` first")
     path = run_dir / tables.SIMULATIONS.file
     recs = results.records(table, path)
     n = config.timing.record_samples
@@ -405,7 +410,8 @@ def _records_to_identify(config: Config, run_dir: Path, data, execution: Executi
         simulation = simulate_study(config, run_dir, execution=execution)
     keys = [(m.name, s) for m in config.models for s in config.seeds]
     check_run_dir(config, run_dir, "identify", force=force)
-    return _load_records(config, run_dir), keys, noise_free, simulation
+    made = simulation.simulations if simulation is not None else None
+    return _load_records(config, run_dir, made), keys, noise_free, simulation
 
 
 def _with_worker(log: pa.Table) -> pa.Table:
