@@ -124,3 +124,19 @@ def test_false_negative_bootstrap_is_degenerate_for_identical_realizations_and_s
     assert set(np.unique(one.values)) <= {0.1, 0.5}
     np.testing.assert_array_equal(one.values, two.values)
     assert over_w.false_negative_threshold(segs, nbs) == 0.1  # mean 1.5 from W = 0.1 on
+
+
+@pytest.mark.parametrize("n", [1, 7, 40, 51])
+def test_false_negative_bootstrap_draws_the_resamples_one_after_the_other(n):
+    # Source: the bootstrap as first written (a bincount of n draws per resample, resample after
+    # resample, from one seeded Generator); drawing all resamples at once must give the same
+    # resamples, hence the same W_FN values, not merely the same distribution.
+    rng = np.random.default_rng(11)
+    mixed = [_realization([0.0, float(w)], [3, 0]) for w in rng.uniform(0.05, 0.6, n)]
+    segs, nbs = [s for s, _ in mixed], [nb for _, nb in mixed]
+    at, values = over_w._nb_ft_at_breakpoints(segs, nbs)
+    draw = np.random.default_rng(4)
+    weights = np.stack([np.bincount(draw.integers(0, n, n), minlength=n) for _ in range(300)])
+    expected = over_w._first_below(at, weights @ values / n, 2.0)
+    got = over_w.false_negative_bootstrap(segs, nbs, resamples=300, seed=4)
+    np.testing.assert_array_equal(got.values, expected)

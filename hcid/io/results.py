@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from hcid import tables
@@ -230,7 +231,7 @@ def check_against_config(table: pa.Table, config, path: str | Path) -> None:
     simulated = {m.name for m in config.models}
     allowed = simulated | ({config.data.name} if config.data is not None else set())
     if "model" in names:
-        models = set(table.column("model").to_pylist())
+        models = set(pc.unique(table.column("model")).to_pylist())
         if not models <= allowed:
             bad = sorted(models - allowed, key=str)[0]
             raise DataError(
@@ -239,7 +240,10 @@ def check_against_config(table: pa.Table, config, path: str | Path) -> None:
             )
         if "seed" in names:
             seeds = set(config.seeds)
-            pairs = set(zip(table.column("model").to_pylist(), table.column("seed").to_pylist(), strict=True))
+            distinct = table.select(["model", "seed"]).group_by(["model", "seed"]).aggregate([])
+            pairs = set(
+                zip(distinct.column("model").to_pylist(), distinct.column("seed").to_pylist(), strict=True)
+            )
             wrong = sorted(p for p in pairs if p[0] in simulated and p[1] not in seeds)
             if wrong:
                 raise DataError(
@@ -247,7 +251,7 @@ def check_against_config(table: pa.Table, config, path: str | Path) -> None:
                     "the tables and config.yaml disagree"
                 )
     if "method" in names:
-        unknown = set(table.column("method").to_pylist()) - set(METHODS)
+        unknown = set(pc.unique(table.column("method")).to_pylist()) - set(METHODS)
         if unknown:
             raise DataError(
                 f"{path}: holds method {str(sorted(unknown, key=str)[0])[:40]!r}, not a registered one"

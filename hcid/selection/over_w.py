@@ -264,7 +264,10 @@ def false_negative_bootstrap(
     at, values = _nb_ft_at_breakpoints(segments, nb_ft)
     n = values.shape[0]
     rng = np.random.default_rng(seed)
-    weights = np.stack([np.bincount(rng.integers(0, n, n), minlength=n) for _ in range(resamples)])
+    # One draw of resamples x n indices is the stream of resamples draws of n (numpy's Generator
+    # draws them in order; tests/test_selection.py holds the weights to the one-by-one ones).
+    draws_at = rng.integers(0, n, (resamples, n)) + n * np.arange(resamples)[:, None]
+    weights = np.bincount(draws_at.ravel(), minlength=n * resamples).reshape(resamples, n)
     draws = _first_below(at, weights @ values / n, level)
     alpha = (1.0 - confidence) / 2.0
     low, high = np.quantile(draws, [alpha, 1.0 - alpha], method="inverted_cdf")
