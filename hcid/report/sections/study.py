@@ -377,6 +377,12 @@ def _render_answers(data: StudyData, doc: Doc) -> None:
         ],
         data.answers,
     )
+    _render_answer_notes(data, doc)
+
+
+def _render_answer_notes(data: StudyData, doc: Doc) -> None:
+    """Below the answer table: verdicts resting on one person, the per-subject table, groups whose
+    twins no W separates and runs that keep no path at W."""
     if data.one_person:
         doc.text(
             "**A verdict that rests on one person:** " + "; ".join(data.one_person) + ": every run "
