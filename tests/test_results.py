@@ -222,3 +222,27 @@ def test_split_by_key_matches_the_obvious_grouping(chunks):
     for key in ref:
         assert got[key].to_pydict() == ref[key].to_pydict()
     assert split_by_key(table.slice(0, 0), ("model",)) == {}
+
+
+def test_split_by_key_groups_as_dict_keys_do():
+    # Source: Python's dict (the obvious grouping): -0.0 and 0.0 are one key, a dictionary
+    # column whose dictionary repeats a value groups by value; NaN keys form one group here.
+    from hcid.tables import split_by_key
+
+    t = pa.table({"w": [0.0, -0.0, 0.0, float("nan"), 1.0, float("nan")], "v": [1, 2, 3, 4, 5, 6]})
+    got = split_by_key(t, ("w",))
+    assert [g.column("v").to_pylist() for g in got.values()] == [[1, 2, 3], [4, 6], [5]]
+    d = pa.DictionaryArray.from_arrays(pa.array([0, 1, 0]), pa.array(["a", "a"]))
+    assert list(split_by_key(pa.table({"k": d, "v": [1, 2, 3]}), ("k",))) == [("a",)]
+    assert split_by_key(t, ()) == {}
+
+
+def test_a_table_an_earlier_hcid_wrote_is_not_rewritten(tmp_path):
+    # Source: results.write's promise (a complete run needs no write and may be read-only): a
+    # frontier written with pyarrow's default encoding (hcid before Schema.plain) counts as
+    # the same table, so a read-only run directory of an earlier hcid is not written to.
+    t = pa.table({"v": [0.5, 0.25], "a": [[1.0, 2.0], [3.0]]})
+    path = tmp_path / "t.parquet"
+    pq.write_table(t, path)
+    assert results._same_table(path, t, ("v",))
+    assert not results._same_table(path, pa.table({"v": [0.5, 0.3], "a": [[1.0, 2.0], [3.0]]}), ("v",))

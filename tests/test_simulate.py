@@ -283,10 +283,11 @@ def test_compiled_filter_is_lfilters_bits(paper_config):
     from scipy import signal as sps
 
     from hcid.loop.hcmodel import DiscreteLoop
-    from hcid.loop.simulate import _lfilter, white_noise
+    from hcid.loop.simulate import _lfilter, _replicable, white_noise
 
     dloop = DiscreteLoop.build(paper_config.model("FF"), paper_config.loop, paper_config.timing.sim_dt)
     x = white_noise(7, 5000)
+    assert all(_replicable(*path) for path in (dloop.remnant, dloop.feedforward, dloop.feedback))
     for b, a in (dloop.remnant, dloop.feedforward, dloop.feedback, (np.array([0.5, 0.25]), np.array([1.0]))):
         got, ref = _lfilter(b, a, x), sps.lfilter(b, a, x)
         assert np.array_equal(got.view(np.int64), ref.view(np.int64))

@@ -83,12 +83,21 @@ def _same_table(path: Path, table: pa.Table, plain: Sequence[str] = ()) -> bool:
     """Whether ``path`` holds exactly the bytes ``table`` would be written as (NaN-safe)."""
     if not path.is_file():
         return False
-    sink = pa.BufferOutputStream()
-    _write_parquet(table, sink, plain)
     try:
-        return path.read_bytes() == sink.getvalue().to_pybytes()
+        held = path.read_bytes()
     except OSError:
         return False
+    # This hcid's encoding, then pyarrow's default (an earlier hcid's: a complete run directory
+    # it wrote, perhaps read-only, needs no write either).
+    for default in (False, True):
+        sink = pa.BufferOutputStream()
+        if default:
+            pq.write_table(table, sink)
+        else:
+            _write_parquet(table, sink, plain)
+        if held == sink.getvalue().to_pybytes():
+            return True
+    return False
 
 
 def write_text(text: str, path: str | Path) -> None:

@@ -34,9 +34,16 @@ def _truncated(p: np.ndarray) -> np.ndarray:
     return np.zeros(1) if nonzero.size == 0 else p[nonzero[0] :]
 
 
+def _made(num: np.ndarray, den: np.ndarray) -> Polynomials:
+    """What python-control's constructor keeps: a zero numerator over 1, leading zeros dropped."""
+    if not np.any(num):
+        den = np.ones(1)
+    return _truncated(num), _truncated(den)
+
+
 def tf(num, den) -> Polynomials:
     """``control.tf(num, den)`` for a SISO list of coefficients."""
-    return _truncated(np.array([float(c) for c in num])), _truncated(np.array([float(c) for c in den]))
+    return _made(np.array([float(c) for c in num]), np.array([float(c) for c in den]))
 
 
 def product(left: Polynomials, right: Polynomials) -> Polynomials:
@@ -46,7 +53,7 @@ def product(left: Polynomials, right: Polynomials) -> Polynomials:
     zero, one = np.array([0]), np.array([1])
     num = np.polyadd(np.polymul(zero, den_product), np.polymul(num_product, one))
     den = np.polymul(one, den_product)
-    return _truncated(num), _truncated(den)
+    return _made(num, den)
 
 
 def gain(k: float, right: Polynomials) -> Polynomials:
@@ -72,12 +79,25 @@ def minreal(p: Polynomials) -> Polynomials:
             kept.append(z)
     num = np.atleast_1d(k * np.real(np.poly(kept)))
     den = np.atleast_1d(np.real(np.poly(poles)))
-    return _truncated(num.astype(np.float64)), _truncated(den.astype(np.float64))
+    return _made(num.astype(np.float64), den.astype(np.float64))
 
 
 def poles(p: Polynomials) -> np.ndarray:
-    """The poles (python-control's ``TransferFunction.poles`` for SISO: the roots of den)."""
-    return np.roots(p[1]).astype(complex)
+    """python-control's ``TransferFunction.poles`` for SISO (through ``_common_den``): the roots
+    of the normalised denominator, those within 2 sqrt(eps) of the real axis made real, multiplied
+    out again and their roots taken. (A plant's zeros on the imaginary axis give feedforward poles
+    whose real part is rounding: the same rounding as python-control's, the same verdict.)"""
+    num, den = p
+    eps = np.finfo(float).eps
+    if np.abs(num).max() <= eps:
+        found = np.roots(den)
+    else:
+        _, a = _normalize(num, den)
+        found = np.roots((a + 0.0) / a[0])
+    snapped = [c.real if abs(c.imag) < 2 * np.sqrt(eps) else c for c in found]
+    if not snapped:
+        return np.array([], dtype=complex)
+    return np.roots(np.poly(snapped).real).astype(complex)
 
 
 def sample(p: Polynomials, dt: float, method: str) -> Polynomials:
@@ -90,7 +110,7 @@ def sample(p: Polynomials, dt: float, method: str) -> Polynomials:
     else:
         raise ValueError(f"sample: method {method!r} is not one the loop uses (bilinear, zoh)")
     num, den = _ss2tf(a, b, c, d)
-    return _truncated(np.asarray(num[0, :], dtype=np.float64)), _truncated(np.asarray(den, dtype=np.float64))
+    return _made(np.asarray(num[0, :], dtype=np.float64), np.asarray(den, dtype=np.float64))
 
 
 def _normalize(b: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

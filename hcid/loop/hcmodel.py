@@ -112,10 +112,17 @@ def remnant_filter(loop: Loop) -> control.TransferFunction:
 
 
 def discretise(sys, dt: float, method: str = "zoh") -> tuple[np.ndarray, np.ndarray]:
-    """Discretise a SISO transfer function (python-control's, or a ``(num, den)`` pair) as
-    ``control.sample_system`` does; returns ``(b, a)`` for ``scipy.signal.lfilter``."""
-    polynomials = sys if isinstance(sys, tuple) else _lti.tf(sys.num[0][0], sys.den[0][0])
-    num, den = _lti.sample(polynomials, dt, method)
+    """Discretise a SISO transfer function by ``control.sample_system``; returns ``(b, a)`` for
+    ``scipy.signal.lfilter``. A ``(num, den)`` pair (the loop's own paths, ``bilinear`` or
+    ``zoh``) is done by :mod:`hcid.loop._lti`, the same bits without importing python-control."""
+    if isinstance(sys, tuple):
+        num, den = _lti.sample(sys, dt, method)
+    else:
+        import control
+
+        d = control.sample_system(sys, dt, method=method)
+        num = np.atleast_1d(np.squeeze(np.asarray(d.num[0][0], dtype=np.float64)))
+        den = np.atleast_1d(np.squeeze(np.asarray(d.den[0][0], dtype=np.float64)))
     # Pad the numerator to the denominator's length so coefficient k is lag k.
     b = np.concatenate([np.zeros(den.size - num.size), num])
     return b / den[0], den / den[0]

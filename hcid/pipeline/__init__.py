@@ -38,6 +38,10 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
+def __dir__() -> list[str]:
+    return sorted({*globals(), "HCFitRun", "fit_hc_study"})
+
+
 __all__ = [
     "BACKENDS",
     "CalibrationRun",
