@@ -193,7 +193,8 @@ def records(table: pa.Table, path: str | Path) -> dict[tuple[str, int], dict[str
     problem = tables.SIMULATIONS.problem(table)
     if problem is not None:
         raise DataError(f"{path}: {problem}")
-    model = table.column("model").to_numpy(zero_copy_only=False).astype(str)
+    encoded = pc.dictionary_encode(table.column("model")).combine_chunks()  # no string sort
+    names, model_code = encoded.dictionary.to_pylist(), encoded.indices.to_numpy(zero_copy_only=False)
     seed = table.column("seed").to_numpy()
     k = table.column("k").to_numpy()
     data = {name: table.column(name).to_numpy().astype(np.float64) for name in ("t", *CHANNELS)}
@@ -202,10 +203,10 @@ def records(table: pa.Table, path: str | Path) -> dict[tuple[str, int], dict[str
         if bad.any():
             i = int(np.argmax(bad))
             raise DataError(
-                f"{path}: column {name!r} holds {values[i]} at model {model[i]}, seed {seed[i]}, k {k[i]}"
+                f"{path}: column {name!r} holds {values[i]} at model {names[model_code[i]]}, seed {seed[i]}, "
+                f"k {k[i]}"
             )
     out: dict[tuple[str, int], dict[str, np.ndarray]] = {}
-    _, model_code = np.unique(model, return_inverse=True)
     _, seed_code = np.unique(seed, return_inverse=True)
     key = model_code.astype(np.int64) * (int(seed_code.max(initial=0)) + 1) + seed_code
     _, first, group, counts = np.unique(key, return_index=True, return_inverse=True, return_counts=True)
@@ -213,7 +214,7 @@ def records(table: pa.Table, path: str | Path) -> dict[tuple[str, int], dict[str
     rows_of = np.split(grouped, np.cumsum(counts)[:-1])
     for g in np.argsort(first):  # records in order of first appearance
         start = first[g]
-        m, s = model[start], int(seed[start])
+        m, s = names[model_code[start]], int(seed[start])
         rows = rows_of[g]
         if not np.array_equal(k[rows], np.arange(rows.size)):
             raise DataError(f"{path}: samples of model {m}, seed {s} are not k = 0..{rows.size - 1} in order")
