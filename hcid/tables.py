@@ -50,9 +50,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-import numpy as np
 import pyarrow as pa
-import pyarrow.compute as pc
 
 __all__ = [
     "ANALYSIS",
@@ -81,9 +79,7 @@ __all__ = [
     "SIMULATION_SUMMARY",
     "Schema",
     "UNCERTAINTY_COLUMNS",
-    "concat",
     "rate_column",
-    "split_by_key",
     "stage_choice",
     "thresholds",
 ]
@@ -308,47 +304,6 @@ def thresholds(criterion_columns: Sequence[str] = ()) -> Schema:
         ("method", "model"),
         optional=(*criterion_columns, *UNCERTAINTY_COLUMNS, *rates),
     )
-
-
-def split_by_key(table: pa.Table, keys: Sequence[str]) -> dict[tuple, pa.Table]:
-    """Rows of ``table`` grouped by the values of ``keys``, groups in first-seen order and rows
-    in table order: one ``take`` of the whole table, then a slice per group (the paper study's
-    frontier of 89,600 rows in 200 groups: 10 times faster than a take per group). Key values
-    group as a dict's keys do (-0.0 with 0.0), but NaN keys form one group."""
-    if table.num_rows == 0 or not keys:
-        return {}
-    codes, values = [], []
-    group = np.zeros(table.num_rows, dtype=np.int64)
-    for k in keys:
-        column = table.column(k)
-        if pa.types.is_dictionary(column.type):  # its dictionary may repeat a value
-            column = column.cast(column.type.value_type)
-        if pa.types.is_floating(column.type):  # -0.0 + 0.0 is 0.0: one key, as in a dict
-            column = pc.add(column, 0.0)
-        encoded = pc.dictionary_encode(column, null_encoding="encode").combine_chunks()
-        codes.append(encoded.indices.to_numpy(zero_copy_only=False).astype(np.int64))
-        values.append(encoded.dictionary.to_pylist())
-        # the groups so far numbered 0.. again (no overflow however many keys)
-        group = np.unique(group * len(values[-1]) + codes[-1], return_inverse=True)[1].ravel()
-    _, first, inverse = np.unique(group, return_index=True, return_inverse=True)
-    order = np.argsort(first)  # the groups in first-seen order
-    rank = np.empty(order.size, dtype=np.int64)
-    rank[order] = np.arange(order.size)
-    row_rank = rank[inverse.ravel()]
-    rows = np.argsort(row_rank, kind="stable")
-    taken = table.take(pa.array(rows, pa.int64()))
-    ends = np.cumsum(np.bincount(row_rank, minlength=order.size))
-    out = {}
-    for g, start in enumerate(np.concatenate([[0], ends[:-1]])):
-        key = tuple(v[c[first[order[g]]]] for v, c in zip(values, codes, strict=True))
-        out[key] = taken.slice(start, ends[g] - start)
-    assert len(out) == order.size, "split_by_key: two groups with equal keys"
-    return out
-
-
-def concat(tables: Sequence[pa.Table]) -> pa.Table:
-    """Concatenate tables of one schema into a single-chunk table."""
-    return pa.concat_tables(tables).combine_chunks()
 
 
 # --------------------------------------------------------------------------- analyses of selected models

@@ -15,6 +15,7 @@ from typer.testing import CliRunner
 
 from hcid import pipeline, tables
 from hcid.cli import app
+from hcid.io import results
 from hcid.pipeline import Execution, studies
 
 from . import naive
@@ -71,7 +72,7 @@ def test_identical_across_jobs(ci_runs, name):
 def test_selection_table_is_brute_force_argmin(ci_runs, ci_config):
     # Every stored selection equals the row-by-row argmin of log V + W d over the frontier.
     run = ci_runs[1]
-    frontier = tables.split_by_key(pq.read_table(run / "frontier.parquet"), tables.FRONTIER.key)
+    frontier = results.split_by_key(pq.read_table(run / "frontier.parquet"), tables.FRONTIER.key)
     chosen = pq.read_table(run / "selection.parquet").to_pylist()
     cols = ("na", "nb_ft", "nb_e", "nk_ft", "nk_e")
     for row in chosen[::7]:
@@ -86,7 +87,7 @@ def test_selection_table_is_brute_force_argmin(ci_runs, ci_config):
 def test_thresholds_match_fine_grid(ci_runs):
     # W_FP / W_FN from exact breakpoints bracket the values seen on a fine W grid.
     run = ci_runs[1]
-    frontier = tables.split_by_key(pq.read_table(run / "frontier.parquet"), tables.FRONTIER.key)
+    frontier = results.split_by_key(pq.read_table(run / "frontier.parquet"), tables.FRONTIER.key)
     w = np.geomspace(1e-5, 20, 3000)
     thresholds = {(r["method"], r["model"]): r for r in pq.read_table(run / "thresholds.parquet").to_pylist()}
     cols = ("na", "nb_ft", "nb_e", "nk_ft", "nk_e")

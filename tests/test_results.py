@@ -204,7 +204,7 @@ def _split_by_key_reference(table, keys):
 def test_split_by_key_matches_the_obvious_grouping(chunks):
     # Source: _split_by_key_reference above. Same groups, same first-seen order, same rows in
     # table order, for string, integer, float and null key values over several chunks.
-    from hcid.tables import split_by_key
+    from hcid.io.results import split_by_key
 
     rng = np.random.default_rng(5)
     n = 600
@@ -227,7 +227,7 @@ def test_split_by_key_matches_the_obvious_grouping(chunks):
 def test_split_by_key_groups_as_dict_keys_do():
     # Source: Python's dict (the obvious grouping): -0.0 and 0.0 are one key, a dictionary
     # column whose dictionary repeats a value groups by value; NaN keys form one group here.
-    from hcid.tables import split_by_key
+    from hcid.io.results import split_by_key
 
     t = pa.table({"w": [0.0, -0.0, 0.0, float("nan"), 1.0, float("nan")], "v": [1, 2, 3, 4, 5, 6]})
     got = split_by_key(t, ("w",))

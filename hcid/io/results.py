@@ -62,8 +62,15 @@ def _write_parquet(table: pa.Table, where, plain: Sequence[str] = ()) -> None:
     values are each their own (ARX coefficients, a record's noisy signals): the paper study's
     frontier is written in 50 instead of 187 ms and its simulations in 19 instead of 69 ms,
     each file smaller; the values read back are the same."""
+    pq.write_table(table, where, use_dictionary=_dictionary_columns(table, plain))
+
+
+def _dictionary_columns(table: pa.Table, plain: Sequence[str]) -> list[str] | bool:
+    """The columns :func:`_write_parquet` dictionary-encodes; True where that is every one
+    (pyarrow's default, the same bytes)."""
     skip = set(plain) | {f.name for f in table.schema if pa.types.is_list(f.type)}
-    pq.write_table(table, where, use_dictionary=[n for n in table.column_names if n not in skip])
+    names = table.column_names
+    return True if skip.isdisjoint(names) else [n for n in names if n not in skip]
 
 
 def write(schema: Schema, table: pa.Table, run_dir: str | Path) -> Path:
@@ -87,14 +94,12 @@ def _same_table(path: Path, table: pa.Table, plain: Sequence[str] = ()) -> bool:
         held = path.read_bytes()
     except OSError:
         return False
-    # This hcid's encoding, then pyarrow's default (an earlier hcid's: a complete run directory
-    # it wrote, perhaps read-only, needs no write either).
-    for default in (False, True):
+    # This hcid's encoding, then pyarrow's default where it differs (an earlier hcid's: a
+    # complete run directory it wrote, perhaps read-only, needs no write either).
+    ours = _dictionary_columns(table, plain)
+    for dictionary in (ours,) if ours is True else (ours, True):
         sink = pa.BufferOutputStream()
-        if default:
-            pq.write_table(table, sink)
-        else:
-            _write_parquet(table, sink, plain)
+        pq.write_table(table, sink, use_dictionary=dictionary)
         if held == sink.getvalue().to_pybytes():
             return True
     return False
@@ -220,6 +225,50 @@ def records(table: pa.Table, path: str | Path) -> dict[tuple[str, int], dict[str
             raise DataError(f"{path}: samples of model {m}, seed {s} are not k = 0..{rows.size - 1} in order")
         out[(m, s)] = {name: values[rows] for name, values in data.items()}
     return out
+
+
+# --------------------------------------------------------------------------- grouping and joining tables
+
+
+def split_by_key(table: pa.Table, keys: Sequence[str]) -> dict[tuple, pa.Table]:
+    """Rows of ``table`` grouped by the values of ``keys``, groups in first-seen order and rows
+    in table order: one ``take`` of the whole table, then a slice per group (the paper study's
+    frontier of 89,600 rows in 200 groups: 10 times faster than a take per group). Key values
+    group as a dict's keys do (-0.0 with 0.0), but NaN keys form one group."""
+    if table.num_rows == 0 or not keys:
+        return {}
+    codes, values = [], []
+    group = np.zeros(table.num_rows, dtype=np.int64)
+    for k in keys:
+        column = table.column(k)
+        if pa.types.is_dictionary(column.type):  # its dictionary may repeat a value
+            column = column.cast(column.type.value_type)
+        if pa.types.is_floating(column.type):  # -0.0 + 0.0 is 0.0: one key, as in a dict
+            column = pc.add(column, 0.0)
+        encoded = pc.dictionary_encode(column, null_encoding="encode").combine_chunks()
+        codes.append(encoded.indices.to_numpy(zero_copy_only=False).astype(np.int64))
+        values.append(encoded.dictionary.to_pylist())
+        # the groups so far numbered 0.. again (no overflow however many keys)
+        group = np.unique(group * len(values[-1]) + codes[-1], return_inverse=True)[1].ravel()
+    _, first, inverse = np.unique(group, return_index=True, return_inverse=True)
+    order = np.argsort(first)  # the groups in first-seen order
+    rank = np.empty(order.size, dtype=np.int64)
+    rank[order] = np.arange(order.size)
+    row_rank = rank[inverse.ravel()]
+    rows = np.argsort(row_rank, kind="stable")
+    taken = table.take(pa.array(rows, pa.int64()))
+    ends = np.cumsum(np.bincount(row_rank, minlength=order.size))
+    out = {}
+    for g, start in enumerate(np.concatenate([[0], ends[:-1]])):
+        key = tuple(v[c[first[order[g]]]] for v, c in zip(values, codes, strict=True))
+        out[key] = taken.slice(start, ends[g] - start)
+    assert len(out) == order.size, "split_by_key: two groups with equal keys"
+    return out
+
+
+def concat(parts: Sequence[pa.Table]) -> pa.Table:
+    """Concatenate tables of one schema into a single-chunk table."""
+    return pa.concat_tables(parts).combine_chunks()
 
 
 # --------------------------------------------------------------------------- consistency with the config

@@ -42,7 +42,7 @@ from hcid.config import Config
 from hcid.config.fit import FEEDFORWARD_PARAMETERS
 from hcid.errors import ConfigError, DataError, IdentificationError
 from hcid.hcfit.determined import group_model
-from hcid.io import datasets, folders
+from hcid.io import datasets, folders, results
 from hcid.io.datasets import DataSet
 from hcid.io.resolve import with_data
 from hcid.loop.hcmodel import plant
@@ -349,7 +349,7 @@ def _twins(study: _Study, found: _Found) -> None:
 def _selection_paths(study: _Study, found: _Found, frontier: pa.Table) -> None:
     """Every run's frontier (of the run's ``frontier`` table) and selection path over W, per method."""
     name = study.config.data.name
-    by_key = tables.split_by_key(frontier, tables.FRONTIER.key)
+    by_key = results.split_by_key(frontier, tables.FRONTIER.key)
     for seed in study.records:
         for method_name in methods.METHODS:
             t = by_key[(name, seed, method_name)]

@@ -128,7 +128,7 @@ def _records(run_dir: Path) -> dict[tuple[str, int], dict[str, np.ndarray]]:
         out.update(results.records(sims, run_dir / tables.SIMULATIONS.file))
     measured = results.read_optional(tables.MEASURED, run_dir)
     if measured is not None:
-        for key, t in tables.split_by_key(measured, tables.MEASURED.key).items():
+        for key, t in results.split_by_key(measured, tables.MEASURED.key).items():
             out[key] = {c: t.column(c).to_numpy().astype(np.float64) for c in tables.SIGNALS}
     return out
 
@@ -319,9 +319,9 @@ def _groups(found: dict[str, pa.Table | None], digest: str) -> dict:
     if any(found.get(name) is None for name in OUTPUTS):
         return {}
     mask = pa.compute.equal(found["parameters"].column("settings"), digest)
-    split = {"parameters": tables.split_by_key(found["parameters"].filter(mask), _KEY)}
+    split = {"parameters": results.split_by_key(found["parameters"].filter(mask), _KEY)}
     for name in list(OUTPUTS)[1:]:
-        split[name] = tables.split_by_key(found[name], _KEY)
+        split[name] = results.split_by_key(found[name], _KEY)
     out = {}
     for k, p in split["parameters"].items():
         if k in split["residuals"]:
@@ -450,7 +450,7 @@ def _write_fits(config: Config, run_dir: Path, by_key: dict, kept: dict) -> dict
     order = {k: i for i, k in enumerate(by_key)}
     keys = sorted(kept, key=lambda k: (order.get(k[:3], len(order)), k[3]))
     written = {
-        name: tables.concat([schema.arrow.empty_table()] + [kept[k][name] for k in keys])
+        name: results.concat([schema.arrow.empty_table()] + [kept[k][name] for k in keys])
         for name, schema in OUTPUTS.items()
     }
     record_config(config, run_dir)
@@ -499,7 +499,7 @@ def fit_hc_study(
     config = dataclasses.replace(config, fit_hc=_fit_settings(config, target))
     frontier = results.read(tables.FRONTIER, run_dir, hint="run `hcid identify` first")
     results.check_against_config(frontier, config, run_dir / tables.FRONTIER.file)
-    by_key = tables.split_by_key(frontier, tables.FRONTIER.key)
+    by_key = results.split_by_key(frontier, tables.FRONTIER.key)
     present = list(dict.fromkeys(k[2] for k in by_key))
     names = [m for m in (method_names or methods.METHODS) if m in present]
     for m in names:

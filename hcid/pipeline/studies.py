@@ -207,15 +207,15 @@ def _existing(run_dir: Path) -> dict[tuple[str, int, str], dict[str, pa.Table]]:
     hint = "use --force to recompute it"
     key = tables.FRONTIER.key
     frontier = results.read(tables.FRONTIER, run_dir, key, hint=hint)
-    logs = tables.split_by_key(results.read(tables.IDENTIFY_LOG, run_dir, key, hint=hint), key)
+    logs = results.split_by_key(results.read(tables.IDENTIFY_LOG, run_dir, key, hint=hint), key)
     choices = {}
     for name, schema in _choice_schemas().items():
         table = results.read_optional(schema, run_dir, schema.key)
-        choices[name] = tables.split_by_key(table, schema.key) if table is not None else {}
+        choices[name] = results.split_by_key(table, schema.key) if table is not None else {}
     handoff = results.read_optional(tables.HANDOFF, run_dir)
-    handoffs = tables.split_by_key(handoff, key) if handoff is not None else {}
+    handoffs = results.split_by_key(handoff, key) if handoff is not None else {}
     out = {}
-    for k, table in tables.split_by_key(frontier, key).items():
+    for k, table in results.split_by_key(frontier, key).items():
         method = methods.METHODS.get(k[2])
         if k not in logs or method is None:
             continue
@@ -291,19 +291,19 @@ def _done(run_dir: Path, keys: list, names: tuple[str, ...], force: bool) -> dic
 def _write_identification(config: Config, run_dir: Path, done: dict) -> tuple[pa.Table, dict, pa.Table]:
     """Write frontier, identify_log, each choosing stage's table and the handoff; drop the parts."""
     order = _canonical_order(config, done)
-    frontier = tables.concat([done[k]["frontier"] for k in order])
-    log = tables.concat([_with_worker(done[k]["log"]) for k in order])
+    frontier = results.concat([done[k]["frontier"] for k in order])
+    log = results.concat([_with_worker(done[k]["log"]) for k in order])
     results.write(tables.FRONTIER, frontier, run_dir)
     results.write(tables.IDENTIFY_LOG, log, run_dir)
     choices = {}
     for name, schema in _choice_schemas().items():
         parts = [done[k][name] for k in order if name in done[k]]
         if parts:
-            choices[name] = tables.concat(parts)
+            choices[name] = results.concat(parts)
             results.write(schema, choices[name], run_dir)
     handoff = [done[k]["handoff"] for k in order if "handoff" in done[k]]
     if handoff:
-        results.write(tables.HANDOFF, tables.concat(handoff), run_dir)
+        results.write(tables.HANDOFF, results.concat(handoff), run_dir)
     results.clear_parts(run_dir)
     return frontier, choices, log
 
@@ -494,7 +494,7 @@ def calibrate_paths(config: Config, run_dir: Path, paths: dict[str, tuple]) -> l
     grid; written to ``calibration.parquet``."""
     w = np.asarray(config.selection.w_grid)
     out = [calibrate(m, *paths[m], w, config.selection.target_rate) for m in methods.METHODS]
-    results.write(tables.CALIBRATION, tables.concat([c.to_arrow() for c in out]), run_dir)
+    results.write(tables.CALIBRATION, results.concat([c.to_arrow() for c in out]), run_dir)
     return out
 
 

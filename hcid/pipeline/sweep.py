@@ -69,8 +69,8 @@ def sweep_study(config: Config, run_dir: Path, frontier: pa.Table | None = None)
         bp_parts.append(
             _rows_table(model, seed, method, {"w_from": seg.w_from, "w_to": seg.w_to}, cols, seg.index)
         )
-    selection_table = tables.concat(sel_parts)
-    breakpoints_table = tables.concat(bp_parts)
+    selection_table = results.concat(sel_parts)
+    breakpoints_table = results.concat(bp_parts)
     chosen = criteria.configured(config.selection.criteria)
     thresholds = _thresholds(config, chosen, segments, nb_ft)
     rates = _rates(config, segments, nb_ft, w)
@@ -86,7 +86,7 @@ def selections(frontier: pa.Table, run_dir: Path) -> dict[tuple[str, int, str], 
     """Per realization and method: its selection over W and its frontier columns."""
     path = run_dir / tables.FRONTIER.file
     out = {}
-    for (model, seed, method), t in tables.split_by_key(frontier, tables.FRONTIER.key).items():
+    for (model, seed, method), t in results.split_by_key(frontier, tables.FRONTIER.key).items():
         cols = {c: t.column(c).to_numpy() for c in tables.SELECTED_COLUMNS}
         orders = np.column_stack([cols[c] for c in tables.ORDER_COLUMNS])
         try:
@@ -168,7 +168,7 @@ def _rates(config: Config, segments: dict, nb_ft: dict, w: np.ndarray) -> pa.Tab
                     method, model.name, _error(model), segments[key], nb_ft[key], w
                 )
                 parts.append(curve.to_arrow())
-    return tables.concat(parts) if parts else tables.RATES.arrow.empty_table()
+    return results.concat(parts) if parts else tables.RATES.arrow.empty_table()
 
 
 # --------------------------------------------------------------------------- the whole study

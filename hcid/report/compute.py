@@ -19,9 +19,10 @@ import pyarrow.compute  # noqa: F401  (pa.compute)
 from hcid import tables
 from hcid.arx.response import path_response
 from hcid.config import Config, paper
+from hcid.io.results import split_by_key
 from hcid.loop.hcmodel import true_response
 from hcid.selection import over_w
-from hcid.tables import ORDER_COLUMNS, split_by_key
+from hcid.tables import ORDER_COLUMNS
 
 __all__ = [
     "Curves",

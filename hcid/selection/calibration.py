@@ -53,9 +53,8 @@ def clopper_pearson(k: np.ndarray, n: int, level: float = 0.95) -> tuple[np.ndar
     alpha = 1.0 - level
     # scipy.stats.beta.ppf's own ufunc (its _ppf), without importing scipy.stats (0.5 s of
     # every command); tests/test_calibration.py holds it to beta.ppf's bits.
-    with np.errstate(invalid="ignore"):
-        low = np.where(k > 0, _ufuncs._beta_ppf(alpha / 2, k, n - k + 1), 0.0)
-        high = np.where(k < n, _ufuncs._beta_ppf(1 - alpha / 2, k + 1, n - k), 1.0)
+    low = np.where(k > 0, _ufuncs._beta_ppf(alpha / 2, k, n - k + 1), 0.0)
+    high = np.where(k < n, _ufuncs._beta_ppf(1 - alpha / 2, k + 1, n - k), 1.0)
     return low, high
 
 

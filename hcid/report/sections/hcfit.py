@@ -11,13 +11,13 @@ import pyarrow.compute  # noqa: F401  (pa.compute)
 
 from hcid import methods
 from hcid.hcfit import PARAMETERS, UNITS, hc_response
+from hcid.io.results import split_by_key
 from hcid.loop.hcmodel import plant
 from hcid.pipeline.summary import summarise_fits
 from hcid.report import compute as calc
 from hcid.report import figures_hcfit
 from hcid.report.document import Doc
 from hcid.selection.calibration import clopper_pearson
-from hcid.tables import split_by_key
 
 TITLE = "11. Parametric HC model (SPEC 8) and residuals"
 
