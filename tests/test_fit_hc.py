@@ -236,7 +236,7 @@ def test_report_shows_the_section(fitted, tmp_path):
     _, out = fitted
     drawn = ("hc_parameters_W_BIC.png", "hc_residuals.png")
     text, figures = report_without_figures(out[1][0], draw=drawn, out=tmp_path)
-    assert "## 11. Parametric HC model" in text
+    assert "## 10. Parametric HC model" in text
     assert "| FF | direct | 0.007153 | Kpt | - | 2 | 0.8 |" in text
     assert set(drawn) <= figures and all((tmp_path / name).stat().st_size > 0 for name in drawn)
 

@@ -181,10 +181,10 @@ def test_sweep_and_report_on_data_run(three_formats, data_config_path):
     assert pq.read_table(run / "thresholds.parquet").num_rows == 0  # no truth, no thresholds
     # report.md as `hcid report` writes it, and the data section's own figure drawn
     md, figures = report_without_figures(run, draw=["data_structure.png"], out=run)
-    assert "## 10. Measured data: subject01" in md
+    assert "## 9. Measured data: subject01" in md
     assert {"data_structure.png", "bode_data_w0.00715.png"} <= figures
     assert (run / "data_structure.png").stat().st_size > 0
-    assert "true" not in md.split("## 10.")[1].lower().replace("no true dynamics", "")
+    assert "true" not in md.split("## 9.")[1].lower().replace("no true dynamics", "")
 
 
 def test_calibrate_w_interval_from_thresholds(tmp_path, data_config_path):

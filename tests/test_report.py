@@ -1,6 +1,7 @@
 """hcid report on configs/ci.yaml: built from the tables alone, valid figures, verdicts that follow."""
 
 import os
+import re
 import shutil
 import struct
 import subprocess
@@ -240,6 +241,10 @@ def test_report_of_another_experiment(tmp_path):
     assert "segments: 2 hold, 2 ramp" in text
     assert "The answer: the paper's claims" not in text and compute_report(run).verdicts == []
     assert "W_FP 0.012" not in text and "W_FN 0.26" not in text  # the paper's thresholds
+    # Nor its figure numbers, its Table 2 column or the sampling test of its thresholds
+    # (a newcomer's walkthrough, 2026-11-27, found all three in the integrator example's report).
+    assert "paper Fig" not in text and "paper Table 2" not in text and "P(W_FP &gt;=" not in text
+    assert "P*(W_FN &gt;=" not in text
     assert (tmp_path / "forcing_spectra.png").stat().st_size > 0
 
 
@@ -247,6 +252,10 @@ def test_paper_report_names_the_paper_experiment(report):
     text = report.markdown.read_text()
     assert "The paper's experiment" in text and "at the plant output: theta = Yc u + fd" in text
     assert "The answer: the paper's claims" in text
+    assert "## 3. Model fit vs W (paper Fig. 5)" in text and "paper Table 2" in text
+    assert "P(W_FP &gt;= 0.012)" in text  # Markdown escapes >
+    numbers = [int(m) for m in re.findall(r"^## (\d+)[a-z]?\. ", text, flags=re.M)]
+    assert numbers == sorted(numbers) and set(numbers) == set(range(1, max(numbers) + 1))  # no gap
 
 
 # --------------------------------------------------------------------------- sampling verdicts (SPEC 9)

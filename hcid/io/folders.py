@@ -154,13 +154,14 @@ def claim(
     known: Sequence[str],
     kind: str = RUN_DIRECTORY,
     adopt: Callable[[list[str]], bool] | None = None,
+    advice: str = "choose a new or empty folder",
 ) -> None:
     """Make ``folder`` an hcid folder of ``kind``, or check that it is one.
 
     A new or empty folder gets a manifest. A folder written by an hcid without
     manifests is adopted when ``adopt(entries)`` says so (its files among
-    ``known`` become hcid's); any other non-empty folder is refused, as is an
-    hcid folder of another kind.
+    ``known`` become hcid's); any other non-empty folder is refused (the error
+    ends with ``advice``), as is an hcid folder of another kind.
 
     Raises
     ------
@@ -179,10 +180,7 @@ def claim(
     except OSError as exc:
         raise DataError(f"{folder}: cannot read ({exc.strerror or exc})") from exc
     if entries and not (adopt is not None and adopt(entries)):
-        raise DataError(
-            f"{folder}: not an hcid {kind} (no {MANIFEST}, and it holds other files); "
-            "choose a new or empty folder"
-        )
+        raise DataError(f"{folder}: not an hcid {kind} (no {MANIFEST}, and it holds other files); {advice}")
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

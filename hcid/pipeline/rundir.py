@@ -121,6 +121,7 @@ def using(run_dir: Path, *, create: bool = True) -> Iterator[Path]:
         )
     held = _HELD.get(resolved)
     created = not run_dir.exists()
+    claimed = not (run_dir / folders.MANIFEST).is_file()  # new or empty: this command claims it
     if held is not None:
         held[1] += 1
         try:
@@ -129,7 +130,10 @@ def using(run_dir: Path, *, create: bool = True) -> Iterator[Path]:
             held[1] -= 1
         return
     known = known_files()
-    folders.claim(run_dir, known, adopt=lambda entries: _written_by_hcid(entries, known))
+    advice = (
+        "choose a new or empty folder" if create else "give a run directory `hcid run` or `hcid analyse` made"
+    )
+    folders.claim(run_dir, known, adopt=lambda entries: _written_by_hcid(entries, known), advice=advice)
     lock_path = run_dir / LOCK
     lock_before = lock_path.stat() if lock_path.is_file() else None
     try:
@@ -164,8 +168,8 @@ def using(run_dir: Path, *, create: bool = True) -> Iterator[Path]:
     finally:
         del _HELD[resolved]
         handle.close()  # releases the lock
-        if created:
-            _remove_if_unused(run_dir)
+        if claimed:
+            _remove_if_unused(run_dir, remove_folder=created)
 
 
 def _restore_lock(handle, path: Path, text: str, before: os.stat_result | None) -> None:
@@ -192,20 +196,24 @@ def _written_by_hcid(entries: list[str], known: list[str]) -> bool:
     )
 
 
-def _remove_if_unused(run_dir: Path) -> None:
-    """A directory this command created and then wrote nothing into (a refusal) is removed."""
+def _remove_if_unused(run_dir: Path, *, remove_folder: bool) -> None:
+    """A directory this command claimed and then wrote nothing into (a refusal) is left as it was:
+    its manifest and lock removed, and the directory itself where the command created it."""
     try:
         if {p.name for p in run_dir.iterdir()} <= {folders.MANIFEST, LOCK}:
             for name in (folders.MANIFEST, LOCK):
                 (run_dir / name).unlink(missing_ok=True)
-            run_dir.rmdir()
+            if remove_folder:
+                run_dir.rmdir()
     except OSError:
         pass
 
 
 #: Config sections each stage's tables depend on.
 SIMULATION_SECTIONS = ("models", "loop", "signals", "timing", "seeds")
-IDENTIFICATION_SECTIONS = (*SIMULATION_SECTIONS, "identify", "data")
+#: The measured data's own settings first: the identify grids and timing follow from them, and
+#: a refusal names the key the user changed (data.analysis_rate, not a grid it moved).
+IDENTIFICATION_SECTIONS = ("data", *SIMULATION_SECTIONS, "identify")
 
 
 def _identification_files() -> list[str]:
@@ -252,7 +260,7 @@ def check_run_dir(config: Config, run_dir: Path, stage: str, *, force: bool = Fa
     current = _common_stages(_own_yaml(config.to_yaml()), previous)
     previous = _common_stages(previous, current)
     if stage == "simulate":
-        sections, stale, redo = SIMULATION_SECTIONS, None, "hcid simulate --force"
+        sections, stale, redo = SIMULATION_SECTIONS, None, "`hcid simulate --force`"
     elif stage == "identify":
         sim_key = _first_difference(
             {k: previous.get(k) for k in SIMULATION_SECTIONS},
@@ -263,16 +271,17 @@ def check_run_dir(config: Config, run_dir: Path, stage: str, *, force: bool = Fa
                 f"{run_dir}: simulated with another config ({sim_key} differs); "
                 "use `hcid simulate --force` to redo it or --run for another directory"
             )
-        sections, stale, redo = IDENTIFICATION_SECTIONS, _identification_files(), "hcid identify --force"
+        sections, stale = IDENTIFICATION_SECTIONS, _identification_files()
+        redo = "--force (hcid identify, analyse or fit-hc)"
     else:
-        sections, stale, redo = IDENTIFICATION_SECTIONS, None, "hcid identify --force"
+        sections, stale, redo = IDENTIFICATION_SECTIONS, None, "`hcid identify --force`"
     key = _first_difference({k: previous.get(k) for k in sections}, {k: current.get(k) for k in sections})
     if key is None:
         return
     if not force:
         raise DataError(
-            f"{run_dir}: made with another config ({key} differs); use `{redo}` to redo it "
-            "or --run for another directory"
+            f"{run_dir}: made with another config ({key} differs); redo it with {redo} "
+            "or choose another --run"
         )
     owned = folders.owned_files(run_dir)
     folders.remove_owned(

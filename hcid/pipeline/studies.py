@@ -19,6 +19,7 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import methods, tables
+from hcid.analysis.fourier import plant_mismatch
 from hcid.config import Config, IdentifyConfig
 from hcid.errors import ConfigError, DataError
 from hcid.io import datasets, measured, results
@@ -390,6 +391,37 @@ def _check_data(config: Config, data: datasets.DataSet) -> None:
             f"data: run {short} holds {data.records[short]['u'].size} samples, the config's windows "
             f"need {need}; read it for this config (hcid.io.resolve.read_study)"
         )
+    _check_plant(config, data)
+
+
+#: The most of a run's theta = ft - e at its forcing lines that the configured plant may leave
+#: unexplained (RMS share, :func:`hcid.analysis.fourier.plant_mismatch`): the example studies and
+#: the shared recordings leave 0.2% to 11% with their own plant, 62% and more with the other's.
+PLANT_MISMATCH_LIMIT = 0.3
+
+
+def _check_plant(config: Config, data: datasets.DataSet) -> None:
+    """Refuse runs whose e is not ft minus the configured plant's output (a data set of another
+    plant, or the disturbance at the other point): every result would be for the wrong loop.
+    Runs whose forcing functions have no lines, and a config without a loop (identification
+    alone), are not checked."""
+    loop, rate = config.loop, config.timing.output_rate
+    if loop is None:
+        return
+    found = {run: plant_mismatch(rec, rate, loop.plant.num, loop.plant.den, loop.disturbance_at)
+             for run, rec in data.records.items()}  # fmt: skip
+    over = {run: m for run, m in found.items() if m is not None and m > PLANT_MISMATCH_LIMIT}
+    if not over:
+        return
+    worst = max(over, key=over.get)
+    file = next((r["file"] for r in data.runs if r.get("run") == worst), None)
+    raise DataError(
+        f"data: run {worst}{f' ({file})' if file else ''} is not the configured plant: "
+        f"{over[worst]:.0%} (RMS) of its theta = ft - e at the forcing lines is not what "
+        f"loop.plant {loop.plant.text} with the disturbance at its {loop.disturbance_at} gives "
+        f"({len(over)} of {len(found)} runs over {PLANT_MISMATCH_LIMIT:.0%}); check loop.plant and "
+        "loop.disturbance_at, or the data files"
+    )
 
 
 def _records_to_identify(config: Config, run_dir: Path, data, execution: Execution, force: bool):

@@ -64,11 +64,18 @@ def to_markdown(doc: Doc) -> str:
 
 
 def _inline_md(text: str) -> str:
-    out = html.escape(text)
+    """The Markdown the report's texts use, as HTML: ``**bold**``, ``*italic*`` and ``_italic_``,
+    `` `code` ``, and ``\\*`` for a literal asterisk (W\\*).
+
+    >>> _inline_md("*Words.* A run's **W\\*** and `nb_ft` (_p_ < 0.05)")
+    "<i>Words.</i> A run's <b>W*</b> and <code>nb_ft</code> (<i>p</i> &lt; 0.05)"
+    """
+    out = html.escape(text, quote=False).replace("\\*", "\x00")  # a literal asterisk, kept aside
     out = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", out)
+    out = re.sub(r"(?<![\w*])\*(?=\S)(.+?)(?<=\S)\*(?![\w*])", r"<i>\1</i>", out)
     out = re.sub(r"`(.+?)`", r"<code>\1</code>", out)
     out = re.sub(r"(?<!\w)_(.+?)_(?!\w)", r"<i>\1</i>", out)
-    return out
+    return out.replace("\x00", "*")
 
 
 def to_html(doc: Doc, out_dir: Path, title: str) -> str:

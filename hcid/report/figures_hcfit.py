@@ -1,4 +1,4 @@
-"""Figures of the parametric HC fit and the residual analysis (report section 11).
+"""Figures of the parametric HC fit and the residual analysis (report section 10).
 
 Each ``plot_*`` draws data computed by :mod:`hcid.report.sections.hcfit`;
 nothing here computes results. No pyplot (see :mod:`hcid.report.figures`).

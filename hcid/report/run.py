@@ -108,7 +108,10 @@ def marks_for_plot(marks: dict[str, dict[str, float]]) -> dict[str, float]:
 def _load_config(run_dir: Path) -> Config:
     path = run_dir / "config.yaml"
     if not path.is_file():
-        raise DataError(f"{path}: missing; is {run_dir} a run directory (made by `hcid simulate`)?")
+        raise DataError(
+            f"{path}: missing; is {run_dir} a run directory (made by `hcid run CONFIG` or "
+            "`hcid analyse CONFIG --data DATA`)?"
+        )
     try:
         data = read_yaml(path, "run config")
         return parse_config(data, run_dir.name, method_names=recorded_methods(data))

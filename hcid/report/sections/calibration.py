@@ -1,4 +1,4 @@
-"""9. W calibration on the HC hypothesis (paper section 6, first recommendation)."""
+"""8. W calibration on the HC hypothesis (paper section 6, first recommendation)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from hcid import methods
 from hcid.report import figures
 from hcid.report.document import Doc
 
-TITLE = "9. W calibration on the HC hypothesis"
+TITLE = "8. W calibration on the HC hypothesis"
 
 
 @dataclass(frozen=True)

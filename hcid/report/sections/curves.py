@@ -11,7 +11,7 @@ from hcid.report import figures
 from hcid.report.document import Doc
 from hcid.report.run import marks_for_plot
 
-TITLE = "3. Model fit vs W (paper Fig. 5)"
+TITLE = "3. Model fit vs W"
 
 
 @dataclass(frozen=True)
@@ -46,7 +46,7 @@ def compute(run, done) -> CurvesData | None:
 
 
 def render(data: CurvesData | None, doc: Doc) -> None:
-    doc.text(f"## {TITLE}")
+    doc.text(f"## {TITLE}" + (" (paper Fig. 5)" if data is not None and data.is_paper else ""))
     if data is None:
         doc.text("_Missing: `selection.parquet` (run `hcid sweep-w`)._")
         return
@@ -56,7 +56,7 @@ def render(data: CurvesData | None, doc: Doc) -> None:
         "the configured criteria's W marked.",
         lambda: figures.plot_vaf(data.curves, data.criterion_marks),
     )
-    doc.text("## 4. Feedforward found vs W (paper Fig. 6)")
+    doc.text("## 4. Feedforward found vs W" + (" (paper Fig. 6)" if data.is_paper else ""))
     doc.figure(
         "nb_ft_vs_w.png",
         "Mean nb_ft of the selected models. FB: any nb_ft > 0 is a false "
@@ -70,8 +70,9 @@ def render(data: CurvesData | None, doc: Doc) -> None:
             for c in data.thresholds[0]
             if c.startswith("w_") and c not in ("w_fp", "w_fn") and c not in tables.UNCERTAINTY_COLUMNS
         ]
+        paper_column = ["paper"] if data.is_paper else []  # another experiment: no paper figure
         doc.table(
-            ["method", "model", "Nf", *(c.upper() for c in columns), "W_FP", "W_FN", "paper"],
+            ["method", "model", "Nf", *(c.upper() for c in columns), "W_FP", "W_FN", *paper_column],
             [
                 [
                     r["method"],
@@ -80,7 +81,7 @@ def render(data: CurvesData | None, doc: Doc) -> None:
                     *(f"{r[c]:.3g}" if r[c] is not None else "-" for c in columns),
                     "-" if r["w_fp"] is None else f"{r['w_fp']:.3g}",
                     "-" if r["w_fn"] is None else f"{r['w_fn']:.3g}",
-                    _paper_threshold(r) if data.is_paper else "-",
+                    *([_paper_threshold(r)] if data.is_paper else []),
                 ]
                 for r in data.thresholds
             ],

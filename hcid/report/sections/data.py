@@ -1,4 +1,4 @@
-"""10. Measured data as a function of W (paper section 6, second recommendation)."""
+"""9. Measured data as a function of W (paper section 6, second recommendation)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from hcid.report import figures
 from hcid.report.document import Doc
 from hcid.report.run import marks_for_plot
 
-TITLE = "10. Measured data"
+TITLE = "9. Measured data"
 
 
 @dataclass(frozen=True)

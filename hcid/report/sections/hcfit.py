@@ -19,7 +19,7 @@ from hcid.report import figures_hcfit
 from hcid.report.document import Doc
 from hcid.selection.calibration import clopper_pearson
 
-TITLE = "11. Parametric HC model (SPEC 8) and residuals"
+TITLE = "10. Parametric HC model (SPEC 8) and residuals"
 
 
 @dataclass(frozen=True)

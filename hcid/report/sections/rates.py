@@ -28,6 +28,7 @@ class RatesData:
     marks: dict[str, float]
     header: list[str]
     rows: list[list[str]]
+    is_paper: bool = True  # the paper's experiment: the sampling column judges its thresholds
 
 
 def rate_with_band(rate: float | None, n: int) -> str:
@@ -39,7 +40,14 @@ def rate_with_band(rate: float | None, n: int) -> str:
     return f"{k}/{n} = {rate:.2f} [{low[0]:.2f}, {high[0]:.2f}]"
 
 
-def _uncertainty(r: dict) -> str:
+def _uncertainty(r: dict, is_paper: bool) -> str:
+    """A threshold's sampling uncertainty: W_FN's bootstrap interval, and for the paper's
+    experiment how likely its W_FP and W_FN were under this run's (another experiment's
+    thresholds are not the paper's to compare with)."""
+    if not is_paper:
+        if r["has_feedforward"] and r.get("w_fn_low") is not None:
+            return f"95% [{r['w_fn_low']:.3g}, {r['w_fn_high']:.3g}]"
+        return "-"
     if not r["has_feedforward"]:
         p = r.get("p_w_fp_at_paper")
         ref = paper.W_FP.get(r["method"])
@@ -57,6 +65,7 @@ def _uncertainty(r: dict) -> str:
 def compute(run, done) -> RatesData | None:
     if run.rates is None or run.rates.num_rows == 0 or run.thresholds is None:
         return None
+    is_paper = paper.is_paper_experiment(run.config)
     chosen = criteria.configured(run.config.selection.criteria)
     present = [c for c in chosen if tables.rate_column(c.column) in run.thresholds.column_names]
     rows = []
@@ -69,13 +78,13 @@ def compute(run, done) -> RatesData | None:
                 r["model"],
                 _ERROR_WORDS["false_negative" if r["has_feedforward"] else "false_positive"],
                 ("W_FN " if r["has_feedforward"] else "W_FP ") + f"{threshold:.3g}",
-                _uncertainty(r),
+                _uncertainty(r, is_paper),
                 *(rate_with_band(r[tables.rate_column(c.column)], n) for c in present),
             ]
         )
     header = ["method", "model", "error", "threshold", "sampling", *(f"rate at {c.label}" for c in present)]
     marks = marks_for_plot(run.criterion_marks())
-    return RatesData(run.rates, run.config.name, marks, header, rows)
+    return RatesData(run.rates, run.config.name, marks, header, rows, is_paper)
 
 
 def render(data: RatesData | None, doc: Doc) -> None:
@@ -86,7 +95,13 @@ def render(data: RatesData | None, doc: Doc) -> None:
         "W_FP is an extreme (the largest W at which any FB realization is a false positive) and W_FN "
         "the crossing of a mean, so both move from one set of realizations to the next. Beside them: "
         "the share of realizations making the error at each W, with exact 95% (Clopper-Pearson) bands, "
-        "and each threshold's sampling uncertainty. Rules: W_FP: " + W_FP_RULE + ". W_FN: " + W_FN_RULE + "."
+        "and each threshold's sampling uncertainty. "
+        + (
+            "Rules: W_FP: " + W_FP_RULE + ". W_FN: " + W_FN_RULE + "."
+            if data.is_paper
+            else "W_FN's: its bootstrap 95% interval (2000 resamples of the realizations, seed 0); "
+            "this is not the paper's experiment, so its thresholds are not compared with the paper's."
+        )
     )
     doc.figure(
         "rates_vs_w.png",

@@ -14,7 +14,7 @@ from hcid.report import compute as calc
 from hcid.report import figures
 from hcid.report.document import Doc
 
-TITLE = "5. Selected models at W_BIC (paper Figs. 7, 8)"
+TITLE = "5. Selected models at W_BIC"
 
 
 @dataclass(frozen=True)
@@ -27,6 +27,7 @@ class ResponsesData:
     ff_model: str | None
     errors: dict[tuple[str, str], dict[str, np.ndarray]]
     choices: dict[str, list[tuple[tuple, int]]] = field(default_factory=dict)
+    is_paper: bool = True  # the paper's experiment: its figures named beside the titles
 
 
 def _choices(run) -> dict[str, list[tuple[tuple, int]]]:
@@ -78,11 +79,12 @@ def compute(run, done) -> ResponsesData | None:
         ff_model=ff.name if ff is not None else None,
         errors=errors,
         choices=_choices(run),
+        is_paper=paper.is_paper_experiment(config),
     )
 
 
 def render(data: ResponsesData | None, doc: Doc) -> None:
-    doc.text(f"## {TITLE}")
+    doc.text(f"## {TITLE}" + (" (paper Figs. 7, 8)" if data is not None and data.is_paper else ""))
     if data is None:
         doc.text("_Missing: `frontier.parquet` (run `hcid identify`)._")
         return
@@ -106,7 +108,7 @@ def render(data: ResponsesData | None, doc: Doc) -> None:
     if data.ff_model is not None:
         ff = data.ff_model
         w = paper.W_NO_FEEDFORWARD
-        doc.text(f"## 6. FF feedback path at W = {w:g} (paper Fig. 9)")
+        doc.text(f"## 6. FF feedback path at W = {w:g}" + (" (paper Fig. 9)" if data.is_paper else ""))
         doc.figure(
             f"bode_{ff}_w{w:g}.png".replace("0.", "0"),
             f"Feedback path of the models selected at W = {w:g}.",
@@ -118,7 +120,7 @@ def render(data: ResponsesData | None, doc: Doc) -> None:
                 title=f"{ff}: feedback path at W = {w:g}",
             ),
         )
-        doc.text("## 7. Errors at W_BIC per method (paper Fig. 10)")
+        doc.text("## 7. Errors at W_BIC per method" + (" (paper Fig. 10)" if data.is_paper else ""))
         doc.figure(
             "errors_bic.png",
             f"Magnitude and phase errors (paper eq. 11-12) of the {ff} model.",

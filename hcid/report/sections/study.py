@@ -148,7 +148,8 @@ def _with_se(r: dict, p: str) -> str:
     if status.startswith("fixed"):
         return _num(r[p]) + "°"
     if is_undetermined(status):  # its se says nothing (3e+05 in a correlated pair, 4e-09 in a failed fit)
-        return _num(r[p]) + "†"
+        # A value within 1e-6 of 0 (a lead time on its bound at 0) reads as 0, not as 1.69e-08.
+        return (_num(r[p]) if abs(r[p]) >= 1e-6 else "0") + "†"
     se = f" ± {_num(r[p + '_se'], 2)}" if math.isfinite(r[p + "_se"]) else ""
     return _num(r[p]) + se + ("‡" if is_flagged(status) else "")
 
