@@ -409,6 +409,7 @@ _SHARES = (
     "median_power",
     "fc_p",
     "share_remnant",
+    "remnant_share_data",
     "alpha",
 )
 #: The units of the analysis tables' numeric columns (Parquet field metadata ``unit``; "-": none,
@@ -498,7 +499,7 @@ ANALYSIS = _schema(
     + [("p_value", _F64), ("power", _F64), ("evidence", _STR), ("evidence_uncertain", _BOOL)]
     + [("hc_form", _STR)]
     + [f for p in HC_PARAMETER_NAMES for f in ((p, _F64), (f"{p}_se", _F64), (f"{p}_status", _STR))]
-    + [("crossover", _F64), ("phase_margin", _F64), ("share_remnant", _F64)]
+    + [("crossover", _F64), ("phase_margin", _F64), ("share_remnant", _F64), ("remnant_share_data", _F64)]
     + _CONSISTENCY_FIELDS,
     ("data_set", "run_id", "method"),
     units=_ANALYSIS_UNITS,

@@ -84,7 +84,11 @@ def _one_run(table):
             lambda t: t.set_column(1, "time_s", [t.column("time_s").to_numpy() * 2]),
             "sample rate 12.5 Hz, below the config's analysis rate (timing.output_rate) 25 Hz",
         ),
-        (lambda t: t.slice(0, 1500), "1500 samples at 25 Hz, the identification windows need 2048"),
+        (
+            lambda t: t.slice(0, 1500),
+            "1500 samples at 25 Hz, the identification windows (data.window, or identify's "
+            "estimation and validation rows) need 2048",
+        ),
     ],
 )
 @pytest.mark.parametrize("suffix", [".csv", ".parquet"])

@@ -484,7 +484,8 @@ def _after_lead_in(
         if skip >= total:
             lead = f", none after the {data.lead_in:g} s lead-in"
         raise DataError(
-            f"{where}: {total} samples at {rate:g} Hz{lead}, the identification windows need {need}"
+            f"{where}: {total} samples at {rate:g} Hz{lead}, the identification windows (data.window, "
+            f"or identify's estimation and validation rows) need {need}"
         )
     n = total - skip
     signals_ = {name: np.ascontiguousarray(x[skip:]) for name, x in signals_.items()}

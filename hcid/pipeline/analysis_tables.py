@@ -12,7 +12,7 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import hcfit, methods, tables
-from hcid.analysis.fourier import fc_estimate
+from hcid.analysis.fourier import fc_estimate, off_line_share
 from hcid.config import Config
 from hcid.errors import DataError
 from hcid.hcfit.determined import parameter_status
@@ -117,6 +117,10 @@ class _Rows:
         row["crossover"] = fitted_loop.crossover if fitted_loop else math.nan
         row["phase_margin"] = fitted_loop.phase_margin if fitted_loop else math.nan
         row["share_remnant"] = fitted_loop.shares["remnant"] if fitted_loop else math.nan
+        record = self.study.records[seed]  # the same share from the data alone, beside the fit's
+        row["remnant_share_data"] = off_line_share(
+            record["u"], record["ft"], record["fd"], config.timing.output_rate
+        )
         row.update(self.found.evidence[(seed, method_name)])
         row["evidence_uncertain"] = bool(row["power"] < MIN_POWER)
         check = self.checks.run(seed, fit) if fit else None

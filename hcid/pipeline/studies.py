@@ -396,7 +396,7 @@ def _check_data(config: Config, data: datasets.DataSet) -> None:
 
 #: The most of a run's theta = ft - e at its forcing lines that the configured plant may leave
 #: unexplained (RMS share, :func:`hcid.analysis.fourier.plant_mismatch`): the example studies and
-#: the shared recordings leave 0.2% to 11% with their own plant, 62% and more with the other's.
+#: the shared recordings leave 0.1% to 11% with their own plant, 62% and more with the other's.
 PLANT_MISMATCH_LIMIT = 0.3
 
 

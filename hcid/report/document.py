@@ -119,7 +119,7 @@ def to_html(doc: Doc, out_dir: Path, title: str) -> str:
         "vertical-align:top;font-size:0.85em}th{background:#f0f0f0}img{max-width:100%}"
         ".wide{overflow-x:auto;max-width:100%}"
         "figcaption{font-size:0.9em;color:#444}.holds{background:#e6f4e6}.fails{background:#fbe3e3}"
-        ".na{background:#f4f4f4}"
+        ".na{background:#f4f4f4}.short{white-space:nowrap}"
     )
     return (
         f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>hcid report: '
@@ -130,4 +130,8 @@ def to_html(doc: Doc, out_dir: Path, title: str) -> str:
 
 
 def _cell_class(cell) -> str:
-    return {"holds": "holds", "does not hold": "fails", "not evaluated": "na"}.get(str(cell), "")
+    """A verdict's colour; a short value (an estimate with its se, ``0.96 ± 0.32``) kept on one
+    line, where a narrow column would break it over three."""
+    text = str(cell)
+    verdict = {"holds": "holds", "does not hold": "fails", "not evaluated": "na"}.get(text)
+    return verdict or ("short" if len(text) <= 16 else "")

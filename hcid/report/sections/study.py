@@ -44,6 +44,10 @@ def _num(x, digits: int = 3) -> str:
     return "-" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
 
 
+def _percent(share: float) -> str:
+    return "-" if not math.isfinite(share) else f"{100 * share:.0f}"
+
+
 def _slug(folder: str) -> str:
     """A group's name for its figure files: its twins folder's (unique per group)."""
     return folder.rsplit("/", 1)[-1]
@@ -174,7 +178,7 @@ def _run_table(runs) -> tuple[list[str], list[list[str]]]:
         "wc rad/s",
         "PM deg",
         "VAF %",
-        "remnant % of var(u)",
+        "remnant % of var(u): fit / data",
         "data check (p)",
     ]
     rows = []
@@ -194,7 +198,7 @@ def _run_table(runs) -> tuple[list[str], list[list[str]]]:
                 _num(r["crossover"]),
                 _num(r["phase_margin"]),
                 "-" if not math.isfinite(r["vaf_validation"]) else f"{r['vaf_validation']:.1f}",
-                "-" if not math.isfinite(r["share_remnant"]) else f"{100 * r['share_remnant']:.0f}",
+                f"{_percent(r['share_remnant'])} / {_percent(r['remnant_share_data'])}",
                 check,
             ]
         )
@@ -328,8 +332,11 @@ def render(data: StudyData | None, doc: Doc) -> None:
         "determines but outside the parameter's plausible range or not told from 0, ° held at a literature "
         "value (`hc_form` nms fixed); p (evidence): the run's feedforward p-value by the statistic "
         "that decides for its group (W* or the Fourier coefficients); nb_ft and feedforward at W: "
-        "its selection at the group's calibrated W (SPEC 10); data check: the p-value of the run's "
-        "own model against its data."
+        "its selection at the group's calibrated W (SPEC 10); remnant: the share of var(u) the "
+        "fitted model's paths leave, and the remnant's share from the data alone (u's power off the "
+        "forcing lines; the first is larger where the model misses part of the forced response); "
+        "data check: the "
+        "p-value of the run's own model against its data."
     )
     doc.table(data.runs_header, data.runs)
 
