@@ -64,8 +64,8 @@ def to_markdown(doc: Doc) -> str:
 
 
 def _inline_md(text: str) -> str:
-    """The Markdown the report's texts use, as HTML: ``**bold**``, ``*italic*`` and ``_italic_``,
-    `` `code` ``, and ``\\*`` for a literal asterisk (W\\*).
+    r"""The Markdown the report's texts use, as HTML: ``**bold**``, ``*italic*`` and ``_italic_``,
+    `` `code` ``, and ``\*`` for a literal asterisk (W\*).
 
     >>> _inline_md("*Words.* A run's **W\\*** and `nb_ft` (_p_ < 0.05)")
     "<i>Words.</i> A run's <b>W*</b> and <code>nb_ft</code> (<i>p</i> &lt; 0.05)"
