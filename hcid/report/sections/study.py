@@ -333,9 +333,9 @@ def render(data: StudyData | None, doc: Doc) -> None:
         "value (`hc_form` nms fixed); p (evidence): the run's feedforward p-value by the statistic "
         "that decides for its group (W* or the Fourier coefficients); nb_ft and feedforward at W: "
         "its selection at the group's calibrated W (SPEC 10); remnant: the share of var(u) the "
-        "fitted model's paths leave, and the remnant's share from the data alone (u's power off the "
-        "forcing lines; the first is larger where the model misses part of the forced response); "
-        "data check: the "
+        "fitted model's paths leave given the measured e (the remnant injected at u), and the "
+        "remnant's share of var(u) in the closed loop from the data alone (u's power off the "
+        "forcing lines; the remnant also moves e, so the two differ); data check: the "
         "p-value of the run's own model against its data."
     )
     doc.table(data.runs_header, data.runs)
