@@ -68,15 +68,15 @@ def group_runs(run_dir: Path) -> dict[str, dict]:
     """Per group of analysis.csv: its factor key, its runs' (model, seed) and its forcing sets."""
     runs = pq.read_table(run_dir / "runs.parquet").to_pydict()
     seed_of = {f: (m, s) for f, m, s in zip(runs["file"], runs["model"], runs["seed"], strict=True)}
+    factors = [c for c in runs if c not in ("model", "seed", "file", "file_run")]
     groups: dict[str, dict] = {}
     with open(run_dir / "analysis.csv", newline="") as handle:
         for row in csv.DictReader(handle):
             g = groups.setdefault(row["group"], {"runs": set(), "sets": set()})
-            g["key"] = (
-                tuple(part.split("=", 1)[1] for part in row["group"].split(", "))
-                if "=" in row["group"]
-                else ()
-            )
+            # The grouping factors, in the group's own order, and this run's values of them.
+            by = [f for f in factors if row["group"].startswith(f"{f}=") or f", {f}=" in row["group"]]
+            by.sort(key=lambda f: row["group"].find(f"{f}="))
+            g["key"] = tuple(row[f] for f in by)
             g["runs"].add(seed_of[row["file"]])
             g["sets"].add(row["forcing_set"])
     return groups
@@ -101,6 +101,9 @@ def agreement(run_dir: Path, caps, w_range) -> None:
                     twins[model].append(v)
             fb, ff = np.array(twins["FB"]), np.array(twins["FF"])
             rv = np.array(list(runs.values()))
+            if not (fb.size and ff.size and rv.size):
+                print(f"{group}, {method}: no FB twins, FF twins or runs in {run_dir}, skipped")
+                continue
             print(f"{group}, {method}: {len(rv)} runs, {len(fb)} FB and {len(ff)} FF twins")
             p_full = np.array([evidence_p_value(w, fb[:, 0]) for w in rv[:, 0]])
             for j, cap in enumerate(caps[1:], start=1):
@@ -135,9 +138,12 @@ def timing(run_dir: Path, caps, config, repeat: int = 10) -> None:
 
     print(f"one identification on {len(records)} FB twin records of {folder.name}, ms each:")
     for a, b, c in caps:
-        grid = direct.grid
+        g = direct.grid  # the configured lower orders kept, the upper ones capped
         grid = dataclasses.replace(
-            grid, na=(1, min(a, grid.na[1])), nb1=(0, min(b, grid.nb1[1])), nb2=(0, min(c, grid.nb2[1]))
+            g,
+            na=(g.na[0], min(a, g.na[1])),
+            nb1=(g.nb1[0], min(b, g.nb1[1])),
+            nb2=(g.nb2[0], min(c, g.nb2[1])),
         )
         print(f"  direct, cap {(a, b, c)}: {per_fit(direct, grid, direct_inputs):.1f}")
     print(f"  indirect stage 1 (its own grid): {per_fit(stage1, stage1.grid, stage1_inputs):.1f}")

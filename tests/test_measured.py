@@ -2,6 +2,7 @@
 
 import copy
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -696,3 +697,109 @@ def test_a_missing_error_column_names_its_way_out_and_the_files_width(tmp_path, 
         read_runs(path, data, 25.0, 2048)
     assert "missing columns" in str(err.value) and "joystick" in str(err.value)
     assert "(or a system output 'column 9' for e = ft - theta); the file has 5 columns" in str(err.value)
+
+
+# --------------------------------------------------------------------------- recordings of another loop
+
+LAB = ROOT / "configs" / "lab_example.yaml"
+LAB_DATA = ROOT / "configs" / "lab_example"
+CPHS = ROOT.parent / "shared" / "data" / "cphs2017"
+
+
+def _lab_with(tmp_path, old: str, new: str):
+    text = LAB.read_text()
+    assert old in text
+    path = tmp_path / "lab.yaml"
+    path.write_text(text.replace(old, new))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("old", "new"),
+    [("disturbance_at: input", "disturbance_at: output"), ("K: 1.5}", "K: 3.0}")],
+    ids=["disturbance at the output", "twice the gain"],
+)
+def test_data_of_another_loop_is_refused_in_one_line(tmp_path, old, new):
+    # Source: tests/test_fourier.py's plant_mismatch of these runs, 0.77 and more, 0.93 and more.
+    run = tmp_path / "run"
+    config = _lab_with(tmp_path, old, new)
+    result = runner.invoke(
+        app, ["identify", str(config), "--data", str(LAB_DATA), "--run", str(run), "--quiet"]
+    )
+    assert result.exit_code == 2, result.output
+    assert "is not the configured plant" in result.stderr and "24 of 24 runs over 30%" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not run.exists()
+
+
+def test_a_run_longer_than_the_window_is_checked_over_the_window(tmp_path):
+    """The multisines have whole periods over the window only: a run that goes on after it (10 s
+    more here) is checked over the window, not skipped for having no lines (a review's find)."""
+    from hcid.io.resolve import read_study
+    from hcid.pipeline.studies import _check_plant
+
+    longer = tmp_path / "longer"
+    longer.mkdir()
+    for path in sorted(LAB_DATA.glob("S1_*.csv")):
+        lines = path.read_text().splitlines(keepends=True)
+        body = [x for x in lines if x.strip() and not x.startswith("#")]
+        (longer / path.name).write_text("".join(lines) + "".join(_shifted(body, 45.0)))
+    for config, refused in ((LAB, False), (_lab_with(tmp_path, "K: 1.5}", "K: 3.0}"), True)):
+        cfg, data = read_study(config, [str(longer)], None)
+        assert all(
+            r["u"].size > round(cfg.timing.window * cfg.timing.output_rate) for r in data.records.values()
+        )
+        if refused:
+            with pytest.raises(DataError, match="is not the configured plant"):
+                _check_plant(cfg, data)
+        else:
+            _check_plant(cfg, data)
+
+
+def _shifted(rows: list[str], dt: float) -> list[str]:
+    """The first 10 s of a lab file's rows again, their times ``dt`` later (the file goes on)."""
+    out = []
+    for row in rows:
+        t, *rest = row.split(",")
+        if float(t) < 10.0:
+            out.append(",".join([f"{float(t) + dt:.6f}", *rest]))
+    return out
+
+
+def test_a_refused_analyse_force_keeps_the_earlier_twins(tmp_path):
+    from hcid.io import folders
+    from hcid.pipeline import rundir
+
+    run = tmp_path / "run"
+    twin = run / "twins" / "g1"
+    with rundir.using(run), rundir.using(twin):
+        folders.atomic_write(twin / "frontier.parquet", lambda p: Path(p).write_text("x"))
+    config = _lab_with(tmp_path, "K: 1.5}", "K: 3.0}")
+    result = runner.invoke(
+        app, ["analyse", str(config), "--data", str(LAB_DATA), "--run", str(run), "--force", "--quiet"]
+    )
+    assert result.exit_code == 2 and "is not the configured plant" in result.stderr
+    assert (twin / "frontier.parquet").read_text() == "x"
+
+
+@pytest.mark.skipif(not CPHS.is_dir(), reason=f"no recordings at {CPHS}")
+def test_recordings_of_both_plants_under_one_plant_are_refused(tmp_path):
+    """The walkthrough's case: every file of the recordings with the integrator's config analysed
+    the second-order plant's six runs as the integrator and reversed their verdicts."""
+    import glob
+
+    from hcid.io.resolve import read_study
+    from hcid.pipeline.studies import _check_plant
+
+    run = tmp_path / "mixed"
+    result = runner.invoke(
+        app,
+        ["analyse", str(ROOT / "configs" / "cphs2017_fo.yaml"), "--data", str(CPHS / "*.csv"),
+         "--by", "plant", "--run", str(run), "--quiet"],
+    )  # fmt: skip
+    assert result.exit_code == 2, result.output
+    assert "_so_" in result.stderr and "6 of 12 runs over 30%" in result.stderr
+    assert not run.exists()
+    for plant in ("fo", "so"):  # each plant's own config accepts its files
+        files = glob.glob(str(CPHS / f"*_{plant}_*.csv"))
+        _check_plant(*read_study(ROOT / "configs" / f"cphs2017_{plant}.yaml", files, None))

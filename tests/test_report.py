@@ -5,6 +5,7 @@ import re
 import shutil
 import struct
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -457,3 +458,38 @@ def test_a_variant_is_summarised_from_its_own_tables(ci_run):
     assert int(variant.stage1_top.rsplit(" x", 1)[1]) == max(chosen.count(s) for s in chosen)
     assert set(variant.rates.column("model").to_pylist()) == {"FB"}
     assert set(variant.rates.column("method").to_pylist()) == {"indirect"}
+
+
+# ------------------------------------------------------------- a newcomer's walkthrough (2026-11-27)
+
+
+def test_report_text_renders_emphasis_and_literal_asterisks():
+    from hcid.report.document import _inline_md
+
+    html = _inline_md("*Words used here.* A run's **W\\*** is ... reach its W\\*; x * y * z")
+    assert html.startswith("<i>Words used here.</i> A run's <b>W*</b>")
+    assert "\\" not in html and "reach its W*;" in html and "x * y * z" in html
+
+
+def test_a_value_on_its_bound_at_zero_reads_as_zero():
+    import math
+
+    from hcid.report.sections.study import _with_se
+
+    row = {"TL": 1.69e-08, "TL_status": "at a search bound (0)", "TL_se": math.nan}
+    assert _with_se(row, "TL") == "0†"
+    row = {"TL": 0.25, "TL_status": "at a search bound (0.25)", "TL_se": math.nan}
+    assert _with_se(row, "TL") == "0.25†"
+    row = {"Kpt": 5e-7, "Kpt_status": "correlated with TI (0.97)", "Kpt_se": math.nan}
+    assert _with_se(row, "Kpt") == "5e-07†"  # not on a bound: its value as it is
+
+
+def test_a_measured_study_of_another_plant_has_no_paper_labels(tmp_path):
+    root = Path(__file__).resolve().parents[1]
+    config, run = root / "configs" / "lab_example.yaml", tmp_path / "lab"
+    data = root / "configs" / "lab_example" / "S1_pursuit_trial1.csv"
+    result = runner.invoke(app, ["identify", str(config), "--data", str(data), "--run", str(run), "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert runner.invoke(app, ["sweep-w", str(config), "--run", str(run)]).exit_code == 0
+    text, _ = report_without_figures(run)
+    assert "## 3. Model fit vs W" in text and "paper Fig" not in text

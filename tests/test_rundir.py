@@ -7,6 +7,7 @@ import shutil
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -300,3 +301,55 @@ def test_the_record_keeps_earlier_stages_only_beside_their_results(small_run, tm
     rundir.record_config(direct_only, run)
     recorded = yaml.safe_load((run / "config.yaml").read_text())["identify"]
     assert set(recorded) == {"target_shift", "direct"}
+
+
+# ------------------------------------------------------------- a newcomer's walkthrough (2026-11-27)
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize(
+    "command", [["report"], ["sweep-w", str(ROOT / "configs" / "example_data.yaml"), "--run"]]
+)
+def test_a_refused_command_leaves_an_empty_folder_empty(tmp_path, command):
+    folder = tmp_path / "empty"
+    folder.mkdir()
+    result = runner.invoke(app, [*command, str(folder)])
+    assert result.exit_code == 2, result.output
+    assert list(folder.iterdir()) == []
+
+
+def test_a_folder_holding_only_a_lock_file_is_empty(tmp_path):
+    folder = tmp_path / "left"
+    folder.mkdir()
+    (folder / rundir.LOCK).write_text("")
+    with rundir.using(folder):
+        assert (folder / folders.MANIFEST).is_file()
+
+
+def test_a_folder_not_hcids_given_as_a_run_directory_is_named_as_such(tmp_path):
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("mine\n")
+    result = runner.invoke(app, ["report", str(folder)])
+    assert result.exit_code == 2
+    assert "give a run directory `hcid run` or `hcid analyse` made" in result.stderr
+    assert "choose a new or empty folder" not in result.stderr
+    assert [p.name for p in folder.iterdir()] == ["notes.txt"]
+
+
+def test_a_changed_analysis_rate_is_named_not_the_grid_it_moved(tmp_path):
+    """The identify grids follow from data.analysis_rate: the refusal names what the user changed."""
+    from hcid.io.resolve import read_study
+
+    lab, data = ROOT / "configs" / "lab_example.yaml", [str(ROOT / "configs" / "lab_example")]
+    other = tmp_path / "lab.yaml"
+    other.write_text(lab.read_text().replace("analysis_rate: 20.0", "analysis_rate: 25.0"))
+    before, after = read_study(lab, data, None)[0], read_study(other, data, None)[0]
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "config.yaml").write_text(before.to_yaml())
+    with pytest.raises(
+        DataError, match=r"\(data\.analysis_rate differs\); redo it with `hcid identify --force`"
+    ):
+        rundir.check_run_dir(after, run, "identify")

@@ -28,6 +28,7 @@ import numpy as np
 from hcid.errors import DataError
 
 __all__ = [
+    "NEIGHBOURS",
     "FCEstimate",
     "ForcingLines",
     "fc_estimate",
@@ -44,6 +45,12 @@ __all__ = [
 #: below the weakest line in the example lab study's 60 Hz files resampled to 20 Hz).
 LINE_GAP = 100.0
 LINE_SHARE = 0.999
+
+
+#: Bins without forcing beside each line whose mean power is the remnant's variance there:
+#: 6 gives each estimate 12 real degrees of freedom while spanning +-3 bins (0.47 rad/s for a
+#: 40 s record), over which a person's remnant spectrum changes little.
+NEIGHBOURS = 6
 
 
 @dataclass(frozen=True)
@@ -127,11 +134,28 @@ def forcing_lines(ft: np.ndarray, fd: np.ndarray, rate: float) -> ForcingLines:
     return ForcingLines(n, float(rate), target, dist)
 
 
+def free_neighbours(lines: ForcingLines, count: int = NEIGHBOURS) -> tuple[np.ndarray, np.ndarray]:
+    """The lines' bins (sorted) and, for each, its ``count`` nearest bins without forcing (nearest
+    first, the lower first at equal distance; DC and the Nyquist bin left out), shape (L, count).
+
+    Raises
+    ------
+    DataError
+        If the window has fewer than ``count`` bins without forcing.
+    """
+    bins = np.sort(np.concatenate([lines.target, lines.disturbance]))
+    top = lines.n // 2 if lines.n % 2 else lines.n // 2 - 1
+    free = np.setdiff1d(np.arange(1, top + 1), bins)
+    if free.size < count:
+        raise DataError(f"the record has {free.size} bins without forcing; {count} are needed")
+    return bins, np.array([free[np.lexsort((free, np.abs(free - k)))[:count]] for k in bins])
+
+
 def off_line_share(u: np.ndarray, ft: np.ndarray, fd: np.ndarray, rate: float) -> float:
-    """The remnant's share of u's variance from the data alone: u's power off the forcing lines,
-    plus at each line's bin the mean power of its 4 nearest bins without forcing (the remnant's
-    part there), over u's variance; NaN where the forcing functions have no lines
-    (:func:`forcing_lines`).
+    """The remnant's share of u's variance in the closed loop, from the data alone: u's power off
+    the forcing lines, plus at each line's bin the mean power of its :data:`NEIGHBOURS` nearest bins
+    without forcing (the remnant's part there), over u's variance (DC and the Nyquist bin left
+    out); NaN where the forcing functions have no lines (:func:`forcing_lines`).
 
     Examples
     --------
@@ -146,13 +170,11 @@ def off_line_share(u: np.ndarray, ft: np.ndarray, fd: np.ndarray, rate: float) -
         return math.nan
     u = np.asarray(u, dtype=np.float64)
     power = np.abs(np.fft.rfft(u - u.mean())) ** 2
-    top = u.size // 2 if u.size % 2 else u.size // 2 - 1  # DC and the Nyquist bin left out
-    bins = np.arange(1, top + 1)
-    forced = np.isin(bins, np.concatenate([lines.target, lines.disturbance]))
-    free = bins[~forced]
-    near = [free[np.argsort(np.abs(free - k), kind="stable")[:4]] for k in bins[forced]]
-    remnant = power[free].sum() + sum(power[b].mean() for b in near)
-    return float(min(1.0, remnant / power[bins].sum()))
+    bins, near = free_neighbours(lines)
+    top = u.size // 2 if u.size % 2 else u.size // 2 - 1
+    every = np.arange(1, top + 1)
+    off = power[np.setdiff1d(every, bins)].sum()
+    return float(min(1.0, (off + power[near].mean(axis=1).sum()) / power[every].sum()))
 
 
 def plant_mismatch(
@@ -168,8 +190,8 @@ def plant_mismatch(
     have no lines (:func:`forcing_lines`).
 
     The plant is deterministic (the remnant enters through u, which is measured), so a record of
-    the configured plant leaves only recording and resampling error: 0.1% to 11% on the example
-    studies and the shared recordings, 62% and more with the other recordings' plant.
+    the configured plant leaves only recording and resampling error (docs/measured-studies.md
+    has the figures on the example studies and the shared recordings).
 
     Examples
     --------

@@ -37,6 +37,7 @@ __all__ = [
     "PLAUSIBLE",
     "group_model",
     "is_flagged",
+    "is_on_bound",
     "is_undetermined",
     "nms_undetermined",
     "parameter_status",
@@ -130,6 +131,11 @@ def _own_status(fit) -> dict[str, str]:
 def is_undetermined(status: str) -> bool:
     """Whether a status (:func:`parameter_status`) leaves the value out of group summaries."""
     return status.startswith(_UNDETERMINED_PREFIXES)
+
+
+def is_on_bound(status: str) -> bool:
+    """Whether a status says the value sits on a search bound."""
+    return status.startswith(_AT_BOUND)
 
 
 def is_flagged(status: str) -> bool:

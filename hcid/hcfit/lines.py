@@ -28,17 +28,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hcid.analysis.fourier import ForcingLines, forcing_lines, interpolate
+from hcid.analysis.fourier import NEIGHBOURS, ForcingLines, forcing_lines, free_neighbours, interpolate
 from hcid.errors import DataError
 from hcid.hcfit.closed_loop import loop_spectrum, loops_are_stable
 from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials
 
 __all__ = ["NEIGHBOURS", "LineData", "feedforward_size", "line_data", "record_lines"]
-
-#: Bins without forcing beside each line whose mean power is the remnant's variance there:
-#: 6 gives each estimate 12 real degrees of freedom while spanning +-3 bins (0.47 rad/s for a
-#: 40 s record), over which a person's remnant spectrum changes little.
-NEIGHBOURS = 6
 
 
 @dataclass(frozen=True)
@@ -97,24 +92,16 @@ def line_data(record: TrackingRecord, neighbours: int = NEIGHBOURS) -> LineData:
     lines = forcing_lines(record.ft, record.fd, record.rate)
     if lines.problem is not None:
         raise DataError(f"no forcing lines: {lines.problem}")
-    n = record.ft.size
     spectra = {k: np.fft.rfft(getattr(record, k)) for k in ("u", "e", "ft", "fd")}
-    bins = np.sort(np.concatenate([lines.target, lines.disturbance]))
-    top = n // 2 if n % 2 else n // 2 - 1  # DC and the Nyquist bin are left out
-    free = np.setdiff1d(np.arange(1, top + 1), bins)
-    if free.size < neighbours:
-        raise DataError(f"the record has {free.size} bins without forcing; {neighbours} are needed")
-    # Nearest first, the lower bin first at equal distance.
-    near = np.array([free[np.lexsort((free, np.abs(free - k)))[:neighbours]] for k in bins])
-    omega = lambda b: 2.0 * np.pi * np.asarray(b, dtype=np.float64) * record.rate / n  # noqa: E731
+    bins, near = free_neighbours(lines, neighbours)
     return LineData(
-        omega=omega(bins),
+        omega=lines.omega(bins),
         is_target=np.isin(bins, lines.target),
         u=spectra["u"][bins],
         e=spectra["e"][bins],
         ft=spectra["ft"][bins],
         fd=spectra["fd"][bins],
-        near_omega=omega(near),
+        near_omega=lines.omega(near),
         near_u=spectra["u"][near],
         near_e=spectra["e"][near],
         lines=lines,

@@ -479,12 +479,12 @@ def analyse_study(
         now = time.perf_counter()
         stages[name], lap[0] = now - lap[0], now
 
-    if force:
-        _forget_twins(run_dir)
     with labelled("runs: "):
         identified = identify_study(
             config, run_dir, tuple(methods.METHODS), data=data, execution=execution, force=force
         )
+    if force:  # after the data's checks (in identify_study): a refused --force keeps the twins
+        _forget_twins(run_dir)
     lap_done("identify")
     runs = datasets.runs_table(config.data.name, data)
     study = _Study(

@@ -117,9 +117,10 @@ class _Rows:
         row["crossover"] = fitted_loop.crossover if fitted_loop else math.nan
         row["phase_margin"] = fitted_loop.phase_margin if fitted_loop else math.nan
         row["share_remnant"] = fitted_loop.shares["remnant"] if fitted_loop else math.nan
-        record = self.study.records[seed]  # the same share from the data alone, beside the fit's
+        # The remnant's closed-loop share from the data alone, over the window (as the FC estimates).
+        n, record = round(config.timing.window * config.timing.output_rate), self.study.records[seed]
         row["remnant_share_data"] = off_line_share(
-            record["u"], record["ft"], record["fd"], config.timing.output_rate
+            record["u"][:n], record["ft"][:n], record["fd"][:n], config.timing.output_rate
         )
         row.update(self.found.evidence[(seed, method_name)])
         row["evidence_uncertain"] = bool(row["power"] < MIN_POWER)

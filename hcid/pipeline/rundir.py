@@ -133,25 +133,20 @@ def using(run_dir: Path, *, create: bool = True) -> Iterator[Path]:
     advice = (
         "choose a new or empty folder" if create else "give a run directory `hcid run` or `hcid analyse` made"
     )
-    folders.claim(run_dir, known, adopt=lambda entries: _written_by_hcid(entries, known), advice=advice)
+
+    def claim() -> None:  # a folder holding only a lock file is empty: a command left it so
+        adopt = lambda entries: set(entries) <= {LOCK} or _written_by_hcid(entries, known)  # noqa: E731
+        folders.claim(run_dir, known, adopt=adopt, advice=advice)
+
+    claim()
     lock_path = run_dir / LOCK
     lock_before = lock_path.stat() if lock_path.is_file() else None
     try:
-        handle = open(lock_path, "a+")  # noqa: SIM115 (held until the command ends)
-    except OSError as exc:
-        if not os.access(run_dir, os.W_OK):  # read-only: nobody can write it, reading is safe
-            yield run_dir
-            return
-        raise DataError(f"{run_dir}: cannot lock ({exc.strerror or exc})") from exc
-    try:
-        fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        handle.seek(0)
-        holder = handle.read(200).strip() or "another process"
-        handle.close()
-        raise DataError(
-            f"{run_dir}: in use by {holder}; wait for it to finish or choose another --run"
-        ) from None
+        handle = _locked(run_dir, lock_path)
+    except _ReadOnly:  # nobody can write it, reading is safe
+        yield run_dir
+        return
+    claim()  # again, locked: a command that held it may have left it empty since
     handle.seek(0)
     holder_before = handle.read()
     handle.seek(0)
@@ -167,9 +162,48 @@ def using(run_dir: Path, *, create: bool = True) -> Iterator[Path]:
         raise
     finally:
         del _HELD[resolved]
-        handle.close()  # releases the lock
-        if claimed:
+        if claimed:  # while still locked: a command arriving now finds the lock file gone
             _remove_if_unused(run_dir, remove_folder=created)
+        handle.close()  # releases the lock
+
+
+class _ReadOnly(Exception):
+    """The run directory cannot be locked because nobody can write it."""
+
+
+def _locked(run_dir: Path, lock_path: Path):
+    """The lock file, opened and exclusively locked. A lock taken on a file that is no longer at
+    ``lock_path`` (a command that held it removed it, leaving the folder as it found it) holds
+    nothing: the file is opened again.
+
+    Raises
+    ------
+    DataError
+        If another process holds the lock, or the lock file cannot be opened.
+    """
+    for _ in range(5):
+        try:
+            handle = open(lock_path, "a+")  # noqa: SIM115 (held until the command ends)
+        except OSError as exc:
+            if not os.access(run_dir, os.W_OK):
+                raise _ReadOnly from exc
+            raise DataError(f"{run_dir}: cannot lock ({exc.strerror or exc})") from exc
+        try:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.seek(0)
+            holder = handle.read(200).strip() or "another process"
+            handle.close()
+            raise DataError(
+                f"{run_dir}: in use by {holder}; wait for it to finish or choose another --run"
+            ) from None
+        try:
+            if os.stat(lock_path).st_ino == os.fstat(handle.fileno()).st_ino:
+                return handle
+        except FileNotFoundError:
+            pass
+        handle.close()
+    raise DataError(f"{run_dir}: in use (its lock file keeps being replaced); choose another --run")
 
 
 def _restore_lock(handle, path: Path, text: str, before: os.stat_result | None) -> None:
@@ -272,7 +306,7 @@ def check_run_dir(config: Config, run_dir: Path, stage: str, *, force: bool = Fa
                 "use `hcid simulate --force` to redo it or --run for another directory"
             )
         sections, stale = IDENTIFICATION_SECTIONS, _identification_files()
-        redo = "--force (hcid identify, analyse or fit-hc)"
+        redo = "`hcid identify --force` (`hcid analyse --force` for measured data)"
     else:
         sections, stale, redo = IDENTIFICATION_SECTIONS, None, "`hcid identify --force`"
     key = _first_difference({k: previous.get(k) for k in sections}, {k: current.get(k) for k in sections})

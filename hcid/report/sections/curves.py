@@ -41,7 +41,7 @@ def compute(run, done) -> CurvesData | None:
         threshold_marks=threshold_marks,
         criterion_labels=list(marks),
         thresholds=rows,
-        is_paper=not run.config.simulates or paper.is_paper_experiment(run.config),
+        is_paper=paper.is_paper_experiment(run.config),
     )
 
 

@@ -1,4 +1,4 @@
-"""11. Parametric HC model of the selected models, and their residuals (``hcid fit-hc``, SPEC 8)."""
+"""10. Parametric HC model of the selected models, and their residuals (``hcid fit-hc``, SPEC 8)."""
 
 from __future__ import annotations
 

@@ -11,7 +11,7 @@ import pyarrow as pa
 
 from hcid import tables
 from hcid.hcfit.consistency import CONTRADICTED, format_p
-from hcid.hcfit.determined import is_flagged, is_undetermined
+from hcid.hcfit.determined import is_flagged, is_on_bound, is_undetermined
 from hcid.io import results
 from hcid.pipeline.summary import has_safe_interval, rate_interval, summarise_groups
 from hcid.report import figures, figures_hcfit
@@ -152,8 +152,9 @@ def _with_se(r: dict, p: str) -> str:
     if status.startswith("fixed"):
         return _num(r[p]) + "°"
     if is_undetermined(status):  # its se says nothing (3e+05 in a correlated pair, 4e-09 in a failed fit)
-        # A value within 1e-6 of 0 (a lead time on its bound at 0) reads as 0, not as 1.69e-08.
-        return (_num(r[p]) if abs(r[p]) >= 1e-6 else "0") + "†"
+        # On a bound within 1e-6 of 0 (a lead time held at 0) it reads as 0, not as 1.69e-08.
+        at_zero = is_on_bound(status) and abs(r[p]) < 1e-6
+        return ("0" if at_zero else _num(r[p])) + "†"
     se = f" ± {_num(r[p + '_se'], 2)}" if math.isfinite(r[p + "_se"]) else ""
     return _num(r[p]) + se + ("‡" if is_flagged(status) else "")
 
