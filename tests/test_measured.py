@@ -803,3 +803,21 @@ def test_recordings_of_both_plants_under_one_plant_are_refused(tmp_path):
     for plant in ("fo", "so"):  # each plant's own config accepts its files
         files = glob.glob(str(CPHS / f"*_{plant}_*.csv"))
         _check_plant(*read_study(ROOT / "configs" / f"cphs2017_{plant}.yaml", files, None))
+
+
+def test_plant_check_false_lets_recordings_the_plant_leaves_a_delay_out_through(tmp_path):
+    config = tmp_path / "lab.yaml"
+    text = (
+        LAB.read_text()
+        .replace("K: 1.5}", "K: 3.0}")
+        .replace("  lead_in: 5.0", "  lead_in: 5.0\n  plant_check: false")
+    )
+    config.write_text(text)
+    data, run = LAB_DATA / "S1_pursuit_trial1.csv", tmp_path / "run"
+    result = runner.invoke(app, ["identify", str(config), "--data", str(data), "--run", str(run), "--quiet"])
+    assert result.exit_code == 0, result.output
+    config.write_text(text.replace("plant_check: false", "plant_check: maybe"))
+    result = runner.invoke(
+        app, ["identify", str(config), "--data", str(data), "--run", str(tmp_path / "r2"), "--quiet"]
+    )
+    assert result.exit_code == 2 and "data.plant_check: must be true or false, got 'maybe'" in result.stderr

@@ -359,6 +359,9 @@ def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataC
     if struct is not None and (not isinstance(struct, str) or not struct.isidentifier()):
         raise ConfigError(f"data.struct: must be a MATLAB variable name, got {fmt(struct)}")
     dimensions = _data_dimensions(s.get("dimensions", None))
+    plant_check = s.get("plant_check", True)
+    if not isinstance(plant_check, bool):
+        raise ConfigError(f"data.plant_check: must be true or false, got {fmt(plant_check)}")
     lead_in = s.number("lead_in", 0.0, 1e4, 0.0)
     rate = timing.output_rate
     if abs(lead_in * rate - round(lead_in * rate)) > 1e-6:
@@ -375,6 +378,7 @@ def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataC
         pattern=pattern,
         struct=struct,
         dimensions=dimensions,
+        plant_check=plant_check,
     )
 
 

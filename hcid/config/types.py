@@ -430,6 +430,9 @@ class DataConfig:
     #: The axes of a MATLAB file's N-D arrays: ``sample`` and one factor per other axis, e.g.
     #: ``("sample", "trial", "subject")`` for arrays of samples x repeats x participants.
     dimensions: tuple[str, ...] | None = None
+    #: Check every run against the configured plant (theta = ft - e against Yc at the forcing
+    #: lines); False for recordings the plant does not describe whole (a display delay it leaves out).
+    plant_check: bool = True
 
 
 @dataclass(frozen=True)

@@ -404,10 +404,10 @@ def _check_plant(config: Config, data: datasets.DataSet) -> None:
     """Refuse runs whose e is not ft minus the configured plant's output (a data set of another
     plant, or the disturbance at the other point): every result would be for the wrong loop.
     Each run is checked over the analysis window (where its multisines have whole periods);
-    runs whose forcing functions have no lines there, and a config without a loop
-    (identification alone), are not checked."""
+    runs whose forcing functions have no lines there, a config without a loop (identification
+    alone) and one with ``data.plant_check: false`` are not checked."""
     loop, rate = config.loop, config.timing.output_rate
-    if loop is None:
+    if loop is None or not config.data.plant_check:
         return
     n = round(config.timing.window * rate)
     found = {
@@ -426,7 +426,8 @@ def _check_plant(config: Config, data: datasets.DataSet) -> None:
         f"{over[worst]:.0%} (RMS) of its theta = ft - e at the forcing lines is not what "
         f"loop.plant {loop.plant.text} with the disturbance at its {loop.disturbance_at} gives "
         f"({len(over)} of {len(found)} runs over {PLANT_MISMATCH_LIMIT:.0%}); check loop.plant and "
-        "loop.disturbance_at, or the data files"
+        "loop.disturbance_at, or the data files (data.plant_check: false where the plant leaves out "
+        "a display delay)"
     )
 
 
