@@ -493,3 +493,28 @@ def test_a_measured_study_of_another_plant_has_no_paper_labels(tmp_path):
     assert runner.invoke(app, ["sweep-w", str(config), "--run", str(run)]).exit_code == 0
     text, _ = report_without_figures(run)
     assert "## 3. Model fit vs W" in text and "paper Fig" not in text
+
+
+def test_the_run_table_is_split_in_two_that_fit_a_page():
+    """A re-check found the run table (21 columns for the recordings) wider than the page, its
+    last columns behind a scroll bar: the run's evidence and fit, then its parameters."""
+    from hcid.report.sections.study import _split_runs
+
+    header = [
+        "run",
+        "subject",
+        "method",
+        "p (evidence)",
+        "Kpt",
+        "TL s",
+        "zeta_nms",
+        "VAF %",
+        "data check (p)",
+    ]
+    row = ["1", "dp", "direct", "0.01 (W*)", "0.9", "0.2", "0.35°", "66.0", "0.39"]
+    (h1, r1), (h2, r2) = _split_runs(header, [row])
+    assert h1 == ["run", "subject", "method", "p (evidence)", "VAF %", "data check (p)"]
+    assert h2 == ["run", "subject", "method", "Kpt", "TL s", "zeta_nms"]
+    assert r1 == [["1", "dp", "direct", "0.01 (W*)", "66.0", "0.39"]] and r2 == [
+        ["1", "dp", "direct", "0.9", "0.2", "0.35°"]
+    ]

@@ -326,20 +326,42 @@ def render(data: StudyData | None, doc: Doc) -> None:
     _render_evidence(data, doc)
     _render_checks(data, doc)
     _render_parameters(data, doc)
+    (evidence_header, evidence_rows), (parameter_header, parameter_rows) = _split_runs(
+        data.runs_header, data.runs
+    )
     doc.text(
         "Every run (`analysis.csv` holds all columns, one row per run and method, ready for a "
-        "repeated-measures ANOVA or a mixed model). Estimates ± standard error; † a value the run "
-        "does not determine, without its se (the reason and the se in `analysis.csv`), ‡ a value it "
-        "determines but outside the parameter's plausible range or not told from 0, ° held at a literature "
-        "value (`hc_form` nms fixed); p (evidence): the run's feedforward p-value by the statistic "
-        "that decides for its group (W* or the Fourier coefficients); nb_ft and feedforward at W: "
-        "its selection at the group's calibrated W (SPEC 10); remnant: the share of var(u) the "
-        "fitted model's paths leave given the measured e (the remnant injected at u), and the "
-        "remnant's share of var(u) in the closed loop from the data alone (u's power off the "
-        "forcing lines; the remnant also moves e, so the two differ); data check: the "
-        "p-value of the run's own model against its data."
+        "repeated-measures ANOVA or a mixed model), in two tables. First its evidence and fit: "
+        "p (evidence): the run's feedforward p-value by the statistic that decides for its group "
+        "(W* or the Fourier coefficients); nb_ft and feedforward at W: its selection at the group's "
+        "calibrated W (SPEC 10); remnant: the share of var(u) the fitted model's paths leave given "
+        "the measured e (the remnant injected at u), and the remnant's share of var(u) in the closed "
+        "loop from the data alone (u's power off the forcing lines; the remnant also moves e, so the "
+        "two differ); data check: the p-value of the run's own model against its data."
     )
-    doc.table(data.runs_header, data.runs)
+    doc.table(evidence_header, evidence_rows)
+    doc.text(
+        "Then its parameters: estimates ± standard error; † a value the run does not determine, "
+        "without its se (the reason and the se in `analysis.csv`), ‡ a value it determines but "
+        "outside the parameter's plausible range or not told from 0, ° held at a literature value "
+        "(`hc_form` nms fixed)."
+    )
+    doc.table(parameter_header, parameter_rows)
+
+
+def _split_runs(header: list[str], rows: list[list[str]]) -> tuple[tuple, tuple]:
+    """The run table as two that fit a page: the run (its id, factors and method) with its
+    evidence and fit, and the run with its parameters."""
+    ident = header.index("method") + 1
+    names = tuple(_SHOWN)
+    is_parameter = [h.split(" ")[0] in names for h in header]
+    first = [i for i in range(len(header)) if i < ident or not is_parameter[i]]
+    second = [i for i in range(len(header)) if i < ident or is_parameter[i]]
+
+    def pick(columns: list[int]) -> tuple[list[str], list[list[str]]]:
+        return [header[i] for i in columns], [[row[i] for i in columns] for row in rows]
+
+    return pick(first), pick(second)
 
 
 def _render_answers(data: StudyData, doc: Doc) -> None:
