@@ -96,6 +96,13 @@ def test_every_run_and_group_is_answered_with_its_factors(analysed):
     assert len(checks) == 4 and sum("chi-square" in line for line in checks) == 2
     assert sum(line.startswith("    data check: the group's model as above; ") for line in checks) == 2
     assert (run / "report" / "report.html").is_file()
+    # The loop line gives the remnant's share from the data: the median of its runs' column.
+    loops = [line for line in output.splitlines() if line.startswith("    loop: ")]
+    for g, line in zip(groups, loops, strict=True):
+        share = np.median(
+            [r["remnant_share_data"] for r in rows if r["group"] == g["group"] and r["method"] == g["method"]]
+        )
+        assert f"; remnant {100 * share:.0f}% of var(u) by the data (medians over runs)" in line
 
 
 def test_each_runs_p_value_is_sequential_over_its_fb_twins_in_the_order_drawn(analysed):

@@ -95,9 +95,13 @@ def print_analysis(result) -> None:
             typer.echo(_subjects_line(summary))
         typer.echo(_calibrated_line(summary))
         typer.echo(_analysis_parameters(summary.parameters, len(summary.runs)))
+        remnant = summary.remnant_share
+        remnant_text = (
+            f"; remnant {100 * remnant:.0f}% of var(u) by the data" if math.isfinite(remnant) else ""
+        )
         typer.echo(
-            f"    loop: crossover {summary.crossover:.3g} rad/s, phase margin {summary.phase_margin:.3g} deg "
-            "(medians over runs)"
+            f"    loop: crossover {summary.crossover:.3g} rad/s, phase margin {summary.phase_margin:.3g} deg"
+            f"{remnant_text} (medians over runs)"
         )
         typer.echo(_data_check_line(g, full=g["group"] not in checked))
         checked.add(g["group"])

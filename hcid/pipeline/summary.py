@@ -55,6 +55,12 @@ class GroupSummary:
         return with_evidence[0] if one else None
 
     @property
+    def remnant_share(self) -> float:
+        """The remnant's closed-loop share of var(u) from the data alone (``remnant_share_data``),
+        the median over the group's runs."""
+        return _median([r["remnant_share_data"] for r in self.runs])
+
+    @property
     def without_paths(self) -> int:
         """Runs whose selection at the group's W keeps neither path (nb_ft = nb_e = 0): a W beyond
         what their data support, where "no feedforward" says nothing."""
