@@ -67,6 +67,11 @@ class ForcingLines:
     disturbance: np.ndarray
     problem: str | None = None
 
+    @property
+    def inner(self) -> np.ndarray:
+        """Every bin of the window but DC and the Nyquist bin: 1 .. (n - 1) // 2."""
+        return np.arange(1, (self.n - 1) // 2 + 1)
+
     def omega(self, bins: np.ndarray) -> np.ndarray:
         """Frequencies (rad/s) of ``bins``."""
         return 2.0 * np.pi * np.asarray(bins, dtype=np.float64) * self.rate / self.n
@@ -144,8 +149,7 @@ def free_neighbours(lines: ForcingLines, count: int = NEIGHBOURS) -> tuple[np.nd
         If the window has fewer than ``count`` bins without forcing.
     """
     bins = np.sort(np.concatenate([lines.target, lines.disturbance]))
-    top = lines.n // 2 if lines.n % 2 else lines.n // 2 - 1
-    free = np.setdiff1d(np.arange(1, top + 1), bins)
+    free = np.setdiff1d(lines.inner, bins)
     if free.size < count:
         raise DataError(f"the record has {free.size} bins without forcing; {count} are needed")
     return bins, np.array([free[np.lexsort((free, np.abs(free - k)))[:count]] for k in bins])
@@ -171,10 +175,8 @@ def off_line_share(u: np.ndarray, ft: np.ndarray, fd: np.ndarray, rate: float) -
     u = np.asarray(u, dtype=np.float64)
     power = np.abs(np.fft.rfft(u - u.mean())) ** 2
     bins, near = free_neighbours(lines)
-    top = u.size // 2 if u.size % 2 else u.size // 2 - 1
-    every = np.arange(1, top + 1)
-    off = power[np.setdiff1d(every, bins)].sum()
-    return float(min(1.0, (off + power[near].mean(axis=1).sum()) / power[every].sum()))
+    off = power[np.setdiff1d(lines.inner, bins)].sum()
+    return float(min(1.0, (off + power[near].mean(axis=1).sum()) / power[lines.inner].sum()))
 
 
 def plant_mismatch(

@@ -67,6 +67,13 @@ class _Rows:
         self.group_checks = {
             key: checks.group(seeds, found.models[key].values) for key, seeds in study.groups.items()
         }
+        # Each run's remnant share from the data alone (the same for both methods), over the
+        # window as the FC estimates.
+        rate, n = study.config.timing.output_rate, study.config.timing.record_samples
+        self.remnant_share = {
+            seed: off_line_share(r["u"][:n], r["ft"][:n], r["fd"][:n], rate)
+            for seed, r in study.records.items()
+        }
 
     def choice(self, key, method_name: str) -> dict:
         """The group's W for a method, how it was chosen, and its twins' rates there."""
@@ -117,11 +124,7 @@ class _Rows:
         row["crossover"] = fitted_loop.crossover if fitted_loop else math.nan
         row["phase_margin"] = fitted_loop.phase_margin if fitted_loop else math.nan
         row["share_remnant"] = fitted_loop.shares["remnant"] if fitted_loop else math.nan
-        # The remnant's closed-loop share from the data alone, over the window (as the FC estimates).
-        n, record = round(config.timing.window * config.timing.output_rate), self.study.records[seed]
-        row["remnant_share_data"] = off_line_share(
-            record["u"][:n], record["ft"][:n], record["fd"][:n], config.timing.output_rate
-        )
+        row["remnant_share_data"] = self.remnant_share[seed]
         row.update(self.found.evidence[(seed, method_name)])
         row["evidence_uncertain"] = bool(row["power"] < MIN_POWER)
         check = self.checks.run(seed, fit) if fit else None
@@ -182,8 +185,7 @@ def _tables(study, found, checks: Checks) -> tuple[pa.Table, pa.Table]:
 
 def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median: dict) -> list[dict]:
     """The group's Fourier-coefficient estimates and its fitted model at the same lines."""
-    n = round(config.timing.window * config.timing.output_rate)
-    rows = slice(0, n)
+    rows = slice(0, config.timing.record_samples)
     base = {"group": name, "n_runs": len(seeds)}
     try:
         fc = fc_estimate([records[s] for s in seeds], config.timing.output_rate, rows)

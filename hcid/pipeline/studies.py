@@ -409,7 +409,7 @@ def _check_plant(config: Config, data: datasets.DataSet) -> None:
     loop, rate = config.loop, config.timing.output_rate
     if loop is None or not config.data.plant_check:
         return
-    n = round(config.timing.window * rate)
+    n = config.timing.record_samples
     found = {
         run: plant_mismatch({k: rec[k][:n] for k in ("ft", "fd", "e", "u")}, rate, loop.plant.num,
                             loop.plant.den, loop.disturbance_at)
