@@ -1,7 +1,5 @@
 """Fourier-coefficient (model-free) estimates (SPEC 10, issue 27)."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -11,7 +9,7 @@ from hcid.io.resolve import load_config
 from hcid.loop.hcmodel import DiscreteLoop
 from hcid.loop.simulate import remnant_gain, simulate_realization
 
-ROOT = Path(__file__).resolve().parents[1]
+from .conftest import ROOT
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,6 @@ import re
 import shutil
 import struct
 import subprocess
-from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -17,7 +16,7 @@ from hcid.cli import app
 from hcid.report import build_report
 from hcid.report.build import compute_report
 
-from .conftest import CI_CONFIG, report_without_figures
+from .conftest import CI_CONFIG, ROOT, report_without_figures
 
 runner = CliRunner()
 FIGURES = (
@@ -485,9 +484,8 @@ def test_a_value_on_its_bound_at_zero_reads_as_zero():
 
 
 def test_a_measured_study_of_another_plant_has_no_paper_labels(tmp_path):
-    root = Path(__file__).resolve().parents[1]
-    config, run = root / "configs" / "lab_example.yaml", tmp_path / "lab"
-    data = root / "configs" / "lab_example" / "S1_pursuit_trial1.csv"
+    config, run = ROOT / "configs" / "lab_example.yaml", tmp_path / "lab"
+    data = ROOT / "configs" / "lab_example" / "S1_pursuit_trial1.csv"
     result = runner.invoke(app, ["identify", str(config), "--data", str(data), "--run", str(run), "--quiet"])
     assert result.exit_code == 0, result.output
     assert runner.invoke(app, ["sweep-w", str(config), "--run", str(run)]).exit_code == 0

@@ -7,7 +7,6 @@ import shutil
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -20,7 +19,7 @@ from hcid.errors import DataError
 from hcid.io import folders, results
 from hcid.pipeline import rundir
 
-from .conftest import report_without_figures
+from .conftest import ROOT, report_without_figures
 
 runner = CliRunner()
 
@@ -304,8 +303,6 @@ def test_the_record_keeps_earlier_stages_only_beside_their_results(small_run, tm
 
 
 # ------------------------------------------------------------- a newcomer's walkthrough (2026-11-27)
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.parametrize(
