@@ -8,6 +8,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -90,6 +91,18 @@ def test_stopping_early_kills_the_forked_workers(monkeypatch):
     start = time.monotonic()
     stream.close()  # what a KeyboardInterrupt in the caller's loop does
     assert _wait_gone(children) == [] and time.monotonic() - start < 10
+
+
+def test_stopping_early_leaves_no_pool_thread_running(monkeypatch):
+    # The pool's manager thread is joined when the loop is left: one still running at
+    # Python's exit raced its hook on Python 3.11 (an OSError traceback after Ctrl-C, seen in CI).
+    _forking(monkeypatch, True)
+    before = set(threading.enumerate())
+    stream = parallel.parallel_map(_nap, [(0.0,), (60.0,), (60.0,)], jobs=2, label="t", show_progress=False)
+    next(stream)
+    assert set(threading.enumerate()) - before  # the manager thread runs while the pool does
+    stream.close()
+    assert set(threading.enumerate()) - before == set()
 
 
 @pytest.mark.parametrize("fork", [True, False], ids=["forked", "loky"])

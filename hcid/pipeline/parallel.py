@@ -265,12 +265,18 @@ def _ctrl_c_deferred():
 
 
 def _stop_pool(pool, futures, n_tasks: int) -> None:
+    """Stop the pool, killing its workers first unless every task has finished.
+
+    Always waits for the pool's manager thread, which ends as soon as it sees the killed
+    workers: left running, it can close its wake-up pipe while Python's exit hook writes to it
+    (Python 3.11's race, fixed in 3.12), which printed an OSError traceback after a Ctrl-C.
+    """
     finished = len(futures) == n_tasks and all(f.done() and not f.cancelled() for f in futures)
     if not finished:
         # ProcessPoolExecutor.kill_workers() arrives in Python 3.14; until then, its processes.
         for process in list((getattr(pool, "_processes", None) or {}).values()):
             process.kill()
-    pool.shutdown(wait=finished, cancel_futures=True)
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _forked_worker_start(parent: int) -> None:
