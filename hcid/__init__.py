@@ -3,8 +3,10 @@
 The public API (:mod:`hcid.api`): :func:`read_records`, :class:`Experiment` and
 :class:`Plant`, :func:`identify` returning an :class:`IdentificationResult`
 (``select(w)``, ``selection_path()``), the :class:`SelectedModel` it selects
-(``frequency_response``, ``simulate``) and :func:`fit_hc`. Names are loaded on
-first use, so ``import hcid`` (and ``hcid --help``) stays fast.
+(``frequency_response``, ``simulate``) and :func:`fit_hc`; a whole measured study with
+:func:`analyse` (``hcid analyse``: :class:`AnalysisOptions`, :class:`Execution`, returning an
+:class:`AnalysisRun`) and :func:`build_report`. Names are loaded on first use, so
+``import hcid`` (and ``hcid --help``) stays fast.
 """
 
 from importlib import import_module
@@ -17,6 +19,11 @@ except PackageNotFoundError:  # running from a source tree that is not installed
 
 #: Public name -> the module that defines it.
 _EXPORTS = {
+    "AnalysisOptions": "hcid.pipeline.analyse",
+    "AnalysisRun": "hcid.pipeline.analyse",
+    "Execution": "hcid.pipeline.execution",
+    "analyse": "hcid.pipeline.analyse",
+    "build_report": "hcid.report",
     "Experiment": "hcid.api",
     "IdentificationResult": "hcid.api",
     "Record": "hcid.api",

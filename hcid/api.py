@@ -27,12 +27,13 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import hcfit, methods, tables
+from hcid.analysis.fourier import PLANT_MISMATCH_LIMIT, plant_mismatch
 from hcid.analysis.selected import SelectedModel, fit_selected
 from hcid.config import Config, DataConfig, Forcing, IdentifyConfig, Plant, Timing
-from hcid.config.parse import default_data
+from hcid.config.parse import data_identify_defaults, default_data
 from hcid.errors import ConfigError, DataError, IdentificationError, checked_rate
 from hcid.io import results
-from hcid.io.measured import check_signal, read_runs
+from hcid.io.measured import TIME_JITTER, check_signal, read_runs
 from hcid.io.resolve import resolve_identify
 from hcid.loop.hcmodel import transfer_function
 from hcid.selection import criteria, over_w
@@ -76,15 +77,21 @@ class Record:
     def __post_init__(self) -> None:
         checked_rate(self.rate, DataError)
         n = None
-        for name in ("t", "ft", "fd", "e", "u"):
+        for name in ("ft", "t", "fd", "e", "u"):  # ft first: every other has its length
             x = check_signal(getattr(self, name), f"record {name}")
             if x.ndim != 1 or (n is not None and x.size != n):
-                raise DataError(
-                    f"record {name}: must be 1-D with the length of ft ({n}), got shape {x.shape}"
-                )
+                want = "1-D" if n is None else f"1-D with the length of ft ({n})"
+                raise DataError(f"record {name}: must be {want}, got shape {x.shape}")
             n = x.size if name == "ft" else n
             object.__setattr__(self, name, x)
         object.__setattr__(self, "rate", float(self.rate))
+        steps = np.diff(self.t) * self.rate  # 1 at every sample of a record at its rate
+        if steps.size and not np.all(np.abs(steps - 1.0) <= TIME_JITTER):
+            k = int(np.argmax(np.abs(steps - 1.0) > TIME_JITTER))
+            raise DataError(
+                f"record t: must step by 1/rate ({1 / self.rate:.6g} s), got {steps[k] / self.rate:.6g} s "
+                f"at sample {k + 1}"
+            )
 
     @property
     def signals(self) -> dict[str, np.ndarray]:
@@ -116,7 +123,8 @@ def read_records(
     path : str or Path
         The file; at most 1 GiB. Several runs are told apart by a run column.
     columns : mapping, optional
-        The file's names of ``ft``, ``fd``, ``e``, ``u``, ``theta`` (system output, for
+        The file's names (str), or its column positions (int, 0 first, for files without
+        a header), of ``ft``, ``fd``, ``e``, ``u``, ``theta`` (system output, for
         ``e = ft - theta``), ``time``, ``run`` and ``rate``; unnamed ones keep their
         default names (``t`` or ``time``, ``ft``, ``fd``, ``e``, ``u``, ``run``).
     rate : float, optional
@@ -134,6 +142,8 @@ def read_records(
     DataError
         One line naming the file and what is wrong.
     """
+    if not isinstance(path, str | Path):
+        raise DataError(f"path: must be a file's path (str or Path), got {type(path).__name__}")
     data = default_data()
     given = dict(columns or {})
     unknown = sorted(set(given) - set(data.columns))
@@ -194,9 +204,28 @@ def identification_settings(
     """The stages (grids, windows) and target shift for records of ``n_samples`` at ``rate`` Hz.
 
     ``identify`` is a config's ``identify`` section as a mapping (its keys and
-    defaults: SPEC 3, ``docs/configuration.md``); None gives every default.
+    defaults: SPEC 3, ``docs/configuration.md``). None gives what ``hcid analyse`` uses for
+    a measured study without one: SPEC 3's grids and windows in seconds, scaled to the rate
+    and the record (:func:`hcid.config.parse.data_identify_defaults`: delays up to 2 s on ft
+    and 0.4 s on e, estimation and validation the paper's shares of the record); at 25 Hz
+    and 2048 samples that is SPEC 3's section exactly.
+
+    Examples
+    --------
+    >>> s = identification_settings(25.0, 1000)          # a 40 s record at 25 Hz
+    >>> s.stage("direct").grid.nk1, s.stage("direct").estimation, s.stage("direct").validation
+    ((1, 50), Window(first=63, last=531), Window(first=532, last=1000))
     """
-    return resolve_identify(None if identify is None else dict(identify), rate, n_samples)
+    if identify is not None and not isinstance(identify, Mapping):
+        raise ConfigError(
+            f"identify: must be a mapping (a config's identify section), got {type(identify).__name__}"
+        )
+    if identify is None:
+        checked_rate(rate)
+        if not (isinstance(n_samples, int) and n_samples > 0):
+            raise ConfigError(f"n_samples: must be a positive integer, got {n_samples!r}")
+        identify = data_identify_defaults(Timing(rate, rate, 0.0, n_samples / rate, 1))
+    return resolve_identify(dict(identify), rate, n_samples)
 
 
 @dataclass(frozen=True)
@@ -284,14 +313,22 @@ def identify(
         A registered method: ``direct`` or ``indirect``.
     settings : IdentifyConfig, optional
         Default: :func:`identification_settings` for the record's rate and length
-        (SPEC 3's grids and windows).
+        (SPEC 3's grids and windows in seconds, as ``hcid analyse`` uses them).
     threads : int
-        Threads of the ARX engine.
+        Threads of the ARX engine (at least 1).
     """
     if not isinstance(record, Record):
         raise IdentificationError(f"record: must be a hcid.Record, got {type(record).__name__}")
+    methods.get(method)
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise IdentificationError(f"threads: must be an integer >= 1, got {threads!r}")
     if settings is None:
         settings = identification_settings(record.rate, record.ft.size)
+    elif not isinstance(settings, IdentifyConfig):
+        raise IdentificationError(
+            f"settings: must come from hcid.identification_settings(rate, n_samples, identify), "
+            f"got {type(settings).__name__}"
+        )
     found = methods.identify(record.signals, settings, method, rate=record.rate, threads=threads)
     parts = results.frontier_part("record", record.run, found, methods.get(method).choice_stages)
     frontier = parts["frontier"].drop_columns(["model", "seed"])
@@ -303,8 +340,9 @@ def fit_hc(
     record: Record,
     experiment: Experiment,
     *,
-    target: str = "time",
+    target: str = "auto",
     settings: hcfit.FitSettings | None = None,
+    plant_check: bool = True,
 ) -> hcfit.HCFit | None:
     """Fit the parametric HC model (SPEC 8) to a selected model and its record.
 
@@ -319,19 +357,37 @@ def fit_hc(
         The plant (the feedforward path inverts it) and where the disturbance
         enters (the closed-loop target's loop).
     target : str
-        ``time`` (the default: u simulated from the measured ft and e),
-        ``closed_loop`` (the model in closed loop with the plant, driven by the
-        measured ft and fd) or ``frequency`` (the ARX model's paths); ignored
-        when ``settings`` is given.
+        ``auto`` (the default, as ``hcid analyse`` and ``hcid fit-hc``: ``lines`` where the
+        record's forcing functions are multisines on disjoint lines with enough disturbance
+        lines, else ``time``), ``lines`` (the paths at the forcing lines, from the record's
+        Fourier coefficients), ``time`` (u simulated from the measured ft and e),
+        ``closed_loop`` (the model in closed loop with the plant, driven by the measured ft
+        and fd) or ``frequency`` (the ARX model's paths); ignored when ``settings`` is given.
+        docs/parametric-fit.md compares them.
     settings : FitSettings, optional
         Bounds, starts and seed (:func:`hcid.hcfit.parse_fit_settings`); the
         band defaults to the disturbance's (a multisine's) or the record's.
+    plant_check : bool
+        Refuse a record the experiment's plant does not describe (``hcid analyse``'s check:
+        more than 30% (RMS) of ``theta = ft - e`` at the forcing lines unexplained); False
+        where the plant leaves out, say, a display delay.
 
     Returns
     -------
     HCFit or None
         None for a frequency fit of a model without feedback path.
+
+    Raises
+    ------
+    DataError
+        A record of another plant (``plant_check``).
     """
+    for name, value, kind in (("model", model, SelectedModel), ("record", record, Record),
+                              ("experiment", experiment, Experiment)):  # fmt: skip
+        if not isinstance(value, kind):
+            raise IdentificationError(f"{name}: must be a hcid.{kind.__name__}, got {type(value).__name__}")
+    if plant_check:
+        _check_plant(record, experiment)
     timing = Timing(record.rate, record.rate, 0.0, record.ft.size / record.rate, 1)
     band = Config.band_of(experiment.disturbance, timing)
     if settings is None:
@@ -341,3 +397,18 @@ def fit_hc(
     return fit_selected(
         model, record.signals, transfer_function(experiment.plant), settings, experiment.disturbance_at
     )
+
+
+def _check_plant(record: Record, experiment: Experiment) -> None:
+    """Refuse a record that ``experiment``'s plant leaves more than
+    :data:`~hcid.analysis.fourier.PLANT_MISMATCH_LIMIT` of theta unexplained at its forcing lines
+    (unchecked where its forcing functions have no lines over the record)."""
+    plant = experiment.plant
+    found = plant_mismatch(record.signals, record.rate, plant.num, plant.den, experiment.disturbance_at)
+    if found is not None and not found <= PLANT_MISMATCH_LIMIT:
+        raise DataError(
+            f"record {record.run}: is not the experiment's plant: {found:.0%} (RMS) of its theta = ft - e "
+            f"at the forcing lines is not what {plant.text} with the disturbance at its "
+            f"{experiment.disturbance_at} gives; check Experiment(plant, disturbance_at), or pass "
+            "plant_check=False where the plant leaves out a display delay"
+        )

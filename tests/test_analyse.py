@@ -20,10 +20,8 @@ CONFIG = LAB.parent / "lab_example.yaml"
 def analysed(tmp_path_factory):
     """Subjects S1 and S2, trials 1 and 2 of both conditions (8 files), 4 twins each and at most 12 FB
     twins for the p-values: ``hcid analyse --jobs 1`` (tables, answer and report), and the same
-    analysis through the library on two workers (tables only; its output is the empty string)."""
-    from hcid.io.resolve import read_study
-    from hcid.pipeline import Execution
-    from hcid.pipeline.analyse import AnalysisOptions, analyse_study
+    analysis through the public API on two workers (tables only; its output is the empty string)."""
+    import hcid
 
     base = tmp_path_factory.mktemp("lab")
     data = base / "data"
@@ -36,9 +34,11 @@ def analysed(tmp_path_factory):
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
     out = {1: (run, result.output)}
-    config, data_set = read_study(CONFIG, [data])
-    options = AnalysisOptions(twins=4, max_fb_twins=12)
-    analyse_study(config, base / "run2", data_set, options, execution=Execution(jobs=2, progress=False))
+    options = hcid.AnalysisOptions(twins=4, max_fb_twins=12)
+    found = hcid.analyse(
+        CONFIG, data, base / "run2", options, execution=hcid.Execution(jobs=2, progress=False)
+    )
+    assert found.run_dir == base / "run2" and found.runs.num_rows == 16  # 8 runs, 2 methods
     out[2] = (base / "run2", "")
     return data, out
 

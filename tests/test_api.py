@@ -25,6 +25,16 @@ def record():
 
 
 @pytest.fixture(scope="module")
+def lab_record():
+    """Run 1 of a lab example file (multisines over its 40 s window), as configs/lab_example.yaml
+    reads it: its columns, 20 Hz, 5 s lead-in, the window's 800 samples."""
+    columns = {"time": "time", "ft": "target", "fd": "disturbance", "e": "error", "u": "stick"}
+    path = ROOT / "configs" / "lab_example" / "S1_pursuit_trial1.csv"
+    ((run, whole),) = hcid.read_records(path, columns=columns, rate=20.0, lead_in=5.0).items()
+    return hcid.Record(run, 20.0, *(getattr(whole, k)[:800] for k in ("t", "ft", "fd", "e", "u")))
+
+
+@pytest.fixture(scope="module")
 def direct(record):
     return hcid.identify(record, "direct")
 
@@ -148,11 +158,82 @@ def test_fit_hc_through_the_api_equals_the_pipelines(record, direct):
             lambda r, d: hcid.identification_settings(25.0, 2048, {"direct": {"na": [0, 3]}}),
             "identify.direct.na",
         ),
+        # A newcomer's notebook (2026-11-27): each refused in one line naming its argument.
+        (lambda r, d: hcid.identify(r, "drect"), "method: must be one of direct, indirect, got 'drect'"),
+        (lambda r, d: hcid.identify(r, threads=0), "threads: must be an integer >= 1, got 0"),
+        (
+            lambda r, d: hcid.identify(r, settings={"direct": {}}),
+            "settings: must come from hcid.identification",
+        ),
+        (lambda r, d: hcid.fit_hc(r, d.select(0.1), None), "model: must be a hcid.SelectedModel, got Record"),
+        (lambda r, d: hcid.read_records([EXAMPLE]), "path: must be a file's path"),
+        (
+            lambda r, d: hcid.Record(1, 25.0, r.t[:10], r.ft, r.fd, r.e, r.u),
+            r"record t: must be 1-D with the",
+        ),
+        (
+            lambda r, d: hcid.Record(1, 25.0, r.t * 1.1, r.ft, r.fd, r.e, r.u),
+            r"record t: must step by 1/rate",
+        ),
+        (lambda r, d: hcid.Record(1, 25.0, r.t, r.ft + 1j, r.fd, r.e, r.u), "record ft holds complex values"),
+        (lambda r, d: hcid.Plant.integrator(float("nan")), r"plant.num: must be finite numbers, got \[nan\]"),
+        (lambda r, d: hcid.Plant.tf([1.0], [0.0]), "plant.den: must not be all zero"),
+        (lambda r, d: hcid.AnalysisOptions(twins="4"), "twins \\(--twins\\): must be an integer"),
     ],
 )
 def test_bad_input_is_one_hcid_error(record, direct, call, message):
     with pytest.raises(hcid.HcidError, match=message):
         call(record, direct)
+
+
+def test_default_settings_are_analyses_for_the_records_rate_and_length(record):
+    # Source: SPEC 3 exactly at 25 Hz and 2048 samples (the config parser's sample defaults), and
+    # for a shorter record the measured-data defaults `hcid analyse` resolves for a study without an
+    # identify section (hcid.config.parse.data_identify_defaults, in seconds).
+    from hcid.config import Timing
+    from hcid.config.parse import data_identify_defaults
+    from hcid.io.resolve import resolve_identify
+
+    assert hcid.identification_settings(25.0, 2048) == resolve_identify(None, 25.0, 2048)
+    shorter = data_identify_defaults(Timing(25.0, 25.0, 0.0, 40.0, 1))
+    assert hcid.identification_settings(25.0, 1000) == resolve_identify(shorter, 25.0, 1000)
+    short = hcid.Record(1, 25.0, record.t[:1000], record.ft[:1000], record.fd[:1000], record.e[:1000],
+                        record.u[:1000])  # fmt: skip
+    direct = hcid.identify(short, "direct").settings.stage("direct")
+    assert direct.grid.nk1 == (1, 50) and (direct.estimation.first, direct.validation.last) == (63, 1000)
+
+
+def test_fit_hc_defaults_to_the_estimator_hcid_analyse_uses(lab_record):
+    # Source: a config without a fit section (hcid.hcfit.parse_fit_settings({})) is what
+    # `hcid analyse` and `hcid fit-hc` fit with: target auto, the lines estimator on a lab example
+    # run (multisines over its 40 s window; configs/lab_example.yaml's columns, rate and lead-in).
+    from hcid.analysis.selected import fit_selected
+    from hcid.hcfit import parse_fit_settings
+    from hcid.loop.hcmodel import transfer_function
+
+    columns = {"time": "time", "ft": "target", "fd": "disturbance", "e": "error", "u": "stick"}
+    path = ROOT / "configs" / "lab_example" / "S1_pursuit_trial1.csv"
+    ((run, whole),) = hcid.read_records(path, columns=columns, rate=20.0, lead_in=5.0).items()
+    record = hcid.Record(run, 20.0, *(getattr(whole, k)[:800] for k in ("t", "ft", "fd", "e", "u")))
+    result = hcid.identify(record, "direct")
+    model = result.select(result.w_bic)
+    plant = hcid.Plant.integrator(1.5)
+    default = hcid.fit_hc(model, record, hcid.Experiment(plant, "input"))
+    settings = parse_fit_settings({}, default_band=(2 * np.pi / 40.0, np.pi * 20.0))
+    want = fit_selected(model, record.signals, transfer_function(plant), settings, "input")
+    assert settings.target == "auto" and default.target == want.target == "lines"
+    assert default.estimates == want.estimates
+
+
+def test_fit_hc_refuses_a_record_of_another_plant(lab_record):
+    # Source: hcid.analysis.fourier.plant_mismatch, which `hcid analyse` refuses a run by: twice
+    # the plant's gain leaves theta's every line unexplained by 100% (its doctest).
+    result = hcid.identify(lab_record, "direct")
+    model = result.select(result.w_bic)
+    doubled = hcid.Experiment(hcid.Plant.integrator(3.0), "input")
+    with pytest.raises(hcid.DataError, match=r"^record 1: is not the experiment's plant: 100% \(RMS\)"):
+        hcid.fit_hc(model, lab_record, doubled)
+    assert hcid.fit_hc(model, lab_record, doubled, plant_check=False) is not None
 
 
 def test_records_and_selections_are_checked(record, direct):

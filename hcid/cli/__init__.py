@@ -345,17 +345,17 @@ def analyse(
     """Analyse a measured study end to end: identify every run, calibrate W per condition on twins of
     the condition's own fitted model, select every run there and fit its parameters; writes
     RUN/analysis.parquet, analysis.csv, analysis_groups.parquet and the report RUN/report/report.html."""
-    from hcid.pipeline.analyse import AnalysisOptions, analyse_study
+    from hcid.pipeline.analyse import AnalysisOptions
+    from hcid.pipeline.analyse import analyse as analyse_
 
     execution = _execution(jobs, backend, scheduler, worker_timeout, quiet)
-    groups = None if by is None else tuple(b.strip() for b in by.split(",") if b.strip())
-    options = AnalysisOptions(groups, twins, max_fb_twins, ff_twin, alpha, fdr)
-    cfg, run_dir, data_set = _load_data(config, run, data, execution, skip=skip_unreadable)
-    result = analyse_study(cfg, run_dir, data_set, options, execution=execution, force=force)
+    options = AnalysisOptions(by, twins, max_fb_twins, ff_twin, alpha, fdr)
+    result = analyse_(config, data, _run_dir(config, run), options, execution=execution,
+                      skip_unreadable=skip_unreadable, force=force)  # fmt: skip
     answers.print_analysis(result)
     from hcid.report import build_report
 
-    typer.echo(f"report: {build_report(run_dir).html}")
+    typer.echo(f"report: {build_report(result.run_dir).html}")
 
 
 @app.command("fit-hc")

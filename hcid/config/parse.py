@@ -29,6 +29,7 @@ from hcid.config.types import (
     Plant,
     SelectionConfig,
     Timing,
+    check_plant,
 )
 from hcid.errors import ConfigError
 
@@ -99,23 +100,10 @@ def _second_order(s: Section) -> Plant:
 
 def _transfer_function(s: Section) -> Plant:
     num, den = number_list(s, "num"), number_list(s, "den")
-    for key, coefs in (("num", num), ("den", den)):
-        if len(coefs) > 11:
-            raise ConfigError(
-                f"loop.plant.{key}: must hold at most 11 coefficients (degree 10), got {len(coefs)}"
-            )
-    num = tuple(num[next((i for i, c in enumerate(num) if c != 0), len(num)) :])
-    if not num:
-        raise ConfigError("loop.plant.num: must not be all zero")
-    if den[0] == 0:
+    check_plant(num, den, "loop.plant")
+    if den[0] == 0:  # a config writes den from its leading power (a 0 there is a slip)
         raise ConfigError(f"loop.plant.den: the leading coefficient must not be 0, got {list(den)}")
-    plant = Plant.tf(num, den)
-    if plant.relative_degree < 0:
-        raise ConfigError(
-            f"loop.plant: must be proper (degree of num <= degree of den), got degrees "
-            f"{len(plant.num) - 1} and {len(plant.den) - 1}"
-        )
-    return plant
+    return Plant.tf(num, den)
 
 
 #: Plant shorthands of ``loop.plant.kind``, each a builder from its section (SPEC 7);

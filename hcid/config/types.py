@@ -8,6 +8,7 @@ output rate (``[129, 1088]``); :meth:`Window.rows` gives the Python slice
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -78,30 +79,36 @@ class Plant:
     den: tuple[float, ...]
     text: str
 
+    def __post_init__(self) -> None:
+        check_plant(self.num, self.den, "plant")
+
     @classmethod
     def second_order(cls, K: float, wb: float) -> Plant:
         """The paper's plant ``K wb / (s (s + wb))``."""
+        K, wb = _real(K, "K"), _real(wb, "wb")
         return cls("second_order", (K * wb,), (1.0, wb, 0.0), f"{K:g}*{wb:g}/(s (s + {wb:g}))")
 
     @property
     def relative_degree(self) -> int:
-        """Degree of ``den`` minus degree of ``num`` (leading zeros ignored): >= 0 for a proper plant.
+        """Degree of ``den`` minus degree of ``num`` (leading zeros ignored): >= 0, as a plant is proper.
 
         Examples
         --------
-        >>> Plant.integrator(1.0).relative_degree, Plant.tf([1.0, 0.0, 0.0], [1.0, 1.0]).relative_degree
-        (1, -1)
+        >>> Plant.integrator(1.0).relative_degree, Plant.tf([1.0, 1.0], [1.0, 3.0]).relative_degree
+        (1, 0)
         """
         return relative_degree(self.num, self.den)
 
     @classmethod
     def integrator(cls, K: float) -> Plant:
         """``K / s``."""
+        K = _real(K, "K")
         return cls("integrator", (K,), (1.0, 0.0), f"{K:g}/s")
 
     @classmethod
     def double_integrator(cls, K: float) -> Plant:
         """``K / s^2``."""
+        K = _real(K, "K")
         return cls("double_integrator", (K,), (1.0, 0.0, 0.0), f"{K:g}/s^2")
 
     @classmethod
@@ -119,19 +126,68 @@ class Plant:
         return cls("tf", num, den, f"({_poly_text(num)}) / ({_poly_text(den)})")
 
 
+def _real(x: Any, name: str) -> float:
+    """A shorthand's number as a float (its finiteness is :func:`check_plant`'s)."""
+    if isinstance(x, bool) or not isinstance(x, numbers.Real):
+        raise ConfigError(f"plant.{name}: must be a number, got {x!r}")
+    return float(x)
+
+
+#: The most coefficients of ``num`` or of ``den`` (degree 10).
+MAX_PLANT_COEFFICIENTS = 11
+
+
+def check_plant(num: Sequence[float], den: Sequence[float], where: str) -> None:
+    """Refuse a plant that is no proper transfer function: coefficients not finite, more than
+    :data:`MAX_PLANT_COEFFICIENTS`, ``num`` or ``den`` all zero, or ``num`` of higher degree
+    than ``den`` (leading zeros ignored).
+
+    Examples
+    --------
+    >>> check_plant((float("nan"),), (1.0, 0.0), "plant")
+    Traceback (most recent call last):
+    ...
+    hcid.errors.ConfigError: plant.num: must be finite numbers, got [nan]
+    """
+    for key, coefs in (("num", num), ("den", den)):
+        if not all(
+            isinstance(c, numbers.Real) and not isinstance(c, bool) and math.isfinite(c) for c in coefs
+        ):
+            raise ConfigError(f"{where}.{key}: must be finite numbers, got {list(coefs)}")
+        if len(coefs) > MAX_PLANT_COEFFICIENTS:
+            raise ConfigError(
+                f"{where}.{key}: must hold at most {MAX_PLANT_COEFFICIENTS} coefficients (degree 10), "
+                f"got {len(coefs)}"
+            )
+    for key, coefs in (("num", num), ("den", den)):
+        if not any(c != 0 for c in coefs):
+            raise ConfigError(f"{where}.{key}: must not be all zero")
+    if relative_degree(num, den) < 0:
+        raise ConfigError(
+            f"{where}: must be proper (degree of num <= degree of den), got degrees {_degree(num)} and "
+            f"{_degree(den)}"
+        )
+
+
 #: The largest relative degree of a plant with an Inverse Feedforward Model (SPEC 7):
 #: ``Ynms Kpt / Yc / (TI s + 1)^2`` is proper exactly up to it.
 MAX_INVERTIBLE_DEGREE = 4
 
 
 def relative_degree(num: Sequence[float], den: Sequence[float]) -> int:
-    """Degree of ``den`` minus degree of ``num`` (in s, highest power first; leading zeros ignored)."""
+    """Degree of ``den`` minus degree of ``num`` (in s, highest power first; leading zeros ignored).
 
-    def degree(coefs: Sequence[float]) -> int:
-        first = next((i for i, c in enumerate(coefs) if c != 0), len(coefs))
-        return len(coefs) - first - 1
+    Examples
+    --------
+    >>> relative_degree([1.0], [1.0, 0.0]), relative_degree([1.0, 0.0, 0.0], [0.0, 1.0, 1.0])
+    (1, -1)
+    """
+    return _degree(den) - _degree(num)
 
-    return degree(den) - degree(num)
+
+def _degree(coefs: Sequence[float]) -> int:
+    first = next((i for i, c in enumerate(coefs) if c != 0), len(coefs))
+    return len(coefs) - first - 1
 
 
 def _poly_text(coefs: tuple[float, ...]) -> str:

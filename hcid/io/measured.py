@@ -69,7 +69,12 @@ def check_signal(x: np.ndarray, where: str) -> np.ndarray:
     DataError
         Naming ``where``, the first bad value and its sample.
     """
-    x = np.ascontiguousarray(x, dtype=np.float64)
+    if np.iscomplexobj(x):
+        raise DataError(f"{where} holds complex values; a signal is real")
+    try:
+        x = np.ascontiguousarray(x, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise DataError(f"{where} must hold numbers, got {type(x).__name__}") from None
     if x.size == 0:
         raise DataError(f"{where} holds no samples")
     bad = ~np.isfinite(x) | (np.abs(x) > LARGEST)

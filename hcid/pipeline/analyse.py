@@ -44,7 +44,7 @@ from hcid.errors import ConfigError, DataError, IdentificationError
 from hcid.hcfit.determined import group_model
 from hcid.io import datasets, folders, results
 from hcid.io.datasets import DataSet
-from hcid.io.resolve import with_data
+from hcid.io.resolve import read_study, with_data
 from hcid.loop.hcmodel import plant
 from hcid.pipeline.analysis_tables import write_tables
 from hcid.pipeline.evidence import (
@@ -73,7 +73,7 @@ from hcid.pipeline.twins import (
 from hcid.selection import over_w
 from hcid.selection.calibration import benjamini_hochberg
 
-__all__ = ["AnalysisOptions", "AnalysisRun", "analyse_study"]
+__all__ = ["AnalysisOptions", "AnalysisRun", "analyse", "analyse_study"]
 
 #: Realizations of each twin (FB and FF) per group.
 TWINS = 20
@@ -167,11 +167,12 @@ class AnalysisOptions:
     """How ``hcid analyse`` groups and decides (its options; checked when made).
 
     ``by``: the factors whose runs share one calibrated W (None: ``condition`` if the data set
-    has it, else one group); ``twins``: realizations of each twin per group and forcing set
-    (also the batch in which more FB twins are drawn); ``max_fb_twins``: the most FB twins per
-    forcing set for the runs' p-values (None: :data:`MAX_FB_TWINS`, or ``twins`` if more);
-    ``ff_twin``: :data:`FF_TWINS`; ``alpha``: each run's test level; ``fdr``: control the false
-    discovery rate over the study's runs instead."""
+    has it, else one group; a string is split at commas, as ``--by`` is); ``twins``:
+    realizations of each twin per group and forcing set (also the batch in which more FB twins
+    are drawn); ``max_fb_twins``: the most FB twins per forcing set for the runs' p-values
+    (None: :data:`MAX_FB_TWINS`, or ``twins`` if more); ``ff_twin``: :data:`FF_TWINS`;
+    ``alpha``: each run's test level; ``fdr``: control the false discovery rate over the
+    study's runs instead."""
 
     by: tuple[str, ...] | None = None
     twins: int = TWINS
@@ -181,6 +182,18 @@ class AnalysisOptions:
     fdr: bool = False
 
     def __post_init__(self) -> None:
+        if isinstance(self.by, str):  # "subject,condition", as --by takes it
+            object.__setattr__(self, "by", tuple(b.strip() for b in self.by.split(",") if b.strip()))
+        if self.by is not None and not all(isinstance(b, str) and b for b in self.by):
+            raise ConfigError(f"by (--by): must be factor names, got {self.by!r}")
+        for name in ("twins", "max_fb_twins"):
+            value = getattr(self, name)
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, int | None)
+                or (name == "twins" and value is None)
+            ):
+                raise ConfigError(f"{name} (--{name.replace('_', '-')}): must be an integer, got {value!r}")
         if not 2 <= self.twins <= 1000:
             raise ConfigError(f"twins (--twins): must be an integer in [2, 1000], got {self.twins}")
         if not self.twins <= self.most_fb_twins <= 10000:
@@ -515,3 +528,62 @@ def analyse_study(
     lap_done("tables")
     aside = tuple((str(f), str(why)) for f, why in data.set_aside)
     return AnalysisRun(group_table, run_table, time.perf_counter() - start, run_dir, stages, aside)
+
+
+def analyse(
+    config: str | Path,
+    data: str | Path | Sequence[str | Path],
+    run: str | Path,
+    options: AnalysisOptions | None = None,
+    *,
+    execution: Execution | None = None,
+    skip_unreadable: bool = False,
+    force: bool = False,
+) -> AnalysisRun:
+    """Analyse a measured study end to end, as ``hcid analyse`` does (the same function).
+
+    Every run identified by each method, W calibrated per group on twins of the group's
+    fitted model, each run's feedforward tested against its FB twins (its p-value), its
+    model selected and its parameters fitted with their standard errors (SPEC 10 and 11).
+
+    Parameters
+    ----------
+    config : str or Path
+        The study's YAML config (``data`` and ``loop`` sections: docs/configuration.md).
+    data : str, Path or a sequence of them
+        Files, quoted globs (``"trials/*.csv"``), folders or a manifest CSV.
+    run : str or Path
+        The run directory: the tables, the twins and ``report/``; a second call with the same
+        inputs reuses what is there (``force`` starts again).
+    options : AnalysisOptions, optional
+        Grouping (``by="subject,condition"``), twins, the test's level (``hcid analyse``'s
+        options); default: ``AnalysisOptions()``.
+    execution : Execution, optional
+        Workers and progress bars; default ``Execution(jobs=2)``.
+    skip_unreadable : bool
+        Set aside files that cannot be read (``AnalysisRun.set_aside``) instead of refusing.
+
+    Returns
+    -------
+    AnalysisRun
+        ``runs``: one row per run and method (its factors, ``p_value``, ``feedforward_at_w``,
+        the parameters with ``_se`` and ``_status``; docs/tables.md), ``groups``: one per group
+        and method (W, its rule, the verdict); the same tables as ``RUN/analysis.parquet`` and
+        ``analysis_groups.parquet``. ``hcid.build_report(run)`` writes the HTML report.
+
+    Raises
+    ------
+    HcidError
+        One line naming what is wrong (config, data, a run directory in use); nothing written.
+    """
+    execution = Execution() if execution is None else execution
+    options = AnalysisOptions() if options is None else options
+    for name, value, kind in (("options", options, AnalysisOptions), ("execution", execution, Execution)):
+        if not isinstance(value, kind):
+            raise ConfigError(f"{name}: must be a hcid.{kind.__name__}, got {type(value).__name__}")
+    sources = [data] if isinstance(data, str | Path) else list(data)
+    if not sources or not all(isinstance(x, str | Path) for x in sources):
+        raise DataError(f"data: must be files, globs or folders (str or Path), got {data!r}")
+    execution.check()
+    study, data_set = read_study(config, sources, skip_unreadable=skip_unreadable)
+    return analyse_study(study, Path(run), data_set, options, execution=execution, force=force)

@@ -19,7 +19,7 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import methods, tables
-from hcid.analysis.fourier import plant_mismatch
+from hcid.analysis.fourier import PLANT_MISMATCH_LIMIT, plant_mismatch
 from hcid.config import Config, IdentifyConfig
 from hcid.errors import ConfigError, DataError
 from hcid.io import datasets, measured, results
@@ -392,12 +392,6 @@ def _check_data(config: Config, data: datasets.DataSet) -> None:
             f"need {need}; read it for this config (hcid.io.resolve.read_study)"
         )
     _check_plant(config, data)
-
-
-#: The most of a run's theta = ft - e at its forcing lines that the configured plant may leave
-#: unexplained (RMS share, :func:`hcid.analysis.fourier.plant_mismatch`); it accepts a plant gain
-#: 0.7 to 1.3 times the true one, and the measurements behind it are in docs/measured-studies.md.
-PLANT_MISMATCH_LIMIT = 0.3
 
 
 def _check_plant(config: Config, data: datasets.DataSet) -> None:
