@@ -178,6 +178,8 @@ def test_fit_hc_through_the_api_equals_the_pipelines(record, direct):
         (lambda r, d: hcid.Record(1, 25.0, r.t, r.ft + 1j, r.fd, r.e, r.u), "record ft holds complex values"),
         (lambda r, d: hcid.Plant.integrator(float("nan")), r"plant.num: must be finite numbers, got \[nan\]"),
         (lambda r, d: hcid.Plant.tf([1.0], [0.0]), "plant.den: must not be all zero"),
+        (lambda r, d: d.selection_path().at(-1.0), "w: must be >= 0, got -1.0"),
+        (lambda r, d: d.select(0.1).frequency_response([1.0, np.nan]), "omega: must be finite .* got nan"),
         (lambda r, d: hcid.AnalysisOptions(twins="4"), "twins \\(--twins\\): must be an integer"),
     ],
 )

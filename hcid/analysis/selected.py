@@ -148,7 +148,18 @@ class SelectedModel:
         dict
             ``{"ft": Hft, "e": He}``, each complex of the shape of ``omega``: u per ft
             (SPEC 5: ``exp(jw shift) z^-nk_ft B_ft / A``) and u per e; zeros for a dropped path.
+
+        Raises
+        ------
+        IdentificationError
+            For an ``omega`` that is not finite and >= 0.
         """
+        omega = np.asarray(omega, dtype=np.float64)
+        bad = ~(np.isfinite(omega) & (omega >= 0))
+        if bad.any():
+            raise IdentificationError(
+                f"omega: must be finite frequencies >= 0 (rad/s), got {float(omega[bad].flat[0])}"
+            )
         dt = 1.0 / self.rate
         return {
             "ft": path_response(self.a, self.b_ft, self.nk_ft, omega, dt, advance=self.target_shift),

@@ -72,8 +72,11 @@ class SelectionPath:
     w_to: np.ndarray
 
     def at(self, w: np.ndarray) -> np.ndarray:
-        """Frontier row selected at each W (W >= 0)."""
-        return self.index[np.searchsorted(self.w_from, np.asarray(w, dtype=np.float64), side="right") - 1]
+        """Frontier row selected at each W (W >= 0; a negative or NaN W is refused)."""
+        w = np.asarray(w, dtype=np.float64)
+        if not np.all(w >= 0):
+            raise IdentificationError(f"w: must be >= 0, got {float(w[~(w >= 0)].flat[0])}")
+        return self.index[np.searchsorted(self.w_from, w, side="right") - 1]
 
     def to_arrow(self) -> pa.Table:
         """One row per interval: the frontier row (``index``) selected for ``w_from <= W < w_to``."""
