@@ -225,6 +225,10 @@ def test_fit_hc_defaults_to_the_estimator_hcid_analyse_uses(lab_record):
     want = fit_selected(model, record.signals, transfer_function(plant), settings, "input")
     assert settings.target == "auto" and default.target == want.target == "lines"
     assert default.estimates == want.estimates
+    # Each parameter's status, as analysis.parquet's <name>_status columns hold it.
+    from hcid.hcfit.determined import parameter_status
+
+    assert default.status == parameter_status(want) and set(default.status) == set(default.names)
 
 
 def test_fit_hc_refuses_a_record_of_another_plant(lab_record):

@@ -15,7 +15,7 @@ from scipy import optimize, stats
 from hcid.config.fit import FEEDBACK_PARAMETERS, UNITS, FitSettings
 from hcid.errors import DataError, IdentificationError
 from hcid.hcfit.consistency import CONTRADICTED
-from hcid.hcfit.determined import LITERATURE_NMS, nms_undetermined
+from hcid.hcfit.determined import LITERATURE_NMS, nms_undetermined, parameter_status
 from hcid.hcfit.lines import LineData, LinesProblem, line_data
 from hcid.hcfit.model import TrackingRecord, simulate_hc
 from hcid.hcfit.problems import ClosedLoopProblem, Fixed, FrequencyProblem, TimeProblem
@@ -46,7 +46,8 @@ class HCFit:
     Attributes
     ----------
     target : str
-        ``frequency``, ``time`` or ``closed_loop``.
+        The estimator fitted: ``lines``, ``time``, ``closed_loop`` or ``frequency`` (``auto``
+        resolved).
     names : tuple of str
         Fitted parameters: :data:`FEEDBACK_PARAMETERS`, then
         :data:`FEEDFORWARD_PARAMETERS` if the model has a feedforward path.
@@ -119,6 +120,14 @@ class HCFit:
     @property
     def has_feedforward(self) -> bool:
         return "Kpt" in self.names
+
+    @property
+    def status(self) -> dict[str, str]:
+        """``{parameter: status}``: ``determined``, or why the data do not determine it (on a
+        search bound, its 95% interval wider than its plausible range, correlated with another,
+        held fixed, ...) or why it is flagged; what ``hcid analyse`` writes as ``<name>_status``
+        (:func:`hcid.hcfit.determined.parameter_status`)."""
+        return parameter_status(self)
 
     def rows(self) -> list[dict[str, Any]]:
         """One dict per parameter: parameter, estimate, se, ci_low, ci_high, unit, at_bound,
