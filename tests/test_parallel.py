@@ -4,6 +4,7 @@ import contextlib
 import fcntl
 import multiprocessing
 import os
+import select
 import shutil
 import signal
 import subprocess
@@ -126,6 +127,8 @@ def test_forked_workers_keep_no_copy_of_the_run_lock(tmp_path):
             os.write(started, b"1")
             time.sleep(5)
             os._exit(0)
+        # A child that died before writing would block os.read forever: wait at most 60 s.
+        assert select.select([ready], [], [], 60)[0], "the forked child never started"
         os.read(ready, 1)
     try:
         _run_dir_is_free(run)  # the parent has released it; the child must not hold it
@@ -187,7 +190,7 @@ def test_forked_workers_die_with_a_killed_parent(simulated, tmp_path):
     try:
         assert len(workers) == 2
         proc.kill()
-        proc.communicate()
+        proc.communicate(timeout=60)  # workers that outlived it would hold its pipes: fail, not hang
         assert _wait_gone(workers) == []
         _run_dir_is_free(run)
     finally:
@@ -323,8 +326,9 @@ def test_execution_runs_blas_single_threaded_and_puts_it_back(jobs, fork, monkey
     import joblib._parallel_backends
     from threadpoolctl import threadpool_info, threadpool_limits
 
+    # The path under test, whatever threads earlier tests in this process started.
+    monkeypatch.setattr(parallel, "_can_fork", lambda: fork)
     if not fork:
-        monkeypatch.setattr(parallel, "_can_fork", lambda: False)
         monkeypatch.setattr(joblib._parallel_backends, "cpu_count", lambda *a, **k: 8)
         for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
             monkeypatch.delenv(name, raising=False)  # make test sets them; a library caller may not

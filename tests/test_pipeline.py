@@ -181,6 +181,9 @@ def test_dask_all_workers_lost_fails_in_one_line_within_the_timeout(ci_runs, tmp
     ) as cluster:
         workers = [_dask_worker(cluster.scheduler_address) for _ in range(2)]
         try:
+            # Both joined before hcid starts: --worker-timeout 4 also bounds its first wait for one.
+            with distributed.Client(cluster) as client:
+                client.wait_for_workers(2, timeout=120)
             cmd = [str(Path(sys.executable).parent / "hcid"), "identify", str(config), "--run", str(run),
                    "--backend", "dask", "--scheduler", cluster.scheduler_address, "--worker-timeout", "4",
                    "--force", "--quiet"]  # fmt: skip
