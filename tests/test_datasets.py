@@ -392,3 +392,27 @@ def test_a_data_set_read_for_another_rate_or_too_short_is_refused(trial_folder, 
     with pytest.raises(DataError, match="run 1 holds 100 samples"):
         identify_study(config, tmp_path / "b", data=dataclasses.replace(good, records=short))
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_a_config_given_as_a_mapping_reads_as_its_yaml_file(monkeypatch):
+    # hcid.analyse(config=dict): the mapping a YAML file holds gives that file's study (the same
+    # resolved config and records; relative paths from the working folder), and a value no YAML
+    # file could hold is refused naming its key.
+    from hcid.errors import ConfigError
+    from hcid.io.resolve import read_study
+
+    root = Path(__file__).resolve().parents[1]
+    monkeypatch.chdir(root)
+    path = root / "configs" / "lab_example.yaml"
+    files = sorted(str(p) for p in (root / "configs" / "lab_example").glob("S1_*_trial1.csv"))
+    raw = yaml.safe_load(path.read_text())
+    from_file, file_data = read_study(path, files)
+    from_dict, dict_data = read_study(raw, files)
+    assert from_dict.identify == from_file.identify and from_dict.loop == from_file.loop
+    assert from_dict.data == from_file.data and from_dict.name == from_file.name
+    assert list(dict_data.records) == list(file_data.records)
+    for run, record in file_data.records.items():
+        assert all(np.array_equal(record[k], dict_data.records[run][k]) for k in ("ft", "fd", "e", "u"))
+    raw["data"]["window"] = np.float64(40.0)
+    with pytest.raises(ConfigError, match=r"^data.window: must be a number, .* got a float64"):
+        read_study(raw, files)

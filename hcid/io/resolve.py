@@ -19,7 +19,7 @@ values; this step, above the data readers and the method registry, completes a
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -203,18 +203,19 @@ def describe_file(path: str | Path, run_dir: Path | None = None) -> Config:
 
 
 def read_study(
-    path: str | Path,
+    path: str | Path | Mapping[str, Any],
     sources: Sequence[str | Path],
     method_names: Sequence[str] | None = None,
     *,
     skip_unreadable: bool = False,
 ) -> tuple[Config, DataSet]:
-    """A measured study's config (YAML at ``path``), completed from its data where it leaves the
-    analysis rate or window out (:func:`data_timing`) and resolved for ``method_names``, and its
-    data set at the analysis rate: every file of ``sources`` found once and read once
-    (:func:`hcid.io.datasets.read_files`, :func:`hcid.io.datasets.set_at`). With
-    ``skip_unreadable``, files that cannot be read or fail their checks are set aside with their
-    reasons (``DataSet.set_aside``) instead of refused.
+    """A measured study's config (YAML at ``path``, or the mapping such a file holds: its
+    relative paths then from the working folder, its name ``name`` or ``study``), completed from
+    its data where it leaves the analysis rate or window out (:func:`data_timing`) and resolved
+    for ``method_names``, and its data set at the analysis rate: every file of ``sources`` found
+    once and read once (:func:`hcid.io.datasets.read_files`, :func:`hcid.io.datasets.set_at`).
+    With ``skip_unreadable``, files that cannot be read or fail their checks are set aside with
+    their reasons (``DataSet.set_aside``) instead of refused.
 
     Raises
     ------
@@ -223,8 +224,11 @@ def read_study(
     """
     from hcid.io.datasets import data_files, read_files, set_at
 
-    path = Path(path)
-    raw = read_yaml(path)
+    if isinstance(path, Mapping):
+        raw, path = _as_yaml(path), Path.cwd() / "study.yaml"
+    else:
+        path = Path(path)
+        raw = read_yaml(path)
     if not isinstance(raw, dict) or not isinstance(raw.get("data", {}), dict):
         raise ConfigError(f"{path}: data: must be a mapping")
     reading = _reading(raw, path.parent)
@@ -243,6 +247,34 @@ def read_study(
     order = [str(f.path) for f in files]
     data_set = set_at(read, config.data, samples_needed(config), skip_unreadable, aside, order)
     return config, data_set
+
+
+def _as_yaml(config: Mapping[str, Any]) -> dict:
+    """A config given as a mapping, as its YAML file would read: string keys, and plain numbers,
+    strings, booleans, None, lists and mappings as values (copied).
+
+    Raises
+    ------
+    ConfigError
+        Naming the first key whose value no YAML file could hold (a numpy number, a tuple, ...).
+    """
+
+    def plain(value: Any, where: str) -> Any:
+        if isinstance(value, Mapping):
+            bad = next((k for k in value if not isinstance(k, str)), None)
+            if bad is not None:
+                raise ConfigError(f"{where or 'config'}: keys must be strings, got {bad!r}")
+            return {k: plain(v, f"{where}.{k}" if where else k) for k, v in value.items()}
+        if isinstance(value, list):
+            return [plain(v, f"{where}[{i}]") for i, v in enumerate(value)]
+        if value is None or type(value) in (bool, int, float, str):
+            return value
+        raise ConfigError(
+            f"{where or 'config'}: must be a number, string, boolean, list or mapping, as in a YAML "
+            f"file; got a {type(value).__name__} ({value!r})"
+        )
+
+    return plain(config, "")
 
 
 def with_data(config: Config) -> Config:

@@ -28,9 +28,10 @@ group's model-free estimates of both paths, SPEC 10, beside its fitted model).
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
@@ -531,7 +532,7 @@ def analyse_study(
 
 
 def analyse(
-    config: str | Path,
+    config: str | Path | Mapping[str, Any],
     data: str | Path | Sequence[str | Path],
     run: str | Path,
     options: AnalysisOptions | None = None,
@@ -548,8 +549,9 @@ def analyse(
 
     Parameters
     ----------
-    config : str or Path
-        The study's YAML config (``data`` and ``loop`` sections: docs/configuration.md).
+    config : str, Path or mapping
+        The study's YAML config (``data`` and ``loop`` sections: docs/configuration.md), or the
+        mapping such a file holds (its relative paths then from the working folder).
     data : str, Path or a sequence of them
         Files, quoted globs (``"trials/*.csv"``), folders or a manifest CSV.
     run : str or Path
