@@ -224,7 +224,7 @@ def identification_settings(
         checked_rate(rate)
         if not (isinstance(n_samples, int) and n_samples > 0):
             raise ConfigError(f"n_samples: must be a positive integer, got {n_samples!r}")
-        identify = data_identify_defaults(Timing(rate, rate, 0.0, n_samples / rate, 1))
+        identify = data_identify_defaults(Timing(rate, rate, 0.0, n_samples / rate, 1), where="rate")
     return resolve_identify(dict(identify), rate, n_samples)
 
 

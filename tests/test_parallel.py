@@ -276,6 +276,35 @@ def _in_a_fresh_process(code: str) -> list[str]:
     return out.stdout.split()
 
 
+_HALF_SENT = """
+import gc, multiprocessing.queues, os, struct, time
+from hcid.pipeline import parallel
+
+def task(kind):
+    if kind == "quick":
+        return 0
+    # Half a result on the pool's result pipe: a worker killed while sending a large one.
+    queue = next(o for o in gc.get_objects() if isinstance(o, multiprocessing.queues.SimpleQueue))
+    os.write(queue._writer.fileno(), struct.pack("!i", 1_000_000) + b"x" * 10)
+    time.sleep(60)
+
+tasks = [("quick",), ("half",), ("quick",)]
+stream = parallel.parallel_map(task, tasks, jobs=2, label="t", show_progress=False)
+next(stream)
+time.sleep(1.0)  # the manager thread is now reading the rest of the half-sent result
+stream.close()
+print("closed")
+"""
+
+
+def test_stopping_early_with_a_result_half_sent_does_not_hang():
+    # A reviewer's case: a worker killed while sending a large result left the pool's manager
+    # thread waiting for its rest, and the join of _stop_pool for ever (in a process of its own,
+    # so that a hang fails this test by its timeout instead of stopping the suite).
+    out = subprocess.run([sys.executable, "-c", _HALF_SENT], capture_output=True, text=True, timeout=60)
+    assert (out.returncode, out.stdout.split(), out.stderr) == (0, ["closed"], "")
+
+
 def test_can_fork_only_when_no_other_thread_runs():
     # In a process of its own (this one may have threads of earlier tests, loky's among them).
     code = (

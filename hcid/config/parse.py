@@ -19,7 +19,7 @@ from typing import Any
 from hcid.config._checks import LIMITS, Section, fmt, integer, number_list
 from hcid.config.fit import FitSettings, parse_fit_settings
 from hcid.config.forcing import check_against_timing, signals_section, timing_section
-from hcid.config.stages import identify_section
+from hcid.config.stages import MOST_LAGS, identify_section
 from hcid.config.types import (
     Config,
     DataConfig,
@@ -265,7 +265,7 @@ def _data_timing(top: Section) -> Timing:
     return Timing(sim_rate=rate, output_rate=rate, run_in=0.0, window=window, periods=1)
 
 
-def data_identify_defaults(timing: Timing) -> dict:
+def data_identify_defaults(timing: Timing, where: str = "data.analysis_rate") -> dict:
     """The identify section of a measured study that gives none: SPEC 3's grids and windows in
     seconds, scaled to the analysis rate and the record.
 
@@ -273,7 +273,9 @@ def data_identify_defaults(timing: Timing) -> dict:
     to 0.2 s (at least one sample); orders as SPEC 3, stage 1's nb1 up to 1 s of lags above 25 Hz
     (its ft_s lags must reach the target shift); estimation ``[W/16, 17 W/32)`` and
     validation ``[17 W/32, W)`` of the window W (the paper's 129..1088 and 1089..2048 of 2048
-    samples); target shift 1 s. At 25 Hz and W = 81.92 s this is SPEC 3's section exactly.
+    samples); target shift 1 s. At 25 Hz and W = 81.92 s this is SPEC 3's section exactly. Up to
+    60 Hz: stage 1's 1 s of lags is then the most a grid holds (:data:`MOST_LAGS`); above it, a
+    ConfigError naming ``where`` (analyse at a lower rate, or give the identify section).
 
     Examples
     --------
@@ -287,6 +289,12 @@ def data_identify_defaults(timing: Timing) -> dict:
     def samples(seconds: float) -> int:
         return max(1, round(seconds * rate))
 
+    if samples(1.0) > MOST_LAGS:
+        raise ConfigError(
+            f"{where}: the default identification grids (SPEC 3's in seconds) reach {MOST_LAGS / 1.0:g} Hz "
+            f"(stage 1's 1 s of lags, at most {MOST_LAGS}), got {rate:g} Hz; analyse at a lower rate "
+            "(25 Hz is the paper's) or give the identify section"
+        )
     cut = (round(n / 16) / rate, round(17 * n / 32) / rate)
     final = {
         "na": [1, 7],

@@ -20,6 +20,11 @@ __all__ = ["build_stages", "identify_section", "parse_identify", "stage_raw"]
 _ABSENT = object()  # a key left out (None is a value: refused where a mapping is needed)
 
 
+#: The most input lags (nb1, nb2) and the longest delay (nk1, nk2) a grid may hold, in samples.
+MOST_LAGS = 60
+MOST_DELAY = 200
+
+
 def _seconds_window(key: str, value: Any, rate: float, n_record: int) -> list[int]:
     """``[start, end]`` in s (end exclusive: the window holds ``(end - start) rate`` samples) as samples."""
     ok = (
@@ -83,10 +88,10 @@ def _stage(data: Any, path: str, defaults: dict, timing: Timing, unit: str, give
     s = Section(merged, path)
     grid = Grid(
         na=int_range(s, "na", 1, 30),
-        nb1=int_range(s, "nb1", 0, 60),
-        nb2=int_range(s, "nb2", 0, 60),
-        nk1=int_range(s, "nk1", 0, 200),
-        nk2=int_range(s, "nk2", 0, 200),
+        nb1=int_range(s, "nb1", 0, MOST_LAGS),
+        nb2=int_range(s, "nb2", 0, MOST_LAGS),
+        nk1=int_range(s, "nk1", 0, MOST_DELAY),
+        nk2=int_range(s, "nk2", 0, MOST_DELAY),
     )
     max_lag = grid.max_lag
     # A method's default window (its StageSpec) is in samples; one the config gives is in `unit`.

@@ -268,7 +268,7 @@ def _stop_pool(pool, futures, n_tasks: int) -> None:
     """Stop the pool, killing its workers first unless every task has finished.
 
     Always waits for the pool's manager thread, which ends as soon as it sees the killed
-    workers: left running, it can close its wake-up pipe while Python's exit hook writes to it
+    workers (or the end of a result one of them was sending): left running, it can close its wake-up pipe while Python's exit hook writes to it
     (Python 3.11's race, fixed in 3.12), which printed an OSError traceback after a Ctrl-C.
     """
     finished = len(futures) == n_tasks and all(f.done() and not f.cancelled() for f in futures)
@@ -276,6 +276,11 @@ def _stop_pool(pool, futures, n_tasks: int) -> None:
         # ProcessPoolExecutor.kill_workers() arrives in Python 3.14; until then, its processes.
         for process in list((getattr(pool, "_processes", None) or {}).values()):
             process.kill()
+        # A worker killed while sending a result leaves the manager thread reading the rest of it;
+        # with this process's copy of the pipe's write end closed too, it reads an end instead.
+        writer = getattr(getattr(pool, "_result_queue", None), "_writer", None)
+        if writer is not None:
+            writer.close()
     pool.shutdown(wait=True, cancel_futures=True)
 
 
