@@ -33,7 +33,7 @@ from hcid.config import Config, DataConfig, Forcing, IdentifyConfig, Plant, Timi
 from hcid.config.parse import data_identify_defaults, default_data
 from hcid.errors import ConfigError, DataError, IdentificationError, checked_rate
 from hcid.io import results
-from hcid.io.measured import TIME_JITTER, check_signal, read_runs
+from hcid.io.measured import TIME_JITTER, check_signal, read_runs, time_rate
 from hcid.io.resolve import resolve_identify
 from hcid.loop.hcmodel import transfer_function
 from hcid.selection import criteria, over_w
@@ -85,13 +85,9 @@ class Record:
             n = x.size if name == "ft" else n
             object.__setattr__(self, name, x)
         object.__setattr__(self, "rate", float(self.rate))
-        steps = np.diff(self.t) * self.rate  # 1 at every sample of a record at its rate
-        if steps.size and not np.all(np.abs(steps - 1.0) <= TIME_JITTER):
-            k = int(np.argmax(np.abs(steps - 1.0) > TIME_JITTER))
-            raise DataError(
-                f"record t: must step by 1/rate ({1 / self.rate:.6g} s), got {steps[k] / self.rate:.6g} s "
-                f"at sample {k + 1}"
-            )
+        found = time_rate(self.t, "record t", default=self.rate)
+        if abs(found - self.rate) > TIME_JITTER * self.rate:
+            raise DataError(f"record t: steps {1 / found:.6g} s, not 1/rate ({1 / self.rate:.6g} s)")
 
     @property
     def signals(self) -> dict[str, np.ndarray]:

@@ -173,12 +173,17 @@ def test_fit_hc_through_the_api_equals_the_pipelines(record, direct):
         ),
         (
             lambda r, d: hcid.Record(1, 25.0, r.t * 1.1, r.ft, r.fd, r.e, r.u),
-            r"record t: must step by 1/rate",
+            r"record t: steps 0.044 s, not 1/rate",
+        ),
+        (
+            lambda r, d: hcid.Record(1, 25.0, r.t**1.01, r.ft, r.fd, r.e, r.u),
+            "record t: time is not uniformly",
         ),
         (lambda r, d: hcid.Record(1, 25.0, r.t, r.ft + 1j, r.fd, r.e, r.u), "record ft holds complex values"),
         (lambda r, d: hcid.Plant.integrator(float("nan")), r"plant.num: must be finite numbers, got \[nan\]"),
         (lambda r, d: hcid.Plant.tf([1.0], [0.0]), "plant.den: must not be all zero"),
         (lambda r, d: d.selection_path().at(-1.0), "w: must be >= 0, got -1.0"),
+        (lambda r, d: hcid.identification_settings(100.0, 4000), "rate: the default identification grids"),
         (lambda r, d: d.select(0.1).frequency_response([1.0, np.nan]), "omega: must be finite .* got nan"),
         (lambda r, d: hcid.AnalysisOptions(twins="4"), "twins \\(--twins\\): must be an integer"),
     ],

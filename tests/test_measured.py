@@ -386,6 +386,21 @@ def test_data_only_config_with_default_names(tmp_path, example_table, data_confi
         assert len(result.stderr.strip().splitlines()) == 1 and not other.exists()
 
 
+def test_default_grids_refuse_an_analysis_rate_above_60_hz():
+    # Source: stage 1's default nb1 is 1 s of lags (hcid.config.parse.data_identify_defaults) and a
+    # grid holds at most MOST_LAGS = 60 (hcid.config.stages): 60 Hz is accepted, 61 Hz refused in
+    # one line naming data.analysis_rate (before, it named identify.stage1.nb1, which no one wrote).
+    from hcid.config.stages import MOST_LAGS
+
+    raw = {"name": "lab", "data": {"analysis_rate": 60.0, "window": 40.0}}
+    assert parse_config(raw, "lab").identify.stage("stage1").grid.nb1 == (0, MOST_LAGS)
+    raw["data"]["analysis_rate"] = 61.0
+    with pytest.raises(
+        ConfigError, match=r"^data.analysis_rate: the default identification grids .* reach 60 Hz"
+    ):
+        parse_config(raw, "lab")
+
+
 def test_paper_config_reads_a_file_with_default_names(tmp_path, example_table, ci_config):
     # configs/ci.yaml has no data section: a file with the default names (time as 'time',
     # the other spelling) is read with them, under the data name 'data'.

@@ -434,25 +434,38 @@ def _named_signals(path: Path, cols: dict[str, np.ndarray], data: DataConfig) ->
     return cols
 
 
+def time_rate(time: np.ndarray, where: str, default: float | None = None) -> float:
+    """The sample rate (Hz) of a uniformly sampled, increasing time vector (s); ``default`` for a
+    single sample.
+
+    A logger's time stamps are rounded (to 1 us, say: 6e-5 of a 60 Hz step): each step may
+    differ from the mean by :data:`TIME_JITTER` of it, a dropped or doubled sample may not.
+
+    Raises
+    ------
+    DataError
+        Naming ``where`` and the first step that is off, or a time that does not increase.
+    """
+    steps = np.diff(time)
+    mean = (time[-1] - time[0]) / steps.size if steps.size else 0.0
+    off = np.abs(steps - mean) > TIME_JITTER * abs(mean) + 1e-9
+    if steps.size and off.any():
+        k = int(np.argmax(off))
+        raise DataError(
+            f"{where}: time is not uniformly sampled (step {steps[k]:.6g} s at sample "
+            f"{k + 1}, mean step {mean:.6g} s)"
+        )
+    if steps.size and steps[0] <= 0:
+        raise DataError(f"{where}: time does not increase (step {steps[0]:.6g} s)")
+    if not steps.size and default is None:
+        raise DataError(f"{where}: one sample only; a run needs at least two to have a sample rate")
+    return steps.size / (time[-1] - time[0]) if steps.size else default
+
+
 def _run_rate(where: str, run: dict[str, np.ndarray], data: DataConfig, default: float | None) -> float:
     """A run's sample rate (Hz): from its uniformly sampled time column, else its rate column."""
     if "time" in run:
-        steps = np.diff(run["time"])
-        # A logger's time stamps are rounded (to 1 us, say: 6e-5 of a 60 Hz step): each step may
-        # differ from the mean by TIME_JITTER of it, a dropped or doubled sample may not.
-        mean = (run["time"][-1] - run["time"][0]) / steps.size if steps.size else 0.0
-        off = np.abs(steps - mean) > TIME_JITTER * abs(mean) + 1e-9
-        if steps.size and off.any():
-            k = int(np.argmax(off))
-            raise DataError(
-                f"{where}: time is not uniformly sampled (step {steps[k]:.6g} s at sample "
-                f"{k + 1}, mean step {mean:.6g} s)"
-            )
-        if steps.size and steps[0] <= 0:
-            raise DataError(f"{where}: time does not increase (step {steps[0]:.6g} s)")
-        if not steps.size and default is None:
-            raise DataError(f"{where}: one sample only; a run needs at least two to have a sample rate")
-        return steps.size / (run["time"][-1] - run["time"][0]) if steps.size else default
+        return time_rate(run["time"], where, default)
     rates = np.ravel(run["rate"])
     if rates.size == 0 or not np.isfinite(rates[0]) or rates[0] <= 0:
         raise DataError(f"{where}: the rate {data.columns['rate']!r} is empty or not a positive number")

@@ -345,6 +345,7 @@ def _reading(raw: dict, base: Path | None):
         "window": 1.0,
         "lead_in": 0.0,
     }
+    probe["identify"] = {}  # the data section alone: no identification defaults at the placeholder rate
     return describe_config(probe, "probe", base).data
 
 

@@ -267,9 +267,10 @@ def _ctrl_c_deferred():
 def _stop_pool(pool, futures, n_tasks: int) -> None:
     """Stop the pool, killing its workers first unless every task has finished.
 
-    Always waits for the pool's manager thread, which ends as soon as it sees the killed
-    workers (or the end of a result one of them was sending): left running, it can close its wake-up pipe while Python's exit hook writes to it
-    (Python 3.11's race, fixed in 3.12), which printed an OSError traceback after a Ctrl-C.
+    Always waits for the pool's manager thread, which ends as soon as it sees the killed workers
+    (or the end of a result one of them was sending): left running, it can close its wake-up pipe
+    while Python's exit hook writes to it (Python 3.11's race, fixed in 3.12), which printed an
+    OSError traceback after a Ctrl-C.
     """
     finished = len(futures) == n_tasks and all(f.done() and not f.cancelled() for f in futures)
     if not finished:
