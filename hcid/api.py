@@ -27,7 +27,7 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import hcfit, methods, tables
-from hcid.analysis.fourier import PLANT_MISMATCH_LIMIT, plant_mismatch
+from hcid.analysis.fourier import is_other_plant, plant_mismatch
 from hcid.analysis.selected import SelectedModel, fit_selected
 from hcid.config import Config, DataConfig, Forcing, IdentifyConfig, Plant, Timing
 from hcid.config.parse import data_identify_defaults, default_data
@@ -200,7 +200,9 @@ def identification_settings(
     """The stages (grids, windows) and target shift for records of ``n_samples`` at ``rate`` Hz.
 
     ``identify`` is a config's ``identify`` section as a mapping (its keys and
-    defaults: SPEC 3, ``docs/configuration.md``). None gives what ``hcid analyse`` uses for
+    defaults: SPEC 3, ``docs/configuration.md``), read as a config reads it: the keys it
+    leaves out take SPEC 3's values, windows in samples, not the scaled ones below (give
+    ``windows_in: seconds`` and the windows for a shorter record). None gives what ``hcid analyse`` uses for
     a measured study without one: SPEC 3's grids and windows in seconds, scaled to the rate
     and the record (:func:`hcid.config.parse.data_identify_defaults`: delays up to 2 s on ft
     and 0.4 s on e, estimation and validation the paper's shares of the record); at 25 Hz
@@ -218,6 +220,8 @@ def identification_settings(
         )
     if identify is None:
         checked_rate(rate)
+        if isinstance(n_samples, numbers.Integral) and not isinstance(n_samples, bool):
+            n_samples = int(n_samples)  # numpy's too
         if not (isinstance(n_samples, int) and n_samples > 0):
             raise ConfigError(f"n_samples: must be a positive integer, got {n_samples!r}")
         identify = data_identify_defaults(Timing(rate, rate, 0.0, n_samples / rate, 1), where="rate")
@@ -366,7 +370,10 @@ def fit_hc(
     plant_check : bool
         Refuse a record the experiment's plant does not describe (``hcid analyse``'s check:
         more than 30% (RMS) of ``theta = ft - e`` at the forcing lines unexplained); False
-        where the plant leaves out, say, a display delay.
+        where the plant leaves out, say, a display delay. It reads the lines over the whole
+        record, so it checks only a record whose forcing functions are multisines over whole
+        periods of it (cut the record to the analysis window, as ``hcid analyse`` does); on
+        others it is not made, and ``auto`` fits by ``time`` there too.
 
     Returns
     -------
@@ -401,7 +408,7 @@ def _check_plant(record: Record, experiment: Experiment) -> None:
     (unchecked where its forcing functions have no lines over the record)."""
     plant = experiment.plant
     found = plant_mismatch(record.signals, record.rate, plant.num, plant.den, experiment.disturbance_at)
-    if found is not None and not found <= PLANT_MISMATCH_LIMIT:
+    if is_other_plant(found):
         raise DataError(
             f"record {record.run}: is not the experiment's plant: {found:.0%} (RMS) of its theta = ft - e "
             f"at the forcing lines is not what {plant.text} with the disturbance at its "

@@ -180,17 +180,29 @@ def test_fit_hc_through_the_api_equals_the_pipelines(record, direct):
             "record t: time is not uniformly",
         ),
         (lambda r, d: hcid.Record(1, 25.0, r.t, r.ft + 1j, r.fd, r.e, r.u), "record ft holds complex values"),
-        (lambda r, d: hcid.Plant.integrator(float("nan")), r"plant.num: must be finite numbers, got \[nan\]"),
+        (lambda r, d: hcid.Plant.integrator(float("nan")), "plant.K: must be a finite number > 0, got nan"),
         (lambda r, d: hcid.Plant.tf([1.0], [0.0]), "plant.den: must not be all zero"),
         (lambda r, d: d.selection_path().at(-1.0), "w: must be >= 0, got -1.0"),
         (lambda r, d: hcid.identification_settings(100.0, 4000), "rate: the default identification grids"),
         (lambda r, d: d.select(0.1).frequency_response([1.0, np.nan]), "omega: must be finite .* got nan"),
+        (lambda r, d: hcid.Plant.tf(["1"], [1.0, 0.0]), r"plant.num: must be finite numbers, got \['1'\]"),
+        (lambda r, d: hcid.Plant.second_order(1.0, 0.0), "plant.wb: must be a finite number > 0, got 0.0"),
+        (lambda r, d: hcid.Plant.integrator(-1.5), "plant.K: must be a finite number > 0, got -1.5"),
         (lambda r, d: hcid.AnalysisOptions(twins="4"), "twins \\(--twins\\): must be an integer"),
     ],
 )
 def test_bad_input_is_one_hcid_error(record, direct, call, message):
     with pytest.raises(hcid.HcidError, match=message):
         call(record, direct)
+
+
+def test_numpy_integers_are_integers():
+    # A notebook's counts often come from numpy (len of an array is int, its .size too, but
+    # np.int64 arithmetic is common): accepted where a Python int is.
+    assert hcid.identification_settings(25.0, np.int64(1000)) == hcid.identification_settings(25.0, 1000)
+    assert hcid.AnalysisOptions(twins=np.int64(4), max_fb_twins=np.int32(8)) == hcid.AnalysisOptions(
+        twins=4, max_fb_twins=8
+    )
 
 
 def test_default_settings_are_analyses_for_the_records_rate_and_length(record):
@@ -230,10 +242,15 @@ def test_fit_hc_defaults_to_the_estimator_hcid_analyse_uses(lab_record):
     want = fit_selected(model, record.signals, transfer_function(plant), settings, "input")
     assert settings.target == "auto" and default.target == want.target == "lines"
     assert default.estimates == want.estimates
-    # Each parameter's status, as analysis.parquet's <name>_status columns hold it.
-    from hcid.hcfit.determined import parameter_status
+    # Each parameter's status, as analysis.parquet's <name>_status columns hold it (the rules of
+    # hcid.hcfit.determined: a fixed parameter, then one on a search bound, say so first).
+    import dataclasses
 
-    assert default.status == parameter_status(want) and set(default.status) == set(default.names)
+    first = default.names[0]
+    assert set(default.status) == set(default.names)
+    assert dataclasses.replace(default, fixed=(first,)).status[first] == "fixed at a literature value"
+    bounded = dataclasses.replace(default, at_bound=(True, *default.at_bound[1:]))
+    assert bounded.status[first] == "at a search bound"
 
 
 def test_fit_hc_refuses_a_record_of_another_plant(lab_record):

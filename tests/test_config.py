@@ -268,6 +268,15 @@ def test_paper_plant_is_the_default(paper_config):
     [
         ({"kind": "cubic"}, {}, "loop.plant.kind: unknown plant shorthand 'cubic' (allowed: second_order, "),
         ({"kind": "tf", "num": [1, 0, 0], "den": [1, 1]}, {}, "loop.plant: must be proper"),
+        # Each rule of hcid.config.types.check_plant, and the config's own: den from its leading power.
+        ({"kind": "tf", "num": [1, 2, 3], "den": [0, 1, 0]}, {}, "loop.plant.den: the leading coefficient"),
+        ({"kind": "tf", "num": [0, 0], "den": [1, 1]}, {}, "loop.plant.num: must not be all zero"),
+        ({"kind": "tf", "num": [1], "den": [0, 0]}, {}, "loop.plant.den: must not be all zero"),
+        (
+            {"kind": "tf", "num": [1], "den": [1] * 12},
+            {},
+            "loop.plant.den: must hold at most 11 coefficients",
+        ),
         ({"kind": "integrator", "K": 1}, {"disturbance_at": "middle"}, "loop.disturbance_at: must be one of"),
         # Yc = (1 - s) / (s (s + 1)): its zero at s = 1 is a pole of the Inverse Feedforward Model.
         (

@@ -189,3 +189,18 @@ def test_the_plant_check_has_no_lines_to_check_without_multisines(integrator):
     r = simulate_realization(integrator, integrator.model("FF"), 1, kn=0.0)
     rec = {"ft": r.ft, "fd": np.zeros_like(r.fd), "e": r.e, "u": r.u}
     assert plant_mismatch(rec, 20.0, [1.0], [1.0, 0.0], "input") is None
+
+
+def test_a_record_is_of_another_plant_above_the_limit_or_nan():
+    # Source: the rule's statement (hcid.analysis.fourier.is_other_plant), which hcid analyse and
+    # hcid.fit_hc both refuse by: over PLANT_MISMATCH_LIMIT (0.3) or NaN; None (no lines) is unchecked.
+    from hcid.analysis.fourier import PLANT_MISMATCH_LIMIT, is_other_plant
+
+    assert PLANT_MISMATCH_LIMIT == 0.3
+    assert [is_other_plant(m) for m in (None, 0.0, 0.3, 0.31, float("nan"))] == [
+        False,
+        False,
+        False,
+        True,
+        True,
+    ]

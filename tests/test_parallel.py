@@ -355,7 +355,10 @@ def test_execution_runs_blas_single_threaded_and_puts_it_back(jobs, fork, monkey
     import joblib._parallel_backends
     from threadpoolctl import threadpool_info, threadpool_limits
 
-    # The path under test, whatever threads earlier tests in this process started.
+    # The path under test, whatever earlier tests in this process started: forking where it is
+    # safe (else skipped: forcing it could hang), loky's workers forced.
+    if fork and not parallel._can_fork():
+        pytest.skip("another thread runs in this process (an earlier test's): forking is not safe here")
     monkeypatch.setattr(parallel, "_can_fork", lambda: fork)
     if not fork:
         monkeypatch.setattr(joblib._parallel_backends, "cpu_count", lambda *a, **k: 8)

@@ -35,6 +35,7 @@ __all__ = [
     "fc_estimate",
     "forcing_lines",
     "interpolate",
+    "is_other_plant",
     "off_line_share",
     "plant_mismatch",
 ]
@@ -184,6 +185,13 @@ def off_line_share(u: np.ndarray, ft: np.ndarray, fd: np.ndarray, rate: float) -
 #: unexplained (RMS share, :func:`plant_mismatch`); it accepts a plant gain 0.7 to 1.3 times the
 #: true one, and the measurements behind it are in docs/measured-studies.md.
 PLANT_MISMATCH_LIMIT = 0.3
+
+
+def is_other_plant(mismatch: float | None) -> bool:
+    """Whether a :func:`plant_mismatch` says the record is of another plant: above
+    :data:`PLANT_MISMATCH_LIMIT`, or NaN (theta and the plant's output both 0 at every line is no
+    agreement either); None (no lines to check at) is not."""
+    return mismatch is not None and not mismatch <= PLANT_MISMATCH_LIMIT
 
 
 def plant_mismatch(

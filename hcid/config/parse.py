@@ -100,9 +100,9 @@ def _second_order(s: Section) -> Plant:
 
 def _transfer_function(s: Section) -> Plant:
     num, den = number_list(s, "num"), number_list(s, "den")
-    check_plant(num, den, "loop.plant")
-    if den[0] == 0:  # a config writes den from its leading power (a 0 there is a slip)
+    if den and den[0] == 0 and any(den):  # a config writes den from its leading power: a 0 is a slip
         raise ConfigError(f"loop.plant.den: the leading coefficient must not be 0, got {list(den)}")
+    check_plant(num, den, "loop.plant")
     return Plant.tf(num, den)
 
 

@@ -120,6 +120,7 @@ class Plant:
         >>> Plant.tf([0, 2.0], [1.0, 3.0, 0.0]).text
         '(2) / (1 s^2 + 3 s)'
         """
+        check_plant(num, den, "plant")  # before float() could take "1" or True for a number
         num = tuple(float(c) for c in num)
         num = num[next((i for i, c in enumerate(num) if c != 0), len(num)) :]
         den = tuple(float(c) for c in den)
@@ -127,9 +128,9 @@ class Plant:
 
 
 def _real(x: Any, name: str) -> float:
-    """A shorthand's number as a float (its finiteness is :func:`check_plant`'s)."""
-    if isinstance(x, bool) or not isinstance(x, numbers.Real):
-        raise ConfigError(f"plant.{name}: must be a number, got {x!r}")
+    """A shorthand's gain or break frequency as a float: a finite number > 0, as a config's is."""
+    if isinstance(x, bool) or not isinstance(x, numbers.Real) or not (math.isfinite(x) and x > 0):
+        raise ConfigError(f"plant.{name}: must be a finite number > 0, got {x!r}")
     return float(x)
 
 

@@ -27,6 +27,7 @@ group's model-free estimates of both paths, SPEC 10, beside its fitted model).
 
 from __future__ import annotations
 
+import numbers
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -189,11 +190,9 @@ class AnalysisOptions:
             raise ConfigError(f"by (--by): must be factor names, got {self.by!r}")
         for name in ("twins", "max_fb_twins"):
             value = getattr(self, name)
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, int | None)
-                or (name == "twins" and value is None)
-            ):
+            if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+                object.__setattr__(self, name, int(value))  # numpy's too
+            elif not (value is None and name == "max_fb_twins"):
                 raise ConfigError(f"{name} (--{name.replace('_', '-')}): must be an integer, got {value!r}")
         if not 2 <= self.twins <= 1000:
             raise ConfigError(f"twins (--twins): must be an integer in [2, 1000], got {self.twins}")

@@ -19,7 +19,7 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import methods, tables
-from hcid.analysis.fourier import PLANT_MISMATCH_LIMIT, plant_mismatch
+from hcid.analysis.fourier import PLANT_MISMATCH_LIMIT, is_other_plant, plant_mismatch
 from hcid.config import Config, IdentifyConfig
 from hcid.errors import ConfigError, DataError
 from hcid.io import datasets, measured, results
@@ -409,8 +409,7 @@ def _check_plant(config: Config, data: datasets.DataSet) -> None:
                             loop.plant.den, loop.disturbance_at)
         for run, rec in data.records.items()
     }  # fmt: skip
-    # NaN (theta and the plant's output both 0 at every line) is no agreement either.
-    over = {run: m for run, m in found.items() if m is not None and not m <= PLANT_MISMATCH_LIMIT}
+    over = {run: m for run, m in found.items() if is_other_plant(m)}
     if not over:
         return
     worst = max(over, key=over.get)
