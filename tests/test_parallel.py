@@ -20,7 +20,7 @@ from hcid import pipeline
 from hcid.errors import HcidError
 from hcid.pipeline import Execution, parallel, rundir
 
-from .conftest import CI_CONFIG
+from .conftest import CI_CONFIG, ROOT
 
 HCID = str(Path(sys.executable).parent / "hcid")
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="workers are forked on Linux only")
@@ -346,29 +346,49 @@ def _blas_threads(_: int) -> list[int]:
     return [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
 
 
+def _blas_around_a_run(jobs: int) -> tuple[list[int], list[list[int]], list[int]]:
+    """BLAS threads in this process before and after ``Execution(jobs).run`` under a caller's
+    limit of 2, and in the worker of each of its 4 tasks."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    with threadpool_limits(2, user_api="blas"):  # a caller's BLAS with two threads
+        before = [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+        found = Execution(jobs, progress=False).run(_blas_threads, [(i,) for i in range(4)], "t")
+        after = [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+    return before, found, after
+
+
 @pytest.mark.parametrize("jobs, fork", [(1, True), (2, True), (2, False)])
 def test_execution_runs_blas_single_threaded_and_puts_it_back(jobs, fork, monkeypatch):
     # Issue 36: the pinning lives in Execution, for a library caller as for the CLI, in forked
     # workers and in loky's fresh ones (as if on a machine of 8 CPUs, where loky would give each
     # of 2 workers 4 threads). Source: threadpoolctl's count of each loaded BLAS's threads, in
     # the worker that ran the task.
+    import json
+
     import joblib._parallel_backends
-    from threadpoolctl import threadpool_info, threadpool_limits
 
-    # The path under test, whatever earlier tests in this process started: forking where it is
-    # safe (else skipped: forcing it could hang), loky's workers forced.
-    if fork and not parallel._can_fork():
-        pytest.skip("another thread runs in this process (an earlier test's): forking is not safe here")
-    monkeypatch.setattr(parallel, "_can_fork", lambda: fork)
-    if not fork:
-        monkeypatch.setattr(joblib._parallel_backends, "cpu_count", lambda *a, **k: 8)
-        for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-            monkeypatch.delenv(name, raising=False)  # make test sets them; a library caller may not
-
-    with threadpool_limits(2, user_api="blas"):  # a caller's BLAS with two threads
-        before = [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
-        found = Execution(jobs, progress=False).run(_blas_threads, [(i,) for i in range(4)], "t")
-        after = [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+    if jobs > 1 and fork:
+        # Forked workers in a process of its own, where forking is safe (this one may run the
+        # threads of pytest-xdist or of earlier tests, and would then use loky's instead).
+        code = (
+            "import json\n"
+            "from hcid.pipeline import parallel\n"
+            "from tests.test_parallel import _blas_around_a_run\n"
+            "assert parallel._can_fork()\n"
+            f"print(json.dumps(_blas_around_a_run({jobs})))\n"
+        )
+        out = subprocess.run(
+            [sys.executable, "-c", code], cwd=ROOT, check=True, capture_output=True, text=True
+        )
+        before, found, after = json.loads(out.stdout)
+    else:
+        monkeypatch.setattr(parallel, "_can_fork", lambda: fork)
+        if not fork:
+            monkeypatch.setattr(joblib._parallel_backends, "cpu_count", lambda *a, **k: 8)
+            for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+                monkeypatch.delenv(name, raising=False)  # make test sets them; a library caller may not
+        before, found, after = _blas_around_a_run(jobs)
     assert before and set(before) == {2}
     assert all(counts and set(counts) == {1} for counts in found)
     assert after == before
