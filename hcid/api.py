@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import numbers
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -119,8 +120,8 @@ def read_records(
     path : str or Path
         The file; at most 1 GiB. Several runs are told apart by a run column.
     columns : mapping, optional
-        The file's names (str), or its column positions (int, 0 first, for files without
-        a header), of ``ft``, ``fd``, ``e``, ``u``, ``theta`` (system output, for
+        The file's names (str), or its column positions (int, 1 for the first column, as a
+        config's ``data.columns``), of ``ft``, ``fd``, ``e``, ``u``, ``theta`` (system output, for
         ``e = ft - theta``), ``time``, ``run`` and ``rate``; unnamed ones keep their
         default names (``t`` or ``time``, ``ft``, ``fd``, ``e``, ``u``, ``run``).
     rate : float, optional
@@ -370,10 +371,9 @@ def fit_hc(
     plant_check : bool
         Refuse a record the experiment's plant does not describe (``hcid analyse``'s check:
         more than 30% (RMS) of ``theta = ft - e`` at the forcing lines unexplained); False
-        where the plant leaves out, say, a display delay. It reads the lines over the whole
-        record, so it checks only a record whose forcing functions are multisines over whole
-        periods of it (cut the record to the analysis window, as ``hcid analyse`` does); on
-        others it is not made, and ``auto`` fits by ``time`` there too.
+        where the plant leaves out, say, a display delay. It reads the forcing lines over the
+        whole record: where the forcing functions are no multisines over (nearly) whole
+        periods of it, it warns that the plant was not checked, and ``auto`` fits by ``time``.
 
     Returns
     -------
@@ -404,10 +404,16 @@ def fit_hc(
 
 def _check_plant(record: Record, experiment: Experiment) -> None:
     """Refuse a record that ``experiment``'s plant leaves more than
-    :data:`~hcid.analysis.fourier.PLANT_MISMATCH_LIMIT` of theta unexplained at its forcing lines
-    (unchecked where its forcing functions have no lines over the record)."""
+    :data:`~hcid.analysis.fourier.PLANT_MISMATCH_LIMIT` of theta unexplained at its forcing lines;
+    a warning where its forcing functions have no lines over the record (nothing to check at)."""
     plant = experiment.plant
     found = plant_mismatch(record.signals, record.rate, plant.num, plant.den, experiment.disturbance_at)
+    if found is None:
+        warnings.warn(
+            f"record {record.run}: the plant was not checked: its forcing functions are not multisines "
+            f"over whole periods of its {record.ft.size} samples (plant_check=False: unchecked, no warning)",
+            stacklevel=3,
+        )
     if is_other_plant(found):
         raise DataError(
             f"record {record.run}: is not the experiment's plant: {found:.0%} (RMS) of its theta = ft - e "

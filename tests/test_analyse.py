@@ -253,6 +253,26 @@ def test_the_report_answers_first(analysed):
         assert f"{g['method']}: {said}" in caption, (g["group"], g["method"], caption)
 
 
+def test_a_run_directory_of_another_measured_study_names_the_data_and_analyse_force(analysed, tmp_path):
+    # Measured data are not simulated: another study's config in the same run directory (here the
+    # plant changed) is refused naming the first key that differs and `hcid analyse --force`, not
+    # "simulated with another config ... hcid simulate --force" as before.
+    import yaml
+
+    data, out = analysed
+    run = tmp_path / "run"
+    shutil.copytree(out[1][0], run)
+    raw = yaml.safe_load(CONFIG.read_text())
+    raw["loop"]["plant"]["K"] = 1.6
+    other = tmp_path / "other.yaml"
+    other.write_text(yaml.safe_dump(raw))
+    args = ["analyse", str(other), "--data", str(data), "--run", str(run), "--twins", "4", "--quiet"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2
+    assert result.stderr.startswith(f"hcid: error: {run}: made with another config (loop.plant.K differs)")
+    assert "`hcid analyse --force` for measured data" in result.stderr
+
+
 def test_every_group_has_its_own_twins_folder():
     # Source: the review's collision, "a b" and "a-b" (and ("x_y", "z") against ("x", "y_z")),
     # once made safe for a path, were one folder: the digest of the values tells them apart.

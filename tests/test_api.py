@@ -188,6 +188,13 @@ def test_fit_hc_through_the_api_equals_the_pipelines(record, direct):
         (lambda r, d: hcid.Plant.tf(["1"], [1.0, 0.0]), r"plant.num: must be finite numbers, got \['1'\]"),
         (lambda r, d: hcid.Plant.second_order(1.0, 0.0), "plant.wb: must be a finite number > 0, got 0.0"),
         (lambda r, d: hcid.Plant.integrator(-1.5), "plant.K: must be a finite number > 0, got -1.5"),
+        (lambda r, d: hcid.analyse(CI_CONFIG, 42, "unused"), r"data: must be files, globs or folders"),
+        (
+            lambda r, d: hcid.analyse(42, [EXAMPLE], "unused"),
+            "config: must be a YAML file's path or the mapping",
+        ),
+        (lambda r, d: hcid.analyse(CI_CONFIG, [EXAMPLE], None), "run: must be the run directory's path"),
+        (lambda r, d: hcid.Execution(jobs="2"), r"jobs \(--jobs\): must be an integer >= 1, got '2'"),
         (lambda r, d: hcid.AnalysisOptions(twins="4"), "twins \\(--twins\\): must be an integer"),
     ],
 )
@@ -251,6 +258,25 @@ def test_fit_hc_defaults_to_the_estimator_hcid_analyse_uses(lab_record):
     assert dataclasses.replace(default, fixed=(first,)).status[first] == "fixed at a literature value"
     bounded = dataclasses.replace(default, at_bound=(True, *default.at_bound[1:]))
     assert bounded.status[first] == "at a search bound"
+
+
+def test_fit_hc_warns_where_it_cannot_check_the_plant(record, direct):
+    # The example's target is the paper's, no multisine (hcid.analysis.fourier.forcing_lines finds
+    # no lines over its 2048 samples): the plant cannot be checked, and fit_hc says so, once; with
+    # plant_check=False it does not.
+    import warnings
+
+    from hcid.hcfit import parse_fit_settings
+
+    model = direct.select(direct.w_bic)
+    experiment = hcid.Experiment(hcid.Plant.second_order(2.75, 2.0))
+    quick = parse_fit_settings({"target": "time", "starts": 1, "maxiter": 4, "popsize": 4},
+                               default_band=(0.23, 17.33))  # fmt: skip
+    with pytest.warns(UserWarning, match=r"^record 1: the plant was not checked: .* of its 2048 samples"):
+        hcid.fit_hc(model, record, experiment, settings=quick)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        hcid.fit_hc(model, record, experiment, settings=quick, plant_check=False)
 
 
 def test_fit_hc_refuses_a_record_of_another_plant(lab_record):

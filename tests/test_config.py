@@ -469,3 +469,12 @@ def test_improper_plant_message_quotes_at_most_80_characters(paper_raw):
     assert "is improper for the plant '(1) / (1 s^6 + 2.34568 s^5" in text
     quoted = text.split("for the plant ")[1].split(" (relative degree")[0]
     assert len(quoted) == 80 and quoted.endswith("...")
+
+
+def test_a_measured_study_names_its_optional_sections_among_the_allowed_keys():
+    # A data-only config that misspells loop: the refusal lists loop and timing, which it may hold.
+    raw = {"name": "x", "data": {"analysis_rate": 25.0, "window": 40.0}, "loops": {}}
+    with pytest.raises(
+        ConfigError, match=r"^loops: unknown key \(allowed: data, fit_hc, identify, loop, name, "
+    ):
+        parse_config(raw, "x")

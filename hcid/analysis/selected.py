@@ -169,8 +169,8 @@ class SelectedModel:
     def simulate(self, ft: np.ndarray, e: np.ndarray) -> np.ndarray:
         """u simulated from rest from the unshifted target ``ft`` and the error ``e`` (rad).
 
-        ``ft`` is shifted forward by the target shift (its last samples repeat the
-        last value); the result has the length of ``ft``.
+        ``ft`` is shifted forward by the target shift (zeros after the record's
+        end, :func:`hcid.methods.shift_forward`); the result has the length of ``ft``.
         """
         ft = np.ascontiguousarray(ft, dtype=np.float64)
         e = np.ascontiguousarray(e, dtype=np.float64)

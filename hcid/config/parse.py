@@ -528,6 +528,7 @@ def describe_config(data: Any, name: str, base: Path | None = None) -> Config:
         seeds = _seeds_section(top)
     else:
         models, disturbance, target, seeds = (), None, None, ()
+        top.get("loop", None), top.get("timing", None)  # optional: named among the allowed keys
         loop = _loop_section(top, plant_only=True) if "loop" in top.data else None
         timing = timing_section(top) if "timing" in top.data else _data_timing(top)
     identify = identify_section(top, timing)

@@ -426,7 +426,10 @@ def _named_signals(path: Path, cols: dict[str, np.ndarray], data: DataConfig) ->
         wanted = [data.columns[n] for n in (*absent, "theta") if n in data.columns]
         if any(isinstance(c, int) for c in wanted) and path.suffix.lower() in (".csv", ".txt"):
             hint += f"; the file has {csv_layout(path)[2]} columns"
-        raise DataError(f"{path}: missing columns {missing}{hint} (mapped in the config's data.columns)")
+        raise DataError(
+            f"{path}: missing columns {missing}{hint} (mapped in a config's data.columns, or "
+            "read_records' columns=)"
+        )
     if "time" not in cols and "rate" not in cols:
         raise DataError(
             f"{path}: needs a time column '{data.columns['time']}' or a rate '{data.columns['rate']}'"

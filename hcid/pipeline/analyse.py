@@ -582,9 +582,17 @@ def analyse(
     for name, value, kind in (("options", options, AnalysisOptions), ("execution", execution, Execution)):
         if not isinstance(value, kind):
             raise ConfigError(f"{name}: must be a hcid.{kind.__name__}, got {type(value).__name__}")
-    sources = [data] if isinstance(data, str | Path) else list(data)
+    if not isinstance(config, str | Path | Mapping):
+        raise ConfigError(
+            f"config: must be a YAML file's path or the mapping it holds, got {type(config).__name__}"
+        )
+    if not isinstance(run, str | Path):
+        raise ConfigError(f"run: must be the run directory's path (str or Path), got {type(run).__name__}")
+    sources = [data] if isinstance(data, str | Path) else list(data) if isinstance(data, Sequence) else []
     if not sources or not all(isinstance(x, str | Path) for x in sources):
-        raise DataError(f"data: must be files, globs or folders (str or Path), got {data!r}")
+        raise DataError(
+            f"data: must be files, globs or folders (str or Path, or a list of them), got {data!r}"
+        )
     execution.check()
     study, data_set = read_study(config, sources, skip_unreadable=skip_unreadable)
     return analyse_study(study, Path(run), data_set, options, execution=execution, force=force)

@@ -34,7 +34,7 @@ class Execution:
     >>> Execution(jobs=0)
     Traceback (most recent call last):
     ...
-    hcid.errors.HcidError: jobs (--jobs): must be at least 1, got 0
+    hcid.errors.HcidError: jobs (--jobs): must be an integer >= 1, got 0
     """
 
     jobs: int = 2
@@ -44,8 +44,8 @@ class Execution:
     progress: bool = True
 
     def __post_init__(self) -> None:
-        if not isinstance(self.jobs, int) or self.jobs < 1:
-            raise HcidError(f"jobs (--jobs): must be at least 1, got {self.jobs!r}")
+        if isinstance(self.jobs, bool) or not isinstance(self.jobs, int) or self.jobs < 1:
+            raise HcidError(f"jobs (--jobs): must be an integer >= 1, got {self.jobs!r}")
         if not self.worker_timeout > 0:
             raise HcidError(
                 "worker_timeout (--worker-timeout): must be a positive number of seconds, "

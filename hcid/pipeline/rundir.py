@@ -296,11 +296,12 @@ def check_run_dir(config: Config, run_dir: Path, stage: str, *, force: bool = Fa
     if stage == "simulate":
         sections, stale, redo = SIMULATION_SECTIONS, None, "`hcid simulate --force`"
     elif stage == "identify":
+        # Measured data without a simulation: its plant (loop) is an analysis input, not a simulation's.
         sim_key = _first_difference(
             {k: previous.get(k) for k in SIMULATION_SECTIONS},
             {k: current.get(k) for k in SIMULATION_SECTIONS},
         )
-        if sim_key is not None:
+        if sim_key is not None and config.simulates:
             raise DataError(
                 f"{run_dir}: simulated with another config ({sim_key} differs); "
                 "use `hcid simulate --force` to redo it or --run for another directory"
