@@ -28,7 +28,7 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import hcfit, methods, tables
-from hcid.analysis.fourier import is_other_plant, plant_mismatch
+from hcid.analysis.fourier import forcing_lines, is_other_plant, plant_mismatch
 from hcid.analysis.selected import SelectedModel, fit_selected
 from hcid.config import Config, DataConfig, Forcing, IdentifyConfig, Plant, Timing
 from hcid.config.parse import data_identify_defaults, default_data
@@ -86,9 +86,14 @@ class Record:
             n = x.size if name == "ft" else n
             object.__setattr__(self, name, x)
         object.__setattr__(self, "rate", float(self.rate))
-        found = time_rate(self.t, "record t", default=self.rate)
-        if abs(found - self.rate) > TIME_JITTER * self.rate:
-            raise DataError(f"record t: steps {1 / found:.6g} s, not 1/rate ({1 / self.rate:.6g} s)")
+        time_rate(self.t, "record t", default=self.rate)  # uniform and increasing, as a file's time
+        off = np.abs(np.diff(self.t) * self.rate - 1.0) > TIME_JITTER  # and each step 1/rate
+        if off.any():
+            k = int(np.argmax(off))
+            raise DataError(
+                f"record t: step {self.t[k + 1] - self.t[k]:.6g} s at sample {k + 1}, not 1/rate "
+                f"({1 / self.rate:.6g} s)"
+            )
 
     @property
     def signals(self) -> dict[str, np.ndarray]:
@@ -409,9 +414,10 @@ def _check_plant(record: Record, experiment: Experiment) -> None:
     plant = experiment.plant
     found = plant_mismatch(record.signals, record.rate, plant.num, plant.den, experiment.disturbance_at)
     if found is None:
+        why = forcing_lines(record.ft, record.fd, record.rate).problem
         warnings.warn(
-            f"record {record.run}: the plant was not checked: its forcing functions are not multisines "
-            f"over whole periods of its {record.ft.size} samples (plant_check=False: unchecked, no warning)",
+            f"record {record.run}: the plant was not checked over its {record.ft.size} samples: {why} "
+            "(plant_check=False: unchecked, no warning)",
             stacklevel=3,
         )
     if is_other_plant(found):

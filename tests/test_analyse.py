@@ -273,6 +273,32 @@ def test_a_run_directory_of_another_measured_study_names_the_data_and_analyse_fo
     assert "`hcid analyse --force` for measured data" in result.stderr
 
 
+def test_a_simulation_studys_run_directory_is_never_given_measured_results(analysed, tmp_path):
+    # A reviewer's case: the refusal above must not open a simulated study's directory to measured
+    # data, even with --force (its simulations would stay beside the measured results).
+    data, _ = analysed
+    run = tmp_path / "sim"
+    from .conftest import CI_CONFIG
+
+    assert runner.invoke(app, ["simulate", str(CI_CONFIG), "--run", str(run), "--quiet"]).exit_code == 0
+    before = sorted(p.name for p in run.iterdir())
+    args = [
+        "analyse",
+        str(CONFIG),
+        "--data",
+        str(data),
+        "--run",
+        str(run),
+        "--twins",
+        "4",
+        "--quiet",
+        "--force",
+    ]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2 and "simulated with another config" in result.stderr
+    assert sorted(p.name for p in run.iterdir()) == before
+
+
 def test_every_group_has_its_own_twins_folder():
     # Source: the review's collision, "a b" and "a-b" (and ("x_y", "z") against ("x", "y_z")),
     # once made safe for a path, were one folder: the digest of the values tells them apart.

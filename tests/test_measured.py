@@ -399,6 +399,24 @@ def test_default_grids_refuse_an_analysis_rate_above_60_hz():
         ConfigError, match=r"^data.analysis_rate: the default identification grids .* reach 60 Hz"
     ):
         parse_config(raw, "lab")
+    # A timing section's rate is named as such.
+    timed = {"name": "lab", "data": {}, "timing": {"sim_rate": 100.0, "output_rate": 100.0, "run_in": 0.0,
+                                                   "window": 40.0, "periods": 1}}  # fmt: skip
+    with pytest.raises(ConfigError, match=r"^timing.output_rate: the default identification grids"):
+        parse_config(timed, "lab")
+
+
+def test_an_analysis_rate_whose_probe_window_is_no_whole_samples_reads():
+    # The data section is described at a placeholder timing to read the files: at 12.5 Hz its 1 s
+    # was no whole number of samples, and a valid config was refused naming data.window.
+    from hcid.io.resolve import read_study
+
+    root = Path(__file__).resolve().parents[1]
+    raw = yaml.safe_load((root / "configs" / "lab_example.yaml").read_text())
+    raw["data"].update(analysis_rate=12.5, window=40.0, lead_in=4.0)
+    files = sorted(str(p) for p in (root / "configs" / "lab_example").glob("S1_*_trial1.csv"))
+    config, data = read_study(raw, files)
+    assert config.timing.output_rate == 12.5 and all(r["u"].size >= 500 for r in data.records.values())
 
 
 def test_paper_config_reads_a_file_with_default_names(tmp_path, example_table, ci_config):

@@ -277,8 +277,10 @@ def _in_a_fresh_process(code: str) -> list[str]:
 
 
 _HALF_SENT = """
-import gc, multiprocessing.queues, os, struct, time
+import gc, multiprocessing.queues, os, struct, tempfile, time
 from hcid.pipeline import parallel
+
+SENT = os.path.join(tempfile.mkdtemp(), "sent")
 
 def task(kind):
     if kind == "quick":
@@ -286,12 +288,15 @@ def task(kind):
     # Half a result on the pool's result pipe: a worker killed while sending a large one.
     queue = next(o for o in gc.get_objects() if isinstance(o, multiprocessing.queues.SimpleQueue))
     os.write(queue._writer.fileno(), struct.pack("!i", 1_000_000) + b"x" * 10)
+    open(SENT, "w").close()
     time.sleep(60)
 
 tasks = [("quick",), ("half",), ("quick",)]
 stream = parallel.parallel_map(task, tasks, jobs=2, label="t", show_progress=False)
 next(stream)
-time.sleep(1.0)  # the manager thread is now reading the rest of the half-sent result
+while not os.path.exists(SENT):  # the half result is on the pipe (the suite's timeout bounds this)
+    time.sleep(0.01)
+time.sleep(0.2)  # and the manager thread reading the rest of it
 stream.close()
 print("closed")
 """

@@ -516,7 +516,8 @@ def describe_config(data: Any, name: str, base: Path | None = None) -> Config:
         # seconds, scaled to the analysis rate and the record (data_identify_defaults).
         given = Section(data, "")
         timing = timing_section(given) if "timing" in data else _data_timing(given)
-        data = {**data, "identify": data_identify_defaults(timing)}
+        where = "timing.output_rate" if "timing" in data else "data.analysis_rate"
+        data = {**data, "identify": data_identify_defaults(timing, where)}
         top = Section(data, "")
         top.get("name", name)
     if simulates:

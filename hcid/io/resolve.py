@@ -339,12 +339,7 @@ def _reading(raw: dict, base: Path | None):
     """The config's data section described on its own, at a placeholder timing, to read files."""
     data = dict(raw["data"]) if isinstance(raw.get("data"), dict) else {}
     probe = {k: v for k, v in raw.items() if k in ("name", "data")}
-    probe["data"] = {
-        **data,
-        "analysis_rate": data.get("analysis_rate", 1000.0),
-        "window": 1.0,
-        "lead_in": 0.0,
-    }
+    probe["data"] = {**data, "analysis_rate": 1000.0, "window": 1.0, "lead_in": 0.0}  # whole samples
     probe["identify"] = {}  # the data section alone: no identification defaults at the placeholder rate
     return describe_config(probe, "probe", base).data
 

@@ -296,12 +296,13 @@ def check_run_dir(config: Config, run_dir: Path, stage: str, *, force: bool = Fa
     if stage == "simulate":
         sections, stale, redo = SIMULATION_SECTIONS, None, "`hcid simulate --force`"
     elif stage == "identify":
-        # Measured data without a simulation: its plant (loop) is an analysis input, not a simulation's.
+        # Between two measured studies (neither simulates) the plant (loop) is an analysis input,
+        # named below; a simulation in either is never mixed with another study's results.
         sim_key = _first_difference(
             {k: previous.get(k) for k in SIMULATION_SECTIONS},
             {k: current.get(k) for k in SIMULATION_SECTIONS},
         )
-        if sim_key is not None and config.simulates:
+        if sim_key is not None and (config.simulates or "models" in previous):
             raise DataError(
                 f"{run_dir}: simulated with another config ({sim_key} differs); "
                 "use `hcid simulate --force` to redo it or --run for another directory"
