@@ -30,8 +30,9 @@ import pyarrow as pa
 from hcid import hcfit, methods, tables
 from hcid.analysis.fourier import forcing_lines, is_other_plant, plant_mismatch
 from hcid.analysis.selected import SelectedModel, fit_selected
-from hcid.config import Config, DataConfig, Forcing, IdentifyConfig, Plant, Timing
+from hcid.config import Config, DataConfig, Forcing, IdentifyConfig, Plant
 from hcid.config.parse import data_identify_defaults, default_data
+from hcid.config.stages import record_timing
 from hcid.errors import ConfigError, DataError, IdentificationError, checked_rate
 from hcid.io import results
 from hcid.io.measured import TIME_JITTER, check_signal, read_runs, time_rate
@@ -224,13 +225,9 @@ def identification_settings(
         raise ConfigError(
             f"identify: must be a mapping (a config's identify section), got {type(identify).__name__}"
         )
+    timing = record_timing(rate, n_samples)
     if identify is None:
-        checked_rate(rate)
-        if isinstance(n_samples, numbers.Integral) and not isinstance(n_samples, bool):
-            n_samples = int(n_samples)  # numpy's too
-        if not (isinstance(n_samples, int) and n_samples > 0):
-            raise ConfigError(f"n_samples: must be a positive integer, got {n_samples!r}")
-        identify = data_identify_defaults(Timing(rate, rate, 0.0, n_samples / rate, 1), where="rate")
+        identify = data_identify_defaults(timing, where="rate")
     return resolve_identify(dict(identify), rate, n_samples)
 
 
@@ -396,8 +393,7 @@ def fit_hc(
             raise IdentificationError(f"{name}: must be a hcid.{kind.__name__}, got {type(value).__name__}")
     if plant_check:
         _check_plant(record, experiment)
-    timing = Timing(record.rate, record.rate, 0.0, record.ft.size / record.rate, 1)
-    band = Config.band_of(experiment.disturbance, timing)
+    band = Config.band_of(experiment.disturbance, record_timing(record.rate, record.ft.size))
     if settings is None:
         settings = hcfit.parse_fit_settings({"target": target}, "fit_hc", default_band=band)
     elif settings.band is None:

@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from typing import Any
 
 from hcid.config._checks import LIMITS, Section, fmt, int_range
 from hcid.config.types import Grid, IdentifyConfig, StageConfig, Timing, Window
 from hcid.errors import ConfigError, checked_rate
 
-__all__ = ["build_stages", "identify_section", "parse_identify", "stage_raw"]
+__all__ = ["build_stages", "identify_section", "parse_identify", "record_timing", "stage_raw"]
 
 _ABSENT = object()  # a key left out (None is a value: refused where a mapping is needed)
 
@@ -205,6 +206,23 @@ def stage_raw(stage: StageConfig) -> dict:
     return _stage_raw(stage)
 
 
+def record_timing(rate: float, n_samples: int) -> Timing:
+    """The timing of one record of ``n_samples`` (a positive integer, numpy's too) at ``rate`` Hz:
+    no run-in, one period, the whole record the window.
+
+    Raises
+    ------
+    ConfigError
+        For a rate or a number of samples that is none.
+    """
+    checked_rate(rate)
+    if isinstance(n_samples, numbers.Integral) and not isinstance(n_samples, bool):
+        n_samples = int(n_samples)
+    if not (isinstance(n_samples, int) and n_samples > 0):
+        raise ConfigError(f"n_samples: must be a positive integer, got {fmt(n_samples)}")
+    return Timing(sim_rate=rate, output_rate=rate, run_in=0.0, window=n_samples / rate, periods=1)
+
+
 def parse_identify(data: Any, rate: float, n_samples: int) -> tuple[IdentifyConfig, Timing]:
     """The ``identify`` section alone, for a record of ``n_samples`` at ``rate`` Hz, and that timing.
 
@@ -216,8 +234,5 @@ def parse_identify(data: Any, rate: float, n_samples: int) -> tuple[IdentifyConf
     ConfigError
         Naming the key, as in a config.
     """
-    checked_rate(rate)
-    if not (isinstance(n_samples, int) and n_samples > 0):
-        raise ConfigError(f"n_samples: must be a positive integer, got {fmt(n_samples)}")
-    timing = Timing(sim_rate=rate, output_rate=rate, run_in=0.0, window=n_samples / rate, periods=1)
+    timing = record_timing(rate, n_samples)
     return identify_section(Section({"identify": {} if data is None else data}, ""), timing), timing
