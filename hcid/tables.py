@@ -74,8 +74,12 @@ __all__ = [
     "RUN_LOG",
     "SELECTED_COLUMNS",
     "SELECTION",
+    "SESSION_FINDINGS",
+    "SESSION_LINES",
+    "SESSION_TRIALS",
     "SET_ASIDE",
     "SIMULATIONS",
+    "SKIPPED",
     "SIMULATION_SUMMARY",
     "Schema",
     "UNCERTAINTY_COLUMNS",
@@ -569,4 +573,53 @@ FC_ESTIMATES = _schema(
     + [("problem", _STR)],
     ("group", "path", "omega"),
     optional=("inversion_median", "inversion_q25", "inversion_q75"),  # absent before 2026-11-27
+)
+#: ``skipped.parquet`` (``hcid analyse``): every file a folder or glob of ``--data`` found that is
+#: not a run (not of a data format, left out by ``data.exclude``, a copy of a recording in another
+#: format), with the one-line reason; empty when none was.
+SKIPPED = _schema("skipped.parquet", [("file", _STR), ("reason", _STR)], ("file",))
+#: ``session_trials.parquet`` (``hcid analyse`` on a whole experiment, SPEC 12): one row per run:
+#: its ``kind`` from the data (``target and disturbance``, ``disturbance only``, ``target only``),
+#: its ``person``, its lines (``target_lines``, ``disturbance_lines``: frequencies in rad/s, ``;``
+#: separated), ``problem`` (why it has no lines, else empty), and its u predicted by the person's
+#: model from the other kind of trials (``predicted_by``: ``single-input trials`` for a two-input
+#: trial and the other way round): ``error_fb`` and ``error_ff`` (``RMS(u - u_hat) / RMS(u)`` over
+#: the window, feedback-only and feedback plus feedforward), ``lines_error_fb`` and
+#: ``lines_error_ff`` (the same counted at the trial's lines only); then the run's factors.
+SESSION_TRIALS = _schema(
+    "session_trials.parquet",
+    [("data_set", _STR), ("run_id", _INT), ("file", _STR), ("person", _STR), ("kind", _STR)]
+    + [("target_lines", _STR), ("disturbance_lines", _STR), ("problem", _STR), ("predicted_by", _STR)]
+    + [("error_fb", _F64), ("error_ff", _F64), ("lines_error_fb", _F64), ("lines_error_ff", _F64)],
+    ("run_id",),
+)
+#: ``session_lines.parquet`` (``hcid analyse`` on a whole experiment, SPEC 12): per person (and
+#: ``person`` ``median``: the median over people of each magnitude, the circular mean of each
+#: phase), ``source`` (the trials combined: ``all trials``, ``two-input trials``, ``single-input
+#: trials``) and line (``omega`` rad/s, ``hz``): the condition-averaged responses ``h_ur`` and
+#: ``h_ud`` (U/Ft, U/Fd), the feedback ``he`` and feedforward ``ht`` paths and the model inversion
+#: ``inversion`` = |Ht Yc| (linear; ``_db`` magnitudes in dB, ``_deg`` phases in deg), with the
+#: quartiles of the trials' own |Ht Yc| (``inversion_q25``, ``inversion_q75``); ``he_measured``
+#: (false: He interpolated from other lines), and the trials behind each line.
+SESSION_LINES = _schema(
+    "session_lines.parquet",
+    [("person", _STR), ("source", _STR), ("omega", _F64), ("hz", _F64)]
+    + [("h_ur_db", _F64), ("h_ur_deg", _F64), ("h_ud_db", _F64), ("h_ud_deg", _F64)]
+    + [("he_db", _F64), ("he_deg", _F64), ("ht_db", _F64), ("ht_deg", _F64)]
+    + [("inversion", _F64), ("inversion_deg", _F64), ("inversion_q25", _F64), ("inversion_q75", _F64)]
+    + [("he_measured", _BOOL), ("n_target_trials", _INT), ("n_disturbance_trials", _INT)],
+    ("person", "source", "omega"),
+)
+#: ``session_findings.parquet`` (``hcid analyse`` on a whole experiment, SPEC 12): the study's
+#: comparisons, one row each: ``finding`` (``model inversion``, ``superposition``,
+#: ``prediction``), ``person`` (one, or ``all``), ``source`` (the trials behind it, or a
+#: prediction's direction), ``quantity`` (what ``estimate`` is, with ``low`` and ``high`` its
+#: range or interval as ``spread`` says), ``omega`` (rad/s; NaN: over lines, ``band`` says which),
+#: ``p`` and ``test`` (the test behind ``p``, empty where none), ``n`` (pairs, people or trials).
+SESSION_FINDINGS = _schema(
+    "session_findings.parquet",
+    [("finding", _STR), ("person", _STR), ("source", _STR), ("quantity", _STR), ("band", _STR)]
+    + [("omega", _F64), ("estimate", _F64), ("low", _F64), ("high", _F64), ("spread", _STR)]
+    + [("p", _F64), ("test", _STR), ("n", _INT)],
+    ("finding", "person", "source", "quantity", "band", "omega"),
 )

@@ -36,6 +36,7 @@ __all__ = [
     "forcing_lines",
     "interpolate",
     "is_other_plant",
+    "line_bins",
     "off_line_share",
     "plant_mismatch",
 ]
@@ -98,6 +99,13 @@ def _lines(x: np.ndarray) -> tuple[np.ndarray, float]:
         return np.zeros(0, dtype=np.int64), 0.0
     bins = np.sort(order[: top + 1])
     return bins, float(power[bins].sum() / total)
+
+
+def line_bins(x: np.ndarray) -> np.ndarray:
+    """The bins of ``x``'s lines over the window where it is a sum of sines over whole periods
+    (its lines hold :data:`LINE_SHARE` of its power), else none."""
+    bins, share = _lines(np.asarray(x, dtype=np.float64))
+    return bins if share >= LINE_SHARE else np.zeros(0, dtype=np.int64)
 
 
 def forcing_lines(ft: np.ndarray, fd: np.ndarray, rate: float) -> ForcingLines:

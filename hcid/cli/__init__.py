@@ -327,6 +327,15 @@ def analyse(
             "instead of testing each run at --alpha.",
         ),
     ] = False,
+    person: Annotated[
+        str | None,
+        typer.Option(
+            "--person",
+            help="The factor naming people, whose conditions a whole experiment combines (single-input "
+            "trials, swapped lines; SPEC 12). Default: subject, if the data set has it.",
+            show_default=False,
+        ),
+    ] = None,
     skip_unreadable: Annotated[
         bool,
         typer.Option(
@@ -349,7 +358,7 @@ def analyse(
     from hcid.pipeline.analyse import analyse as analyse_
 
     execution = _execution(jobs, backend, scheduler, worker_timeout, quiet)
-    options = AnalysisOptions(by, twins, max_fb_twins, ff_twin, alpha, fdr)
+    options = AnalysisOptions(by, twins, max_fb_twins, ff_twin, alpha, fdr, person)
     result = analyse_(config, data, _run_dir(config, run), options, execution=execution,
                       skip_unreadable=skip_unreadable, force=force)  # fmt: skip
     answers.print_analysis(result)

@@ -351,6 +351,14 @@ def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataC
     pattern = s.get("pattern", None)
     if pattern is not None:
         check_pattern(pattern, "data.pattern")
+    exclude = s.get("exclude", [])
+    if isinstance(exclude, str):
+        exclude = [exclude]
+    if not isinstance(exclude, list) or not all(isinstance(x, str) and x.strip() for x in exclude):
+        raise ConfigError(
+            "data.exclude: must be a list of file-name globs such as ['*_rst?.csv', 'desktop.ini'], "
+            f"got {fmt(exclude)}"
+        )
     struct = s.get("struct", None)
     if struct is not None and (not isinstance(struct, str) or not struct.isidentifier()):
         raise ConfigError(f"data.struct: must be a MATLAB variable name, got {fmt(struct)}")
@@ -372,6 +380,7 @@ def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataC
         lead_in=lead_in,
         time_default=time_default,
         pattern=pattern,
+        exclude=tuple(exclude),
         struct=struct,
         dimensions=dimensions,
         plant_check=plant_check,
@@ -422,14 +431,16 @@ _PLACEHOLDER = re.compile(r"\{([^{}]*)\}")
 
 
 def check_pattern(pattern: object, key: str) -> tuple[str, ...]:
-    """The factor names of a file-name pattern such as ``{subject}_{condition}_{trial}.csv``.
+    """The factor names of a file-name pattern such as ``{subject}_{condition}_{trial}.csv``; a
+    pattern with ``/`` matches the file's name and the folders it sits in
+    (``{subject}/{stamp}_{trial}.csv``: the subject from the file's folder).
 
     Raises
     ------
     ConfigError
         For a pattern that is not a string, holds no ``{factor}``, a factor that is not an
         identifier or is reserved (:data:`RESERVED_FACTORS`), a repeated factor, two factors
-        with nothing between them, or a ``/``.
+        with nothing between them, a backslash, or an empty, ``.`` or ``..`` folder part.
     """
     if not isinstance(pattern, str) or not pattern:
         raise ConfigError(
@@ -449,8 +460,12 @@ def check_pattern(pattern: object, key: str) -> tuple[str, ...]:
         raise ConfigError(
             f"{key}: two factors with nothing between them cannot be told apart: {fmt(pattern)}"
         )
-    if "/" in pattern or "\\" in pattern:
-        raise ConfigError(f"{key}: matches a file's name, not its folder: {fmt(pattern)}")
+    parts = pattern.split("/")
+    if "\\" in pattern or any(p in ("", ".", "..") for p in parts):
+        raise ConfigError(
+            f"{key}: matches a file's name and the folders it sits in, separated by '/' (e.g. "
+            f"'{{subject}}/{{trial}}.csv'), with no empty, '.' or '..' part: {fmt(pattern)}"
+        )
     return tuple(names)
 
 

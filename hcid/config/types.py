@@ -473,7 +473,8 @@ class DataConfig:
     samples at the analysis rate) is skipped at the start of every run, after the
     data are resampled to the analysis rate. A column given as an integer is a CSV
     column's position (1 for the first). ``pattern`` (e.g.
-    ``{subject}_{condition}_{trial}.csv``) gives each file's factors from its name.
+    ``{subject}_{condition}_{trial}.csv``, or ``{subject}/{trial}.csv`` with the folder) gives
+    each file's factors from its name.
     """
 
     name: str
@@ -482,6 +483,10 @@ class DataConfig:
     lead_in: float = 0.0
     time_default: bool = False
     pattern: str | None = None
+    #: File-name globs (``fnmatch``; with ``/``, over the name and the folders it sits in) of files
+    #: a folder or glob of ``--data`` finds that are not runs (a logger's reset segments): left out,
+    #: and listed as skipped with the glob that left each out.
+    exclude: tuple[str, ...] = ()
     #: A MATLAB file's struct variable holding the signals as fields (None: plain variables).
     struct: str | None = None
     #: The axes of a MATLAB file's N-D arrays: ``sample`` and one factor per other axis, e.g.

@@ -20,6 +20,7 @@ run id and its factors, for every table to be joined with.
 from __future__ import annotations
 
 import csv
+import fnmatch
 import glob
 import os
 import re
@@ -37,7 +38,17 @@ from hcid.io.formats import READERS, csv_layout
 from hcid.io.measured import FileAtRate, at_rate, read_file, records_of
 from hcid.tables import RUNS
 
-__all__ = ["DataFile", "DataSet", "data_files", "read_files", "read_set", "runs_table", "set_at"]
+__all__ = [
+    "DataFile",
+    "DataSet",
+    "FoundFiles",
+    "data_files",
+    "find_files",
+    "read_files",
+    "read_set",
+    "runs_table",
+    "set_at",
+]
 
 _GLOB = re.compile(r"[*?\[]")
 
@@ -64,18 +75,27 @@ class DataSet:
     rate: float
     #: Files left out (``read_set(skip=True)``): (path, the one-line reason).
     set_aside: tuple[tuple[str, str], ...] = ()
+    #: Files a folder or glob found that are not runs (:func:`find_files`): (path, reason).
+    skipped: tuple[tuple[str, str], ...] = ()
 
 
 def _pattern_regex(pattern: str, lazy: bool = True) -> re.Pattern:
-    """The pattern's regex: each factor one or more characters, matched lazily or greedily
-    (a name both match alike is read in one way only)."""
+    """The pattern's regex: each factor one or more characters other than ``/``, matched lazily
+    or greedily (a name both match alike is read in one way only)."""
     out, pos = [], 0
     for m in re.finditer(r"\{([^{}]*)\}", pattern):
         out.append(re.escape(pattern[pos : m.start()]))
-        out.append(f"(?P<{m.group(1)}>.+{'?' if lazy else ''})")
+        out.append(f"(?P<{m.group(1)}>[^/]+{'?' if lazy else ''})")
         pos = m.end()
     out.append(re.escape(pattern[pos:]))
     return re.compile("".join(out))
+
+
+def _tail(path: Path, pattern: str) -> str:
+    """The part of ``path`` a pattern or glob with ``/`` is matched against: the file's name and as
+    many of its folders as the pattern names."""
+    parts = path.resolve().parts
+    return "/".join(parts[-(pattern.count("/") + 1) :])
 
 
 def _is_manifest(path: Path) -> bool:
@@ -118,19 +138,30 @@ def _manifest(path: Path) -> list[DataFile]:
     return out
 
 
-def _expand(source: str | Path | DataFile) -> list[DataFile]:
+def _not_data(found: list[Path], skipped: list[tuple[str, str]]) -> list[Path]:
+    """The data files of what a folder or glob found; the others listed in ``skipped``."""
+    for p in found:
+        if p.suffix.lower() not in READERS:
+            skipped.append(
+                (str(p), f"not a data file ({p.suffix or 'no suffix'}; read: {', '.join(READERS)})")
+            )
+    return [p for p in found if p.suffix.lower() in READERS]
+
+
+def _expand(source: str | Path | DataFile, skipped: list[tuple[str, str]]) -> list[DataFile]:
     if isinstance(source, DataFile):  # already expanded (e.g. by set_aside), its factors kept
         return [source]
     text = str(source)
     path = Path(text)
     if _GLOB.search(text) and not path.exists():
-        found = sorted(Path(m) for m in glob.glob(text, recursive=True) if Path(m).is_file())
-        found = [p for p in found if p.suffix.lower() in READERS]
+        found = _not_data(
+            sorted(Path(m) for m in glob.glob(text, recursive=True) if Path(m).is_file()), skipped
+        )
         if not found:
             raise DataError(f"{text}: matches no data file ({', '.join(READERS)})")
         return [DataFile(p) for p in found]
     if path.is_dir():
-        found = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in READERS)
+        found = _not_data(sorted(p for p in path.iterdir() if p.is_file()), skipped)
         found = [p for p in found if not _is_manifest(p)]
         if not found:
             raise DataError(f"{path}: holds no data file ({', '.join(READERS)})")
@@ -144,8 +175,64 @@ def _expand(source: str | Path | DataFile) -> list[DataFile]:
     return [DataFile(path)]
 
 
+@dataclass(frozen=True)
+class FoundFiles:
+    """What ``--data`` names: the data set's files with their factors, in order, and the files a
+    folder or glob found that are not runs, each with the one-line reason it was left out."""
+
+    files: list[DataFile]
+    skipped: tuple[tuple[str, str], ...] = ()
+
+
+def _excluded(files: list[DataFile], exclude: Sequence[str], skipped: list) -> list[DataFile]:
+    kept = []
+    for f in files:
+        glob_ = next((g for g in exclude if fnmatch.fnmatchcase(_tail(f.path, g), g)), None)
+        if glob_ is None:
+            kept.append(f)
+        else:
+            skipped.append((str(f.path), f"left out by data.exclude {glob_!r}"))
+    return kept
+
+
+def _copies(files: list[DataFile], skipped: list) -> list[DataFile]:
+    """One file of each recording: where a folder holds a name in several formats (a logger's
+    ``.csv`` beside its ``.npz``), the set's most common format is kept and the others skipped."""
+    count: dict[str, int] = {}
+    for f in files:
+        count[f.path.suffix.lower()] = count.get(f.path.suffix.lower(), 0) + 1
+    rank = {suffix: (-n, list(READERS).index(suffix)) for suffix, n in count.items()}
+    by_stem: dict[tuple[Path, str], list[DataFile]] = {}
+    for f in files:
+        by_stem.setdefault((f.path.resolve().parent, f.path.stem), []).append(f)
+    copies = set()
+    for same in by_stem.values():
+        if len(same) > 1:
+            kept = min(same, key=lambda f: rank[f.path.suffix.lower()])
+            for f in same:
+                if f is not kept:
+                    copies.add(f.path)
+                    skipped.append((str(f.path), f"a copy of {kept.path.name} in another format"))
+    return [f for f in files if f.path not in copies]
+
+
 def data_files(sources: Sequence[str | Path], pattern: str | None = None) -> list[DataFile]:
-    """The files of a data set with their factors, in order.
+    """The files of a data set with their factors, in order (:func:`find_files` without
+    exclusions; the files it skips are left out)."""
+    return find_files(sources, pattern).files
+
+
+def find_files(
+    sources: Sequence[str | Path], pattern: str | None = None, exclude: Sequence[str] = ()
+) -> FoundFiles:
+    """The files of a data set with their factors, in order, and those left out.
+
+    A folder or glob may find files that are not runs; each is left out and listed with its
+    reason (:attr:`FoundFiles.skipped`): a file that is not of a data format (a stray
+    ``desktop.ini``), one an ``exclude`` glob matches (a logger's reset segments), or a copy of a
+    recording in another format beside it (the set's most common format kept). ``pattern`` gives
+    each kept file's factors from its name, and, where it holds ``/``, from the folders the file
+    sits in (``{subject}/{trial}.csv``).
 
     Raises
     ------
@@ -158,13 +245,20 @@ def data_files(sources: Sequence[str | Path], pattern: str | None = None) -> lis
         sources = [sources]
     if not sources:
         raise DataError("data (--data): no data given")
-    files = [f for source in sources for f in _expand(source)]
+    skipped: list[tuple[str, str]] = []
+    files = [f for source in sources for f in _expand(source, skipped)]
     seen: dict[Path, Path] = {}
     for f in files:
         key = f.path.resolve()
         if key in seen:
             raise DataError(f"{f.path}: named twice in the data set")
         seen[key] = f.path
+    files = _copies(_excluded(files, exclude, skipped), skipped)
+    if not files:
+        raise DataError(
+            f"data (--data): every file it names is left out ({len(skipped)}: e.g. {skipped[0][0]}: "
+            f"{skipped[0][1]})"
+        )
     if pattern is not None:
         try:
             check_pattern(pattern, "data.pattern")
@@ -173,14 +267,20 @@ def data_files(sources: Sequence[str | Path], pattern: str | None = None) -> lis
         regex, greedy = _pattern_regex(pattern), _pattern_regex(pattern, lazy=False)
         named = []
         for f in files:
-            m = regex.fullmatch(f.path.name)
+            name = _tail(f.path, pattern)
+            m = regex.fullmatch(name)
             if m is None:
-                raise DataError(f"{f.path}: its name does not match data.pattern {pattern!r}")
-            if greedy.fullmatch(f.path.name).groupdict() != m.groupdict():
+                where = "its name" if "/" not in pattern else f"{name!r}"
+                raise DataError(
+                    f"{f.path}: {where} does not match data.pattern {pattern!r} (files that are not "
+                    "runs: data.exclude)"
+                )
+            if greedy.fullmatch(name).groupdict() != m.groupdict():
                 raise DataError(
                     f"{f.path}: its name matches data.pattern {pattern!r} in more than one way (e.g. "
-                    f"{m.groupdict()} or {greedy.fullmatch(f.path.name).groupdict()}); make the pattern's "
-                    "separators occur in no factor value"
+                    f"{m.groupdict()} or {greedy.fullmatch(name).groupdict()}); make the pattern's "
+                    "separators occur in no factor value, or leave files that are not runs out "
+                    "(data.exclude)"
                 )
             given = dict(f.factors)
             for name, value in m.groupdict().items():
@@ -197,7 +297,7 @@ def data_files(sources: Sequence[str | Path], pattern: str | None = None) -> lis
         if set(n) != set(names[0]):
             missing = sorted(set(names[0]) ^ set(n))
             raise DataError(f"{f.path}: factors {n} differ from the set's {names[0]} (missing {missing})")
-    return files
+    return FoundFiles(files, tuple(skipped))
 
 
 def _columns(path: Path) -> tuple[str, ...] | None:
@@ -271,11 +371,15 @@ def set_at(
     skip: bool = False,
     aside: Sequence[tuple[str, str]] = (),
     order: Sequence[str] = (),
+    skipped: Sequence[tuple[str, str]] = (),
+    single_input: bool = False,
 ) -> DataSet:
     """The files :func:`read_files` read, as a data set: every run after ``data.lead_in``,
     holding ``need`` samples, each file with the columns of the set's first kept file and all
     runs at one own rate. With ``skip``, a file that fails is set aside with its reason, beside
-    those ``aside`` already holds, all listed in the files' ``order`` (their paths)."""
+    those ``aside`` already holds, all listed in the files' ``order`` (their paths); ``skipped``
+    (:attr:`FoundFiles.skipped`) is kept with the set; ``single_input`` lets a run's ft or fd be
+    constant (:func:`hcid.io.measured.records_of`)."""
     records: dict[int, dict[str, np.ndarray]] = {}
     runs: list[dict[str, object]] = []
     aside = list(aside)
@@ -286,7 +390,7 @@ def set_at(
         try:
             if first is not None and columns != first[0]:
                 raise _columns_differ(f, columns, first)
-            file_records = records_of(file, data, need)
+            file_records = records_of(file, data, need, single_input)
             native = _same_rate(f, file.natives, native)
         except DataError as exc:
             if not skip:
@@ -319,7 +423,7 @@ def set_at(
     names = {str(f.path): f.path.resolve().relative_to(root).as_posix() for f in kept}
     for r in runs:
         r["file"] = names[r["file"]]
-    return DataSet(records, runs, factors, float(read[0][1].rate), tuple(aside))
+    return DataSet(records, runs, factors, float(read[0][1].rate), tuple(aside), tuple(skipped))
 
 
 def read_set(

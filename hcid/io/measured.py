@@ -397,11 +397,14 @@ def at_rate(file: FileRuns, data: DataConfig, rate: float | None = None) -> File
     return FileAtRate(file.path, signals, natives, float(rate))
 
 
-def records_of(file: FileAtRate, data: DataConfig, need: int = 1) -> dict[int, dict[str, np.ndarray]]:
+def records_of(
+    file: FileAtRate, data: DataConfig, need: int = 1, single_input: bool = False
+) -> dict[int, dict[str, np.ndarray]]:
     """Each run's record after ``data.lead_in``, holding at least ``need`` samples, no signal
-    constant over them (:func:`read_runs`)."""
+    constant over them (:func:`read_runs`); with ``single_input``, one of ft and fd may be (a
+    disturbance-only or target-only trial, SPEC 12)."""
     return {
-        run_id: _after_lead_in(f"{file.path}: run {run_id}", signals_, file.rate, data, need)
+        run_id: _after_lead_in(f"{file.path}: run {run_id}", signals_, file.rate, data, need, single_input)
         for run_id, signals_ in file.signals.items()
     }
 
@@ -495,7 +498,12 @@ def _at_rate(
 
 
 def _after_lead_in(
-    where: str, signals_: dict[str, np.ndarray], rate: float, data: DataConfig, need: int
+    where: str,
+    signals_: dict[str, np.ndarray],
+    rate: float,
+    data: DataConfig,
+    need: int,
+    single_input: bool = False,
 ) -> dict[str, np.ndarray]:
     """The record after the lead-in, long enough and with no signal constant over ``need`` samples."""
     total = signals_["ft"].size
@@ -510,7 +518,11 @@ def _after_lead_in(
         )
     n = total - skip
     signals_ = {name: np.ascontiguousarray(x[skip:]) for name, x in signals_.items()}
-    for name in SIGNALS:
+    constant = [name for name in SIGNALS if np.ptp(signals_[name][: need if need > 1 else n]) == 0]
+    forcing = [name for name in constant if name in ("ft", "fd")]
+    if single_input and len(forcing) == 1:  # one input absent: a single-input trial
+        constant.remove(forcing[0])
+    for name in constant:
         window = signals_[name][: need if need > 1 else n]
         if np.ptp(window) == 0:
             raise DataError(

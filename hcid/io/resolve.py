@@ -208,6 +208,7 @@ def read_study(
     method_names: Sequence[str] | None = None,
     *,
     skip_unreadable: bool = False,
+    single_input: bool = False,
 ) -> tuple[Config, DataSet]:
     """A measured study's config (YAML at ``path``, or the mapping such a file holds: its
     relative paths then from the working folder, its name ``name`` or ``study``), completed from
@@ -215,14 +216,15 @@ def read_study(
     for ``method_names``, and its data set at the analysis rate: every file of ``sources`` found
     once and read once (:func:`hcid.io.datasets.read_files`, :func:`hcid.io.datasets.set_at`).
     With ``skip_unreadable``, files that cannot be read or fail their checks are set aside with
-    their reasons (``DataSet.set_aside``) instead of refused.
+    their reasons (``DataSet.set_aside``) instead of refused; with ``single_input``, a run
+    whose ft or fd is constant (a single-input trial) is kept, not refused.
 
     Raises
     ------
     ConfigError, DataError
         For a bad config, data section or data set, in one line.
     """
-    from hcid.io.datasets import data_files, read_files, set_at
+    from hcid.io.datasets import find_files, read_files, set_at
 
     if isinstance(path, Mapping):
         raw, path = _as_yaml(path), Path.cwd() / "study.yaml"
@@ -232,7 +234,8 @@ def read_study(
     if not isinstance(raw, dict) or not isinstance(raw.get("data", {}), dict):
         raise ConfigError(f"{path}: data: must be a mapping")
     reading = _reading(raw, path.parent)
-    files = data_files(sources, reading.pattern)
+    found = find_files(sources, reading.pattern, reading.exclude)
+    files = found.files
     if _needs_timing(raw):  # the files taken to the analysis rate as read, then the window from them
         try:
             rate = checked_rate(raw["data"].get("analysis_rate"))
@@ -245,7 +248,8 @@ def read_study(
         read, aside = read_files(files, reading, described.timing.output_rate, skip_unreadable)
     config = with_data(resolve_config(described, method_names))
     order = [str(f.path) for f in files]
-    data_set = set_at(read, config.data, samples_needed(config), skip_unreadable, aside, order)
+    need = samples_needed(config)
+    data_set = set_at(read, config.data, need, skip_unreadable, aside, order, found.skipped, single_input)
     return config, data_set
 
 

@@ -30,7 +30,7 @@ from __future__ import annotations
 import numbers
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +38,7 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import hcfit, methods, tables
+from hcid.analysis.conditions import Kind
 from hcid.analysis.descriptors import fit_remnant
 from hcid.analysis.selected import SelectedModel, analyse_selected
 from hcid.config import Config
@@ -48,6 +49,7 @@ from hcid.io import datasets, folders, results
 from hcid.io.datasets import DataSet
 from hcid.io.resolve import read_study, with_data
 from hcid.loop.hcmodel import plant
+from hcid.pipeline import sessions
 from hcid.pipeline.analysis_tables import write_tables
 from hcid.pipeline.evidence import (
     MAX_FB_TWINS,
@@ -60,6 +62,7 @@ from hcid.pipeline.execution import Execution
 from hcid.pipeline.fit import _choices, _stage_choices
 from hcid.pipeline.parallel import labelled
 from hcid.pipeline.rundir import holds_run_dir
+from hcid.pipeline.sessions import Session
 from hcid.pipeline.studies import identify_study
 from hcid.pipeline.twins import (
     TwinSource,
@@ -99,6 +102,12 @@ class AnalysisRun:
     stages: dict[str, float] = field(default_factory=dict)
     #: The files left out because they could not be read: (path, reason).
     set_aside: tuple[tuple[str, str], ...] = ()
+    #: The files a folder or glob found that are not runs: (path, reason).
+    skipped: tuple[tuple[str, str], ...] = ()
+    #: Runs per condition kind (:class:`hcid.analysis.conditions.Kind` values), from the data.
+    kinds: dict[str, int] = field(default_factory=dict)
+    #: A whole experiment's conditions combined per person (None: the runs need no combining).
+    session: Session | None = None
 
 
 # --------------------------------------------------------------------------- per-run fits
@@ -174,7 +183,8 @@ class AnalysisOptions:
     are drawn); ``max_fb_twins``: the most FB twins per forcing set for the runs' p-values
     (None: :data:`MAX_FB_TWINS`, or ``twins`` if more); ``ff_twin``: :data:`FF_TWINS`;
     ``alpha``: each run's test level; ``fdr``: control the false discovery rate over the
-    study's runs instead."""
+    study's runs instead; ``person``: the factor naming the people whose conditions are combined
+    in a whole experiment (None: ``subject`` where the data set has it, else one person)."""
 
     by: tuple[str, ...] | None = None
     twins: int = TWINS
@@ -182,6 +192,7 @@ class AnalysisOptions:
     ff_twin: str = "auto"
     alpha: float = 0.05
     fdr: bool = False
+    person: str | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.by, str):  # "subject,condition", as --by takes it
@@ -203,6 +214,8 @@ class AnalysisOptions:
             )
         if not (isinstance(self.alpha, float | int) and 0.0 < self.alpha < 1.0):
             raise ConfigError(f"alpha (--alpha): must be a level in (0, 1), got {self.alpha!r}")
+        if self.person is not None and not (isinstance(self.person, str) and self.person.isidentifier()):
+            raise ConfigError(f"person (--person): must be a factor name, got {self.person!r}")
         if self.ff_twin not in FF_TWINS:
             raise ConfigError(
                 f"ff_twin (--ff-twin): must be one of {', '.join(FF_TWINS)}, got {self.ff_twin!r}"
@@ -484,6 +497,12 @@ def analyse_study(
     """
     _check_config(config)
     config = with_data(config)
+    trials = sessions.classify(data.records, config)
+    person = _person(data, options.person)
+    whole = data
+    two_input = [seed for seed, t in trials.items() if t.kind is Kind.TWO_INPUT]
+    if len(two_input) < len(trials):  # single-input runs: combined per person, not tested for feedforward
+        data = _subset(data, two_input)
     by = _factors_and_groups(data, options.by)
     start = time.perf_counter()
     stages, lap = {}, [start]
@@ -491,6 +510,18 @@ def analyse_study(
     def lap_done(name: str) -> None:
         now = time.perf_counter()
         stages[name], lap[0] = now - lap[0], now
+
+    kinds = {kind.value: sum(t.kind is kind for t in trials.values()) for kind in Kind}
+    session = None
+    if sessions.is_whole_experiment(trials):
+        session = sessions.combine_session(config, whole, trials, person)
+        lap_done("combine conditions")
+    if not two_input:  # refused before anything is written
+        counts = ", ".join(f"{n} {k}" for k, n in kinds.items() if n)
+        raise DataError(
+            f"no run has both a target and a disturbance ({counts}): hcid analyse tests feedforward on "
+            "two-input runs and combines the other conditions with them; add the study's two-input runs"
+        )
 
     with labelled("runs: "):
         identified = identify_study(
@@ -525,9 +556,50 @@ def analyse_study(
     _select_and_fit(study, found, judge, run_sizes)
     lap_done("fit selected")
     group_table, run_table = write_tables(study, found, checks, judge, data.set_aside)
+    _write_skipped(run_dir, whole)
+    if session is not None:
+        sessions.write_session(run_dir, session)
     lap_done("tables")
     aside = tuple((str(f), str(why)) for f, why in data.set_aside)
-    return AnalysisRun(group_table, run_table, time.perf_counter() - start, run_dir, stages, aside)
+    return AnalysisRun(
+        group_table,
+        run_table,
+        time.perf_counter() - start,
+        run_dir,
+        stages,
+        aside,
+        tuple(whole.skipped),
+        kinds,
+        session,
+    )
+
+
+def _person(data: DataSet, person: str | None) -> str | None:
+    """The factor naming people (``--person``; default :data:`sessions.PERSON` where the data set
+    has it, else None: one person)."""
+    if person is None:
+        return sessions.PERSON if sessions.PERSON in data.factors else None
+    if person not in data.factors:
+        raise ConfigError(
+            f"--person {person}: the data set has no factor {person!r} (its factors: "
+            f"{', '.join(data.factors) or 'none'})"
+        )
+    return person
+
+
+def _subset(data: DataSet, seeds: Sequence[int]) -> DataSet:
+    """The data set's runs ``seeds``, their ids and factors kept."""
+    keep = set(seeds)
+    return replace(
+        data,
+        records={s: r for s, r in data.records.items() if s in keep},
+        runs=[r for r in data.runs if int(r["run"]) in keep],
+    )
+
+
+def _write_skipped(run_dir: Path, data: DataSet) -> None:
+    rows = [{"file": f, "reason": why} for f, why in data.skipped]
+    results.write(tables.SKIPPED, pa.Table.from_pylist(rows, schema=tables.SKIPPED.arrow), run_dir)
 
 
 def analyse(
@@ -594,5 +666,5 @@ def analyse(
             f"data: must be files, globs or folders (str or Path, or a list of them), got {data!r}"
         )
     execution.check()
-    study, data_set = read_study(config, sources, skip_unreadable=skip_unreadable)
+    study, data_set = read_study(config, sources, skip_unreadable=skip_unreadable, single_input=True)
     return analyse_study(study, Path(run), data_set, options, execution=execution, force=force)

@@ -1,0 +1,455 @@
+"""``hcid analyse`` on a whole experiment: each run's condition kind from its data, and every
+condition combined per person (SPEC 12; :mod:`hcid.analysis.conditions` computes).
+
+Two-input runs go through the analysis of feedforward (identification, twins, p-values);
+every run, whatever its kind, goes into the combination per person: the responses at every
+line, the feedback and feedforward paths and the model inversion |Ht Yc|, and the study's
+comparisons (model inversion by band, superposition, prediction across conditions), written
+as ``session_trials``, ``session_lines`` and ``session_findings`` (docs/tables.md).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import pyarrow as pa
+from scipy import stats
+
+from hcid import tables
+from hcid.analysis import conditions
+from hcid.analysis.conditions import Kind, PersonLines, TrialLines
+from hcid.config import Config
+from hcid.errors import DataError
+from hcid.io import results
+from hcid.io.datasets import DataSet
+
+__all__ = [
+    "BANDS",
+    "PERSON",
+    "Session",
+    "classify",
+    "combine_session",
+    "is_whole_experiment",
+    "write_session",
+]
+
+#: The factor that names a person, by default (``--person``).
+PERSON = "subject"
+#: The study's bands of the model inversion (Hz): "close to the inverse up to 0.15 Hz, lower from
+#: 0.25 Hz up" (CPHS 2017's finding); a line belongs to a band when within 1e-6 Hz of it.
+BANDS = {"up to 0.15 Hz": (0.0, 0.15), "from 0.25 Hz": (0.25, math.inf)}
+_PREDICTIONS = {
+    Kind.TWO_INPUT: "single-input trials",
+    Kind.TARGET_ONLY: "two-input trials",
+    Kind.DISTURBANCE_ONLY: "two-input trials",
+}
+
+
+def classify(records: Mapping[int, dict], config: Config) -> dict[int, TrialLines]:
+    """Each run's kind and lines over the analysis window (:func:`hcid.analysis.conditions.trial_lines`).
+
+    Raises
+    ------
+    DataError
+        For a run with neither a target nor a disturbance.
+    """
+    rate, n = config.timing.output_rate, config.timing.record_samples
+    out = {}
+    for seed, record in records.items():
+        trial = conditions.trial_lines(record, rate, n)
+        if trial.kind is None:
+            raise DataError(f"run {seed}: {trial.problem}: nothing to analyse")
+        out[seed] = trial
+    return out
+
+
+def is_whole_experiment(trials: Mapping[int, TrialLines]) -> bool:
+    """Whether the runs mix conditions that combine: a single-input run, or lines swapped between
+    two-input runs (otherwise the analysis of feedforward answers alone)."""
+    kinds = {t.kind for t in trials.values()}
+    return kinds != {Kind.TWO_INPUT} or conditions.swapped([t for t in trials.values() if t.problem is None])
+
+
+@dataclass(frozen=True)
+class Session:
+    """What the combination found: the three tables it writes."""
+
+    trials: pa.Table
+    lines: pa.Table
+    findings: pa.Table
+    person: str | None
+
+
+def _lines_text(trial: TrialLines, bins: np.ndarray) -> str:
+    return ";".join(f"{w:.4g}" for w in trial.omega(bins))
+
+
+def _in_band(hz: np.ndarray, band: str) -> np.ndarray:
+    low, high = BANDS[band]
+    return (hz >= low - 1e-6) & (hz <= high + 1e-6)
+
+
+def _line_rows(person: str, source: str, p: PersonLines) -> list[dict]:
+    def db(h):
+        return 20.0 * np.log10(np.abs(h))
+
+    def deg(h):
+        return np.degrees(np.angle(h))
+
+    rows = []
+    for i, omega in enumerate(p.omega):
+        runs = p.inversion_runs[i]
+        q25, q75 = np.percentile(runs, [25.0, 75.0]) if runs.size else (math.nan, math.nan)
+        rows.append(
+            {
+                "person": person,
+                "source": source,
+                "omega": float(omega),
+                "hz": float(omega / (2 * np.pi)),
+                "h_ur_db": float(db(p.h_ur[i])),
+                "h_ur_deg": float(deg(p.h_ur[i])),
+                "h_ud_db": float(db(p.h_ud[i])),
+                "h_ud_deg": float(deg(p.h_ud[i])),
+                "he_db": float(db(p.he[i])),
+                "he_deg": float(deg(p.he[i])),
+                "ht_db": float(db(p.ht[i])),
+                "ht_deg": float(deg(p.ht[i])),
+                "inversion": float(np.abs(p.inversion[i])),
+                "inversion_deg": float(deg(p.inversion[i])),
+                "inversion_q25": float(q25),
+                "inversion_q75": float(q75),
+                "he_measured": bool(p.he_measured[i]),
+                "n_target_trials": int(p.n_target[i]),
+                "n_disturbance_trials": int(p.n_disturbance[i]),
+            }
+        )
+    return rows
+
+
+def _median_rows(source: str, people: list[PersonLines]) -> list[dict]:
+    """Per line, the median over people of each magnitude and the circular mean of each phase."""
+    rows = []
+    for i, omega in enumerate(people[0].omega):
+        row = {"person": "median", "source": source, "omega": float(omega), "hz": float(omega / (2 * np.pi))}
+        for name, attr in (("h_ur", "h_ur"), ("h_ud", "h_ud"), ("he", "he"), ("ht", "ht")):
+            h = np.array([getattr(p, attr)[i] for p in people])
+            ok = np.isfinite(h)
+            row[f"{name}_db"] = float(np.median(20.0 * np.log10(np.abs(h[ok])))) if ok.any() else math.nan
+            row[f"{name}_deg"] = (
+                float(np.degrees(np.angle(np.mean(h[ok] / np.abs(h[ok]))))) if ok.any() else math.nan
+            )
+        inv = np.array([p.inversion[i] for p in people])
+        ok = np.isfinite(inv)
+        mags = np.abs(inv[ok])
+        row["inversion"] = float(np.median(mags)) if ok.any() else math.nan
+        row["inversion_deg"] = float(np.degrees(np.angle(np.mean(inv[ok] / mags)))) if ok.any() else math.nan
+        row["inversion_q25"], row["inversion_q75"] = (
+            (float(mags.min()), float(mags.max())) if ok.any() else (math.nan, math.nan)
+        )
+        row["he_measured"] = bool(all(p.he_measured[i] for p in people))
+        row["n_target_trials"] = int(sum(p.n_target[i] for p in people))
+        row["n_disturbance_trials"] = int(sum(p.n_disturbance[i] for p in people))
+        rows.append(row)
+    return rows
+
+
+def _finding(finding, person, source, quantity, band, omega, estimate, low, high, spread, p, test, n) -> dict:
+    return {
+        "finding": finding,
+        "person": person,
+        "source": source,
+        "quantity": quantity,
+        "band": band,
+        "omega": float(omega),
+        "estimate": float(estimate),
+        "low": float(low),
+        "high": float(high),
+        "spread": spread,
+        "p": float(p),
+        "test": test,
+        "n": int(n),
+    }
+
+
+def _wilcoxon(x: np.ndarray) -> float:
+    x = x[np.isfinite(x)]
+    if x.size < 2 or np.all(x == 0):
+        return math.nan
+    return float(stats.wilcoxon(x).pvalue)
+
+
+def _inversion_findings(combined: dict[str, dict[str, PersonLines]]) -> list[dict]:
+    """Per source and band: each person's median |Ht Yc| over the band's lines, the median over
+    people with their range, and a Wilcoxon signed-rank test of log |Ht Yc| against 0 (the exact
+    inverse) over every person's lines in the band."""
+    rows = []
+    nan = math.nan
+    for source, people in combined.items():
+        for band in BANDS:
+            medians, pooled = [], []
+            for person, p in people.items():
+                inv = np.abs(p.inversion[_in_band(p.omega / (2 * np.pi), band)])
+                inv = inv[np.isfinite(inv)]
+                if not inv.size:
+                    continue
+                medians.append(float(np.median(inv)))
+                pooled.append(np.log(inv))
+                rows.append(
+                    _finding(
+                        "model inversion",
+                        person,
+                        source,
+                        "|Ht Yc| median over lines",
+                        band,
+                        nan,
+                        medians[-1],
+                        inv.min(),
+                        inv.max(),
+                        "range over lines",
+                        nan,
+                        "",
+                        inv.size,
+                    )
+                )
+            if medians:
+                logs = np.concatenate(pooled)
+                rows.append(
+                    _finding(
+                        "model inversion",
+                        "all",
+                        source,
+                        "|Ht Yc| median over people",
+                        band,
+                        nan,
+                        np.median(medians),
+                        min(medians),
+                        max(medians),
+                        "range over people",
+                        _wilcoxon(logs),
+                        "Wilcoxon signed-rank of log |Ht Yc| against 0, people x lines",
+                        len(medians),
+                    )
+                )
+    return rows
+
+
+def _superposition_findings(combined: dict[str, dict[str, PersonLines]]) -> list[dict]:
+    single, two = combined.get("single-input trials", {}), combined.get("two-input trials", {})
+    people = sorted(set(single) & set(two))
+    if not people:
+        return []
+    rows = []
+    test = "Wilcoxon signed-rank, paired across people"
+    for c in conditions.superposition([single[p] for p in people], [two[p] for p in people]):
+        band = "pooled over lines" if math.isnan(c.omega) else ""
+        rows.append(
+            _finding(
+                "superposition",
+                "all",
+                "single-input / two-input trials",
+                f"{c.response} magnitude ratio",
+                band,
+                c.omega,
+                c.ratio,
+                c.ratio_low,
+                c.ratio_high,
+                "range over pairs",
+                c.p_magnitude,
+                test + " (log magnitude)",
+                c.pairs,
+            )
+        )
+        rows.append(
+            _finding(
+                "superposition",
+                "all",
+                "single-input / two-input trials",
+                f"{c.response} phase difference deg",
+                band,
+                c.omega,
+                c.phase,
+                c.phase_low,
+                c.phase_high,
+                "range over pairs",
+                c.p_phase,
+                test + " (phase, wrapped)",
+                c.pairs,
+            )
+        )
+    return rows
+
+
+def _prediction_findings(trial_rows: list[dict]) -> list[dict]:
+    """Per direction and person: the median over trials of each error and of the ratio
+    (feedback plus feedforward over feedback-only); over people, the median of the people's
+    ratios with their range. A disturbance-only trial (no target: both models predict alike) is
+    left out of the ratios."""
+    rows = []
+    nan = math.nan
+    directions = {}
+    for r in trial_rows:
+        if r["predicted_by"] and r["kind"] != Kind.DISTURBANCE_ONLY.value and math.isfinite(r["error_fb"]):
+            directions.setdefault(f"{r['predicted_by']} -> {_to(r['kind'])}", {}).setdefault(
+                r["person"], []
+            ).append(r)
+    for direction, people in directions.items():
+        ratios = {}
+        for person, members in people.items():
+            for what, key in (
+                ("error, feedback only", "error_fb"),
+                ("error, feedback and feedforward", "error_ff"),
+            ):
+                values = np.array([m[key] for m in members])
+                rows.append(
+                    _finding(
+                        "prediction",
+                        person,
+                        direction,
+                        what,
+                        "window",
+                        nan,
+                        np.median(values),
+                        values.min(),
+                        values.max(),
+                        "range over trials",
+                        nan,
+                        "",
+                        values.size,
+                    )
+                )
+            for what, num, den in (
+                ("error ratio (feedback and feedforward / feedback only)", "error_ff", "error_fb"),
+                ("error ratio at the lines", "lines_error_ff", "lines_error_fb"),
+            ):
+                values = np.array([m[num] / m[den] for m in members])
+                rows.append(
+                    _finding(
+                        "prediction",
+                        person,
+                        direction,
+                        what,
+                        "window" if num == "error_ff" else "lines",
+                        nan,
+                        np.median(values),
+                        values.min(),
+                        values.max(),
+                        "range over trials",
+                        nan,
+                        "",
+                        values.size,
+                    )
+                )
+                ratios.setdefault(what, []).append(float(np.median(values)))
+        for what, values in ratios.items():
+            values = np.array(values)
+            rows.append(
+                _finding(
+                    "prediction",
+                    "all",
+                    direction,
+                    what,
+                    "window" if "lines" not in what else "lines",
+                    nan,
+                    np.median(values),
+                    values.min(),
+                    values.max(),
+                    "range over people",
+                    nan,
+                    "",
+                    values.size,
+                )
+            )
+    return rows
+
+
+def _to(kind: str) -> str:
+    return "two-input trials" if kind == Kind.TWO_INPUT.value else f"{kind} trials"
+
+
+def combine_session(
+    config: Config, data: DataSet, trials: Mapping[int, TrialLines], person: str | None
+) -> Session:
+    """Every run combined per person (``person``: the factor naming people; None: one person)
+    and plant (the config's): the tables of :mod:`hcid.pipeline.sessions`."""
+    plant_ = config.loop.plant
+    num, den = np.asarray(plant_.num, dtype=np.float64), np.asarray(plant_.den, dtype=np.float64)
+
+    def yc_of(omega: np.ndarray) -> np.ndarray:
+        s = 1j * np.asarray(omega)
+        return np.polyval(num, s) / np.polyval(den, s)
+
+    runs = {int(r["run"]): r for r in data.runs}
+    who = {seed: str(runs[seed][person]) if person else "all" for seed in trials}
+    combined: dict[str, dict[str, PersonLines]] = {}
+    people = sorted(set(who.values()))
+    for name in people:
+        own = [t for s, t in trials.items() if who[s] == name and t.problem is None]
+        if not own:
+            continue
+        bins = np.array(
+            sorted(set().union(*(set(t.target.tolist()) | set(t.disturbance.tolist()) for t in own)))
+        )
+        for source in conditions.SOURCES:
+            found = conditions.combine(
+                conditions.of_kinds(own, source), yc_of, config.loop.disturbance_at, bins
+            )
+            if found is not None:
+                combined.setdefault(source, {})[name] = found
+    trial_rows = []
+    factors = [f for f in data.factors]
+    for seed in sorted(trials):
+        t = trials[seed]
+        row = {
+            "data_set": config.data.name,
+            "run_id": seed,
+            "file": str(runs[seed]["file"]),
+            "person": who[seed],
+            "kind": t.kind.value,
+            "target_lines": _lines_text(t, t.target),
+            "disturbance_lines": _lines_text(t, t.disturbance),
+            "problem": t.problem or "",
+            "predicted_by": "",
+            "error_fb": math.nan,
+            "error_ff": math.nan,
+            "lines_error_fb": math.nan,
+            "lines_error_ff": math.nan,
+        }
+        model = combined.get(_PREDICTIONS[t.kind], {}).get(who[seed])
+        if t.problem is None and model is not None:
+            bins = np.round(model.omega * t.n / (2 * np.pi * t.rate)).astype(np.int64)
+            if set(t.target.tolist()) | set(t.disturbance.tolist()) <= set(bins.tolist()):
+                found = conditions.prediction(t, model, bins)
+                row.update(
+                    predicted_by=_PREDICTIONS[t.kind],
+                    error_fb=found.error_fb,
+                    error_ff=found.error_ff,
+                    lines_error_fb=found.lines_fb,
+                    lines_error_ff=found.lines_ff,
+                )
+        row.update({f: str(runs[seed][f]) for f in factors})
+        trial_rows.append(row)
+    line_rows = []
+    for source, by_person in combined.items():
+        for name, p in by_person.items():
+            line_rows += _line_rows(name, source, p)
+        if len(by_person) > 1 and len({p.omega.size for p in by_person.values()}) == 1:
+            line_rows += _median_rows(source, list(by_person.values()))
+    findings = (
+        _inversion_findings(combined) + _superposition_findings(combined) + _prediction_findings(trial_rows)
+    )
+    return Session(
+        pa.Table.from_pylist(trial_rows),
+        pa.Table.from_pylist(line_rows, schema=tables.SESSION_LINES.arrow),
+        pa.Table.from_pylist(findings, schema=tables.SESSION_FINDINGS.arrow),
+        person,
+    )
+
+
+def write_session(run_dir, session: Session) -> None:
+    """The combination's three tables, each written atomically."""
+    results.write(tables.SESSION_TRIALS, session.trials, run_dir)
+    results.write(tables.SESSION_LINES, session.lines, run_dir)
+    results.write(tables.SESSION_FINDINGS, session.findings, run_dir)
