@@ -58,6 +58,7 @@ __all__ = [
     "BREAKPOINTS",
     "EVIDENCE_TWINS",
     "FC_ESTIMATES",
+    "FEEDBACK_RUNS",
     "CALIBRATION",
     "FRONTIER",
     "HANDOFF",
@@ -622,4 +623,23 @@ SESSION_FINDINGS = _schema(
     + [("omega", _F64), ("estimate", _F64), ("low", _F64), ("high", _F64), ("spread", _STR)]
     + [("p", _F64), ("test", _STR), ("n", _INT)],
     ("finding", "person", "source", "quantity", "band", "omega"),
+)
+#: ``feedback_runs.parquet`` (``hcid analyse`` on a whole experiment, SPEC 12): every
+#: disturbance-only run's feedback alone, one row per run and method: the ARX model identified
+#: without the target path (``nb_ft`` held at 0) and selected at ``w`` = W_BIC (no feedforward
+#: question, so no calibrated W): ``na``, ``nb_e``, ``nk_e``, its ``vaf_validation`` (%); the
+#: parametric feedback path fitted to the run (``fit_target`` the estimator, the same for every
+#: method): each parameter with ``_se`` and ``_status`` (``determined`` or why not, SPEC 11),
+#: ``crossover`` (rad/s) and ``phase_margin`` (deg) of its loop with the plant.
+FEEDBACK_RUNS = _schema(
+    "feedback_runs.parquet",
+    [("data_set", _STR), ("run_id", _INT), ("person", _STR), ("method", _STR), ("w", _F64)]
+    + [("na", _INT), ("nb_e", _INT), ("nk_e", _INT), ("vaf_validation", _F64)]
+    + [("fit_target", _STR), ("fit_vaf_validation", _F64), ("crossover", _F64), ("phase_margin", _F64)]
+    + [
+        field_
+        for p in ("Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
+        for field_ in ((p, _F64), (f"{p}_se", _F64), (f"{p}_status", _STR))
+    ],
+    ("run_id", "method"),
 )

@@ -108,12 +108,13 @@ def line_bins(x: np.ndarray) -> np.ndarray:
     return bins if share >= LINE_SHARE else np.zeros(0, dtype=np.int64)
 
 
-def forcing_lines(ft: np.ndarray, fd: np.ndarray, rate: float) -> ForcingLines:
+def forcing_lines(ft: np.ndarray, fd: np.ndarray, rate: float, one_input: bool = False) -> ForcingLines:
     """Find the forcing functions' lines in one window of ``ft`` and ``fd`` (same length).
 
     Each must be a line spectrum over the window (a multisine over whole periods: see
     :data:`LINE_GAP`) and the two sets disjoint; otherwise ``problem`` says which
-    condition fails and the sets are empty.
+    condition fails and the sets are empty. With ``one_input``, one of them may be constant
+    (a single-input trial, SPEC 12): its set is then empty.
 
     Examples
     --------
@@ -130,9 +131,13 @@ def forcing_lines(ft: np.ndarray, fd: np.ndarray, rate: float) -> ForcingLines:
     target, share_t = _lines(ft)
     dist, share_d = _lines(fd)
     problem = None
-    if not np.any(np.diff(ft)):
+    if one_input and np.any(np.diff(fd)) and not np.any(np.diff(ft)):  # disturbance only
+        target, share_t = empty, 1.0
+    elif one_input and np.any(np.diff(ft)) and not np.any(np.diff(fd)):  # target only
+        dist, share_d = empty, 1.0
+    if not np.any(np.diff(ft)) and not (one_input and target.size == 0 and np.any(np.diff(fd))):
         problem = "the target is constant over the window"
-    elif not np.any(np.diff(fd)):
+    elif not np.any(np.diff(fd)) and not (one_input and dist.size == 0 and np.any(np.diff(ft))):
         problem = "the disturbance is constant over the window"
     elif share_t < LINE_SHARE:
         problem = "the target is not a sum of sines over whole periods of the window"

@@ -87,6 +87,8 @@ def print_analysis(result) -> None:
     (SPEC 11); then what was set aside and where the tables are."""
     from hcid.pipeline.summary import summarise_groups
 
+    if result.session is not None:
+        typer.echo(_kinds_line(result.kinds))
     checked = set()  # groups whose model's data check is printed (the same for every method)
     for summary in summarise_groups(result.groups, result.runs):
         g = summary.group
@@ -105,6 +107,9 @@ def print_analysis(result) -> None:
         )
         typer.echo(_data_check_line(g, full=g["group"] not in checked))
         checked.add(g["group"])
+    _print_session(result)
+    if result.skipped:
+        typer.echo(_skipped_line(result.skipped))
     if result.set_aside:
         typer.echo(
             f"SET ASIDE (--skip-unreadable): {len(result.set_aside)} file(s) could not be read and are "
@@ -333,3 +338,120 @@ def _print_fit_loop(loop: list[dict], m: int) -> None:
                 f" {med('true_crossover'):>8} {med('true_phase_margin'):>7} {med('share_remnant'):>7}"
                 f" {med('remnant_w_n'):>6} {med('remnant_zeta_n'):>6}"
             )
+
+
+def _kinds_line(kinds: dict) -> str:
+    """The runs per condition kind, and what each kind answers (SPEC 12)."""
+    from hcid.analysis.conditions import ANSWERS, Kind
+
+    parts = [f"{kinds[k.value]} {k.value} ({ANSWERS[k]})" for k in Kind if kinds.get(k.value)]
+    return "CONDITIONS (each run's kind from its data): " + "; ".join(parts)
+
+
+def _skipped_line(skipped) -> str:
+    """The files left out, counted by reason (one example each)."""
+    by_reason: dict[str, list[str]] = {}
+    for path, why in skipped:
+        key = why.split(" (")[0].split(" of ")[0]
+        by_reason.setdefault(key, []).append(path)
+    parts = [f"{len(paths)} {key} (e.g. {paths[0].rsplit('/', 1)[-1]})" for key, paths in by_reason.items()]
+    return f"SKIPPED: {len(skipped)} file(s) found are not runs (RUN/skipped.parquet): " + "; ".join(parts)
+
+
+def _range(r: dict, digits: int = 2) -> str:
+    """An estimate with its range, or alone where the range is of one value."""
+    if r["n"] == 1 and r["spread"].endswith("people"):
+        return f"{r['estimate']:.{digits}f}"
+    return f"{r['estimate']:.{digits}f} [{r['low']:.{digits}f}, {r['high']:.{digits}f}]"
+
+
+def _p(p: float) -> str:
+    return "p -" if not math.isfinite(p) else f"p = {p:.2g}" if p >= 1e-4 else "p < 1e-4"
+
+
+def _print_session(result) -> None:
+    """A whole experiment's findings (SPEC 12): model inversion by band, superposition, and
+    prediction across conditions, each with its spread and test."""
+    if result.session is None:
+        return
+    from hcid.pipeline.sessions import BANDS
+    from hcid.pipeline.summary import study_verdicts
+
+    for line in study_verdicts(result.groups, result.runs):
+        typer.echo(line)
+    rows = result.session.findings.to_pylist()
+    people = {r["person"] for r in rows if r["person"] != "all"}
+    who = f"median over {len(people)} people [range over them]" if len(people) > 1 else "one person"
+    inversion = [r for r in rows if r["finding"] == "model inversion" and r["person"] == "all"]
+    if inversion:
+        typer.echo(f"MODEL INVERSION |Ht Yc| (1 = the plant's exact inverse; {who}):")
+        for band in BANDS:
+            here = [r for r in inversion if r["band"] == band]
+            text = "; ".join(f"{_range(r)} from {r['source']} (vs 1: Wilcoxon {_p(r['p'])})" for r in here)
+            typer.echo(f"    {band}: {text}")
+    pooled = [r for r in rows if r["finding"] == "superposition" and r["band"]]
+    if pooled:
+        n = pooled[0]["n"]
+        lines = [
+            r for r in rows if r["finding"] == "superposition" and not r["band"] and math.isfinite(r["p"])
+        ]
+        least = min((r["p"] for r in lines), default=math.nan)
+        typer.echo(
+            f"SUPERPOSITION (single-input against two-input trials, paired across people, {n} "
+            "person-lines pooled; median [range]):"
+        )
+        for r in pooled:
+            unit = " deg" if "phase" in r["quantity"] else ""
+            typer.echo(f"    {r['quantity']}: {_range(r, 1 if unit else 2)}{unit}, Wilcoxon {_p(r['p'])}")
+        if len(people) > 1:
+            typer.echo(
+                f"    per line: the smallest p is {least:.2g} (with {len(people)} people a line's test "
+                f"cannot go below {2 / 2 ** len(people):.2g})"
+            )
+    if result.session.feedback is not None:
+        typer.echo(_feedback_line(result.session.feedback))
+    prediction = [r for r in rows if r["finding"] == "prediction" and r["person"] == "all"]
+    if prediction:
+        typer.echo(
+            "PREDICTION across conditions (error RMS(u - u_hat) / RMS(u), feedback and feedforward over "
+            f"feedback only; {who}):"
+        )
+        for source in dict.fromkeys(r["source"] for r in prediction):
+            here = {r["band"]: r for r in prediction if r["source"] == source}
+            typer.echo(
+                f"    {source}: {_range(here['window'])} over the window, "
+                f"{_range(here['lines'])} at the lines"
+            )
+
+
+def _feedback_line(feedback) -> str:
+    """The disturbance-only runs' feedback alone: the parameters they determine (median, sd over
+    those runs) and each method's ARX selection at W_BIC."""
+    import numpy as np
+
+    from hcid.config.fit import FEEDBACK_PARAMETERS
+
+    rows = feedback.to_pylist()
+    first = {r["run_id"]: r for r in rows}  # the fit is the run's, the same for every method
+    n = len(first)
+    parts = []
+    for p in FEEDBACK_PARAMETERS:
+        kept = [r[p] for r in first.values() if r[f"{p}_status"] == "determined"]
+        if kept:
+            unit = "" if PARAMETER_UNITS[p] == "-" else f" {PARAMETER_UNITS[p]}"
+            sd = f", sd {np.std(kept, ddof=1):.2g}" if len(kept) > 1 else ""
+            parts.append(f"{p} {np.median(kept):.3g}{unit} ({len(kept)} of {n} runs{sd})")
+    loop = [r["crossover"] for r in first.values()]
+    arx = []
+    for method in dict.fromkeys(r["method"] for r in rows):
+        mine = [r for r in rows if r["method"] == method]
+        arx.append(
+            f"{method} VAF {np.median([r['vaf_validation'] for r in mine]):.0f}% (median na "
+            f"{np.median([r['na'] for r in mine]):.0f}, nb_e {np.median([r['nb_e'] for r in mine]):.0f})"
+        )
+    return (
+        f"FEEDBACK ALONE ({n} disturbance-only runs: no target, so no feedforward test): fitted "
+        + ", ".join(parts or ["no parameter determined"])
+        + f"; crossover {np.median(loop):.3g} rad/s (median); ARX without the target path at W_BIC: "
+        + "; ".join(arx)
+    )

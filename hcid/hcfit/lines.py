@@ -89,7 +89,7 @@ def line_data(record: TrackingRecord, neighbours: int = NEIGHBOURS) -> LineData:
     """
     if record.fd is None:
         raise DataError("record: the forcing lines need the record's fd")
-    lines = forcing_lines(record.ft, record.fd, record.rate)
+    lines = forcing_lines(record.ft, record.fd, record.rate, one_input=True)
     if lines.problem is not None:
         raise DataError(f"no forcing lines: {lines.problem}")
     spectra = {k: np.fft.rfft(getattr(record, k)) for k in ("u", "e", "ft", "fd")}

@@ -212,7 +212,7 @@ def _copies(files: list[DataFile], skipped: list) -> list[DataFile]:
             for f in same:
                 if f is not kept:
                     copies.add(f.path)
-                    skipped.append((str(f.path), f"a copy of {kept.path.name} in another format"))
+                    skipped.append((str(f.path), f"a copy in another format of {kept.path.name}"))
     return [f for f in files if f.path not in copies]
 
 

@@ -31,7 +31,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute  # noqa: F401  (pa.compute)
 
-from hcid import methods, tables
+from hcid import hcfit, methods, tables
 from hcid.analysis.selected import (
     RESIDUAL_CONFIDENCE,
     RESIDUAL_MAX_LAG,
@@ -532,4 +532,23 @@ def fit_hc_study(
         reused,
         seconds,
         run_dir,
+    )
+
+
+def fit_windows(config: Config) -> tuple[slice, slice]:
+    """The rows every measured run's parametric fits use (``hcid analyse``): the direct method's
+    final stage's estimation and validation windows."""
+    stage = config.identify.stage(methods.get("direct").final_stage.name)
+    return stage.estimation.rows(), stage.validation.rows()
+
+
+def tracking_record(record: dict, config: Config) -> hcfit.TrackingRecord:
+    """A measured run's record for the parametric fits, over :func:`fit_windows`."""
+    return hcfit.TrackingRecord(
+        record["ft"],
+        record["e"],
+        record["u"],
+        config.timing.output_rate,
+        *fit_windows(config),
+        fd=record["fd"],
     )

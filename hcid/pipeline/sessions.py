@@ -12,19 +12,23 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pyarrow as pa
 from scipy import stats
 
-from hcid import tables
+from hcid import api, hcfit, methods, tables
 from hcid.analysis import conditions
 from hcid.analysis.conditions import Kind, PersonLines, TrialLines
-from hcid.config import Config
+from hcid.analysis.descriptors import loop_margins
+from hcid.config import Config, IdentifyConfig
+from hcid.config.fit import FEEDBACK_PARAMETERS
 from hcid.errors import DataError
 from hcid.io import results
 from hcid.io.datasets import DataSet
+from hcid.loop.hcmodel import plant
+from hcid.pipeline.fit import tracking_record
 
 __all__ = [
     "BANDS",
@@ -81,6 +85,8 @@ class Session:
     lines: pa.Table
     findings: pa.Table
     person: str | None
+    #: The disturbance-only runs' feedback alone (``feedback_runs.parquet``; None without them).
+    feedback: pa.Table | None = None
 
 
 def _lines_text(trial: TrialLines, bins: np.ndarray) -> str:
@@ -370,10 +376,12 @@ def _to(kind: str) -> str:
 
 
 def combine_session(
-    config: Config, data: DataSet, trials: Mapping[int, TrialLines], person: str | None
+    config: Config, data: DataSet, trials: Mapping[int, TrialLines], person: str | None, execution=None
 ) -> Session:
     """Every run combined per person (``person``: the factor naming people; None: one person)
-    and plant (the config's): the tables of :mod:`hcid.pipeline.sessions`."""
+    and plant (the config's): the tables of :mod:`hcid.pipeline.sessions`; with ``execution``
+    (:class:`hcid.pipeline.execution.Execution`), also each disturbance-only run's feedback alone
+    (:func:`fit_feedback`)."""
     plant_ = config.loop.plant
     num, den = np.asarray(plant_.num, dtype=np.float64), np.asarray(plant_.den, dtype=np.float64)
 
@@ -440,16 +448,89 @@ def combine_session(
     findings = (
         _inversion_findings(combined) + _superposition_findings(combined) + _prediction_findings(trial_rows)
     )
+    feedback = None if execution is None else fit_feedback(config, data.records, trials, who, execution)
     return Session(
         pa.Table.from_pylist(trial_rows),
         pa.Table.from_pylist(line_rows, schema=tables.SESSION_LINES.arrow),
         pa.Table.from_pylist(findings, schema=tables.SESSION_FINDINGS.arrow),
         person,
+        feedback,
     )
 
 
 def write_session(run_dir, session: Session) -> None:
-    """The combination's three tables, each written atomically."""
+    """The combination's tables, each written atomically."""
     results.write(tables.SESSION_TRIALS, session.trials, run_dir)
     results.write(tables.SESSION_LINES, session.lines, run_dir)
     results.write(tables.SESSION_FINDINGS, session.findings, run_dir)
+    if session.feedback is not None:
+        results.write(tables.FEEDBACK_RUNS, session.feedback, run_dir)
+
+
+# --------------------------------------------------------------------------- feedback alone
+
+
+def feedback_settings(identify: IdentifyConfig) -> IdentifyConfig:
+    """The study's identification without the target path: every stage's ``nb_ft`` held at 0 (a
+    disturbance-only run's ft is 0, so any other candidate has a zero regressor)."""
+    stages = tuple((name, replace(st, grid=replace(st.grid, nb1=(0, 0)))) for name, st in identify.stages)
+    return replace(identify, stages=stages)
+
+
+def _feedback_task(config: Config, seed: int, record: dict, person: str) -> list[dict]:
+    """A disturbance-only run's feedback alone: each method's ARX model without the target path
+    selected at W_BIC (no feedforward question, so no calibrated W), and the parametric feedback
+    path fitted to the run (the config's estimator), with its loop's crossover and phase margin."""
+    rate = config.timing.output_rate
+    settings = feedback_settings(config.identify)
+    signals = {k: record[k] for k in ("t", "ft", "fd", "e", "u")}
+    run = api.Record(seed, rate, **signals)
+    yc = plant(config.loop)
+    tracking = tracking_record(record, config)
+    fit = hcfit.fit_parametric(
+        config.fit_hc, yc, False, record=tracking, disturbance_at=config.loop.disturbance_at
+    )
+    values, status = fit.values, fit.status
+    se = dict(zip(fit.names, fit.se or [math.nan] * len(fit.names), strict=True))
+    margins = loop_margins(lambda w: hcfit.hc_response(values, yc, w)[1] * yc(1j * w))
+    fitted = {
+        "fit_target": fit.target,
+        "fit_vaf_validation": float(fit.vaf_validation),
+        "crossover": float(margins.crossover),
+        "phase_margin": float(margins.phase_margin),
+    }
+    for p in FEEDBACK_PARAMETERS:
+        fitted.update({p: float(values[p]), f"{p}_se": float(se[p]), f"{p}_status": status[p]})
+    rows = []
+    for method in methods.METHODS:
+        found = api.identify(run, method, settings)
+        chosen = found.select(found.w_bic)
+        na, _, nb_e, _, nk_e = chosen.orders
+        rows.append(
+            {
+                "data_set": config.data.name,
+                "run_id": seed,
+                "person": person,
+                "method": method,
+                "w": float(found.w_bic),
+                "na": int(na),
+                "nb_e": int(nb_e),
+                "nk_e": int(nk_e),
+                "vaf_validation": float(chosen.vaf_validation),
+                **fitted,
+            }
+        )
+    return rows
+
+
+def fit_feedback(
+    config: Config, records: Mapping[int, dict], trials: Mapping[int, TrialLines], who: Mapping, execution
+) -> pa.Table | None:
+    """Every disturbance-only run's feedback alone (:func:`_feedback_task`), on the worker pool;
+    ``who`` maps a run to its person. None without such runs."""
+    seeds = [s for s in sorted(trials) if trials[s].kind is Kind.DISTURBANCE_ONLY]
+    if not seeds:
+        return None
+    tasks = [(config, s, records[s], who[s]) for s in seeds]
+    rows = [row for found in execution.map(_feedback_task, tasks, "feedback alone") for row in found]
+    return pa.Table.from_pylist(rows, schema=tables.FEEDBACK_RUNS.arrow)

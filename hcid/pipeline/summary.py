@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from hcid.pipeline.evidence import ParameterSummary, summarise_parameters
+from hcid.pipeline.evidence import ParameterSummary, group_verdict, summarise_parameters
 from hcid.selection.calibration import binomial_summary
 
 __all__ = ["GroupSummary", "ParameterFits", "rate_interval", "summarise_fits", "summarise_groups"]
@@ -181,5 +181,23 @@ def summarise_fits(params: pa.Table) -> dict[tuple, ParameterFits]:
             n_se=int(np.count_nonzero(has_se)),
             at_bound=sum(bool(r["at_bound"]) for r in rows),
             first=rows[0],
+        )
+    return out
+
+
+def study_verdicts(groups: pa.Table, runs: pa.Table) -> list[str]:
+    """Per method, over every group's runs: k of n at p <= alpha against the binomial (each run
+    tested against its own group's twins), where the study has more than one group."""
+    rows = runs.to_pylist()
+    if len({r["group"] for r in rows}) < 2:
+        return []
+    alpha = float(groups.column("alpha")[0].as_py())
+    out = []
+    for method in dict.fromkeys(r["method"] for r in rows):
+        mine = [r for r in rows if r["method"] == method]
+        v = group_verdict(mine, alpha)
+        out.append(
+            f"ALL GROUPS, {method}: {v['verdict']}: {v['n_evidence']} of {len(mine)} runs show feedforward "
+            f"at p <= {alpha:g} against their own group's twins (binomial p = {v['binomial_p']:.2g})"
         )
     return out

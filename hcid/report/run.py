@@ -33,6 +33,10 @@ _READS = {
     "fc_estimates": (tables.FC_ESTIMATES, None),
     "evidence_twins": (tables.EVIDENCE_TWINS, None),
     "set_aside": (tables.SET_ASIDE, None),
+    "skipped": (tables.SKIPPED, None),
+    "session_trials": (tables.SESSION_TRIALS, None),
+    "session_lines": (tables.SESSION_LINES, None),
+    "session_findings": (tables.SESSION_FINDINGS, None),
     "remnant_spectrum": (tables.REMNANT_SPECTRUM, None),
     "rates": (tables.RATES, None),
     "handoff": (tables.HANDOFF, None),
@@ -68,6 +72,10 @@ class RunTables:
     fc_estimates: pa.Table | None = None
     evidence_twins: pa.Table | None = None
     set_aside: pa.Table | None = None
+    skipped: pa.Table | None = None
+    session_trials: pa.Table | None = None
+    session_lines: pa.Table | None = None
+    session_findings: pa.Table | None = None
 
     def simulations(self) -> dict | None:
         """The simulated records by (model, seed), or None without simulations."""

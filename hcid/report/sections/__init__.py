@@ -9,6 +9,7 @@ a figure, write or extend one module here and list it in :data:`SECTIONS`.
 
 from hcid.report.sections import (
     calibration,
+    conditions,
     curves,
     data,
     experiment,
@@ -41,7 +42,7 @@ SECTIONS = (
 RENDER_ORDER = (verdicts, *(section for section in SECTIONS if section is not verdicts))
 
 #: The sections of a measured study's report (a run of ``hcid analyse``): the answer first, no
-#: paper sections.
-STUDY_SECTIONS = (study,)
+#: paper sections; a whole experiment's conditions combined per person after it.
+STUDY_SECTIONS = (study, conditions)
 
 __all__ = ["RENDER_ORDER", "SECTIONS", "STUDY_SECTIONS"]
