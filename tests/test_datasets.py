@@ -231,7 +231,7 @@ def test_other_data_into_a_run_with_results_is_refused(trial_folder, tmp_path):
         ("{run}_{x}.csv", "factor 'run' must be an identifier other than"),
         ("{a}{b}.csv", "nothing between them"),
         ("{a}_{a}.csv", "appears twice"),
-        ("data/{a}.csv", "not its folder"),
+        ("data\\{a}.csv", "separated by '/'"),
     ],
 )
 def test_a_bad_pattern_names_the_key(tmp_path, pattern, message):
@@ -416,3 +416,83 @@ def test_a_config_given_as_a_mapping_reads_as_its_yaml_file(monkeypatch):
     raw["data"]["window"] = np.float64(40.0)
     with pytest.raises(ConfigError, match=r"^data.window: must be a number, .* got a float64"):
         read_study(raw, files)
+
+
+# --------------------------------------------------------------------------- a lab's session folders
+
+
+@pytest.fixture()
+def session_folders(trial_folder, tmp_path):
+    """The example's trials as a logger leaves a session: one folder per subject, a reset segment
+    beside each trial, a stray desktop.ini, and one trial again as Parquet beside its CSV."""
+    root = tmp_path / "sessions"
+    for trial, (subject, condition, number) in LAYOUT.items():
+        folder = root / subject
+        folder.mkdir(parents=True, exist_ok=True)
+        source = trial_folder / f"{subject}_{condition}_trial{number}.csv"
+        shutil.copy(source, folder / f"{condition}_trial{number}.csv")
+        shutil.copy(source, folder / f"{condition}_trial{number}_rst1.csv")
+        (folder / "desktop.ini").write_text("[.ShellClassInfo]\n")
+    return root
+
+
+def test_a_pattern_with_a_folder_gives_the_subject_from_the_folder(session_folders):
+    found = datasets.find_files(
+        [str(session_folders / "*" / "*.csv")], "{subject}/{condition}_trial{trial}.csv", ["*_rst?.csv"]
+    )
+    assert [dict(f.factors) for f in found.files] == [
+        {"subject": "P01", "condition": "easy", "trial": "1"},
+        {"subject": "P01", "condition": "hard", "trial": "1"},
+        {"subject": "P02", "condition": "easy", "trial": "2"},
+    ]
+    assert sorted(Path(p).name for p, _ in found.skipped) == [
+        "easy_trial1_rst1.csv",
+        "easy_trial2_rst1.csv",
+        "hard_trial1_rst1.csv",
+    ]
+    assert {why for _, why in found.skipped} == {"left out by data.exclude '*_rst?.csv'"}
+
+
+def test_a_folder_lists_what_it_skips_and_why(session_folders):
+    folder = session_folders / "P01"
+    pq.write_table(_as_parquet(folder / "easy_trial1.csv"), folder / "easy_trial1.parquet")
+    found = datasets.find_files([folder], "{condition}_trial{trial}.csv", ["*_rst?.csv"])
+    assert [f.path.name for f in found.files] == ["easy_trial1.csv", "hard_trial1.csv"]
+    why = {Path(p).name: reason for p, reason in found.skipped}
+    assert why["desktop.ini"].startswith("not a data file (.ini")
+    assert why["easy_trial1.parquet"] == "a copy in another format of easy_trial1.csv"
+    assert why["easy_trial1_rst1.csv"] == "left out by data.exclude '*_rst?.csv'"
+    # Without the exclude list, a reset segment is read as a run of its own (trial '1_rst1'):
+    # what data.exclude is for.
+    found = datasets.find_files([folder], "{condition}_trial{trial}.csv")
+    assert ("trial", "1_rst1") in found.files[1].factors
+
+
+def _as_parquet(csv_path: Path):
+    import pyarrow as pa
+
+    rows = [r for r in csv.reader(open(csv_path)) if r and not r[0].startswith("#")]
+    return pa.table({name: pa.array([float(r[i]) for r in rows]) for i, name in enumerate(NAMES)})
+
+
+def test_a_set_whose_every_file_is_left_out_is_refused_in_one_line(session_folders):
+    with pytest.raises(DataError, match=r"every file it names is left out \(3: .*data.exclude"):
+        datasets.find_files([str(session_folders / "*" / "*_rst1.csv")], None, ["*_rst?.csv"])
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("pattern", "../{subject}/{trial}.csv", r"data.pattern: .*no empty, '.' or '..' part"),
+        ("pattern", "{subject}//{trial}.csv", r"data.pattern: .*no empty"),
+        ("exclude", [3], r"data.exclude: must be a list of file-name globs"),
+        ("exclude", [""], r"data.exclude: must be a list of file-name globs"),
+    ],
+)
+def test_bad_folder_patterns_and_exclude_lists_name_the_key(tmp_path, key, value, message):
+    from hcid.errors import ConfigError
+
+    raw = yaml.safe_load(_config(tmp_path).read_text())
+    raw["data"][key] = value
+    with pytest.raises(ConfigError, match=message):
+        parse_config(raw, "lab")

@@ -241,6 +241,12 @@ def _condition_means(trials: Sequence[TrialLines], which: str) -> dict[int, list
 
 
 def _feedback(h_ud: np.ndarray, yc: np.ndarray, disturbance_at: str) -> np.ndarray:
+    """He from the disturbance response (NaN where it was not measured)."""
+    with np.errstate(invalid="ignore"):
+        return _he(h_ud, yc, disturbance_at)
+
+
+def _he(h_ud: np.ndarray, yc: np.ndarray, disturbance_at: str) -> np.ndarray:
     if disturbance_at == "input":
         return -h_ud / (yc * (1.0 + h_ud))
     return -h_ud / (1.0 + h_ud * yc)

@@ -1,0 +1,187 @@
+"""hcid.pipeline.sessions on a whole experiment as its lab stored it (../shared/data/cphs2017-sessions/,
+issue 45): the conditions' kinds, the combination per person against an independent computation,
+and hcid analyse end to end on a reduced session.
+
+The reference is ``benchmarks/cphs_sessions_reference.py``: numpy and scipy on the raw 60 Hz files,
+written from the study's equations (SPEC 12 and the study's own analysis) without reading hcid's
+code. hcid resamples the files to 25 Hz first, so the two agree to the resampling's error at the
+lines, not to the last bits. Skipped where the shared data are absent (a user's clone)."""
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from hcid.io.resolve import read_study, with_data
+from hcid.pipeline import sessions
+
+from .conftest import ROOT
+
+DATA = ROOT.parent / "shared" / "data" / "cphs2017-sessions"
+REFERENCE = ROOT / "benchmarks" / "cphs_sessions_reference.py"
+
+pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"no session recordings at {DATA}")
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    out = tmp_path_factory.mktemp("reference") / "reference.json"
+    subprocess.run(
+        [sys.executable, str(REFERENCE), "--out", str(out)], check=True, capture_output=True, timeout=300
+    )
+    return json.loads(out.read_text())["plants"]
+
+
+@pytest.fixture(scope="module", params=["fo", "so"])
+def combined(request):
+    plant = request.param
+    config, data = read_study(
+        ROOT / "configs" / f"cphs2017_sessions_{plant}.yaml",
+        [str(DATA / "*" / f"*_{plant}_*.csv")],
+        single_input=True,
+    )
+    config = with_data(config)
+    trials = sessions.classify(data.records, config)
+    return plant, data, trials, sessions.combine_session(config, data, trials, "subject")
+
+
+def test_each_trial_kind_is_found_from_the_data_as_the_file_names_say(combined):
+    # The README: assay 1 has no target, assay 3 no disturbance, the others both.
+    plant, data, trials, _ = combined
+    expected = {"1": "disturbance only", "3": "target only"}
+    for run in data.runs:
+        assert trials[run["run"]].kind.value == expected.get(run["assay"], "target and disturbance")
+    assert len(trials) == 90 and sorted({r["subject"] for r in data.runs}) == ["dp", "ef", "gy"]
+
+
+def test_the_files_that_are_not_trials_are_skipped_with_their_reason(combined):
+    plant, data, _, _ = combined
+    # 120 reset segments per subject, all named with the session's first trial's code, fo (README).
+    assert len(data.skipped) == (360 if plant == "fo" else 0)
+    assert {why for _, why in data.skipped} <= {"left out by data.exclude '*_rst[12].*'"}
+
+
+@pytest.mark.parametrize(
+    ("source", "theirs"), [("single-input trials", "single"), ("two-input trials", "pairs_all")]
+)
+def test_model_inversion_per_person_and_line_agrees_with_the_independent_computation(
+    combined, reference, source, theirs
+):
+    plant, _, _, session = combined
+    rows = [r for r in session.lines.to_pylist() if r["source"] == source and r["person"] != "median"]
+    ref = reference[plant]
+    for r in rows:
+        k = round(r["hz"] / 0.05)  # lines at k / 20 Hz
+        i = ref["k"].index(k)
+        assert r["inversion"] == pytest.approx(
+            ref["subjects"][r["person"]][theirs]["absFM"][i], rel=0.03, abs=0.01
+        ), (
+            r["person"],
+            k,
+        )
+    assert len(rows) == 3 * len(ref["k"])
+
+
+# --------------------------------------------------------------------------- hcid analyse, end to end
+
+#: A reduced identification (grids of a few orders and delays, in seconds) so that the whole
+#: command runs in CI: every stage for real, on four trials of one person.
+SMALL_IDENTIFY = {
+    "target_shift": 1.0,
+    "windows_in": "seconds",
+    "direct": {
+        "na": [1, 2],
+        "nb1": [0, 2],
+        "nb2": [0, 2],
+        "nk1": [1, 40],
+        "nk2": [1, 6],
+        "estimation": [2.52, 21.24],
+        "validation": [21.24, 40.0],
+    },
+    "stage1": {
+        "na": [1, 3],
+        "nb1": [0, 25],
+        "nb2": [0, 3],
+        "nk1": [1, 3],
+        "nk2": [1, 3],
+        "estimation": "auto",
+        "validation": "auto",
+    },
+    "stage2": {
+        "na": [1, 2],
+        "nb1": [0, 2],
+        "nb2": [0, 2],
+        "nk1": [1, 40],
+        "nk2": [1, 6],
+        "estimation": [2.52, 21.24],
+        "validation": [21.24, 40.0],
+    },
+}
+
+
+@pytest.fixture(scope="module")
+def session_run(tmp_path_factory):
+    """Four of dp's fo trials (both line sets, disturbance only, target only) as the logger left
+    them (a reset segment, the stray desktop.ini, one trial again as .npz), analysed by the CLI."""
+    import shutil
+
+    import yaml
+    from typer.testing import CliRunner
+
+    from hcid.cli import app
+
+    root = tmp_path_factory.mktemp("session")
+    folder = root / "sessions" / "dp"
+    folder.mkdir(parents=True)
+    names = [
+        "20170901-094005_su17v3_fo_r-sos+E_d-sos+O_s49_p0a0_+1",
+        "20170901-095007_su17v3_fo_r-sos+O_d-sos+E_s49_p0a2_+1",
+        "20170901-094503_su17v3_fo_r-zer_d-sos+A_s49_p0a1_+1",
+        "20170901-095512_su17v3_fo_r-sos+A_d-zer_s49_p0a3_+1",
+        "20170901-094005_su17v3_fo_r-sos+E_d-sos+O_s49_p0a0_+1_rst1",
+    ]
+    for name in names:
+        shutil.copy(DATA / "dp" / f"{name}.csv", folder)
+    shutil.copy(DATA / "dp" / f"{names[0]}.npz", folder)
+    shutil.copy(DATA / "dp" / "desktop.ini", folder)
+    raw = yaml.safe_load((ROOT / "configs" / "cphs2017_sessions_fo.yaml").read_text())
+    raw["identify"] = SMALL_IDENTIFY
+    config = root / "session.yaml"
+    config.write_text(yaml.safe_dump(raw, sort_keys=False))
+    run = root / "run"
+    args = ["analyse", str(config), "--data", str(folder), "--run", str(run), "--twins", "2"]
+    result = CliRunner().invoke(app, [*args, "--max-fb-twins", "2", "--quiet"])
+    return result, run
+
+
+def test_analyse_takes_a_session_folder_as_the_logger_left_it(session_run):
+    import pyarrow.parquet as pq
+
+    result, run = session_run
+    assert result.exit_code == 0, result.output
+    out = result.output
+    assert "CONDITIONS (each run's kind from its data): 2 target and disturbance" in out
+    assert "1 disturbance only (feedback alone" in out and "1 target only" in out
+    assert "SKIPPED: 3 file(s) found are not runs" in out
+    skipped = {
+        r["file"].rsplit("/", 1)[-1]: r["reason"] for r in pq.read_table(run / "skipped.parquet").to_pylist()
+    }
+    assert skipped["desktop.ini"].startswith("not a data file")
+    assert skipped["20170901-094005_su17v3_fo_r-sos+E_d-sos+O_s49_p0a0_+1.npz"].startswith(
+        "a copy in another format"
+    )
+    assert skipped["20170901-094005_su17v3_fo_r-sos+E_d-sos+O_s49_p0a0_+1_rst1.csv"].startswith(
+        "left out by data.exclude"
+    )
+    # Only the two-input trials are tested for feedforward; every trial is combined.
+    analysis = pq.read_table(run / "analysis.parquet").to_pylist()
+    assert sorted({r["assay"] for r in analysis}) == ["0", "2"]
+    trials = pq.read_table(run / "session_trials.parquet").to_pylist()
+    assert sorted(r["assay"] for r in trials) == ["0", "1", "2", "3"]
+    feedback = pq.read_table(run / "feedback_runs.parquet").to_pylist()
+    assert len(feedback) == 2 and {r["method"] for r in feedback} == {"direct", "indirect"}
+    assert all(r["fit_target"] == "lines" and math.isfinite(r["Kpe"]) for r in feedback)
+    assert (run / "report" / "conditions_inversion.png").is_file()
