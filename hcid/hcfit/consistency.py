@@ -157,9 +157,21 @@ def _errors(values, plant, fc, feedforward: bool):
     return he_db, he_deg, ht_db, ht_deg
 
 
+def _by_frequency(estimates: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Per frequency (rad/s, to 1e-9 relative), the mean of the estimates there, ascending."""
+    found: dict[float, list[complex]] = {}
+    for omega, h in estimates:
+        for w, x in zip(omega.tolist(), h.tolist(), strict=True):
+            key = next((k for k in found if math.isclose(k, w, rel_tol=1e-9)), w)
+            found.setdefault(key, []).append(x)
+    omega = np.array(sorted(found))
+    return omega, np.array([np.mean(found[w]) for w in omega.tolist()])
+
+
 def _fc(runs: Sequence[dict[str, np.ndarray]], rate: float):
     """The Fourier-coefficient estimates of the runs together (or, where their forcing functions
-    differ, the mean of each run's); None where there is none (e.g. e without power at a line)."""
+    differ, the mean of each run's, per frequency where their line sets differ); None where there
+    is none (e.g. e without power at a line)."""
     n = runs[0]["u"].size
     try:
         fc = fc_estimate(runs, rate, slice(0, n))
@@ -170,10 +182,16 @@ def _fc(runs: Sequence[dict[str, np.ndarray]], rate: float):
         each = [fc_estimate([r], rate, slice(0, n)) for r in runs]
     except DataError:
         return None
-    if any(
-        f.omega_e.shape != each[0].omega_e.shape or f.omega_t.shape != each[0].omega_t.shape for f in each
-    ):
-        return None
+
+    def same(a: np.ndarray, b: np.ndarray) -> bool:
+        return a.shape == b.shape and np.allclose(a, b, rtol=1e-9, atol=0.0)
+
+    if not all(same(f.omega_e, each[0].omega_e) and same(f.omega_t, each[0].omega_t) for f in each):
+        # Line sets that differ between runs (swapped between trials): per frequency, the mean over
+        # the runs that measured it as such a line.
+        he_omega, he = _by_frequency([(f.omega_e, f.he) for f in each])
+        ht_omega, ht = _by_frequency([(f.omega_t, f.ht) for f in each])
+        return he, he_omega, ht, ht_omega
     return (
         np.mean([f.he for f in each], axis=0),
         each[0].omega_e,
