@@ -426,7 +426,7 @@ def session_folders(trial_folder, tmp_path):
     """The example's trials as a logger leaves a session: one folder per subject, a reset segment
     beside each trial, a stray desktop.ini, and one trial again as Parquet beside its CSV."""
     root = tmp_path / "sessions"
-    for trial, (subject, condition, number) in LAYOUT.items():
+    for subject, condition, number in LAYOUT.values():
         folder = root / subject
         folder.mkdir(parents=True, exist_ok=True)
         source = trial_folder / f"{subject}_{condition}_trial{number}.csv"
@@ -471,7 +471,8 @@ def test_a_folder_lists_what_it_skips_and_why(session_folders):
 def _as_parquet(csv_path: Path):
     import pyarrow as pa
 
-    rows = [r for r in csv.reader(open(csv_path)) if r and not r[0].startswith("#")]
+    with open(csv_path, newline="") as f:
+        rows = [r for r in csv.reader(f) if r and not r[0].startswith("#")]
     return pa.table({name: pa.array([float(r[i]) for r in rows]) for i, name in enumerate(NAMES)})
 
 

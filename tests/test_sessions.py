@@ -12,7 +12,6 @@ import math
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 
 from hcid.io.resolve import read_study, with_data
