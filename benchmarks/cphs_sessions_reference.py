@@ -120,6 +120,7 @@ Prediction across conditions
     from r and d alone (what the study's Fig. 5 did at the lines, for one a5
     and one a6 trial per subject); line errors only.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -139,10 +140,10 @@ PLANTS = ("fo", "so")
 FS = 60.0
 I0, I1 = 300, 2700
 N = I1 - I0
-KS = {"fo": np.array([2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31]),
-      "so": np.array([2, 3, 5, 7, 11, 13, 17])}
+KS = {"fo": np.array([2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31]), "so": np.array([2, 3, 5, 7, 11, 13, 17])}
 NAME_RE = re.compile(
-    r"_su17v3_(fo|so)_r-(zer|sos[+-][EOA])_d-(zer|sos[+-][EOA])_s49_p(\d)a(\d)_([+-]1)\.csv$")
+    r"_su17v3_(fo|so)_r-(zer|sos[+-][EOA])_d-(zer|sos[+-][EOA])_s49_p(\d)a(\d)_([+-]1)\.csv$"
+)
 TWO_INPUT_ASSAYS = (0, 2, 4, 5, 6)
 
 
@@ -182,8 +183,7 @@ def load_trials(data):
             e = r - x
             k = KS[plant]
             bins = 2 * k
-            spec = {nm: np.fft.rfft(v) / N for nm, v in
-                    (("r", r), ("u", u), ("d", d), ("x", x), ("e", e))}
+            spec = {nm: np.fft.rfft(v) / N for nm, v in (("r", r), ("u", u), ("d", d), ("x", x), ("e", e))}
             L = {nm: spec[nm][bins] for nm in spec}
             tm, dm = line_mask(plant, tcode), line_mask(plant, dcode)
             # check the line sets against the data (SPEC 12 rule)
@@ -192,9 +192,20 @@ def load_trials(data):
             ok = np.array_equal(pr > 1e-6 * ref, tm) and np.array_equal(pd > 1e-6 * ref, dm)
             if not ok:
                 raise SystemExit(f"line sets of {f} disagree with its name")
-            trials.append(dict(file=os.path.basename(f), subject=subj, plant=plant,
-                               assay=int(assay), phase=int(phase), sign=int(sign),
-                               tmask=tm, dmask=dm, u=u, L=L))
+            trials.append(
+                dict(
+                    file=os.path.basename(f),
+                    subject=subj,
+                    plant=plant,
+                    assay=int(assay),
+                    phase=int(phase),
+                    sign=int(sign),
+                    tmask=tm,
+                    dmask=dm,
+                    u=u,
+                    L=L,
+                )
+            )
     return trials
 
 
@@ -223,10 +234,14 @@ def estimates(trs, plant, assays_two=TWO_INPUT_ASSAYS, how="mean"):
     a3 = [t for t in trs if t["assay"] == 3]
     a1 = [t for t in trs if t["assay"] == 1]
     two = [t for t in trs if t["assay"] in assays_two]
-    return {"single": {"HUR": avg(a3, "u", "r", "tmask"), "HUD": avg(a1, "u", "d", "dmask"),
-                       "n": (len(a3), len(a1))},
-            "two": {"HUR": avg(two, "u", "r", "tmask"), "HUD": avg(two, "u", "d", "dmask"),
-                    "n": len(two)}}
+    return {
+        "single": {
+            "HUR": avg(a3, "u", "r", "tmask"),
+            "HUD": avg(a1, "u", "d", "dmask"),
+            "n": (len(a3), len(a1)),
+        },
+        "two": {"HUR": avg(two, "u", "r", "tmask"), "HUD": avg(two, "u", "d", "dmask"), "n": len(two)},
+    }
 
 
 def fb_ff(HUR, HUD, M):
@@ -254,14 +269,18 @@ def predict_errors(trial, F, B, M):
     spec[2 * KS[trial["plant"]]] = Uh * N
     uh = np.fft.irfft(spec, n=N)
     u = trial["u"]
-    err_w = np.sqrt(np.mean((u - uh) ** 2) / np.mean(u ** 2))
+    err_w = np.sqrt(np.mean((u - uh) ** 2) / np.mean(u**2))
     num = np.sum(np.abs(L["u"] - Uh) ** 2)
     den = np.sum(np.abs(L["u"]) ** 2)
     # closed loop from r and d (study's Fig. 5 style)
     Ucl = ((F + B) * L["r"] - B * M * L["d"]) / (1 + B * M)
     num_cl = np.sum(np.abs(L["u"] - Ucl) ** 2)
-    return dict(err_window=float(err_w), err_lines=float(np.sqrt(num / den)),
-                err_lines_sq=float(num / den), err_lines_closedloop=float(np.sqrt(num_cl / den)))
+    return dict(
+        err_window=float(err_w),
+        err_lines=float(np.sqrt(num / den)),
+        err_lines_sq=float(num / den),
+        err_lines_closedloop=float(np.sqrt(num_cl / den)),
+    )
 
 
 def fmt(v, w=6, p=3):
@@ -281,11 +300,18 @@ def main():
     args = ap.parse_args()
     t0 = time.time()
     trials = load_trials(args.data)
-    out = {"window_samples": [I0, I1], "fs": FS, "lines_k": {p: KS[p].tolist() for p in PLANTS},
-           "n_trials": len(trials), "plants": {}}
+    out = {
+        "window_samples": [I0, I1],
+        "fs": FS,
+        "lines_k": {p: KS[p].tolist() for p in PLANTS},
+        "n_trials": len(trials),
+        "plants": {},
+    }
     P = print
-    P(f"CPHS 2017 sessions, independent reference (numpy+scipy); {len(trials)} trials loaded "
-      f"from {args.data}")
+    P(
+        f"CPHS 2017 sessions, independent reference (numpy+scipy); {len(trials)} trials loaded "
+        f"from {args.data}"
+    )
     P(f"window rows {I0}..{I1 - 1} ({N} samples, {N / FS:.0f} s); lines k*2pi/20 rad/s = DFT bin 2k")
 
     for plant in PLANTS:
@@ -295,8 +321,10 @@ def main():
         lo = k <= 3
         po = out["plants"][plant] = {"k": k.tolist(), "hz": (k / 20).tolist(), "subjects": {}}
         P("\n" + "=" * 100)
-        P(f"PLANT {plant}  (M = {'1/s' if plant == 'fo' else '1/(s(s+1))'}, disturbance at plant input)"
-          f"  lines k = {' '.join(map(str, k))}")
+        P(
+            f"PLANT {plant}  (M = {'1/s' if plant == 'fo' else '1/(s(s+1))'}, disturbance at plant input)"
+            f"  lines k = {' '.join(map(str, k))}"
+        )
         P("=" * 100)
 
         # ---------------- checks
@@ -325,8 +353,11 @@ def main():
             e_all = estimates(trs, plant)
             e_h1 = estimates(trs, plant, how="H1")
             srcs = [("single", e_all["single"]), ("pairs_all", e_all["two"])]
-            for nm, aset in (("pairs_a0a2", (0, 2)), ("pairs_a0a2a6", (0, 2, 6)),
-                             ("pairs_a0a2a4a5", (0, 2, 4, 5))):
+            for nm, aset in (
+                ("pairs_a0a2", (0, 2)),
+                ("pairs_a0a2a6", (0, 2, 6)),
+                ("pairs_a0a2a4a5", (0, 2, 4, 5)),
+            ):
                 srcs.append((nm, estimates(trs, plant, assays_two=aset)["two"]))
             srcs += [("single_H1", e_h1["single"]), ("pairs_all_H1", e_h1["two"])]
             d = {}
@@ -335,19 +366,36 @@ def main():
                 d[name] = dict(HUR=src["HUR"], HUD=src["HUD"], F=F, B=B, FM=np.abs(F * M))
             est[subj] = d
             po["subjects"][subj] = {
-                name: {"H_UR": cplx(v["HUR"]), "H_UD": cplx(v["HUD"]), "F": cplx(v["F"]),
-                       "B": cplx(v["B"]), "absFM": v["FM"].tolist()} for name, v in d.items()}
+                name: {
+                    "H_UR": cplx(v["HUR"]),
+                    "H_UD": cplx(v["HUD"]),
+                    "F": cplx(v["F"]),
+                    "B": cplx(v["B"]),
+                    "absFM": v["FM"].tolist(),
+                }
+                for name, v in d.items()
+            }
 
         # ---------------- |F M|
         P("\n|F M| per line (model-inversion factor; 1 = exact inverse of the plant)")
         hdr = "  subj  estimate        " + " ".join(f"{kk:6d}" for kk in k) + "   med k>=5  med k<=3"
         P(hdr)
         fm_sum = {}
-        h1diff = max(float(np.max(np.abs(est[s][a]["FM"] - est[s][b]["FM"])))
-                     for s in SUBJECTS for a, b in (("single", "single_H1"), ("pairs_all", "pairs_all_H1")))
+        h1diff = max(
+            float(np.max(np.abs(est[s][a]["FM"] - est[s][b]["FM"])))
+            for s in SUBJECTS
+            for a, b in (("single", "single_H1"), ("pairs_all", "pairs_all_H1"))
+        )
         po["max_abs_diff_absFM_H1_vs_mean_of_ratios"] = h1diff
-        for name in ("single", "pairs_all", "pairs_a0a2", "pairs_a0a2a6", "pairs_a0a2a4a5",
-                     "single_H1", "pairs_all_H1"):
+        for name in (
+            "single",
+            "pairs_all",
+            "pairs_a0a2",
+            "pairs_a0a2a6",
+            "pairs_a0a2a4a5",
+            "single_H1",
+            "pairs_all_H1",
+        ):
             per_hi, per_lo = [], []
             for subj in SUBJECTS:
                 fm = est[subj][name]["FM"]
@@ -355,8 +403,11 @@ def main():
                 per_lo.append(float(np.median(fm[lo])))
                 if name.endswith("_H1"):
                     continue
-                P(f"  {subj:4s}  {name:14s}  " + " ".join(fmt(v) for v in fm)
-                  + f"   {fmt(per_hi[-1])}    {fmt(per_lo[-1])}")
+                P(
+                    f"  {subj:4s}  {name:14s}  "
+                    + " ".join(fmt(v) for v in fm)
+                    + f"   {fmt(per_hi[-1])}    {fmt(per_lo[-1])}"
+                )
             allfm = np.array([est[s][name]["FM"] for s in SUBJECTS])
             per_line_med = np.median(allfm, axis=0)
             if not name.endswith("_H1"):
@@ -370,24 +421,32 @@ def main():
                 "range_over_subjects_k_le3": [min(per_lo), max(per_lo)],
                 "per_line_median_over_subjects": per_line_med.tolist(),
                 "studystyle_median_over_lines_k_ge5": float(np.median(per_line_med[hi])),
-                "studystyle_range_over_lines_k_ge5": [float(per_line_med[hi].min()),
-                                                      float(per_line_med[hi].max())],
+                "studystyle_range_over_lines_k_ge5": [
+                    float(per_line_med[hi].min()),
+                    float(per_line_med[hi].max()),
+                ],
                 "studystyle_median_over_lines_k_le3": float(np.median(per_line_med[lo])),
             }
         po["absFM_summary"] = fm_sum
         P(f"  (H1 averaging gives the same |F M| as the mean of ratios: largest difference {h1diff:.1e})")
-        P("\n|F M| summary (median over the 3 subjects of each subject's median over lines;"
-          " [min-max over subjects])")
-        P("  estimate       k>=5 (>=0.25 Hz)      k<=3 (<=0.15 Hz)      "
-          "study-style k>=5 [min-max over lines]")
+        P(
+            "\n|F M| summary (median over the 3 subjects of each subject's median over lines;"
+            " [min-max over subjects])"
+        )
+        P(
+            "  estimate       k>=5 (>=0.25 Hz)      k<=3 (<=0.15 Hz)      "
+            "study-style k>=5 [min-max over lines]"
+        )
         for name, v in fm_sum.items():
             if name.endswith("_H1"):
                 continue
-            P(f"  {name:14s} {v['median_over_subjects_k_ge5']:.3f} [{v['range_over_subjects_k_ge5'][0]:.2f}-"
-              f"{v['range_over_subjects_k_ge5'][1]:.2f}]     {v['median_over_subjects_k_le3']:.3f} "
-              f"[{v['range_over_subjects_k_le3'][0]:.2f}-{v['range_over_subjects_k_le3'][1]:.2f}]"
-              f"       {v['studystyle_median_over_lines_k_ge5']:.3f} "
-              f"[{v['studystyle_range_over_lines_k_ge5'][0]:.2f}-{v['studystyle_range_over_lines_k_ge5'][1]:.2f}]")
+            P(
+                f"  {name:14s} {v['median_over_subjects_k_ge5']:.3f} [{v['range_over_subjects_k_ge5'][0]:.2f}-"
+                f"{v['range_over_subjects_k_ge5'][1]:.2f}]     {v['median_over_subjects_k_le3']:.3f} "
+                f"[{v['range_over_subjects_k_le3'][0]:.2f}-{v['range_over_subjects_k_le3'][1]:.2f}]"
+                f"       {v['studystyle_median_over_lines_k_ge5']:.3f} "
+                f"[{v['studystyle_range_over_lines_k_ge5'][0]:.2f}-{v['studystyle_range_over_lines_k_ge5'][1]:.2f}]"
+            )
 
         # ---------------- superposition
         P("\nSuperposition: single-input (a3 / a1) vs two-input ('all' pairs) estimate, per subject x line")
@@ -399,50 +458,86 @@ def main():
             dph = wrapdeg(Hs / H2)
             ratio = np.abs(Hs) / np.abs(H2)
             per_line = []
-            P(f"  {resp}: line  k   |single/two| dp ef gy        dphase deg dp ef gy"
-              "      p(log|.|) p(phase)  [n=3]")
+            P(
+                f"  {resp}: line  k   |single/two| dp ef gy        dphase deg dp ef gy"
+                "      p(log|.|) p(phase)  [n=3]"
+            )
             for i, kk in enumerate(k):
                 pl, pp = wil(dlog[:, i]), wil(dph[:, i])
-                per_line.append({"k": int(kk), "ratio": ratio[:, i].tolist(),
-                                 "dphase_deg": dph[:, i].tolist(),
-                                 "p_logmag": pl, "p_phase": pp})
-                P(f"        {kk:7d}   " + " ".join(f"{v:5.2f}" for v in ratio[:, i]) + "      "
-                  + " ".join(f"{v:7.1f}" for v in dph[:, i]) + f"      {pl:6.3f}   {pp:6.3f}")
-            pooled = {"n": int(dlog.size), "p_logmag": wil(dlog.ravel()), "p_phase": wil(dph.ravel()),
-                      "median_ratio": float(np.median(ratio)), "ratio_min": float(ratio.min()),
-                      "ratio_max": float(ratio.max()),
-                      "ratio_q25_q75": [float(np.percentile(ratio, 25)), float(np.percentile(ratio, 75))],
-                      "median_dphase_deg": float(np.median(dph)),
-                      "median_abs_dphase_deg": float(np.median(np.abs(dph)))}
+                per_line.append(
+                    {
+                        "k": int(kk),
+                        "ratio": ratio[:, i].tolist(),
+                        "dphase_deg": dph[:, i].tolist(),
+                        "p_logmag": pl,
+                        "p_phase": pp,
+                    }
+                )
+                P(
+                    f"        {kk:7d}   "
+                    + " ".join(f"{v:5.2f}" for v in ratio[:, i])
+                    + "      "
+                    + " ".join(f"{v:7.1f}" for v in dph[:, i])
+                    + f"      {pl:6.3f}   {pp:6.3f}"
+                )
+            pooled = {
+                "n": int(dlog.size),
+                "p_logmag": wil(dlog.ravel()),
+                "p_phase": wil(dph.ravel()),
+                "median_ratio": float(np.median(ratio)),
+                "ratio_min": float(ratio.min()),
+                "ratio_max": float(ratio.max()),
+                "ratio_q25_q75": [float(np.percentile(ratio, 25)), float(np.percentile(ratio, 75))],
+                "median_dphase_deg": float(np.median(dph)),
+                "median_abs_dphase_deg": float(np.median(np.abs(dph))),
+            }
             # study-style: across-subject medians, paired across lines
             m_s, m_2 = np.median(np.abs(Hs), axis=0), np.median(np.abs(H2), axis=0)
             cm_s, cm_2 = np.mean(Hs / np.abs(Hs), axis=0), np.mean(H2 / np.abs(H2), axis=0)
-            study = {"n_lines": len(k), "p_mag": float(wilcoxon(m_s, m_2).pvalue),
-                     "p_logmag": float(wilcoxon(np.log(m_s), np.log(m_2)).pvalue),
-                     "p_phase": wil(wrapdeg(cm_s / cm_2))}
+            study = {
+                "n_lines": len(k),
+                "p_mag": float(wilcoxon(m_s, m_2).pvalue),
+                "p_logmag": float(wilcoxon(np.log(m_s), np.log(m_2)).pvalue),
+                "p_phase": wil(wrapdeg(cm_s / cm_2)),
+            }
             sp[resp] = {"per_line": per_line, "pooled": pooled, "studystyle_across_lines": study}
-            P(f"  {resp} pooled over subject x line (n={pooled['n']}): "
-              f"Wilcoxon p(log|.|) = {pooled['p_logmag']:.3f},"
-              f" p(phase) = {pooled['p_phase']:.3f}; |single/two| median {pooled['median_ratio']:.3f}"
-              f" [{pooled['ratio_min']:.2f}-{pooled['ratio_max']:.2f}], IQR {pooled['ratio_q25_q75'][0]:.2f}-"
-              f"{pooled['ratio_q25_q75'][1]:.2f}; median dphase {pooled['median_dphase_deg']:.1f} deg,"
-              f" median |dphase| {pooled['median_abs_dphase_deg']:.1f} deg")
-            P(f"  {resp} study-style (median over subjects per line, paired across {len(k)} lines):"
-              f" p(|.|) = {study['p_mag']:.3f}, p(log|.|) = {study['p_logmag']:.3f},"
-              f" p(circular-mean phase) = {study['p_phase']:.3f}")
+            P(
+                f"  {resp} pooled over subject x line (n={pooled['n']}): "
+                f"Wilcoxon p(log|.|) = {pooled['p_logmag']:.3f},"
+                f" p(phase) = {pooled['p_phase']:.3f}; |single/two| median {pooled['median_ratio']:.3f}"
+                f" [{pooled['ratio_min']:.2f}-{pooled['ratio_max']:.2f}], IQR {pooled['ratio_q25_q75'][0]:.2f}-"
+                f"{pooled['ratio_q25_q75'][1]:.2f}; median dphase {pooled['median_dphase_deg']:.1f} deg,"
+                f" median |dphase| {pooled['median_abs_dphase_deg']:.1f} deg"
+            )
+            P(
+                f"  {resp} study-style (median over subjects per line, paired across {len(k)} lines):"
+                f" p(|.|) = {study['p_mag']:.3f}, p(log|.|) = {study['p_logmag']:.3f},"
+                f" p(circular-mean phase) = {study['p_phase']:.3f}"
+            )
 
         # ---------------- prediction
         P("\nPrediction across conditions: U_hat = F R + B E at every line (measured r, e), zero elsewhere")
         pr = po["prediction"] = {}
         for direction, fit_name, targets, label in (
-                ("single_to_pairs", "single", TWO_INPUT_ASSAYS,
-                 "fitted on single-input (a1,a3) -> two-input trials"),
-                ("pairs_to_single", "pairs_all", (1, 3),
-                 "fitted on two-input (all pairs) -> single-input trials")):
+            (
+                "single_to_pairs",
+                "single",
+                TWO_INPUT_ASSAYS,
+                "fitted on single-input (a1,a3) -> two-input trials",
+            ),
+            (
+                "pairs_to_single",
+                "pairs_all",
+                (1, 3),
+                "fitted on two-input (all pairs) -> single-input trials",
+            ),
+        ):
             P(f"  {label}")
-            P("    subj  set      err_window: FF+FB  FB-only  FB-alt  ratio  |"
-              " err_lines: FF+FB  FB-only  FB-alt"
-              "  ratio | closed-loop lines: FF+FB  FB-only ratio")
+            P(
+                "    subj  set      err_window: FF+FB  FB-only  FB-alt  ratio  |"
+                " err_lines: FF+FB  FB-only  FB-alt"
+                "  ratio | closed-loop lines: FF+FB  FB-only ratio"
+            )
             dres = pr[direction] = {"per_subject": {}}
             ratios = {}
             for subj in SUBJECTS:
@@ -450,8 +545,11 @@ def main():
                 F, B = e["F"], e["B"]
                 Balt = e["HUR"] / (1 - e["HUR"] * M)
                 models = {"FF+FB": (F, B), "FB-only": (0 * F, B), "FB-alt": (0 * F, Balt)}
-                trs = [t for t in trials
-                       if t["subject"] == subj and t["plant"] == plant and t["assay"] in targets]
+                trs = [
+                    t
+                    for t in trials
+                    if t["subject"] == subj and t["plant"] == plant and t["assay"] in targets
+                ]
                 sets = {"all": trs}
                 if direction == "pairs_to_single":
                     sets["a3"] = [t for t in trs if t["assay"] == 3]
@@ -470,54 +568,71 @@ def main():
                     res["ratio_window"], res["ratio_lines"], res["ratio_lines_closedloop"] = rw, rl, rc
                     res["ratio_window_vs_alt"] = res["FF+FB"]["err_window"] / res["FB-alt"]["err_window"]
                     res["ratio_lines_vs_alt"] = res["FF+FB"]["err_lines"] / res["FB-alt"]["err_lines"]
-                    ratios.setdefault(sname, []).append((rw, rl, rc, res["ratio_window_vs_alt"],
-                                                         res["ratio_lines_vs_alt"]))
+                    ratios.setdefault(sname, []).append(
+                        (rw, rl, rc, res["ratio_window_vs_alt"], res["ratio_lines_vs_alt"])
+                    )
                     sres[sname] = res
-                    P(f"    {subj:4s}  {sname:4s}(n={len(st):2d})     {res['FF+FB']['err_window']:.3f}   "
-                      f"{res['FB-only']['err_window']:.3f}   {res['FB-alt']['err_window']:.3f}  {rw:.3f}  |"
-                      f"        {res['FF+FB']['err_lines']:.3f}    {res['FB-only']['err_lines']:.3f}   "
-                      f"{res['FB-alt']['err_lines']:.3f}  {rl:.3f} |"
-                      f"        {res['FF+FB']['err_lines_closedloop']:.3f}    "
-                      f"{res['FB-only']['err_lines_closedloop']:.3f}  {rc:.3f}")
+                    P(
+                        f"    {subj:4s}  {sname:4s}(n={len(st):2d})     {res['FF+FB']['err_window']:.3f}   "
+                        f"{res['FB-only']['err_window']:.3f}   {res['FB-alt']['err_window']:.3f}  {rw:.3f}  |"
+                        f"        {res['FF+FB']['err_lines']:.3f}    {res['FB-only']['err_lines']:.3f}   "
+                        f"{res['FB-alt']['err_lines']:.3f}  {rl:.3f} |"
+                        f"        {res['FF+FB']['err_lines_closedloop']:.3f}    "
+                        f"{res['FB-only']['err_lines_closedloop']:.3f}  {rc:.3f}"
+                    )
             dres["ratio_summary"] = {}
             for sname, lst in ratios.items():
                 a = np.array(lst)
-                summ = {nm: {"median": float(np.median(a[:, j])), "min": float(a[:, j].min()),
-                             "max": float(a[:, j].max())}
-                        for j, nm in enumerate(("window", "lines", "lines_closedloop",
-                                                "window_vs_alt", "lines_vs_alt"))}
+                summ = {
+                    nm: {
+                        "median": float(np.median(a[:, j])),
+                        "min": float(a[:, j].min()),
+                        "max": float(a[:, j].max()),
+                    }
+                    for j, nm in enumerate(
+                        ("window", "lines", "lines_closedloop", "window_vs_alt", "lines_vs_alt")
+                    )
+                }
                 dres["ratio_summary"][sname] = summ
-                P(f"    ratio err(FF+FB)/err(FB-only), median over subjects [{sname}]: window "
-                  f"{summ['window']['median']:.3f} [{summ['window']['min']:.2f}-{summ['window']['max']:.2f}],"
-                  f" lines {summ['lines']['median']:.3f} "
-                  f"[{summ['lines']['min']:.2f}-{summ['lines']['max']:.2f}],"
-                  f" closed-loop lines {summ['lines_closedloop']['median']:.3f};"
-                  f" vs FB-alt: window {summ['window_vs_alt']['median']:.3f},"
-                  f" lines {summ['lines_vs_alt']['median']:.3f}")
+                P(
+                    f"    ratio err(FF+FB)/err(FB-only), median over subjects [{sname}]: window "
+                    f"{summ['window']['median']:.3f} [{summ['window']['min']:.2f}-{summ['window']['max']:.2f}],"
+                    f" lines {summ['lines']['median']:.3f} "
+                    f"[{summ['lines']['min']:.2f}-{summ['lines']['max']:.2f}],"
+                    f" closed-loop lines {summ['lines_closedloop']['median']:.3f};"
+                    f" vs FB-alt: window {summ['window_vs_alt']['median']:.3f},"
+                    f" lines {summ['lines_vs_alt']['median']:.3f}"
+                )
 
     # ---------------- headline
     P("\n" + "=" * 100)
     P("HEADLINE (median over the 3 subjects; per-subject figure = median over lines)")
     for plant in PLANTS:
         s = out["plants"][plant]["absFM_summary"]
-        P(f"  {plant}: |F M| k>=5: pairs(all) {s['pairs_all']['median_over_subjects_k_ge5']:.3f}, "
-          f"pairs(a0+a2) {s['pairs_a0a2']['median_over_subjects_k_ge5']:.3f}, "
-          f"pairs(a0+a2+a6) {s['pairs_a0a2a6']['median_over_subjects_k_ge5']:.3f}, single "
-          f"{s['single']['median_over_subjects_k_ge5']:.3f};  k<=3: pairs(all) "
-          f"{s['pairs_all']['median_over_subjects_k_le3']:.3f}, pairs(a0+a2) "
-          f"{s['pairs_a0a2']['median_over_subjects_k_le3']:.3f}, "
-          f"single {s['single']['median_over_subjects_k_le3']:.3f}")
-        P(f"      study-style (per-line median over subjects, median [range] over lines k>=5): single "
-          f"{s['single']['studystyle_median_over_lines_k_ge5']:.3f} "
-          f"[{s['single']['studystyle_range_over_lines_k_ge5'][0]:.2f}-"
-          f"{s['single']['studystyle_range_over_lines_k_ge5'][1]:.2f}], pairs(all) "
-          f"{s['pairs_all']['studystyle_median_over_lines_k_ge5']:.3f}")
+        P(
+            f"  {plant}: |F M| k>=5: pairs(all) {s['pairs_all']['median_over_subjects_k_ge5']:.3f}, "
+            f"pairs(a0+a2) {s['pairs_a0a2']['median_over_subjects_k_ge5']:.3f}, "
+            f"pairs(a0+a2+a6) {s['pairs_a0a2a6']['median_over_subjects_k_ge5']:.3f}, single "
+            f"{s['single']['median_over_subjects_k_ge5']:.3f};  k<=3: pairs(all) "
+            f"{s['pairs_all']['median_over_subjects_k_le3']:.3f}, pairs(a0+a2) "
+            f"{s['pairs_a0a2']['median_over_subjects_k_le3']:.3f}, "
+            f"single {s['single']['median_over_subjects_k_le3']:.3f}"
+        )
+        P(
+            f"      study-style (per-line median over subjects, median [range] over lines k>=5): single "
+            f"{s['single']['studystyle_median_over_lines_k_ge5']:.3f} "
+            f"[{s['single']['studystyle_range_over_lines_k_ge5'][0]:.2f}-"
+            f"{s['single']['studystyle_range_over_lines_k_ge5'][1]:.2f}], pairs(all) "
+            f"{s['pairs_all']['studystyle_median_over_lines_k_ge5']:.3f}"
+        )
         pr = out["plants"][plant]["prediction"]
-        P(f"      prediction ratio err(FF+FB)/err(FB-only): single->pairs window "
-          f"{pr['single_to_pairs']['ratio_summary']['all']['window']['median']:.3f}, lines "
-          f"{pr['single_to_pairs']['ratio_summary']['all']['lines']['median']:.3f}; pairs->single(a3) window "
-          f"{pr['pairs_to_single']['ratio_summary']['a3']['window']['median']:.3f}, lines "
-          f"{pr['pairs_to_single']['ratio_summary']['a3']['lines']['median']:.3f}")
+        P(
+            f"      prediction ratio err(FF+FB)/err(FB-only): single->pairs window "
+            f"{pr['single_to_pairs']['ratio_summary']['all']['window']['median']:.3f}, lines "
+            f"{pr['single_to_pairs']['ratio_summary']['all']['lines']['median']:.3f}; pairs->single(a3) window "
+            f"{pr['pairs_to_single']['ratio_summary']['a3']['window']['median']:.3f}, lines "
+            f"{pr['pairs_to_single']['ratio_summary']['a3']['lines']['median']:.3f}"
+        )
     P(f"elapsed {time.time() - t0:.1f} s")
     if args.out:
         with open(args.out, "w") as fh:
