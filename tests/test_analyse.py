@@ -432,3 +432,187 @@ def test_a_verdict_carried_by_one_subject_is_said_with_each_subjects_count():
     assert GroupSummary(group, runs, (0.3, 0.3), [], 1.5, 55.0).one_subject is None
     one = GroupSummary({**group, "verdict": "UNCERTAIN"}, runs[2:4], (0.3, 0.3), [], 1.5, 55.0)
     assert one.by_subject() == [] and one.one_subject is None  # runs of one subject: no split
+
+
+# --------------------------------------------------------------------------- twins of any group's fit
+
+# Subject dp's two fo trials of assay a4 (../shared/data/cphs2017-sessions/dp, `hcid analyse --by assay`
+# on the two-input trials, the issue's reproduction): both fits put tau_pe on its bound at 0 s (the
+# neuromuscular lag, w_nms 2-3 rad/s, takes the delay's place), TI on its bound; the medians make
+# an unstable loop with the plant 1/s, and the study stopped at this group.
+A4_RUNS = {
+    5: ({"Kpe": 5.3781, "TL": 0.3814, "tau_pe": 0.0, "w_nms": 2.0301, "zeta_nms": 1.4798,
+         "Kpt": 1.0527, "TI": 0.01, "tau_pt": -0.2329}, ("tau_pe", "zeta_nms", "TI")),
+    6: ({"Kpe": 3.2035, "TL": 0.1913, "tau_pe": 0.0, "w_nms": 3.0197, "zeta_nms": 2.0,
+         "Kpt": 1.7384, "TI": 0.01, "tau_pt": -0.1995}, ("tau_pe", "zeta_nms", "TI")),
+}  # fmt: skip
+A4_SOURCE = (
+    "run 5's own model (the medians make an unstable loop with the plant; tau_pe 0.000 s raised to one "
+    "sample of the twins' simulation, 0.01 s at 100 Hz"
+)
+
+
+def _a4_fit(seed):
+    from hcid.hcfit import HCFit
+
+    values, on_bound = A4_RUNS[seed]
+    names = tuple(values)
+    return HCFit(
+        target="lines", names=names, estimates=tuple(values.values()),
+        at_bound=tuple(n in on_bound for n in names), cost=1.0, starts=1, start_costs=(1.0,),
+        vaf_validation=50.0, se=tuple(0.01 for _ in names), partner=tuple("" for _ in names),
+        correlation=tuple(0.1 for _ in names),
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def fo_study():
+    """The lab example's config with the CPHS fo plant (1/s, the disturbance at its input) and one
+    of its records, whose ft and fd drive the twins."""
+    from dataclasses import replace
+
+    from hcid.config import Plant
+    from hcid.io.resolve import read_study, with_data
+
+    config, data = read_study(CONFIG, [str(LAB / "S1_pursuit_trial1.csv")])
+    config = with_data(config)
+    loop_raw = {**config.raw["loop"], "plant": {"kind": "integrator", "K": 1.0}}
+    config = replace(
+        config, loop=replace(config.loop, plant=Plant.integrator(1.0)), raw={**config.raw, "loop": loop_raw}
+    )
+    return config, next(iter(data.records.values()))
+
+
+def _twins_config(config, record, values, remnant=(3.0, 8.0, 2.0)):
+    """The twins' config of a model, parsed as hcid analyse parses it (ranges, whole samples,
+    stable loops: hcid.pipeline.twins._twin_folder)."""
+    from hcid.io.resolve import parse_config
+    from hcid.pipeline.twins import twin_config_raw
+
+    n = round(config.timing.window * config.timing.output_rate)
+    raw = twin_config_raw(config, values, remnant, Path("forcing.csv"), 2, "twins")
+    return parse_config(raw, "twins", forcing={"target": record["ft"][:n], "disturbance": record["fd"][:n]})
+
+
+def test_a_group_whose_fallback_run_has_its_delay_at_0_gets_twins_the_config_takes(fo_study):
+    from hcid.cli.answers import _model_source
+    from hcid.hcfit.determined import group_model
+    from hcid.pipeline.twins import twin_model, twin_values
+
+    config, record = fo_study
+    plant = (np.array(config.loop.plant.num), np.array(config.loop.plant.den))
+    fits = [_a4_fit(5), _a4_fit(6)]
+    model = group_model(fits, ["run 5", "run 6"], *plant, lambda v: twin_model(v, 100.0, config.loop))
+    assert model.source == A4_SOURCE + ")"
+    assert model.values == A4_RUNS[5][0]  # the table's fitted_tau_pe stays the fit's 0 s
+    assert twin_values(model.values, 100.0)["tau_pe"] == 0.01
+    twins = _twins_config(config, record, model.values)
+    assert [(m.name, m.tau_pe, m.Kpe) for m in twins.models] == [("FB", 0.01, 5.3781), ("FF", 0.01, 5.3781)]
+    # The answer line carries it, in its one pair of parentheses.
+    said = _model_source({"twin_source": model.source})
+    assert said.startswith(" (run 5's own model: the medians make") and said.count("(") == 1
+
+
+def test_the_twins_ranges_are_those_their_config_takes(fo_study):
+    # Source: hcid.config.parse (models and loop sections) refuses just beyond each end of
+    # TWIN_RANGES, and takes each end it does not refuse.
+    import copy
+
+    from hcid.config.parse import describe_config
+    from hcid.errors import ConfigError
+    from hcid.pipeline.twins import TWIN_RANGES, twin_config_raw
+
+    config, _ = fo_study
+    base = twin_config_raw(config, A4_RUNS[6][0], (3.0, 8.0, 2.0), Path("forcing.csv"), 2, "twins")
+    where = {"kn": ("loop", "remnant_gain"), "w_n": ("loop", "w_n"), "zeta_n": ("loop", "zeta_n"),
+             "w_nms": ("loop", "w_nms"), "zeta_nms": ("loop", "zeta_nms")}  # fmt: skip
+
+    def described(name, value):
+        raw = copy.deepcopy(base)
+        section, key = where.get(name, ("models", name))
+        for target in [raw["loop"]] if section == "loop" else [raw["models"]["FF"]]:
+            target[key] = value
+        return describe_config(raw, "twins")
+
+    for name, (lo, hi, open_lo) in TWIN_RANGES.items():
+        described(name, hi)
+        with pytest.raises(ConfigError, match=f"{name if name not in where else where[name][1]}: must be"):
+            described(name, hi + 0.01)
+        with pytest.raises(ConfigError):
+            described(name, lo if open_lo else lo - 0.01)
+        if not open_lo:
+            described(name, lo)
+
+
+def test_values_the_twins_cannot_take_are_brought_into_range_or_named(fo_study):
+    from hcid.pipeline.twins import twin_model, twin_remnant
+
+    config, record = fo_study
+    far = {**A4_RUNS[6][0], "Kpe": 150.0, "tau_pt": -2.5, "tau_pe": 0.004}
+    sim = twin_model(far, 100.0)
+    assert (sim.values["Kpe"], sim.values["tau_pt"], sim.values["tau_pe"]) == (100.0, -2.0, 0.01)
+    assert sim.changes == (
+        "tau_pt -2.500 s raised to -2 s, the shortest the twins take",
+        "Kpe 150 lowered to 100, the most the twins take",
+        "tau_pe 0.004 s raised to one sample of the twins' simulation, 0.01 s at 100 Hz",
+    )
+    # No feedback gain has no nearest value the twins take. Kpe 15 with tau_pe 0.3 s on 1/s crosses
+    # over near 15 rad/s with ~260 deg of delay lag: unstable (tests/test_hcfit_lines.py's source).
+    assert twin_model({**far, "Kpe": 0.0}, 100.0).problem == "Kpe is 0, where the twins need a value above 0"
+    late = {**far, "Kpe": 15.0, "tau_pe": 0.3, "w_nms": 10.1, "zeta_nms": 0.35}
+    unstable = twin_model(late, 100.0, config.loop)
+    assert unstable.problem == "the loop with the plant is unstable as the twins simulate it at 100 Hz"
+    # What twin_model takes, the twins' config takes.
+    taken = twin_model({**far, "Kpe": 3.2035}, 100.0, config.loop)
+    assert taken.problem == "" and _twins_config(config, record, {**far, "Kpe": 3.2035}).models
+    remnant = twin_remnant((2000.0, 8.0, 2.0))
+    assert remnant.values == {"kn": 1000.0, "w_n": 8.0, "zeta_n": 2.0}
+    assert remnant.changes == ("kn 2e+03 lowered to 1000, the most the twins take",)
+
+
+def test_a_group_whose_remnant_fits_are_all_on_their_bounds_still_gets_twins(fo_study):
+    # Before: "no run's remnant could be fitted; cannot build its twins" stopped the study. The
+    # medians over the fits on their bounds are used (their level still measures the remnant), and
+    # source says so; only a group without any remnant fit has no twins.
+    from types import SimpleNamespace
+
+    from hcid.analysis.descriptors import RemnantFit
+    from hcid.errors import DataError
+    from hcid.pipeline.analyse import _Found, _group_models
+
+    config, _ = fo_study
+    spectrum = np.zeros(1)  # not read
+    remnants = {5: RemnantFit(2.0, 0.5, 1.0, 100.0, True, spectrum, spectrum, spectrum),
+                6: RemnantFit(4.0, 12.0, 5.0, 100.0, True, spectrum, spectrum, spectrum)}  # fmt: skip
+    study = SimpleNamespace(config=config, groups={("4",): [5, 6]})
+    found = _Found()
+    found.fitted = {s: ({True: _a4_fit(s)}, remnants[s]) for s in (5, 6)}
+    _group_models(study, found)
+    assert found.models[("4",)].source == A4_SOURCE + "; its remnant filter from fits on their search bounds)"
+    assert found.remnants[("4",)] == (3.0, 6.25, 3.0)  # medians of the two
+    found.fitted = {s: ({True: _a4_fit(s)}, None) for s in (5, 6)}
+    with pytest.raises(DataError, match="group 4-.*: no run's remnant could be fitted"):
+        _group_models(study, found)
+
+
+def test_the_issues_group_gets_twins_their_config_takes(fo_study):
+    # The issue's failure, through the same calls as hcid analyse: the group's model, then its
+    # twins' config parsed ("models.FB.tau_pe: must be a number in (0, 2], got 0.0" before).
+    from types import SimpleNamespace
+
+    from hcid.analysis.descriptors import RemnantFit
+    from hcid.pipeline.analyse import _Found, _group_models
+
+    config, record = fo_study
+    spectrum = np.zeros(1)  # not read
+    study = SimpleNamespace(config=config, groups={("4",): [5, 6]})
+    found = _Found()
+    found.fitted = {
+        s: ({True: _a4_fit(s)}, RemnantFit(3.0, 8.0, 2.0, 100.0, False, spectrum, spectrum, spectrum))
+        for s in (5, 6)
+    }
+    _group_models(study, found)
+    model = found.models[("4",)]
+    twins = _twins_config(config, record, model.values, found.remnants[("4",)])
+    assert {m.tau_pe for m in twins.models} == {0.01}
+    assert model.source == A4_SOURCE + ")"

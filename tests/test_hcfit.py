@@ -8,6 +8,7 @@ import pytest
 
 from hcid import hcfit
 from hcid.errors import ConfigError, DataError, IdentificationError
+from hcid.hcfit.determined import FROM_MEDIANS, GroupModel, Simulated, group_model
 from hcid.hcfit.model import _tustin
 from hcid.loop.hcmodel import PATH_METHOD, discretise, feedback_path, feedforward_path, plant, true_response
 from hcid.loop.simulate import simulate_realization
@@ -322,3 +323,52 @@ def test_settings_built_in_code_are_checked_too():
         hcfit.ParameterBounds("TL", 2.0, 1.0, 1.0, 1.0)
     with pytest.raises(ConfigError, match="bounds: must be one per parameter"):
         hcfit.FitSettings(bounds=hcfit.DEFAULT_BOUNDS[:5])
+
+
+# --------------------------------------------------------------------------- a group's model for its twins
+
+
+def _determined_fit(values, at_bound=(), vaf=50.0):
+    """A fit of ``values`` whose every parameter is determined (se 0.01, no correlation) but those
+    on a bound (hcid.hcfit.determined.parameter_status)."""
+    names = tuple(values)
+    return hcfit.HCFit(
+        target="lines", names=names, estimates=tuple(values.values()),
+        at_bound=tuple(n in at_bound for n in names), cost=1.0, starts=1, start_costs=(1.0,),
+        vaf_validation=vaf, se=tuple(0.01 for _ in names), partner=tuple("" for _ in names),
+        correlation=tuple(0.1 for _ in names),
+    )  # fmt: skip
+
+
+def test_a_group_model_is_judged_by_its_values_as_simulated():
+    # A simulation that takes delays of at least 10 ms and Kpe up to 10 (a stand-in for the twins'
+    # hcid.pipeline.twins.twin_model). Every loop below is stable on 1/s: TRUE_FF's feedback with
+    # tau_pe 3 to 10 ms and Kpe 2.5 to 12 (hcid.hcfit.loop_is_stable; Kpe 2.5 with tau_pe 0.24 s is
+    # not, TL 0.4 s being for the paper's plant): only the simulation's limits decide.
+
+    def simulated(values):
+        brought = {**values, "tau_pe": max(values["tau_pe"], 0.01)}
+        changes = ("tau_pe raised to 0.01 s",) if values["tau_pe"] < 0.01 else ()
+        return Simulated(brought, changes, "Kpe above 10" if values["Kpe"] > 10 else "")
+
+    plant = (np.array([1.0]), np.array([1.0, 0.0]))
+    short = [_determined_fit({**TRUE_FF, "tau_pe": tau}) for tau in (0.003, 0.004, 0.005)]
+    model = group_model(short, ["run 1", "run 2", "run 3"], *plant, simulated)
+    assert model.values["tau_pe"] == pytest.approx(0.004)  # as fitted: the twins' value is theirs
+    assert model.source == f"{FROM_MEDIANS} (tau_pe raised to 0.01 s)"
+    # The medians (Kpe 11.5) cannot make twins: the nearest run whose own model can, run 3.
+    strong = [_determined_fit({**TRUE_FF, "tau_pe": 0.01, "Kpe": k}) for k in (12.0, 11.5, 2.5)]
+    model = group_model(strong, ["run 1", "run 2", "run 3"], *plant, simulated)
+    assert model.source == "run 3's own model (the medians cannot make twins: Kpe above 10)"
+    assert model.values["Kpe"] == 2.5 and model.taken == "run 3's own model"
+    with pytest.raises(DataError, match="that its twins can simulate .the medians cannot make twins"):
+        group_model(strong[:2], ["run 1", "run 2"], *plant, simulated)
+
+
+def test_a_group_models_notes_share_one_pair_of_parentheses():
+    # The answer line reads source inside its own parentheses (hcid.cli.answers): one pair only.
+    plain = GroupModel(dict(TRUE_FF), FROM_MEDIANS, ())
+    assert plain.source == FROM_MEDIANS
+    noted = plain.noting("its remnant filter from fits on their search bounds").noting("kn lowered")
+    assert noted.source == f"{FROM_MEDIANS} (its remnant filter from fits on their search bounds; kn lowered)"
+    assert noted.values == plain.values and noted.taken == FROM_MEDIANS

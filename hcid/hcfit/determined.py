@@ -19,7 +19,7 @@ The plausible ranges and their sources are in docs/parametric-fit.md.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,6 +35,7 @@ __all__ = [
     "GroupModel",
     "LITERATURE_NMS",
     "PLAUSIBLE",
+    "Simulated",
     "group_model",
     "is_flagged",
     "is_on_bound",
@@ -168,34 +169,90 @@ class GroupModel:
     values : dict of str to float
         Per parameter, the median over the runs that determine it; where none does, the
         literature value (neuromuscular pair) or the median over all runs brought into the
-        parameter's plausible range.
-    source : str
-        How it was built: the medians, or the fallback taken where they make an unstable
-        loop with the plant.
+        parameter's plausible range. In a fallback, the values of the run taken, as fitted.
+    taken : str
+        Whose values these are: :data:`FROM_MEDIANS`, or the run taken in their place.
     undetermined : tuple of str
         The parameters no run determines (in the fallback: those the run taken does not).
+    notes : tuple of str
+        Why the medians were not taken, and every value its simulation changes beyond its
+        routine rounding (a delay fitted at 0 s brought to one sample), in words.
     """
 
     values: dict
-    source: str
+    taken: str
     undetermined: tuple[str, ...]
+    notes: tuple[str, ...] = ()
+
+    @property
+    def source(self) -> str:
+        """How the model was built, in one line: :data:`FROM_MEDIANS` exactly where nothing
+        else was done, else whose values were taken with the notes in one pair of parentheses
+        (``run 5's own model (the medians make an unstable loop with the plant; tau_pe ...)``)."""
+        return f"{self.taken} ({'; '.join(self.notes)})" if self.notes else self.taken
+
+    def noting(self, *notes: str) -> GroupModel:
+        """The same model with ``notes`` added (what else its twins change, in words)."""
+        return GroupModel(self.values, self.taken, self.undetermined, self.notes + notes)
 
 
-#: How a group's model is built when its medians make a stable loop with the plant.
+@dataclass(frozen=True)
+class Simulated:
+    """A model's values as a simulation takes them (what :func:`group_model`'s ``simulated``
+    gives, e.g. :func:`hcid.pipeline.twins.twin_model`).
+
+    Attributes
+    ----------
+    values : dict of str to float
+        The values as simulated, each in the range the simulation accepts.
+    changes : tuple of str
+        Each value brought into that range, in words (empty where none had to be).
+    problem : str
+        Why the simulation cannot take the model at all ("" where it can): a value that no
+        simulation of a person could take, or a loop that is unstable as simulated.
+    """
+
+    values: dict
+    changes: tuple[str, ...] = ()
+    problem: str = ""
+
+
+#: Whose values a group's model takes where its medians can make its twins (``GroupModel.taken``).
 FROM_MEDIANS = "medians of the values its runs determine"
 
 
-def group_model(fits: Sequence, labels: Sequence[str], num_c, den_c) -> GroupModel:
-    """The group's model from its runs' fits (:class:`hcid.hcfit.HCFit`; ``labels`` name the runs
-    in the fallback's words).
+def group_model(
+    fits: Sequence, labels: Sequence[str], num_c, den_c, simulated: Callable[[dict], Simulated] | None = None
+) -> GroupModel:
+    """The group's model from its runs' fits.
 
     Each parameter is the median over the runs whose fit determines it
-    (:func:`is_undetermined`). Where that model's loop with the plant (``num_c``, ``den_c``)
-    is unstable, the fallback is the run whose own model makes a stable loop and lies nearest
-    the medians (the sum over parameters of the squared difference over the parameter's
-    plausible range); :class:`hcid.errors.DataError` if no run's model does. A failed fit
-    (validation VAF below 0%) is never the fallback, nor in the medians of parameters no run
-    determines (unless every fit failed).
+    (:func:`is_undetermined`). Where those values cannot make the group's twins, the fallback
+    is the run whose own model can and that lies nearest the medians (the sum over parameters
+    of the squared difference over the parameter's plausible range). A model can make twins
+    where its values as simulated make a stable loop with the plant (:func:`loop_is_stable`)
+    and the simulation takes them. A failed fit (validation VAF below 0%) is never the
+    fallback, nor in the medians of parameters no run determines (unless every fit failed).
+
+    Parameters
+    ----------
+    fits : sequence of :class:`hcid.hcfit.HCFit`
+        The group's runs' fits, each with the same parameters.
+    labels : sequence of str
+        The runs' names in the fallback's words (``run 3``).
+    num_c, den_c : ndarray
+        The plant's polynomials in s, highest power first.
+    simulated : callable, optional
+        A model's values as its twins simulate them (:class:`Simulated`); None: as they are.
+        The simulation needs every value in its range: a value brought into it keeps the
+        model's behaviour nearest what was fitted (a delay fitted at 0 s, on its bound, says
+        only that it is shorter than the fit can tell from the neuromuscular lag, and one
+        sample of the simulation is the shortest it can take); ``notes`` says so.
+
+    Raises
+    ------
+    DataError
+        Where neither the medians nor any run's own model can make twins: no fallback exists.
     """
     statuses = [parameter_status(f) for f in fits]
     names = fits[0].names
@@ -211,23 +268,33 @@ def group_model(fits: Sequence, labels: Sequence[str], num_c, den_c) -> GroupMod
             values[p] = LITERATURE_NMS[p]
         else:  # the data say little: the median over the runs, brought into its plausible range
             values[p] = float(np.clip(np.median([f.values[p] for f in described]), *PLAUSIBLE[p]))
-    if loop_is_stable(values, num_c, den_c):
-        return GroupModel(values, FROM_MEDIANS, tuple(none))
+
+    def why_not(candidate: dict) -> tuple[str, tuple[str, ...]]:
+        """Why a model's values cannot make twins ("" where they can), and what simulating
+        them changes."""
+        sim = Simulated(candidate) if simulated is None else simulated(candidate)
+        finite = all(math.isfinite(v) for v in sim.values.values())
+        if finite and not loop_is_stable(sim.values, num_c, den_c):
+            return "make an unstable loop with the plant", sim.changes
+        if sim.problem or not finite:
+            return f"cannot make twins: {sim.problem or 'a value is not finite'}", sim.changes
+        return "", sim.changes
+
+    medians_fail, changes = why_not(values)
+    if not medians_fail:
+        return GroupModel(values, FROM_MEDIANS, tuple(none), changes)
 
     def distance(fit) -> float:
         return sum(((fit.values[p] - values[p]) / (PLAUSIBLE[p][1] - PLAUSIBLE[p][0])) ** 2 for p in names)
 
-    stable = [
-        (distance(f), i)
-        for i, f in enumerate(fits)
-        if not _failed(f) and loop_is_stable(f.values, num_c, den_c)
-    ]
-    if not stable:
-        raise DataError(
-            "neither the medians of its runs' fits nor any run's own model (of those that describe "
-            "their data) makes a stable loop"
-        )
-    i = min(stable)[1]
-    source = f"{labels[i]}'s own model (the medians make an unstable loop with the plant)"
-    its_own = tuple(p for p in names if is_undetermined(statuses[i][p]))
-    return GroupModel(dict(fits[i].values), source, its_own)
+    for _, i in sorted((distance(f), i) for i, f in enumerate(fits) if not _failed(f)):
+        fails, changes = why_not(fits[i].values)
+        if not fails:
+            its_own = tuple(p for p in names if is_undetermined(statuses[i][p]))
+            taken = f"{labels[i]}'s own model"
+            return GroupModel(dict(fits[i].values), taken, its_own, (f"the medians {medians_fail}", *changes))
+    raise DataError(
+        "neither the medians of its runs' fits nor any run's own model (of those that describe "
+        f"their data) makes a stable loop{' that its twins can simulate' if simulated else ''} "
+        f"(the medians {medians_fail})"
+    )

@@ -59,7 +59,7 @@ from hcid.pipeline.evidence import (
     group_name,
 )
 from hcid.pipeline.execution import Execution
-from hcid.pipeline.fit import _choices, _stage_choices
+from hcid.pipeline.fit import _choices, _stage_choices, fit_windows, tracking_record
 from hcid.pipeline.parallel import labelled
 from hcid.pipeline.rundir import holds_run_dir
 from hcid.pipeline.sessions import Session
@@ -73,7 +73,9 @@ from hcid.pipeline.twins import (
     group_slug,
     pool_twins,
     separates,
+    twin_model,
     twin_rate,
+    twin_remnant,
 )
 from hcid.selection import over_w
 from hcid.selection.calibration import benjamini_hochberg
@@ -113,27 +115,10 @@ class AnalysisRun:
 # --------------------------------------------------------------------------- per-run fits
 
 
-def _fit_windows(config: Config) -> tuple[slice, slice]:
-    """The rows every run's parametric fits use: the direct method's final stage's windows."""
-    stage = config.identify.stage(methods.get("direct").final_stage.name)
-    return stage.estimation.rows(), stage.validation.rows()
-
-
-def _tracking(record: dict, config: Config) -> hcfit.TrackingRecord:
-    return hcfit.TrackingRecord(
-        record["ft"],
-        record["e"],
-        record["u"],
-        config.timing.output_rate,
-        *_fit_windows(config),
-        fd=record["fd"],
-    )
-
-
 def _fit_run(config: Config, seed: int, record: dict, kn_rate: float):
     """The run's FF and FB fits and the remnant its FF fit leaves."""
     yc = plant(config.loop)
-    tracking = _tracking(record, config)
+    tracking = tracking_record(record, config)
     settings = config.fit_hc
     fits = {
         ff: hcfit.fit_parametric(settings, yc, ff, record=tracking, disturbance_at=config.loop.disturbance_at)
@@ -168,7 +153,7 @@ def _same_fit(config: Config, sel: SelectedModel, fits: dict):
     """The run's own fit (step 2) of the selected structure when it is the one
     :func:`hcid.analysis.selected.fit_selected` would make (same windows: the direct method's final
     stage's), else None (fitted again)."""
-    if (sel.estimation.rows(), sel.validation.rows()) != _fit_windows(config):
+    if (sel.estimation.rows(), sel.validation.rows()) != fit_windows(config):
         return None
     return fits[bool(sel.has_feedforward)]
 
@@ -302,25 +287,40 @@ def _fit_runs(study: _Study, found: _Found) -> None:
 
 
 def _group_models(study: _Study, found: _Found) -> None:
-    """Per group: its model from what its runs determine, and its twins' remnant filter."""
-    num_c, den_c = np.array(study.config.loop.plant.num), np.array(study.config.loop.plant.den)
+    """Per group: its model from what its runs determine, of those its twins can be made from
+    (:func:`group_model` judged by :func:`twin_model`: a value brought into the twins' range, or
+    the nearest run's own model), and its twins' remnant filter: the medians over the runs whose
+    remnant fit is off its search bounds, else over every run's fit (on a bound the filter's
+    shape means little, its level still measures the remnant); each fallback in ``source``."""
+    config = study.config
+    num_c, den_c = np.array(config.loop.plant.num), np.array(config.loop.plant.den)
+    sim_rate = twin_rate(config.timing.output_rate)
+    remnant_names = ("kn", "w_n", "zeta_n")
+
+    def simulated(values: dict):
+        return twin_model(values, sim_rate, config.loop)
+
     for key, seeds in study.groups.items():
         fits = [found.fitted[s][0][True] for s in seeds]
         try:
-            found.models[key] = group_model(fits, [f"run {s}" for s in seeds], num_c, den_c)
+            model = group_model(fits, [f"run {s}" for s in seeds], num_c, den_c, simulated)
         except DataError as exc:
             raise DataError(
                 f"group {group_slug(key)}: {exc}; look at its runs' fits or group them otherwise (--by)"
             ) from None
-        remnants = [found.fitted[s][1] for s in seeds]
-        remnants = [r for r in remnants if r is not None and not r.at_bound]
-        if not remnants:
+        fitted = [found.fitted[s][1] for s in seeds if found.fitted[s][1] is not None]
+        if not fitted:
             raise DataError(
                 f"group {group_slug(key)}: no run's remnant could be fitted; cannot build its twins"
             )
-        found.remnants[key] = tuple(
-            float(np.median([getattr(r, a) for r in remnants])) for a in ("kn", "w_n", "zeta_n")
-        )
+        off_bounds = [r for r in fitted if not r.at_bound]
+        medians = [float(np.median([getattr(r, a) for r in off_bounds or fitted])) for a in remnant_names]
+        remnant = twin_remnant(tuple(medians))
+        if remnant.problem:
+            raise DataError(f"group {group_slug(key)}: its remnant cannot make twins: {remnant.problem}")
+        on_bounds = () if off_bounds else ("its remnant filter from fits on their search bounds",)
+        found.models[key] = model.noting(*on_bounds, *remnant.changes)
+        found.remnants[key] = tuple(remnant.values[a] for a in remnant_names)
 
 
 def _twin_source(study: _Study, found: _Found, key, sets: list[list[int]], i: int, model: dict) -> TwinSource:
@@ -512,10 +512,6 @@ def analyse_study(
         stages[name], lap[0] = now - lap[0], now
 
     kinds = {kind.value: sum(t.kind is kind for t in trials.values()) for kind in Kind}
-    session = None
-    if sessions.is_whole_experiment(trials):
-        session = sessions.combine_session(config, whole, trials, person)
-        lap_done("combine conditions")
     if not two_input:  # refused before anything is written
         counts = ", ".join(f"{n} {k}" for k, n in kinds.items() if n)
         raise DataError(
@@ -555,6 +551,11 @@ def analyse_study(
     lap_done("more FB twins")
     _select_and_fit(study, found, judge, run_sizes)
     lap_done("fit selected")
+    session = None
+    if sessions.is_whole_experiment(trials):
+        with labelled("conditions: "):
+            session = sessions.combine_session(config, whole, trials, person, execution)
+        lap_done("combine conditions")
     group_table, run_table = write_tables(study, found, checks, judge, data.set_aside)
     _write_skipped(run_dir, whole)
     if session is not None:
