@@ -11,9 +11,11 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from hcid.analysis.conditions import ANSWERS, SOURCES, Kind
+from hcid.config.fit import FEEDBACK_PARAMETERS
 from hcid.pipeline.sessions import BANDS
 from hcid.report.document import Doc
 from hcid.report.figures import plain_log
+from hcid.tables import PARAMETER_UNITS
 
 TITLE = "A whole experiment: every condition, combined per person"
 
@@ -24,7 +26,9 @@ class ConditionsData:
     skipped: list[list[str]]
     inversion: list[list[str]]
     superposition: list[list[str]]
+    superposition_lines: list[list[str]]
     prediction: list[list[str]]
+    feedback: tuple[list[str], list[list[str]]] = ([], [])
     curves: dict = field(default_factory=dict)  # source -> person -> (hz, |Ht Yc|, |He| dB, measured)
     people: int = 0
     name: str = ""
@@ -33,6 +37,8 @@ class ConditionsData:
 def _range(r: dict, digits: int = 2) -> str:
     if not math.isfinite(r["estimate"]):
         return "-"
+    if r["n"] == 1 or r["low"] == r["high"]:  # one person, pair or trial: no range to show
+        return f"{r['estimate']:.{digits}f}"
     return f"{r['estimate']:.{digits}f} [{r['low']:.{digits}f}, {r['high']:.{digits}f}]"
 
 
@@ -91,16 +97,17 @@ def compute(run, done) -> ConditionsData | None:
         ]
         inversion.append(row + ["; ".join(per_person) or "-"])
     superposition = [
-        [
-            r["quantity"],
-            r["band"] or f"{r['omega']:.3g} rad/s",
-            _range(r, 1 if "phase" in r["quantity"] else 2),
-            _p(r["p"]),
-            str(r["n"]),
-        ]
+        [r["quantity"], _range(r, 1 if "phase" in r["quantity"] else 2), _p(r["p"]), str(r["n"])]
         for r in findings
-        if r["finding"] == "superposition" and (r["band"] or r["quantity"].endswith("ratio"))
+        if r["finding"] == "superposition" and r["band"]
     ]
+    per_line: dict[float, list[str]] = {}
+    for r in findings:
+        if r["finding"] == "superposition" and not r["band"] and r["quantity"].endswith("ratio"):
+            row = per_line.setdefault(r["omega"], [f"{r['omega']:.3g}", "-", "-", "-", "-"])
+            at = 1 if r["quantity"].startswith("U/R") else 3
+            row[at : at + 2] = [_range(r), _p(r["p"])]
+    superposition_lines = [per_line[w] for w in sorted(per_line)]
     prediction = [
         [r["source"], r["quantity"], r["band"], _range(r), r["spread"], str(r["n"])]
         for r in findings
@@ -117,8 +124,42 @@ def compute(run, done) -> ConditionsData | None:
             c["he"].append(r["he_db"])
             c["measured"].append(r["he_measured"])
     return ConditionsData(
-        kinds, _skipped(run), inversion, superposition, prediction, curves, len(people), run.config.name
+        kinds,
+        _skipped(run),
+        inversion,
+        superposition,
+        superposition_lines,
+        prediction,
+        _feedback(run),
+        curves,
+        len(people),
+        run.config.name,
     )
+
+
+def _feedback(run) -> tuple[list[str], list[list[str]]]:
+    """Per person, the disturbance-only runs' feedback alone: each parameter's median over the
+    runs that determine it (and how many), the loop's crossover, each method's ARX VAF."""
+    if run.feedback_runs is None:
+        return [], []
+    rows = run.feedback_runs.to_pylist()
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    header = ["person", "runs"]
+    header += [f"{p} ({PARAMETER_UNITS[p]})" if PARAMETER_UNITS[p] != "-" else p for p in FEEDBACK_PARAMETERS]
+    header += ["crossover (rad/s)"] + [f"VAF {m} (%)" for m in methods]
+    out = []
+    for person in sorted({r["person"] for r in rows}):
+        mine = [r for r in rows if r["person"] == person]
+        first = list({r["run_id"]: r for r in mine}.values())
+        cells = [person, str(len(first))]
+        for p in FEEDBACK_PARAMETERS:
+            kept = [r[p] for r in first if r[f"{p}_status"] == "determined"]
+            cells.append(f"{np.median(kept):.3g} ({len(kept)})" if kept else "-")
+        cells.append(f"{np.median([r['crossover'] for r in first]):.3g}")
+        for method in methods:
+            cells.append(f"{np.median([r['vaf_validation'] for r in mine if r['method'] == method]):.0f}")
+        out.append(cells)
+    return header, out
 
 
 def plot_inversion(curves: dict, title: str, axes=None):
@@ -197,15 +238,30 @@ def render(data: ConditionsData | None, doc: Doc) -> None:
             "study's bands (up to 0.15 Hz, from 0.25 Hz).",
             lambda c=data.curves, n=data.name: plot_inversion(c, n),
         )
+    if data.feedback[1]:
+        doc.text(
+            "**Feedback alone** (disturbance-only runs: no target, so no feedforward test): per "
+            "person the median of each fitted parameter over the runs that determine it (how many), "
+            "the loop's crossover (rad/s), and each method's ARX model without the target path at "
+            "W_BIC (validation VAF, %); every run in `feedback_runs.parquet`."
+        )
+        doc.table(*data.feedback)
     if data.superposition:
         doc.text(
             "**Superposition**: each person's single-input estimate (target-only trials for U/R, "
             "disturbance-only for U/D) against their two-input one, paired across people: the median "
             "ratio single/two [range over the pairs] and the Wilcoxon signed-rank test, pooled over "
-            f"lines and per line (with {data.people} people a line's test cannot go below "
-            f"{2 / 2 ** max(data.people, 1):.2g})."
+            "every person's lines, then per line"
+            + (
+                f" (with {data.people} people a line's test cannot go below {2 / 2**data.people:.2g})."
+                if data.people > 1
+                else " (one person: no test per line)."
+            )
         )
-        doc.table(["quantity", "lines", "median [range]", "p", "pairs"], data.superposition)
+        doc.table(["quantity (pooled over lines)", "median [range]", "p", "pairs"], data.superposition)
+        doc.table(
+            ["line (rad/s)", "U/R ratio [range]", "p", "U/D ratio [range]", "p"], data.superposition_lines
+        )
     if data.prediction:
         doc.text(
             "**Prediction across conditions**: each trial's u predicted from its measured ft and e by "
