@@ -187,8 +187,52 @@ def test_the_lab_examples_are_their_plant():
 
 def test_the_plant_check_has_no_lines_to_check_without_multisines(integrator):
     r = simulate_realization(integrator, integrator.model("FF"), 1, kn=0.0)
-    rec = {"ft": r.ft, "fd": np.zeros_like(r.fd), "e": r.e, "u": r.u}
+    noise = np.random.default_rng(0).standard_normal(r.ft.size)  # broadband: no lines
+    rec = {"ft": noise, "fd": np.zeros_like(r.fd), "e": r.e, "u": r.u}
     assert plant_mismatch(rec, 20.0, [1.0], [1.0, 0.0], "input") is None
+
+
+def _single_input_loop(gain=1.0, offset=0.0, target=True):
+    """A noise-free single-input record of u = 2 e with Yc = 1/s, the disturbance at its input,
+    built at the lines (bins 4, 6, 10 of 400 samples at 10 Hz), plus a constant ``offset`` on u
+    whose integral is theta's drift (a ramp) from 0."""
+    n, rate = 400, 10.0
+    x = np.zeros(n // 2 + 1, complex)
+    x[[4, 6, 10]] = n * np.array([1.0, 0.5j, 0.3])
+    w = 2 * np.pi * np.arange(x.size) * rate / n
+    w[0] = 1.0
+    yc, he = gain / (1j * w), 2.0
+    f = np.fft.irfft(x, n)
+    spectrum_u = he * x / (1 + he * yc) if target else -he * yc * x / (1 + he * yc)
+    u = np.fft.irfft(spectrum_u, n) + offset
+    t = np.arange(n) / rate
+    theta = np.fft.irfft(yc * (spectrum_u + (0 if target else x)), n) + gain * offset * t
+    ft, fd = (f, np.zeros(n)) if target else (np.zeros(n), f)
+    return {"ft": ft, "fd": fd, "e": ft - theta, "u": u}, rate
+
+
+def test_a_single_input_record_is_checked_at_its_inputs_lines():
+    # Source: records built from the loop's own equations (noise-free): the right plant explains
+    # theta exactly, twice its gain leaves |Theta - 2 Theta| / |Theta| = 100% (less what a fitted
+    # ramp, the integrator's drift, shares with that error: 0.3% here).
+    for target in (True, False):
+        rec, rate = _single_input_loop(target=target)
+        assert plant_mismatch(rec, rate, [1.0], [1.0, 0.0], "input") == pytest.approx(0.0, abs=1e-9)
+        assert plant_mismatch(rec, rate, [2.0], [1.0, 0.0], "input") == pytest.approx(1.0, abs=0.01)
+
+
+def test_an_integrators_drift_from_a_mean_input_is_not_a_plant_mismatch():
+    # A constant 0.05 on u ramps theta (the integrator's drift), which leaks into every line; the
+    # check takes out a ramp fitted by least squares (one integrator: order 1), exactly here.
+    rec, rate = _single_input_loop(offset=0.05)
+    assert plant_mismatch(rec, rate, [1.0], [1.0, 0.0], "input") == pytest.approx(0.0, abs=1e-9)
+    leaked = np.fft.rfft(rec["ft"] - rec["e"])[[4, 6, 10]]  # what the drift alone adds at the lines
+    assert (
+        np.abs(
+            leaked - np.fft.rfft(_single_input_loop()[0]["ft"] - _single_input_loop()[0]["e"])[[4, 6, 10]]
+        ).max()
+        > 1
+    )
 
 
 def test_a_record_is_of_another_plant_above_the_limit_or_nan():

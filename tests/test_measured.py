@@ -769,7 +769,7 @@ def test_a_run_longer_than_the_window_is_checked_over_the_window(tmp_path):
     """The multisines have whole periods over the window only: a run that goes on after it (10 s
     more here) is checked over the window, not skipped for having no lines (a review's find)."""
     from hcid.io.resolve import read_study
-    from hcid.pipeline.studies import _check_plant
+    from hcid.pipeline.studies import check_plant
 
     longer = tmp_path / "longer"
     longer.mkdir()
@@ -784,9 +784,9 @@ def test_a_run_longer_than_the_window_is_checked_over_the_window(tmp_path):
         )
         if refused:
             with pytest.raises(DataError, match="is not the configured plant"):
-                _check_plant(cfg, data)
+                check_plant(cfg, data)
         else:
-            _check_plant(cfg, data)
+            check_plant(cfg, data)
 
 
 def _shifted(rows: list[str], dt: float) -> list[str]:
@@ -822,7 +822,7 @@ def test_recordings_of_both_plants_under_one_plant_are_refused(tmp_path):
     import glob
 
     from hcid.io.resolve import read_study
-    from hcid.pipeline.studies import _check_plant
+    from hcid.pipeline.studies import check_plant
 
     run = tmp_path / "mixed"
     result = runner.invoke(
@@ -835,7 +835,7 @@ def test_recordings_of_both_plants_under_one_plant_are_refused(tmp_path):
     assert not run.exists()
     for plant in ("fo", "so"):  # each plant's own config accepts its files
         files = glob.glob(str(CPHS / f"*_{plant}_*.csv"))
-        _check_plant(*read_study(ROOT / "configs" / f"cphs2017_{plant}.yaml", files, None))
+        check_plant(*read_study(ROOT / "configs" / f"cphs2017_{plant}.yaml", files, None))
 
 
 def test_plant_check_false_lets_recordings_the_plant_leaves_a_delay_out_through(tmp_path):

@@ -63,7 +63,7 @@ from hcid.pipeline.fit import _choices, _stage_choices, fit_windows, tracking_re
 from hcid.pipeline.parallel import labelled
 from hcid.pipeline.rundir import holds_run_dir
 from hcid.pipeline.sessions import Session
-from hcid.pipeline.studies import identify_study
+from hcid.pipeline.studies import check_plant, identify_study
 from hcid.pipeline.twins import (
     TwinSource,
     calibrate_twins,
@@ -497,6 +497,7 @@ def analyse_study(
     """
     _check_config(config)
     config = with_data(config)
+    check_plant(config, data)  # every run, the single-input ones too (identify checks its own)
     trials = sessions.classify(data.records, config)
     person = _person(data, options.person)
     whole = data

@@ -391,15 +391,16 @@ def _check_data(config: Config, data: datasets.DataSet) -> None:
             f"data: run {short} holds {data.records[short]['u'].size} samples, the config's windows "
             f"need {need}; read it for this config (hcid.io.resolve.read_study)"
         )
-    _check_plant(config, data)
+    check_plant(config, data)
 
 
-def _check_plant(config: Config, data: datasets.DataSet) -> None:
+def check_plant(config: Config, data: datasets.DataSet) -> None:
     """Refuse runs whose e is not ft minus the configured plant's output (a data set of another
     plant, or the disturbance at the other point): every result would be for the wrong loop.
-    Each run is checked over the analysis window (where its multisines have whole periods);
-    runs whose forcing functions have no lines there, a config without a loop (identification
-    alone) and one with ``data.plant_check: false`` are not checked."""
+    Each run is checked over the analysis window (where its multisines have whole periods; a
+    single-input run at its input's lines); runs whose forcing functions have no lines there, a
+    config without a loop (identification alone) and one with ``data.plant_check: false`` are not
+    checked."""
     loop, rate = config.loop, config.timing.output_rate
     if loop is None or not config.data.plant_check:
         return
