@@ -618,7 +618,8 @@ def analyse(
 
     Every run identified by each method, W calibrated per group on twins of the group's
     fitted model, each run's feedforward tested against its FB twins (its p-value), its
-    model selected and its parameters fitted with their standard errors (SPEC 10 and 11).
+    model selected and its parameters fitted with their standard errors (SPEC 10 and 11); in
+    a whole experiment, every condition combined per person (SPEC 12).
 
     Parameters
     ----------
@@ -645,6 +646,11 @@ def analyse(
         the parameters with ``_se`` and ``_status``; docs/tables.md), ``groups``: one per group
         and method (W, its rule, the verdict); the same tables as ``RUN/analysis.parquet`` and
         ``analysis_groups.parquet``. ``hcid.build_report(run)`` writes the HTML report.
+        A whole experiment (single-input runs, or line sets swapped between runs: SPEC 12): only
+        the two-input runs are tested for feedforward; ``kinds`` counts the runs of each kind and
+        ``session`` holds every run combined per person (``session_lines``, ``session_findings``,
+        ``session_trials`` and ``feedback_runs`` tables). ``skipped``: the files a folder or glob
+        found that are not runs, with why.
 
     Raises
     ------
