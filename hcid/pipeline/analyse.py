@@ -20,9 +20,15 @@ feedback: "would feedforward of the size this study shows be found here?"; ``ff_
 which twins gave W. Where no W separates the twins used, the W of the grid with the least
 total error rate (FP + FN) is used and every decision there is marked ``uncertain``.
 
+Each run's kind comes from its data first (SPEC 12, :mod:`hcid.pipeline.sessions`): only runs
+with both a target and a disturbance go through the steps above; in a whole experiment (runs of
+one input, or line sets swapped between runs) every run is then combined per person, and each
+disturbance-only run's feedback fitted alone.
+
 Writes ``analysis.parquet`` and ``analysis.csv`` (one row per run and method, with the run's
 factors: statistics-ready), ``analysis_groups.parquet`` and ``fc_estimates.parquet`` (each
-group's model-free estimates of both paths, SPEC 10, beside its fitted model).
+group's model-free estimates of both paths, SPEC 10, beside its fitted model), ``skipped.parquet``
+(files found that are not runs) and, for a whole experiment, the session tables.
 """
 
 from __future__ import annotations
