@@ -497,3 +497,22 @@ def test_bad_folder_patterns_and_exclude_lists_name_the_key(tmp_path, key, value
     raw["data"][key] = value
     with pytest.raises(ConfigError, match=message):
         parse_config(raw, "lab")
+
+
+def test_identify_lists_the_files_it_skips(session_folders, tmp_path):
+    raw = yaml.safe_load(_config(tmp_path, "{subject}/{condition}_trial{trial}.csv").read_text())
+    raw["data"]["exclude"] = ["*_rst?.csv"]
+    config = tmp_path / "lab.yaml"
+    config.write_text(yaml.safe_dump(raw, sort_keys=False))
+    run = tmp_path / "run"
+    args = ["identify", str(config), "--data", str(session_folders / "P01"), "--run", str(run), "--quiet"]
+    result = runner.invoke(app, [*args, "--method", "direct"])
+    assert result.exit_code == 0, result.output
+    assert "read 2 measured run(s)" in result.output
+    assert (
+        "SKIPPED: 3 file(s) found are not runs (RUN/skipped.parquet): 1 not a data file (e.g. desktop.ini); "
+        "2 left out by data.exclude '*_rst?.csv' (e.g. easy_trial1_rst1.csv)"
+    ) in result.output
+    factors = pq.read_table(run / "runs.parquet").column("subject").to_pylist()
+    assert factors == ["P01", "P01"]
+    assert pq.read_table(run / "skipped.parquet").num_rows == 3

@@ -108,8 +108,7 @@ def print_analysis(result) -> None:
         typer.echo(_data_check_line(g, full=g["group"] not in checked))
         checked.add(g["group"])
     _print_session(result)
-    if result.skipped:
-        typer.echo(_skipped_line(result.skipped))
+    print_skipped(result.skipped)
     if result.set_aside:
         typer.echo(
             f"SET ASIDE (--skip-unreadable): {len(result.set_aside)} file(s) could not be read and are "
@@ -348,8 +347,13 @@ def _kinds_line(kinds: dict) -> str:
     return "CONDITIONS (each run's kind from its data): " + "; ".join(parts)
 
 
+def print_skipped(skipped) -> None:
+    """The files a folder or glob found that are not runs, counted by reason (one example each)."""
+    if skipped:
+        typer.echo(_skipped_line(skipped))
+
+
 def _skipped_line(skipped) -> str:
-    """The files left out, counted by reason (one example each)."""
     by_reason: dict[str, list[str]] = {}
     for path, why in skipped:
         key = why.split(" (")[0].split(" of ")[0]

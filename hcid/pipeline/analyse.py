@@ -69,7 +69,7 @@ from hcid.pipeline.fit import _choices, _stage_choices, fit_windows, tracking_re
 from hcid.pipeline.parallel import labelled
 from hcid.pipeline.rundir import holds_run_dir
 from hcid.pipeline.sessions import Session
-from hcid.pipeline.studies import check_plant, identify_study
+from hcid.pipeline.studies import check_plant, identify_study, write_skipped
 from hcid.pipeline.twins import (
     TwinSource,
     calibrate_twins,
@@ -564,7 +564,7 @@ def analyse_study(
             session = sessions.combine_session(config, whole, trials, person, execution)
         lap_done("combine conditions")
     group_table, run_table = write_tables(study, found, checks, judge, data.set_aside)
-    _write_skipped(run_dir, whole)
+    write_skipped(run_dir, whole)
     if session is not None:
         sessions.write_session(run_dir, session)
     lap_done("tables")
@@ -603,11 +603,6 @@ def _subset(data: DataSet, seeds: Sequence[int]) -> DataSet:
         records={s: r for s, r in data.records.items() if s in keep},
         runs=[r for r in data.runs if int(r["run"]) in keep],
     )
-
-
-def _write_skipped(run_dir: Path, data: DataSet) -> None:
-    rows = [{"file": f, "reason": why} for f, why in data.skipped]
-    results.write(tables.SKIPPED, pa.Table.from_pylist(rows, schema=tables.SKIPPED.arrow), run_dir)
 
 
 def analyse(

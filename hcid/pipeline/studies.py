@@ -37,9 +37,11 @@ __all__ = [
     "SimulationRun",
     "StudyRun",
     "calibrate_study",
+    "check_plant",
     "identify_study",
     "run_study",
     "simulate_study",
+    "write_skipped",
 ]
 
 
@@ -358,6 +360,8 @@ def identify_study(
         done[key] = parts
 
     frontier, choices, log = _write_identification(config, run_dir, done)
+    if data is not None:
+        write_skipped(run_dir, data)
     if tasks:
         results.append_run_log(
             run_dir, f"identify ({len(tasks)} tasks)", time.perf_counter() - start, execution.jobs
@@ -392,6 +396,12 @@ def _check_data(config: Config, data: datasets.DataSet) -> None:
             f"need {need}; read it for this config (hcid.io.resolve.read_study)"
         )
     check_plant(config, data)
+
+
+def write_skipped(run_dir: Path, data: datasets.DataSet) -> None:
+    """``skipped.parquet``: the files a folder or glob of the data set found that are not runs."""
+    rows = [{"file": f, "reason": why} for f, why in data.skipped]
+    results.write(tables.SKIPPED, pa.Table.from_pylist(rows, schema=tables.SKIPPED.arrow), run_dir)
 
 
 def check_plant(config: Config, data: datasets.DataSet) -> None:
