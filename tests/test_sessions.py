@@ -43,7 +43,7 @@ def combined(request):
         single_input=True,
     )
     config = with_data(config)
-    trials = sessions.classify(data.records, config)
+    trials = sessions.classify(data, config)
     return plant, data, trials, sessions.combine_session(config, data, trials, "subject")
 
 

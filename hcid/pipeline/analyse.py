@@ -504,7 +504,7 @@ def analyse_study(
     _check_config(config)
     config = with_data(config)
     check_plant(config, data)  # every run, the single-input ones too (identify checks its own)
-    trials = sessions.classify(data.records, config)
+    trials = sessions.classify(data, config)
     person = _person(data, options.person)
     whole = data
     two_input = [seed for seed, t in trials.items() if t.kind is Kind.TWO_INPUT]

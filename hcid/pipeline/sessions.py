@@ -52,20 +52,21 @@ _PREDICTIONS = {
 }
 
 
-def classify(records: Mapping[int, dict], config: Config) -> dict[int, TrialLines]:
+def classify(data: DataSet, config: Config) -> dict[int, TrialLines]:
     """Each run's kind and lines over the analysis window (:func:`hcid.analysis.conditions.trial_lines`).
 
     Raises
     ------
     DataError
-        For a run with neither a target nor a disturbance.
+        For a run with neither a target nor a disturbance (its file named).
     """
     rate, n = config.timing.output_rate, config.timing.record_samples
+    files = {int(r["run"]): r["file"] for r in data.runs}
     out = {}
-    for seed, record in records.items():
+    for seed, record in data.records.items():
         trial = conditions.trial_lines(record, rate, n)
         if trial.kind is None:
-            raise DataError(f"run {seed}: {trial.problem}: nothing to analyse")
+            raise DataError(f"{files.get(seed, 'data')}: run {seed}: {trial.problem}: nothing to analyse")
         out[seed] = trial
     return out
 
