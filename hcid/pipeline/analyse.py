@@ -297,7 +297,8 @@ def _group_models(study: _Study, found: _Found) -> None:
     (:func:`group_model` judged by :func:`twin_model`: a value brought into the twins' range, or
     the nearest run's own model), and its twins' remnant filter: the medians over the runs whose
     remnant fit is off its search bounds, else over every run's fit (on a bound the filter's
-    shape means little, its level still measures the remnant); each fallback in ``source``."""
+    shape means little, its level still measures the remnant); where its runs make no such model,
+    the model of every run of the study; each fallback in ``source``."""
     config = study.config
     num_c, den_c = np.array(config.loop.plant.num), np.array(config.loop.plant.den)
     sim_rate = twin_rate(config.timing.output_rate)
@@ -306,27 +307,39 @@ def _group_models(study: _Study, found: _Found) -> None:
     def simulated(values: dict):
         return twin_model(values, sim_rate, config.loop)
 
-    for key, seeds in study.groups.items():
+    def model_of(seeds: list[int]):
         fits = [found.fitted[s][0][True] for s in seeds]
-        try:
-            model = group_model(fits, [f"run {s}" for s in seeds], num_c, den_c, simulated)
-        except DataError as exc:
-            raise DataError(
-                f"group {group_slug(key)}: {exc}; look at its runs' fits or group them otherwise (--by)"
-            ) from None
+        model = group_model(fits, [f"run {s}" for s in seeds], num_c, den_c, simulated)
         fitted = [found.fitted[s][1] for s in seeds if found.fitted[s][1] is not None]
         if not fitted:
-            raise DataError(
-                f"group {group_slug(key)}: no run's remnant could be fitted; cannot build its twins"
-            )
+            raise DataError("no run's remnant could be fitted")
         off_bounds = [r for r in fitted if not r.at_bound]
         medians = [float(np.median([getattr(r, a) for r in off_bounds or fitted])) for a in remnant_names]
         remnant = twin_remnant(tuple(medians))
         if remnant.problem:
-            raise DataError(f"group {group_slug(key)}: its remnant cannot make twins: {remnant.problem}")
+            raise DataError(f"its remnant cannot make twins: {remnant.problem}")
         on_bounds = () if off_bounds else ("its remnant filter from fits on their search bounds",)
-        found.models[key] = model.noting(*on_bounds, *remnant.changes)
-        found.remnants[key] = tuple(remnant.values[a] for a in remnant_names)
+        return model.noting(*on_bounds, *remnant.changes), tuple(remnant.values[a] for a in remnant_names)
+
+    every = sorted({s for seeds in study.groups.values() for s in seeds})
+    for key, seeds in study.groups.items():
+        try:
+            found.models[key], found.remnants[key] = model_of(seeds)
+        except DataError as exc:
+            # No run of the group can make twins: the study goes on with the model of all its runs,
+            # said so (a group's decisions then rest on twins of the study's model, not its own).
+            if sorted(seeds) == every:
+                raise DataError(
+                    f"group {group_slug(key)}: {exc}; look at its runs' fits or group them otherwise (--by)"
+                ) from None
+            try:
+                model, remnant = model_of(every)
+            except DataError as pooled:
+                raise DataError(
+                    f"group {group_slug(key)}: {exc}; nor can the study's runs together: {pooled}"
+                ) from None
+            found.models[key] = model.noting(f"its own runs cannot make twins ({exc}): the study's model")
+            found.remnants[key] = remnant
 
 
 def _twin_source(study: _Study, found: _Found, key, sets: list[list[int]], i: int, model: dict) -> TwinSource:
