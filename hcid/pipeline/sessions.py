@@ -487,7 +487,10 @@ def _feedback_task(config: Config, seed: int, record: dict, person: str) -> list
     signals = {k: record[k] for k in ("t", "ft", "fd", "e", "u")}
     run = api.Record(seed, rate, **signals)
     yc = plant(config.loop)
-    tracking = tracking_record(record, config)
+    # Over the analysis window, whole periods of the multisine: the lines estimator's lines (a
+    # sample more, as a 45 s file at 25 Hz leaves, can smear them below its threshold).
+    window = {k: x[: config.timing.record_samples] for k, x in record.items()}
+    tracking = tracking_record(window, config)
     fit = hcfit.fit_parametric(
         config.fit_hc, yc, False, record=tracking, disturbance_at=config.loop.disturbance_at
     )
