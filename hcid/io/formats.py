@@ -1,5 +1,5 @@
-"""Data file formats: the named columns of a CSV, Parquet or MATLAB file, and nothing else
-(results layer; :mod:`hcid.io.measured` turns them into checked records).
+"""Data file formats: the named columns of a CSV, Parquet, MATLAB or numpy ``.npz`` file, and
+nothing else (results layer; :mod:`hcid.io.measured` turns them into checked records).
 
 - Every file is checked against :data:`MAX_FILE_BYTES` (``stat()``) before it is read.
 - CSV: a UTF-8 byte-order mark, ``#`` comment lines and blank lines are dropped block by
@@ -8,6 +8,9 @@
   named columns are parsed (pyarrow).
 - Parquet: only the named columns are read.
 - MATLAB: v5/v7 by scipy, v7.3 (HDF5) by h5py; a struct's fields and N-D arrays.
+- numpy ``.npz``: ``np.load(allow_pickle=False)`` only (an object array is refused, never
+  unpickled); a name answers to its array or, without one, to the name with a trailing
+  underscore (``ref_``); 1-D or n x 1 arrays (:func:`_read_npz`).
 
 Add a format to :data:`READERS`.
 """
@@ -15,7 +18,6 @@ Add a format to :data:`READERS`.
 from __future__ import annotations
 
 import csv
-import io
 import re
 from pathlib import Path
 
@@ -79,46 +81,38 @@ def _is_comment(line: bytes) -> bool:
     return line.lstrip().startswith(b"#")
 
 
-class _Uncommented(io.RawIOBase):
-    """A CSV file's bytes without a leading UTF-8 byte-order mark and without ``#`` comment lines.
+def _uncommented(path: Path) -> pa.Buffer:
+    """A CSV file's bytes without a leading UTF-8 byte-order mark and without ``#`` comment or
+    blank lines, in memory that Arrow owns.
 
-    Read block by block, so a file is never held twice in memory.
+    Read block by block, so a file is never held twice in memory. Arrow's CSV reader is handed
+    this buffer, never a Python object (a file object, or ``pa.py_buffer`` of bytes): Arrow's
+    threads may release what they were given after ``read_csv`` returns, releasing a Python
+    object takes the interpreter lock, and a thread that asks for it while the interpreter exits
+    aborts the process (``terminate called without an active exception``, apache/arrow#34314)
+    where a refusal should exit with code 2.
     """
-
-    def __init__(self, handle):
-        self._handle = handle
-        self._tail = b""
-        self._out = b""
-        self._first = True
-        self._done = False
-
-    def readable(self) -> bool:
-        return True
-
-    def _fill(self) -> None:
-        while not self._out and not self._done:
-            block = self._handle.read(_BLOCK)
-            if self._first:
-                block, self._first = block.removeprefix(_BOM), False
-            if not block:
-                self._done = True
-                whole, self._tail = self._tail, b""
-            else:
-                block = self._tail + block
+    sink = pa.BufferOutputStream()
+    tail = b""
+    with open(path, "rb") as f:
+        first = True
+        while True:
+            block = f.read(_BLOCK)
+            if first:
+                block, first = block.removeprefix(_BOM), False
+            if block:
+                block = tail + block
                 cut = block.rfind(b"\n") + 1
-                whole, self._tail = block[:cut], block[cut:]
+                whole, tail = block[:cut], block[cut:]
+            else:
+                whole, tail = tail, b""
             if b"#" in whole or _BLANK_LINE.search(whole):
                 whole = b"".join(
                     line for line in whole.splitlines(keepends=True) if line.strip() and not _is_comment(line)
                 )
-            self._out = whole
-
-    def readinto(self, buffer) -> int:
-        self._fill()
-        n = min(len(buffer), len(self._out))
-        buffer[:n] = self._out[:n]
-        self._out = self._out[n:]
-        return n
+            sink.write(whole)
+            if not block:
+                return sink.getvalue()
 
 
 def _fields(line: str, path: Path) -> list[str]:
@@ -191,14 +185,13 @@ def _read_csv(path: Path, wanted: dict[str, str | int]) -> dict[str, np.ndarray]
     if not index:
         return {}
     generated = [f"_c{i}" for i in range(1, width + 1)]
-    with open(path, "rb") as f:
-        table = pacsv.read_csv(
-            io.BufferedReader(_Uncommented(f), _BLOCK),
-            read_options=pacsv.ReadOptions(column_names=generated, skip_rows=1 if header_row else 0),
-            convert_options=pacsv.ConvertOptions(
-                include_columns=sorted({generated[i - 1] for i in index.values()})
-            ),
-        )
+    table = pacsv.read_csv(
+        pa.BufferReader(_uncommented(path)),
+        read_options=pacsv.ReadOptions(column_names=generated, skip_rows=1 if header_row else 0),
+        convert_options=pacsv.ConvertOptions(
+            include_columns=sorted({generated[i - 1] for i in index.values()})
+        ),
+    )
     return _table_columns(table, path, {key: generated[i - 1] for key, i in index.items()}, wanted)
 
 
@@ -303,9 +296,100 @@ def _mat_values(path: Path, mat: dict, wanted: dict[str, str | int], nd: bool) -
     return out
 
 
+_ZIP = (b"PK\x03\x04", b"PK\x05\x06")  # how a zip archive starts (an empty one: its end record)
+#: Readers of a .npy header by its format version; np.savez writes 1.0, or 2.0 for a header past 64 KiB.
+_NPY_HEADERS = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
+
+
+def _read_npz(path: Path, wanted: dict[str, str | int]) -> dict[str, np.ndarray]:
+    """The wanted arrays of a numpy ``.npz`` archive, each a column.
+
+    Read by ``np.load(allow_pickle=False)`` only: an object array (a pickled Python object,
+    which could run code when loaded) is refused, never unpickled. A name answers to the
+    array of that name or, where there is none, to the name with a trailing underscore
+    (``ref`` to ``ref_``, as a logger's ``np.savez(**signals)`` leaves them). A column is a
+    1-D array or an n x 1 one; ``rate`` may also be a number (a 0-D array). The arrays read
+    may unpack to at most :data:`MAX_FILE_BYTES` together (a compressed archive is small on disk).
+    """
+    _by_name(path, wanted)
+    with open(path, "rb") as f:
+        start = f.read(6)
+    if not start.startswith(_ZIP):
+        what = "a single .npy array" if start == b"\x93NUMPY" else "not a zip archive"
+        raise DataError(f"{path}: not a .npz archive of named arrays ({what}; np.savez writes one)")
+    try:
+        npz = np.load(path, allow_pickle=False)
+    except Exception as exc:  # noqa: BLE001 (a damaged archive makes zipfile raise almost anything)
+        raise DataError(f"{path}: not a readable .npz archive ({str(exc).splitlines()[0][:80]})") from exc
+    with npz:
+        members = {}
+        for key, name in wanted.items():
+            member = next((m for m in (name, f"{name}_") if m in npz.files), None)
+            if member is not None:
+                members[key] = member
+        unpacked = sum(_npz_entry(path, npz, m).file_size for m in set(members.values()))
+        if unpacked > MAX_FILE_BYTES:
+            raise DataError(
+                f"{path}: its arrays unpack to {unpacked:,} bytes, above the {MAX_FILE_BYTES:,}-byte "
+                "limit on a data file (split it into several files)"
+            )
+        return {key: _npz_column(path, npz, member, key == "rate") for key, member in members.items()}
+
+
+def _npz_entry(path: Path, npz, member: str):
+    """The archive's entry (``zipfile.ZipInfo``) of an array: ``member.npy``, as np.savez names it."""
+    try:
+        return npz.zip.getinfo(f"{member}.npy")
+    except KeyError:
+        raise DataError(
+            f"{path}: {member!r} is not a numpy array (a file of another kind in the archive)"
+        ) from None
+
+
+def _npz_column(path: Path, npz, member: str, scalar: bool) -> np.ndarray:
+    """One array of an archive as a float64 column, its header checked before its data are read."""
+    label = f"array {member!r}"
+    try:
+        with npz.zip.open(_npz_entry(path, npz, member)) as f:
+            read_header = _NPY_HEADERS.get(np.lib.format.read_magic(f))
+            dtype = read_header(f)[2] if read_header is not None else None
+        if dtype is not None and dtype.hasobject:
+            raise DataError(
+                f"{path}: {label} is a pickled object array; hcid never unpickles a file "
+                "(save it as a numeric array)"
+            )
+        value = npz[member]  # np.load's allow_pickle=False holds here too
+    except DataError:
+        raise
+    except Exception as exc:  # noqa: BLE001 (a damaged entry makes zipfile or numpy raise almost anything)
+        raise DataError(f"{path}: {label} cannot be read ({str(exc).splitlines()[0][:80]})") from exc
+    if np.iscomplexobj(value):
+        raise DataError(f"{path}: {label} holds complex values; give the real signal")
+    if value.dtype.kind not in "fiub":
+        raise DataError(f"{path}: {label} is not numeric ({value.dtype})")
+    if value.ndim == 2 and value.shape[1] == 1:
+        value = value[:, 0]
+    if scalar and value.ndim == 0:
+        value = value.reshape(1)
+    if value.ndim != 1:
+        raise DataError(
+            f"{path}: {label} has shape {value.shape}; a column is a 1-D array or an n x 1 one "
+            "(several runs: a run array beside the signals, not a matrix)"
+        )
+    return np.asarray(value, dtype=np.float64)
+
+
 #: Data formats by file suffix: ``reader(path, wanted) -> {signal: array}``, where ``wanted``
-#: maps ft, fd, e, u, time, run and rate to the file's names. Add a format here.
-READERS = {".csv": _read_csv, ".parquet": _read_parquet, ".pq": _read_parquet, ".mat": _read_mat}
+#: maps ft, fd, e, u, time, run and rate to the file's names. Add a format here; the order
+#: decides which of a recording's copies in several formats a data set keeps on a tie
+#: (:mod:`hcid.io.datasets`: the first).
+READERS = {
+    ".csv": _read_csv,
+    ".parquet": _read_parquet,
+    ".pq": _read_parquet,
+    ".mat": _read_mat,
+    ".npz": _read_npz,
+}
 
 
 def read_columns(path: Path, wanted: dict[str, str | int], **options) -> dict[str, np.ndarray]:

@@ -1,4 +1,4 @@
-"""Measured human-in-the-loop data: read CSV, Parquet or MATLAB files into records.
+"""Measured human-in-the-loop data: read CSV, Parquet, MATLAB or numpy .npz files into records.
 
 Part of the results layer (it reads files). A data file holds one or more runs
 of one subject and condition, each with ft, fd, e and u (rad) and either a
@@ -24,6 +24,9 @@ How each format's columns are read: :mod:`hcid.io.formats`.
 - MATLAB ``.mat``: one variable per signal, a vector (run 1) or a
   samples x runs matrix (runs 1, 2, ...); the rate as a scalar variable
   (``rate`` mapping) or a time vector (``time`` mapping).
+- numpy ``.npz``: one array per signal (1-D or n x 1), runs by a ``run`` array as
+  in a CSV, the rate as a time array or a ``rate`` number; ``ref`` may be saved as
+  ``ref_``. Never unpickled: an object array is refused.
 """
 
 from __future__ import annotations
@@ -306,7 +309,7 @@ def read_runs(
     Parameters
     ----------
     path : str or Path
-        A CSV, Parquet or MATLAB file (:data:`READERS`).
+        A CSV, Parquet, MATLAB or .npz file (:data:`hcid.io.formats.READERS`).
     data : DataConfig
         Column names (by default ``t`` or ``time``, ``ft``, ``fd``, ``e``, ``u``,
         ``run``; without an ``e`` column, ``e = ft - theta`` from the system output)
