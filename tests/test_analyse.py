@@ -593,13 +593,13 @@ def test_a_group_whose_remnant_fits_are_all_on_their_bounds_still_gets_twins(fo_
     found.fitted = {s: ({True: _a4_fit(s)}, None) for s in (5, 6)}
     with pytest.raises(DataError, match="group 4-.*: no run's remnant could be fitted"):
         _group_models(study, found)
-    # With another group whose runs can: the study goes on, this group's twins from the model of
-    # every run of the study (said so), the other group's from its own.
+    # With another group whose runs can: the study goes on, this group's twins with its own model
+    # and the remnant filter of every run of the study (said so), the other group's its own.
     study = SimpleNamespace(config=config, groups={("4",): [5], ("5",): [6]})
     found.fitted = {5: ({True: _a4_fit(5)}, None), 6: ({True: _a4_fit(6)}, remnants[6])}
     _group_models(study, found)
     assert found.models[("4",)].source.endswith(
-        "its own runs cannot make twins (no run's remnant could be fitted): the study's model)"
+        "its own runs cannot make twins (no run's remnant could be fitted): the study's remnant filter)"
     )
     assert found.remnants[("4",)] == found.remnants[("5",)] == (4.0, 12.0, 5.0)
 

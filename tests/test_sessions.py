@@ -9,6 +9,7 @@ lines, not to the last bits. Skipped where the shared data are absent (a user's 
 
 import json
 import math
+from types import SimpleNamespace
 import subprocess
 import sys
 
@@ -22,7 +23,7 @@ from .conftest import ROOT
 DATA = ROOT.parent / "shared" / "data" / "cphs2017-sessions"
 REFERENCE = ROOT / "benchmarks" / "cphs_sessions_reference.py"
 
-pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"no session recordings at {DATA}")
+needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"no session recordings at {DATA}")
 
 
 @pytest.fixture(scope="module")
@@ -47,6 +48,7 @@ def combined(request):
     return plant, data, trials, sessions.combine_session(config, data, trials, "subject")
 
 
+@needs_data
 def test_each_trial_kind_is_found_from_the_data_as_the_file_names_say(combined):
     # The README: assay 1 has no target, assay 3 no disturbance, the others both.
     plant, data, trials, _ = combined
@@ -56,6 +58,7 @@ def test_each_trial_kind_is_found_from_the_data_as_the_file_names_say(combined):
     assert len(trials) == 90 and sorted({r["subject"] for r in data.runs}) == ["dp", "ef", "gy"]
 
 
+@needs_data
 def test_the_files_that_are_not_trials_are_skipped_with_their_reason(combined):
     plant, data, _, _ = combined
     # 120 reset segments per subject, all named with the session's first trial's code, fo (README).
@@ -63,6 +66,7 @@ def test_the_files_that_are_not_trials_are_skipped_with_their_reason(combined):
     assert {why for _, why in data.skipped} <= {"left out by data.exclude '*_rst[12].*'"}
 
 
+@needs_data
 @pytest.mark.parametrize(
     ("source", "theirs"), [("single-input trials", "single"), ("two-input trials", "pairs_all")]
 )
@@ -156,6 +160,7 @@ def session_run(tmp_path_factory):
     return result, run
 
 
+@needs_data
 def test_analyse_takes_a_session_folder_as_the_logger_left_it(session_run):
     import pyarrow.parquet as pq
 
@@ -184,3 +189,81 @@ def test_analyse_takes_a_session_folder_as_the_logger_left_it(session_run):
     assert len(feedback) == 2 and {r["method"] for r in feedback} == {"direct", "indirect"}
     assert all(r["fit_target"] == "lines" and math.isfinite(r["Kpe"]) for r in feedback)
     assert (run / "report" / "conditions_inversion.png").is_file()
+
+
+# --------------------------------------------------------------------------- people who differ
+
+N, RATE = 400, 10.0
+EVEN, ODD = [4, 10, 22, 34], [6, 14, 26, 38]
+
+
+def _study(layouts: dict[str, list[tuple[list[int], list[int]]]], person: str | None = "subject"):
+    """A whole experiment of noise-free trials (tests/test_conditions.py's loop) per person, each
+    trial's (target lines, disturbance lines), on an integrator plant."""
+    from hcid.io.datasets import DataSet
+
+    from .test_conditions import _trial
+
+    records, runs = {}, []
+    for name, trials in layouts.items():
+        for target, disturbance in trials:
+            seed = len(records) + 1
+            records[seed] = _trial(target, disturbance, phase=0.1 * seed)
+            runs.append({"run": seed, "file": f"{name}_{seed}.csv", "file_run": 1, "subject": name})
+    config = SimpleNamespace(
+        loop=SimpleNamespace(plant=SimpleNamespace(num=[1.0], den=[1.0, 0.0]), disturbance_at="input"),
+        data=SimpleNamespace(name="lab"),
+        timing=SimpleNamespace(output_rate=RATE, record_samples=N),
+    )
+    data = DataSet(records, runs, ("subject",), RATE)
+    trials = sessions.classify(data, config)
+    return sessions.combine_session(config, data, trials, person)
+
+
+def test_people_with_other_lines_are_compared_line_by_line():
+    # A measured every line both ways; B one two-input trial (not every E line) and single-input
+    # trials on the O lines: B's estimates are NaN where B measured nothing, never another line's
+    # (per-person line sets of other lengths had stopped the study; of the same length, paired
+    # other lines).
+    every = sorted(EVEN + ODD)
+    session = _study(
+        {
+            "A": [(EVEN, ODD), (ODD, EVEN), ([], every), (every, [])],
+            "B": [(EVEN[:3], ODD), ([], ODD), (ODD, [])],  # B never forced the line at bin 34
+        }
+    )
+    lines = session.lines.to_pylist()
+    b = {r["omega"]: r for r in lines if r["person"] == "B" and r["source"] == "single-input trials"}
+    assert len(b) == 8  # the study's lines, every person on them
+    assert all(
+        math.isnan(r["h_ur_db"]) == (round(r["omega"] * N / (2 * math.pi * RATE)) in EVEN) for r in b.values()
+    )
+    # Superposition pairs A's and B's estimates at the same line: noise-free, the ratio is 1 at
+    # every line either person measured both ways, with nothing to test (all differences 0).
+    pooled = [r for r in session.findings.to_pylist() if r["finding"] == "superposition" and r["band"]]
+    assert {round(r["estimate"], 9) for r in pooled if "ratio" in r["quantity"]} == {1.0}
+    assert all(math.isnan(r["p"]) for r in pooled)
+
+
+def test_a_trial_whose_models_ht_is_unknown_at_its_target_lines_is_not_predicted():
+    # C's only two-input trials have their target on E: their model has no Ht on O, so C's
+    # target-only trial on every line is not predicted (Ht = 0 there would understate it), said so.
+    every = sorted(EVEN + ODD)
+    session = _study({"C": [(EVEN, ODD), ([], every), (every, [])]})
+    rows = {r["kind"]: r for r in session.trials.to_pylist()}
+    target_only = rows["target only"]
+    assert target_only["predicted_by"] == "" and math.isnan(target_only["error_ff"])
+    assert target_only["problem"].startswith(
+        "not predicted: the two-input trials' model has no Ht at 4 of its 8"
+    )
+    # The two-input trial is predicted by the single-input model exactly (noise-free).
+    two = rows["target and disturbance"]
+    assert two["predicted_by"] == "single-input trials" and two["error_ff"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_without_a_person_factor_every_run_is_one_person_said_so():
+    every = sorted(EVEN + ODD)
+    session = _study({"A": [(EVEN, ODD), (ODD, EVEN), ([], every), (every, [])]}, person=None)
+    people = {r["person"] for r in session.findings.to_pylist()}
+    assert people == {sessions.ONE_PERSON, sessions.ALL_PEOPLE}
+    assert {r["person"] for r in session.trials.to_pylist()} == {sessions.ONE_PERSON}

@@ -48,6 +48,7 @@ __all__ = [
     "superposition",
     "swapped",
     "trial_lines",
+    "wilcoxon_p",
 ]
 
 #: An input is absent from a trial when its power at every line of the other input is below
@@ -335,16 +336,25 @@ class Comparison:
     p_phase: float
 
 
-def _wilcoxon(x: np.ndarray) -> float:
-    x = x[np.isfinite(x)]
-    if x.size < 2 or np.all(x == 0):
+#: Differences this small are rounding, not a difference (a test of them would rank noise).
+TIE = 1e-9
+
+
+def wilcoxon_p(x: np.ndarray) -> float:
+    """The two-sided Wilcoxon signed-rank p of the differences ``x`` against 0 (NaN ones left
+    out; differences below :data:`TIE` in magnitude are ties at 0, which the test drops); NaN
+    where fewer than 2 remain."""
+    x = np.asarray(x, dtype=np.float64)
+    x = x[np.isfinite(x) & (np.abs(x) >= TIE)]
+    if x.size < 2:
         return math.nan
     return float(stats.wilcoxon(x, alternative="two-sided").pvalue)
 
 
 def _compared(response: str, omega: float, single: np.ndarray, two: np.ndarray) -> Comparison:
-    log_ratio = np.log(np.abs(single)) - np.log(np.abs(two))
-    phase = np.degrees(np.angle(single / two))  # wrapped to (-180, 180]
+    with np.errstate(invalid="ignore"):  # NaN where a person did not measure the line
+        log_ratio = np.log(np.abs(single)) - np.log(np.abs(two))
+        phase = np.degrees(np.angle(single / two))  # wrapped to (-180, 180]
     ok = np.isfinite(log_ratio) & np.isfinite(phase)
     log_ratio, phase = log_ratio[ok], phase[ok]
     if not ok.any():
@@ -360,8 +370,8 @@ def _compared(response: str, omega: float, single: np.ndarray, two: np.ndarray) 
         float(np.median(phase)),
         float(phase.min()),
         float(phase.max()),
-        _wilcoxon(log_ratio),
-        _wilcoxon(phase),
+        wilcoxon_p(log_ratio),
+        wilcoxon_p(phase),
     )
 
 
@@ -369,6 +379,8 @@ def superposition(single: Sequence[PersonLines], two: Sequence[PersonLines]) -> 
     """Does the response superpose (SPEC 12)? Per response (``U/R``, ``U/D``), per line and pooled
     over lines: each person's single-input estimate against their two-input one, paired across
     people (the i-th of ``single`` and ``two`` are one person's, on the same lines)."""
+    if any(not np.array_equal(p.omega, single[0].omega) for p in (*single, *two)):
+        raise ValueError("superposition: every person's estimates must be on the same lines")
     out = []
     for response, attr in (("U/R", "h_ur"), ("U/D", "h_ud")):
         s = np.array([getattr(p, attr) for p in single])
@@ -395,13 +407,17 @@ class Prediction:
 
 def prediction(trial: TrialLines, model: PersonLines, bins: np.ndarray) -> Prediction:
     """Predict ``trial``'s u from its measured ft and e: ``U_hat = Ht Ft + He E`` at its forcing
-    lines (``model``'s paths at ``bins``, which must hold them), nothing elsewhere (SPEC 12)."""
+    lines (``model``'s paths at ``bins``, which must hold them, Ht at every target line of the
+    trial), nothing elsewhere (SPEC 12)."""
     lines = np.sort(np.concatenate([trial.target, trial.disturbance]))
     index = {b: i for i, b in enumerate(bins.tolist())}
     at = np.array([index[b] for b in lines.tolist()])
     s = trial.spectra
     errors = []
-    for ht in (np.zeros(at.size), np.nan_to_num(model.ht[at])):
+    ht_model = np.where(np.isin(lines, trial.target), model.ht[at], 0.0)  # no ft at a disturbance line
+    if not np.all(np.isfinite(ht_model)):
+        raise ValueError("prediction: the model has no Ht at some of the trial's target lines")
+    for ht in (np.zeros(at.size), ht_model):
         u_hat = np.zeros_like(s["u"])
         u_hat[lines] = ht * s["ft"][lines] + model.he[at] * s["e"][lines]
         residual = s["u"].copy()

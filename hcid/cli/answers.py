@@ -364,6 +364,8 @@ def _skipped_line(skipped) -> str:
 
 def _range(r: dict, digits: int = 2) -> str:
     """An estimate with its range, or alone where the range is of one value."""
+    if not math.isfinite(r["estimate"]):
+        return "not measured"
     if r["n"] == 1 and r["spread"].endswith("people"):
         return f"{r['estimate']:.{digits}f}"
     return f"{r['estimate']:.{digits}f} [{r['low']:.{digits}f}, {r['high']:.{digits}f}]"
@@ -378,43 +380,56 @@ def _print_session(result) -> None:
     prediction across conditions, each with its spread and test."""
     if result.session is None:
         return
-    from hcid.pipeline.sessions import BANDS
+    from hcid.pipeline.sessions import ALL_PEOPLE, BANDS, ONE_PERSON
     from hcid.pipeline.summary import study_verdicts
 
     for line in study_verdicts(result.groups, result.runs):
         typer.echo(line)
     rows = result.session.findings.to_pylist()
-    people = {r["person"] for r in rows if r["person"] != "all"}
+    people = {r["person"] for r in rows if r["person"] != ALL_PEOPLE}
+    if people == {ONE_PERSON}:
+        typer.echo(
+            "ONE PERSON: the data set names no person (--person FACTOR, or a factor named subject): "
+            "every run is combined as one person's, and nothing is compared across people"
+        )
     who = f"median over {len(people)} people [range over them]" if len(people) > 1 else "one person"
-    inversion = [r for r in rows if r["finding"] == "model inversion" and r["person"] == "all"]
+    summary = [r for r in rows if r["person"] == ALL_PEOPLE]
+    inversion = [r for r in summary if r["finding"] == "model inversion"]
     if inversion:
         typer.echo(f"MODEL INVERSION |Ht Yc| (1 = the plant's exact inverse; {who}):")
         for band in BANDS:
             here = [r for r in inversion if r["band"] == band]
-            text = "; ".join(f"{_range(r)} from {r['source']} (vs 1: Wilcoxon {_p(r['p'])})" for r in here)
-            typer.echo(f"    {band}: {text}")
-    pooled = [r for r in rows if r["finding"] == "superposition" and r["band"]]
-    if pooled:
-        n = pooled[0]["n"]
+            text = "; ".join(
+                f"{_range(r)} from {r['source']} (vs 1: Wilcoxon {_p(r['p'])} over the people's lines)"
+                for r in here
+            )
+            typer.echo(f"    {band}: {text or 'no line'}")
+    pooled = [r for r in summary if r["finding"] == "superposition" and r["band"]]
+    if pooled and len(people) > 1:
         lines = [
             r for r in rows if r["finding"] == "superposition" and not r["band"] and math.isfinite(r["p"])
         ]
         least = min((r["p"] for r in lines), default=math.nan)
         typer.echo(
-            f"SUPERPOSITION (single-input against two-input trials, paired across people, {n} "
-            "person-lines pooled; median [range]):"
+            "SUPERPOSITION (single-input against two-input trials, paired across people, their lines "
+            "pooled; median [range] over the person-lines):"
         )
         for r in pooled:
             unit = " deg" if "phase" in r["quantity"] else ""
-            typer.echo(f"    {r['quantity']}: {_range(r, 1 if unit else 2)}{unit}, Wilcoxon {_p(r['p'])}")
-        if len(people) > 1:
+            if r["n"] == 0:
+                typer.echo(f"    {r['quantity']}: not measured (no trials of one of the kinds)")
+                continue
             typer.echo(
-                f"    per line: the smallest p is {least:.2g} (with {len(people)} people a line's test "
-                f"cannot go below {2 / 2 ** len(people):.2g})"
+                f"    {r['quantity']}: {_range(r, 1 if unit else 2)}{unit}, Wilcoxon {_p(r['p'])} "
+                f"({r['n']} person-lines)"
             )
+        typer.echo(
+            f"    per line: the smallest p is {least:.2g} (with {len(people)} people a line's test "
+            f"cannot go below {2 / 2 ** len(people):.2g})"
+        )
     if result.session.feedback is not None:
         typer.echo(_feedback_line(result.session.feedback))
-    prediction = [r for r in rows if r["finding"] == "prediction" and r["person"] == "all"]
+    prediction = [r for r in summary if r["finding"] == "prediction"]
     if prediction:
         typer.echo(
             "PREDICTION across conditions (error RMS(u - u_hat) / RMS(u), feedback and feedforward over "
@@ -434,18 +449,22 @@ def _feedback_line(feedback) -> str:
     import numpy as np
 
     from hcid.config.fit import FEEDBACK_PARAMETERS
+    from hcid.hcfit.determined import DETERMINED
 
     rows = feedback.to_pylist()
     first = {r["run_id"]: r for r in rows}  # the fit is the run's, the same for every method
     n = len(first)
     parts = []
     for p in FEEDBACK_PARAMETERS:
-        kept = [r[p] for r in first.values() if r[f"{p}_status"] == "determined"]
+        kept = [r[p] for r in first.values() if r[f"{p}_status"] == DETERMINED]
         if kept:
             unit = "" if PARAMETER_UNITS[p] == "-" else f" {PARAMETER_UNITS[p]}"
             sd = f", sd {np.std(kept, ddof=1):.2g}" if len(kept) > 1 else ""
             parts.append(f"{p} {np.median(kept):.3g}{unit} ({len(kept)} of {n} runs{sd})")
-    loop = [r["crossover"] for r in first.values()]
+    feedback_known = [
+        r for r in first.values() if r["Kpe_status"] == DETERMINED and math.isfinite(r["crossover"])
+    ]
+    loop = [r["crossover"] for r in feedback_known]
     arx = []
     for method in dict.fromkeys(r["method"] for r in rows):
         mine = [r for r in rows if r["method"] == method]
@@ -453,9 +472,15 @@ def _feedback_line(feedback) -> str:
             f"{method} VAF {np.median([r['vaf_validation'] for r in mine]):.0f}% (median na "
             f"{np.median([r['na'] for r in mine]):.0f}, nb_e {np.median([r['nb_e'] for r in mine]):.0f})"
         )
+    crossover = (
+        f"crossover {np.median(loop):.3g} rad/s (median over the {len(loop)} runs that determine Kpe)"
+        if loop
+        else "crossover not determined"
+    )
     return (
         f"FEEDBACK ALONE ({n} disturbance-only runs: no target, so no feedforward test): fitted "
+        "(median over the runs that determine each; sd over them) "
         + ", ".join(parts or ["no parameter determined"])
-        + f"; crossover {np.median(loop):.3g} rad/s (median); ARX without the target path at W_BIC: "
+        + f"; {crossover}; ARX without the target path at W_BIC: "
         + "; ".join(arx)
     )

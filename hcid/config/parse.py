@@ -354,10 +354,12 @@ def _data_section(top: Section, model_names: list[str], timing: Timing) -> DataC
     exclude = s.get("exclude", [])
     if isinstance(exclude, str):
         exclude = [exclude]
-    if not isinstance(exclude, list) or not all(isinstance(x, str) and x.strip() for x in exclude):
+    if not isinstance(exclude, list) or not all(
+        isinstance(x, str) and x.strip() and not {".", ".."} & set(x.split("/")) for x in exclude
+    ):
         raise ConfigError(
-            "data.exclude: must be a list of file-name globs such as ['*_rst?.csv', 'desktop.ini'], "
-            f"got {fmt(exclude)}"
+            "data.exclude: must be a list of file-name globs such as ['*_rst?.csv', 'desktop.ini'] "
+            f"(with '/', over the folders too; no '.' or '..' part), got {fmt(exclude)}"
         )
     struct = s.get("struct", None)
     if struct is not None and (not isinstance(struct, str) or not struct.isidentifier()):

@@ -93,9 +93,12 @@ def _pattern_regex(pattern: str, lazy: bool = True) -> re.Pattern:
 
 def _tail(path: Path, pattern: str) -> str:
     """The part of ``path`` a pattern or glob with ``/`` is matched against: the file's name and as
-    many of its folders as the pattern names."""
-    parts = path.resolve().parts
-    return "/".join(parts[-(pattern.count("/") + 1) :])
+    many of its folders as the pattern names (the folders as named, a link not followed); the
+    whole absolute path for a glob that starts with ``/``."""
+    absolute = Path(os.path.abspath(path))
+    if pattern.startswith("/"):
+        return absolute.as_posix()
+    return "/".join(absolute.parts[-(pattern.count("/") + 1) :])
 
 
 def _is_manifest(path: Path) -> bool:

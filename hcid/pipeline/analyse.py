@@ -309,7 +309,9 @@ def _group_models(study: _Study, found: _Found) -> None:
 
     def model_of(seeds: list[int]):
         fits = [found.fitted[s][0][True] for s in seeds]
-        model = group_model(fits, [f"run {s}" for s in seeds], num_c, den_c, simulated)
+        return group_model(fits, [f"run {s}" for s in seeds], num_c, den_c, simulated)
+
+    def remnant_of(seeds: list[int]):
         fitted = [found.fitted[s][1] for s in seeds if found.fitted[s][1] is not None]
         if not fitted:
             raise DataError("no run's remnant could be fitted")
@@ -319,27 +321,32 @@ def _group_models(study: _Study, found: _Found) -> None:
         if remnant.problem:
             raise DataError(f"its remnant cannot make twins: {remnant.problem}")
         on_bounds = () if off_bounds else ("its remnant filter from fits on their search bounds",)
-        return model.noting(*on_bounds, *remnant.changes), tuple(remnant.values[a] for a in remnant_names)
+        return (*on_bounds, *remnant.changes), tuple(remnant.values[a] for a in remnant_names)
 
     every = sorted({s for seeds in study.groups.values() for s in seeds})
-    for key, seeds in study.groups.items():
+
+    def own_or_study(key, seeds, make, what: str):
+        """The group's own, else the study's (all its runs), said so; only a study whose runs
+        together cannot make it stops."""
         try:
-            found.models[key], found.remnants[key] = model_of(seeds)
+            return make(seeds), ()
         except DataError as exc:
-            # No run of the group can make twins: the study goes on with the model of all its runs,
-            # said so (a group's decisions then rest on twins of the study's model, not its own).
             if sorted(seeds) == every:
                 raise DataError(
                     f"group {group_slug(key)}: {exc}; look at its runs' fits or group them otherwise (--by)"
                 ) from None
             try:
-                model, remnant = model_of(every)
+                return make(every), (f"its own runs cannot make twins ({exc}): the study's {what}",)
             except DataError as pooled:
                 raise DataError(
                     f"group {group_slug(key)}: {exc}; nor can the study's runs together: {pooled}"
                 ) from None
-            found.models[key] = model.noting(f"its own runs cannot make twins ({exc}): the study's model")
-            found.remnants[key] = remnant
+
+    for key, seeds in study.groups.items():
+        model, model_note = own_or_study(key, seeds, model_of, "model")
+        (remnant_notes, remnant), remnant_note = own_or_study(key, seeds, remnant_of, "remnant filter")
+        found.models[key] = model.noting(*model_note, *remnant_notes, *remnant_note)
+        found.remnants[key] = remnant
 
 
 def _twin_source(study: _Study, found: _Found, key, sets: list[list[int]], i: int, model: dict) -> TwinSource:
@@ -519,6 +526,8 @@ def analyse_study(
     check_plant(config, data)  # every run, the single-input ones too (identify checks its own)
     trials = sessions.classify(data, config)
     person = _person(data, options.person)
+    if sessions.is_whole_experiment(trials):
+        sessions.check_factors(data.factors, person)
     whole = data
     two_input = [seed for seed, t in trials.items() if t.kind is Kind.TWO_INPUT]
     if len(two_input) < len(trials):  # single-input runs: combined per person, not tested for feedforward

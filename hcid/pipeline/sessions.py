@@ -11,12 +11,11 @@ as ``session_trials``, ``session_lines`` and ``session_findings`` (docs/tables.m
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 import pyarrow as pa
-from scipy import stats
 
 from hcid import api, hcfit, methods, tables
 from hcid.analysis import conditions
@@ -24,7 +23,7 @@ from hcid.analysis.conditions import Kind, PersonLines, TrialLines
 from hcid.analysis.descriptors import loop_margins
 from hcid.config import Config, IdentifyConfig
 from hcid.config.fit import FEEDBACK_PARAMETERS
-from hcid.errors import DataError
+from hcid.errors import ConfigError, DataError, HcidError
 from hcid.io import results
 from hcid.io.datasets import DataSet
 from hcid.loop.hcmodel import plant
@@ -42,6 +41,10 @@ __all__ = [
 
 #: The factor that names a person, by default (``--person``).
 PERSON = "subject"
+#: ``person`` of a row over every person (the findings' summaries across people).
+ALL_PEOPLE = "all people"
+#: ``person`` of every run where the data set names no person: one person, said so.
+ONE_PERSON = "one person (no person factor)"
 #: The study's bands of the model inversion (Hz): "close to the inverse up to 0.15 Hz, lower from
 #: 0.25 Hz up" (CPHS 2017's finding); a line belongs to a band when within 1e-6 Hz of it.
 BANDS = {"up to 0.15 Hz": (0.0, 0.15), "from 0.25 Hz": (0.25, math.inf)}
@@ -69,6 +72,23 @@ def classify(data: DataSet, config: Config) -> dict[int, TrialLines]:
             raise DataError(f"{files.get(seed, 'data')}: run {seed}: {trial.problem}: nothing to analyse")
         out[seed] = trial
     return out
+
+
+def check_factors(factors: Sequence[str], person: str | None) -> None:
+    """Refuse a factor named like a column of ``session_trials.parquet`` (other than the person
+    factor named ``person``), before any work.
+
+    Raises
+    ------
+    ConfigError
+        Naming the factor.
+    """
+    taken = sorted(set(factors) & set(tables.SESSION_TRIALS.names) - {person})
+    if taken:
+        raise ConfigError(
+            f"factor {taken[0]!r}: the whole experiment's tables have a column of that name; rename "
+            "the factor (data.pattern, the manifest's header or data.dimensions)"
+        )
 
 
 def is_whole_experiment(trials: Mapping[int, TrialLines]) -> bool:
@@ -181,13 +201,6 @@ def _finding(finding, person, source, quantity, band, omega, estimate, low, high
     }
 
 
-def _wilcoxon(x: np.ndarray) -> float:
-    x = x[np.isfinite(x)]
-    if x.size < 2 or np.all(x == 0):
-        return math.nan
-    return float(stats.wilcoxon(x).pvalue)
-
-
 def _inversion_findings(combined: dict[str, dict[str, PersonLines]]) -> list[dict]:
     """Per source and band: each person's median |Ht Yc| over the band's lines, the median over
     people with their range, and a Wilcoxon signed-rank test of log |Ht Yc| against 0 (the exact
@@ -226,7 +239,7 @@ def _inversion_findings(combined: dict[str, dict[str, PersonLines]]) -> list[dic
                 rows.append(
                     _finding(
                         "model inversion",
-                        "all",
+                        ALL_PEOPLE,
                         source,
                         "|Ht Yc| median over people",
                         band,
@@ -235,8 +248,9 @@ def _inversion_findings(combined: dict[str, dict[str, PersonLines]]) -> list[dic
                         min(medians),
                         max(medians),
                         "range over people",
-                        _wilcoxon(logs),
-                        "Wilcoxon signed-rank of log |Ht Yc| against 0, people x lines",
+                        conditions.wilcoxon_p(logs),
+                        f"Wilcoxon signed-rank of log |Ht Yc| against 0 over {logs.size} person-lines "
+                        "(not independent: a person's lines share a model)",
                         len(medians),
                     )
                 )
@@ -255,7 +269,7 @@ def _superposition_findings(combined: dict[str, dict[str, PersonLines]]) -> list
         rows.append(
             _finding(
                 "superposition",
-                "all",
+                ALL_PEOPLE,
                 "single-input / two-input trials",
                 f"{c.response} magnitude ratio",
                 band,
@@ -272,7 +286,7 @@ def _superposition_findings(combined: dict[str, dict[str, PersonLines]]) -> list
         rows.append(
             _finding(
                 "superposition",
-                "all",
+                ALL_PEOPLE,
                 "single-input / two-input trials",
                 f"{c.response} phase difference deg",
                 band,
@@ -355,7 +369,7 @@ def _prediction_findings(trial_rows: list[dict]) -> list[dict]:
             rows.append(
                 _finding(
                     "prediction",
-                    "all",
+                    ALL_PEOPLE,
                     direction,
                     what,
                     "window" if "lines" not in what else "lines",
@@ -391,16 +405,19 @@ def combine_session(
         return np.polyval(num, s) / np.polyval(den, s)
 
     runs = {int(r["run"]): r for r in data.runs}
-    who = {seed: str(runs[seed][person]) if person else "all" for seed in trials}
+    who = {seed: str(runs[seed][person]) if person else ONE_PERSON for seed in trials}
     combined: dict[str, dict[str, PersonLines]] = {}
     people = sorted(set(who.values()))
+    # Every person on the study's lines (NaN where a person's trials did not measure one), so that
+    # people are compared line by line.
+    lined = [t for t in trials.values() if t.problem is None]
+    bins = np.array(
+        sorted(set().union(*(set(t.target.tolist()) | set(t.disturbance.tolist()) for t in lined)))
+    )
     for name in people:
         own = [t for s, t in trials.items() if who[s] == name and t.problem is None]
         if not own:
             continue
-        bins = np.array(
-            sorted(set().union(*(set(t.target.tolist()) | set(t.disturbance.tolist()) for t in own)))
-        )
         for source in conditions.SOURCES:
             found = conditions.combine(
                 conditions.of_kinds(own, source), yc_of, config.loop.disturbance_at, bins
@@ -428,8 +445,14 @@ def combine_session(
         }
         model = combined.get(_PREDICTIONS[t.kind], {}).get(who[seed])
         if t.problem is None and model is not None:
-            bins = np.round(model.omega * t.n / (2 * np.pi * t.rate)).astype(np.int64)
-            if set(t.target.tolist()) | set(t.disturbance.tolist()) <= set(bins.tolist()):
+            index = {b: i for i, b in enumerate(bins.tolist())}
+            unknown = [b for b in t.target.tolist() if not np.isfinite(model.ht[index[b]])]
+            if unknown:  # Ht = 0 there would understate the feedforward model: not predicted
+                row["problem"] = (
+                    f"not predicted: the {_PREDICTIONS[t.kind]}' model has no Ht at {len(unknown)} of "
+                    f"its {t.target.size} target lines (none of them measured a target there)"
+                )
+            else:
                 found = conditions.prediction(t, model, bins)
                 row.update(
                     predicted_by=_PREDICTIONS[t.kind],
@@ -438,13 +461,12 @@ def combine_session(
                     lines_error_fb=found.lines_fb,
                     lines_error_ff=found.lines_ff,
                 )
-        row.update({f: str(runs[seed][f]) for f in factors})
-        trial_rows.append(row)
+        trial_rows.append({**{f: str(runs[seed][f]) for f in factors}, **row})
     line_rows = []
     for source, by_person in combined.items():
         for name, p in by_person.items():
             line_rows += _line_rows(name, source, p)
-        if len(by_person) > 1 and len({p.omega.size for p in by_person.values()}) == 1:
+        if len(by_person) > 1:
             line_rows += _median_rows(source, list(by_person.values()))
     findings = (
         _inversion_findings(combined) + _superposition_findings(combined) + _prediction_findings(trial_rows)
@@ -491,12 +513,39 @@ def _feedback_task(config: Config, seed: int, record: dict, person: str) -> list
     # sample more, as a 45 s file at 25 Hz leaves, can smear them below its threshold).
     window = {k: x[: config.timing.record_samples] for k, x in record.items()}
     tracking = tracking_record(window, config)
-    fit = hcfit.fit_parametric(
-        config.fit_hc, yc, False, record=tracking, disturbance_at=config.loop.disturbance_at
-    )
-    values, status = fit.values, fit.status
-    se = dict(zip(fit.names, fit.se or [math.nan] * len(fit.names), strict=True))
-    margins = loop_margins(lambda w: hcfit.hc_response(values, yc, w)[1] * yc(1j * w))
+    fitted = _feedback_fit(config, tracking, yc)
+    rows = []
+    for method in methods.METHODS:
+        row = {"data_set": config.data.name, "run_id": seed, "person": person, "method": method}
+        try:
+            found = api.identify(run, method, settings)
+            chosen = found.select(found.w_bic)
+        except HcidError:  # every candidate unstable: counted, the run's other answers kept
+            row.update(w=math.nan, na=None, nb_e=None, nk_e=None, vaf_validation=math.nan)
+        else:
+            na, _, nb_e, _, nk_e = chosen.orders
+            row.update(w=float(found.w_bic), na=int(na), nb_e=int(nb_e), nk_e=int(nk_e))
+            row["vaf_validation"] = float(chosen.vaf_validation)
+        rows.append({**row, **fitted})
+    return rows
+
+
+def _feedback_fit(config: Config, tracking, yc) -> dict:
+    """The feedback path's parametric fit and its loop's margins (a fit that fails: every value
+    NaN, its status the reason; the study goes on)."""
+    try:
+        fit = hcfit.fit_parametric(
+            config.fit_hc, yc, False, record=tracking, disturbance_at=config.loop.disturbance_at
+        )
+        values, status = fit.values, fit.status
+        se = dict(zip(fit.names, fit.se or [math.nan] * len(fit.names), strict=True))
+        margins = loop_margins(lambda w: hcfit.hc_response(values, yc, w)[1] * yc(1j * w))
+    except HcidError as exc:
+        nan = math.nan
+        fitted = {"fit_target": "", "fit_vaf_validation": nan, "crossover": nan, "phase_margin": nan}
+        for p in FEEDBACK_PARAMETERS:
+            fitted.update({p: nan, f"{p}_se": nan, f"{p}_status": f"not fitted: {exc}"})
+        return fitted
     fitted = {
         "fit_target": fit.target,
         "fit_vaf_validation": float(fit.vaf_validation),
@@ -505,26 +554,7 @@ def _feedback_task(config: Config, seed: int, record: dict, person: str) -> list
     }
     for p in FEEDBACK_PARAMETERS:
         fitted.update({p: float(values[p]), f"{p}_se": float(se[p]), f"{p}_status": status[p]})
-    rows = []
-    for method in methods.METHODS:
-        found = api.identify(run, method, settings)
-        chosen = found.select(found.w_bic)
-        na, _, nb_e, _, nk_e = chosen.orders
-        rows.append(
-            {
-                "data_set": config.data.name,
-                "run_id": seed,
-                "person": person,
-                "method": method,
-                "w": float(found.w_bic),
-                "na": int(na),
-                "nb_e": int(nb_e),
-                "nk_e": int(nk_e),
-                "vaf_validation": float(chosen.vaf_validation),
-                **fitted,
-            }
-        )
-    return rows
+    return fitted
 
 
 def fit_feedback(

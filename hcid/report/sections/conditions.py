@@ -12,7 +12,8 @@ from matplotlib.figure import Figure
 
 from hcid.analysis.conditions import ANSWERS, SOURCES, Kind
 from hcid.config.fit import FEEDBACK_PARAMETERS
-from hcid.pipeline.sessions import BANDS
+from hcid.hcfit.determined import DETERMINED
+from hcid.pipeline.sessions import ALL_PEOPLE, BANDS
 from hcid.report.document import Doc
 from hcid.report.figures import plain_log
 from hcid.tables import PARAMETER_UNITS
@@ -70,7 +71,7 @@ def compute(run, done) -> ConditionsData | None:
     counts = {k: sum(t["kind"] == k.value for t in trials) for k in Kind}
     kinds = [[k.value, str(n), ANSWERS[k]] for k, n in counts.items() if n]
     findings = run.session_findings.to_pylist()
-    people = sorted({r["person"] for r in findings if r["person"] != "all"})
+    people = sorted({r["person"] for r in findings if r["person"] != ALL_PEOPLE})
     inversion = []
     for source in SOURCES:
         row = [source]
@@ -80,7 +81,7 @@ def compute(run, done) -> ConditionsData | None:
                     f
                     for f in findings
                     if f["finding"] == "model inversion"
-                    and f["person"] == "all"
+                    and f["person"] == ALL_PEOPLE
                     and f["source"] == source
                     and f["band"] == band
                 ),
@@ -91,9 +92,9 @@ def compute(run, done) -> ConditionsData | None:
             f"{f['person']} {f['estimate']:.2f}"
             for f in findings
             if f["finding"] == "model inversion"
-            and f["person"] != "all"
+            and f["person"] != ALL_PEOPLE
             and f["source"] == source
-            and f["band"] == "from 0.25 Hz"
+            and f["band"] == list(BANDS)[-1]
         ]
         inversion.append(row + ["; ".join(per_person) or "-"])
     superposition = [
@@ -111,7 +112,7 @@ def compute(run, done) -> ConditionsData | None:
     prediction = [
         [r["source"], r["quantity"], r["band"], _range(r), r["spread"], str(r["n"])]
         for r in findings
-        if r["finding"] == "prediction" and r["person"] == "all"
+        if r["finding"] == "prediction" and r["person"] == ALL_PEOPLE
     ]
     curves: dict = {}
     if run.session_lines is not None:
@@ -146,16 +147,19 @@ def _feedback(run) -> tuple[list[str], list[list[str]]]:
     methods = list(dict.fromkeys(r["method"] for r in rows))
     header = ["person", "runs"]
     header += [f"{p} ({PARAMETER_UNITS[p]})" if PARAMETER_UNITS[p] != "-" else p for p in FEEDBACK_PARAMETERS]
-    header += ["crossover (rad/s)"] + [f"VAF {m} (%)" for m in methods]
+    header += ["crossover (rad/s; runs that determine Kpe)"] + [f"VAF {m} (%)" for m in methods]
     out = []
     for person in sorted({r["person"] for r in rows}):
         mine = [r for r in rows if r["person"] == person]
         first = list({r["run_id"]: r for r in mine}.values())
         cells = [person, str(len(first))]
         for p in FEEDBACK_PARAMETERS:
-            kept = [r[p] for r in first if r[f"{p}_status"] == "determined"]
+            kept = [r[p] for r in first if r[f"{p}_status"] == DETERMINED]
             cells.append(f"{np.median(kept):.3g} ({len(kept)})" if kept else "-")
-        cells.append(f"{np.median([r['crossover'] for r in first]):.3g}")
+        loop = [
+            r["crossover"] for r in first if r["Kpe_status"] == DETERMINED and math.isfinite(r["crossover"])
+        ]
+        cells.append(f"{np.median(loop):.3g}" if loop else "-")
         for method in methods:
             cells.append(f"{np.median([r['vaf_validation'] for r in mine if r['method'] == method]):.0f}")
         out.append(cells)
@@ -228,7 +232,7 @@ def render(data: ConditionsData | None, doc: Doc) -> None:
     header = ["trials"]
     for band in BANDS:
         header += [f"|Ht Yc| {band}", f"p vs 1 ({band})"]
-    doc.table([*header, "per person, from 0.25 Hz"], data.inversion)
+    doc.table([*header, f"per person, {list(BANDS)[-1]}"], data.inversion)
     if data.curves:
         doc.figure(
             "conditions_inversion.png",
