@@ -9,9 +9,9 @@ lines, not to the last bits. Skipped where the shared data are absent (a user's 
 
 import json
 import math
-from types import SimpleNamespace
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import pytest
 
