@@ -441,7 +441,7 @@ def main():
             if name.endswith("_H1"):
                 continue
             P(
-                f"  {name:14s} {v['median_over_subjects_k_ge5']:.3f} [{v['range_over_subjects_k_ge5'][0]:.2f}-"
+                f"  {name:14s} {v['median_over_subjects_k_ge5']:.3f} [{v['range_over_subjects_k_ge5'][0]:.2f}-"  # noqa: E501
                 f"{v['range_over_subjects_k_ge5'][1]:.2f}]     {v['median_over_subjects_k_le3']:.3f} "
                 f"[{v['range_over_subjects_k_le3'][0]:.2f}-{v['range_over_subjects_k_le3'][1]:.2f}]"
                 f"       {v['studystyle_median_over_lines_k_ge5']:.3f} "
@@ -505,7 +505,7 @@ def main():
                 f"  {resp} pooled over subject x line (n={pooled['n']}): "
                 f"Wilcoxon p(log|.|) = {pooled['p_logmag']:.3f},"
                 f" p(phase) = {pooled['p_phase']:.3f}; |single/two| median {pooled['median_ratio']:.3f}"
-                f" [{pooled['ratio_min']:.2f}-{pooled['ratio_max']:.2f}], IQR {pooled['ratio_q25_q75'][0]:.2f}-"
+                f" [{pooled['ratio_min']:.2f}-{pooled['ratio_max']:.2f}], IQR {pooled['ratio_q25_q75'][0]:.2f}-"  # noqa: E501
                 f"{pooled['ratio_q25_q75'][1]:.2f}; median dphase {pooled['median_dphase_deg']:.1f} deg,"
                 f" median |dphase| {pooled['median_abs_dphase_deg']:.1f} deg"
             )
@@ -596,7 +596,7 @@ def main():
                 dres["ratio_summary"][sname] = summ
                 P(
                     f"    ratio err(FF+FB)/err(FB-only), median over subjects [{sname}]: window "
-                    f"{summ['window']['median']:.3f} [{summ['window']['min']:.2f}-{summ['window']['max']:.2f}],"
+                    f"{summ['window']['median']:.3f} [{summ['window']['min']:.2f}-{summ['window']['max']:.2f}],"  # noqa: E501
                     f" lines {summ['lines']['median']:.3f} "
                     f"[{summ['lines']['min']:.2f}-{summ['lines']['max']:.2f}],"
                     f" closed-loop lines {summ['lines_closedloop']['median']:.3f};"
@@ -629,7 +629,7 @@ def main():
         P(
             f"      prediction ratio err(FF+FB)/err(FB-only): single->pairs window "
             f"{pr['single_to_pairs']['ratio_summary']['all']['window']['median']:.3f}, lines "
-            f"{pr['single_to_pairs']['ratio_summary']['all']['lines']['median']:.3f}; pairs->single(a3) window "
+            f"{pr['single_to_pairs']['ratio_summary']['all']['lines']['median']:.3f}; pairs->single(a3) window "  # noqa: E501
             f"{pr['pairs_to_single']['ratio_summary']['a3']['window']['median']:.3f}, lines "
             f"{pr['pairs_to_single']['ratio_summary']['a3']['lines']['median']:.3f}"
         )
