@@ -7,6 +7,7 @@ written from the study's equations (SPEC 12 and the study's own analysis) withou
 code. hcid resamples the files to 25 Hz first, so the two agree to the resampling's error at the
 lines, not to the last bits. Skipped where the shared data are absent (a user's clone)."""
 
+import copy
 import json
 import math
 import subprocess
@@ -92,18 +93,19 @@ def test_model_inversion_per_person_and_line_agrees_with_the_independent_computa
 
 #: A reduced identification (grids of a few orders and delays, in seconds) so that the whole
 #: command runs in CI: every stage for real, on four trials of one person.
+_FINAL = {
+    "na": [1, 2],
+    "nb1": [0, 2],
+    "nb2": [0, 2],
+    "nk1": [1, 40],
+    "nk2": [1, 6],
+    "estimation": [2.52, 21.24],
+    "validation": [21.24, 40.0],
+}
 SMALL_IDENTIFY = {
     "target_shift": 1.0,
     "windows_in": "seconds",
-    "direct": {
-        "na": [1, 2],
-        "nb1": [0, 2],
-        "nb2": [0, 2],
-        "nk1": [1, 40],
-        "nk2": [1, 6],
-        "estimation": [2.52, 21.24],
-        "validation": [21.24, 40.0],
-    },
+    "direct": copy.deepcopy(_FINAL),
     "stage1": {
         "na": [1, 3],
         "nb1": [0, 25],
@@ -113,15 +115,7 @@ SMALL_IDENTIFY = {
         "estimation": "auto",
         "validation": "auto",
     },
-    "stage2": {
-        "na": [1, 2],
-        "nb1": [0, 2],
-        "nb2": [0, 2],
-        "nk1": [1, 40],
-        "nk2": [1, 6],
-        "estimation": [2.52, 21.24],
-        "validation": [21.24, 40.0],
-    },
+    "stage2": copy.deepcopy(_FINAL),
 }
 
 

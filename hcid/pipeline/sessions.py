@@ -303,86 +303,45 @@ def _superposition_findings(combined: dict[str, dict[str, PersonLines]]) -> list
     return rows
 
 
+#: The prediction's findings: (quantity, where it is counted, the trial's numerator and
+#: denominator columns, or its one column with no denominator).
+_PREDICTION_QUANTITIES = (
+    ("error, feedback only", "window", "error_fb", None),
+    ("error, feedback and feedforward", "window", "error_ff", None),
+    ("error ratio (feedback and feedforward / feedback only)", "window", "error_ff", "error_fb"),
+    ("error ratio at the lines", "lines", "lines_error_ff", "lines_error_fb"),
+)
+
+
 def _prediction_findings(trial_rows: list[dict]) -> list[dict]:
     """Per direction and person: the median over trials of each error and of the ratio
-    (feedback plus feedforward over feedback-only); over people, the median of the people's
-    ratios with their range. A disturbance-only trial (no target: both models predict alike) is
-    left out of the ratios."""
-    rows = []
+    (feedback plus feedforward over feedback-only), with their range over trials; over people,
+    the median of the people's ratios with their range. A disturbance-only trial (no target: both
+    models predict alike) is left out."""
     nan = math.nan
-    directions = {}
+    directions: dict[str, dict[str, list[dict]]] = {}
     for r in trial_rows:
-        if r["predicted_by"] and r["kind"] != Kind.DISTURBANCE_ONLY.value and math.isfinite(r["error_fb"]):
-            directions.setdefault(f"{r['predicted_by']} -> {_to(r['kind'])}", {}).setdefault(
-                r["person"], []
-            ).append(r)
+        if r["predicted_by"] and r["kind"] != Kind.DISTURBANCE_ONLY.value:
+            direction = f"{r['predicted_by']} -> {_to(r['kind'])}"
+            directions.setdefault(direction, {}).setdefault(r["person"], []).append(r)
+    rows = []
     for direction, people in directions.items():
-        ratios = {}
+        ratios: dict[tuple[str, str], list[float]] = {}
         for person, members in people.items():
-            for what, key in (
-                ("error, feedback only", "error_fb"),
-                ("error, feedback and feedforward", "error_ff"),
-            ):
-                values = np.array([m[key] for m in members])
+            for what, where, num, den in _PREDICTION_QUANTITIES:
+                values = np.array([m[num] / (m[den] if den else 1.0) for m in members])
                 rows.append(
-                    _finding(
-                        "prediction",
-                        person,
-                        direction,
-                        what,
-                        "window",
-                        nan,
-                        np.median(values),
-                        values.min(),
-                        values.max(),
-                        "range over trials",
-                        nan,
-                        "",
-                        values.size,
-                    )
-                )
-            for what, num, den in (
-                ("error ratio (feedback and feedforward / feedback only)", "error_ff", "error_fb"),
-                ("error ratio at the lines", "lines_error_ff", "lines_error_fb"),
-            ):
-                values = np.array([m[num] / m[den] for m in members])
-                rows.append(
-                    _finding(
-                        "prediction",
-                        person,
-                        direction,
-                        what,
-                        "window" if num == "error_ff" else "lines",
-                        nan,
-                        np.median(values),
-                        values.min(),
-                        values.max(),
-                        "range over trials",
-                        nan,
-                        "",
-                        values.size,
-                    )
-                )
-                ratios.setdefault(what, []).append(float(np.median(values)))
-        for what, values in ratios.items():
-            values = np.array(values)
+                    _finding("prediction", person, direction, what, where, nan, np.median(values),
+                             values.min(), values.max(), "range over trials", nan, "", values.size)
+                )  # fmt: skip
+                if den:
+                    ratios.setdefault((what, where), []).append(float(np.median(values)))
+        for (what, where), values in ratios.items():
+            v = np.array(values)
             rows.append(
-                _finding(
-                    "prediction",
-                    ALL_PEOPLE,
-                    direction,
-                    what,
-                    "window" if "lines" not in what else "lines",
-                    nan,
-                    np.median(values),
-                    values.min(),
-                    values.max(),
-                    "range over people",
-                    nan,
-                    "",
-                    values.size,
-                )
-            )
+                _finding("prediction", ALL_PEOPLE, direction, what, where, nan, np.median(v), v.min(),
+                         v.max(), "range over people", nan, "", v.size)
+            )  # fmt: skip
     return rows
 
 
