@@ -151,14 +151,14 @@ def session_run(tmp_path_factory):
     run = root / "run"
     args = ["analyse", str(config), "--data", str(folder), "--run", str(run), "--twins", "2"]
     result = CliRunner().invoke(app, [*args, "--max-fb-twins", "2", "--quiet"])
-    return result, run
+    return result, run, args
 
 
 @needs_data
 def test_analyse_takes_a_session_folder_as_the_logger_left_it(session_run):
     import pyarrow.parquet as pq
 
-    result, run = session_run
+    result, run, _ = session_run
     assert result.exit_code == 0, result.output
     out = result.output
     assert "CONDITIONS (each run's kind from its data): 2 target and disturbance" in out
@@ -261,3 +261,31 @@ def test_without_a_person_factor_every_run_is_one_person_said_so():
     people = {r["person"] for r in session.findings.to_pylist()}
     assert people == {sessions.ONE_PERSON, sessions.ALL_PEOPLE}
     assert {r["person"] for r in session.trials.to_pylist()} == {sessions.ONE_PERSON}
+
+
+@needs_data
+def test_data_that_are_no_whole_experiment_leave_no_earlier_session_tables(session_run):
+    from typer.testing import CliRunner
+
+    from hcid import tables
+    from hcid.cli import app
+
+    first, run, args = session_run
+    assert first.exit_code == 0 and (run / tables.SESSION_LINES.file).is_file()
+    folder = args[args.index("--data") + 1]
+    again = [
+        *args[: args.index("--data")],
+        "--data",
+        f"{folder}/*_p0a0_+1.csv",
+        *args[args.index("--data") + 2 :],
+    ]
+    result = CliRunner().invoke(app, [*again, "--max-fb-twins", "2", "--quiet", "--force"])
+    assert result.exit_code == 0, result.output
+    assert "CONDITIONS" not in result.output
+    for schema in (
+        tables.SESSION_TRIALS,
+        tables.SESSION_LINES,
+        tables.SESSION_FINDINGS,
+        tables.FEEDBACK_RUNS,
+    ):
+        assert not (run / schema.file).exists()

@@ -589,6 +589,8 @@ def analyse_study(
     write_skipped(run_dir, whole)
     if session is not None:
         sessions.write_session(run_dir, session)
+    else:
+        sessions.forget_session(run_dir)
     lap_done("tables")
     aside = tuple((str(f), str(why)) for f, why in data.set_aside)
     return AnalysisRun(

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -24,7 +25,7 @@ from hcid.analysis.descriptors import loop_margins
 from hcid.config import Config, IdentifyConfig
 from hcid.config.fit import FEEDBACK_PARAMETERS
 from hcid.errors import ConfigError, DataError, HcidError
-from hcid.io import results
+from hcid.io import folders, results
 from hcid.io.datasets import DataSet
 from hcid.loop.hcmodel import plant
 from hcid.pipeline.fit import tracking_record
@@ -440,8 +441,21 @@ def combine_session(
     )
 
 
+#: The tables a whole experiment's combination writes.
+SESSION_TABLES = (tables.SESSION_TRIALS, tables.SESSION_LINES, tables.SESSION_FINDINGS, tables.FEEDBACK_RUNS)
+
+
+def forget_session(run_dir, keep: Sequence[tables.Schema] = ()) -> None:
+    """Remove an earlier data set's session tables but ``keep`` (data that are not a whole
+    experiment now, or without disturbance-only runs), so that the report shows only this one's."""
+    names = [t.file for t in SESSION_TABLES if t not in keep and (Path(run_dir) / t.file).is_file()]
+    if names:
+        folders.remove_owned(Path(run_dir), names)
+
+
 def write_session(run_dir, session: Session) -> None:
     """The combination's tables, each written atomically."""
+    forget_session(run_dir, keep=SESSION_TABLES if session.feedback is not None else SESSION_TABLES[:3])
     results.write(tables.SESSION_TRIALS, session.trials, run_dir)
     results.write(tables.SESSION_LINES, session.lines, run_dir)
     results.write(tables.SESSION_FINDINGS, session.findings, run_dir)
