@@ -164,3 +164,17 @@ def test_a_noise_free_trial_is_predicted_exactly_with_feedforward_and_not_withou
     found = conditions.prediction(conditions.trial_lines(_trial(EVEN, ODD), RATE, N), model, every)
     assert found.error_ff == pytest.approx(0.0, abs=1e-9) and found.lines_ff == pytest.approx(0.0, abs=1e-9)
     assert found.error_fb > 0.1 and found.lines_fb == pytest.approx(found.error_fb)  # u holds only lines
+
+
+def test_a_weak_noise_where_an_input_is_absent_gives_the_same_kind_everywhere():
+    # One rule (hcid.analysis.fourier.absent_inputs) for the trial's kind and the lines the plant
+    # check and the lines estimator read: a target of 1e-7 noise (not exactly 0) is absent for all.
+    from hcid.analysis.fourier import forcing_lines
+
+    every = np.sort(np.r_[EVEN, ODD])
+    rec = _trial([], every)
+    rec["ft"] = rec["ft"] + 1e-7 * np.random.default_rng(1).standard_normal(N)
+    assert conditions.trial_lines(rec, RATE, N).kind is Kind.DISTURBANCE_ONLY
+    lines = forcing_lines(rec["ft"], rec["fd"], RATE, one_input=True)
+    assert lines.problem is None and lines.target.size == 0 and lines.disturbance.tolist() == every.tolist()
+    assert forcing_lines(rec["ft"], rec["fd"], RATE).problem is not None  # two inputs asked for

@@ -3,8 +3,8 @@
 A lab's session mixes trials with a target and a disturbance on disjoint lines, trials with
 only one of them, line sets swapped between trials and sign flips. Each trial's kind comes
 from its data (:func:`trial_lines`): over the window an input is absent when its power at
-every forcing line is below :data:`ABSENT` of the other input's strongest line (zero in the
-file). From the
+every forcing line is below :data:`hcid.analysis.fourier.ABSENT` of the other input's strongest
+line (zero in the file). From the
 DFT coefficients ``U, E, Ft, Fd`` of one window (a whole number of periods):
 
 - ``H_UR = U / Ft`` at the target lines and ``H_UD = U / Fd`` at the disturbance lines, per
@@ -34,10 +34,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from hcid.analysis.fourier import interpolate, line_bins
+from hcid.analysis.fourier import absent_inputs, interpolate, line_bins
 
 __all__ = [
-    "ABSENT",
     "SOURCES",
     "Kind",
     "PersonLines",
@@ -51,9 +50,6 @@ __all__ = [
     "wilcoxon_p",
 ]
 
-#: An input is absent from a trial when its power at every line of the other input is below
-#: this share of the other's (SPEC 12): a file's zeros, not a weak sine.
-ABSENT = 1e-6
 
 
 class Kind(enum.Enum):
@@ -145,17 +141,8 @@ def trial_lines(record: Mapping[str, np.ndarray], rate: float, n: int) -> TrialL
     window = {k: np.asarray(record[k], dtype=np.float64)[:n] for k in ("ft", "fd", "e", "u")}
     spectra = {k: np.fft.rfft(x) for k, x in window.items()}
     target, disturbance = line_bins(window["ft"]), line_bins(window["fd"])
-    power_t, power_d = np.abs(spectra["ft"]) ** 2, np.abs(spectra["fd"]) ** 2
     empty = np.zeros(0, dtype=np.int64)
-
-    lines = np.union1d(target, disturbance)
-
-    def absent(mine: np.ndarray, other: np.ndarray) -> bool:
-        # At every forcing line below ABSENT of the other input's strongest line.
-        return lines.size > 0 and bool(np.all(mine[lines] < ABSENT * other[lines].max()))
-
-    no_target = absent(power_t, power_d) or not np.any(np.diff(window["ft"]))
-    no_disturbance = absent(power_d, power_t) or not np.any(np.diff(window["fd"]))
+    no_target, no_disturbance = absent_inputs(window["ft"], window["fd"])
 
     def made(kind, t_bins, d_bins, problem=None) -> TrialLines:
         return TrialLines(kind, t_bins, d_bins, spectra, int(n), float(rate), problem)

@@ -28,9 +28,11 @@ import numpy as np
 from hcid.errors import DataError
 
 __all__ = [
+    "ABSENT",
     "NEIGHBOURS",
     "PLANT_MISMATCH_LIMIT",
     "FCEstimate",
+    "absent_inputs",
     "ForcingLines",
     "fc_estimate",
     "forcing_lines",
@@ -108,13 +110,31 @@ def line_bins(x: np.ndarray) -> np.ndarray:
     return bins if share >= LINE_SHARE else np.zeros(0, dtype=np.int64)
 
 
+#: An input is absent from a trial when its power at every forcing line is below this share of
+#: the other input's strongest line, or it is constant (SPEC 12): a file's zeros, not a weak sine.
+ABSENT = 1e-6
+
+
+def absent_inputs(ft: np.ndarray, fd: np.ndarray) -> tuple[bool, bool]:
+    """Whether the target and the disturbance are absent over this window (:data:`ABSENT`)."""
+    ft, fd = np.asarray(ft, dtype=np.float64), np.asarray(fd, dtype=np.float64)
+    lines = np.union1d(line_bins(ft), line_bins(fd))
+    power = [np.abs(np.fft.rfft(x)) ** 2 for x in (ft, fd)]
+
+    def absent(mine: np.ndarray, other: np.ndarray, x: np.ndarray) -> bool:
+        below = lines.size > 0 and bool(np.all(mine[lines] < ABSENT * other[lines].max()))
+        return below or not np.any(np.diff(x))
+
+    return absent(power[0], power[1], ft), absent(power[1], power[0], fd)
+
+
 def forcing_lines(ft: np.ndarray, fd: np.ndarray, rate: float, one_input: bool = False) -> ForcingLines:
     """Find the forcing functions' lines in one window of ``ft`` and ``fd`` (same length).
 
     Each must be a line spectrum over the window (a multisine over whole periods: see
     :data:`LINE_GAP`) and the two sets disjoint; otherwise ``problem`` says which
-    condition fails and the sets are empty. With ``one_input``, one of them may be constant
-    (a single-input trial, SPEC 12): its set is then empty.
+    condition fails and the sets are empty. With ``one_input``, one of them may be absent
+    (:func:`absent_inputs`: a single-input trial, SPEC 12): its set is then empty.
 
     Examples
     --------
@@ -131,13 +151,14 @@ def forcing_lines(ft: np.ndarray, fd: np.ndarray, rate: float, one_input: bool =
     target, share_t = _lines(ft)
     dist, share_d = _lines(fd)
     problem = None
-    if one_input and np.any(np.diff(fd)) and not np.any(np.diff(ft)):  # disturbance only
-        target, share_t = empty, 1.0
-    elif one_input and np.any(np.diff(ft)) and not np.any(np.diff(fd)):  # target only
-        dist, share_d = empty, 1.0
-    if not np.any(np.diff(ft)) and not (one_input and target.size == 0 and np.any(np.diff(fd))):
+    no_target, no_disturbance = absent_inputs(ft, fd) if one_input else (False, False)
+    single = no_target != no_disturbance  # one input absent (SPEC 12): the other's lines alone
+    if single:
+        target, share_t = (empty, 1.0) if no_target else (target, share_t)
+        dist, share_d = (empty, 1.0) if no_disturbance else (dist, share_d)
+    if not single and not np.any(np.diff(ft)):
         problem = "the target is constant over the window"
-    elif not np.any(np.diff(fd)) and not (one_input and dist.size == 0 and np.any(np.diff(ft))):
+    elif not single and not np.any(np.diff(fd)):
         problem = "the disturbance is constant over the window"
     elif share_t < LINE_SHARE:
         problem = "the target is not a sum of sines over whole periods of the window"
