@@ -191,3 +191,18 @@ def test_version_prints_the_installed_version():
 
     result = CliRunner().invoke(app, ["--version"])
     assert result.exit_code == 0 and result.output.strip() == f"hcid {version('hcid')}"
+
+
+def test_a_tiny_p_value_reads_p_below_not_p_equals_below():
+    # Issue 46 (9): lab_weak printed "p = < 1e-15". Source: the wording rule of
+    # hcid.hcfit.consistency.p_text, below what double precision resolves.
+    from hcid.cli.answers import _data_check_line
+
+    g = {
+        "fc_dof": 40, "fc_verdict": "contradicted by the data", "n_contradicted": 3, "n_runs": 12,
+        "fc_chi2": 400.0, "fc_p": 1e-30, "fc_spread": "across 12 runs", "he_error_db": 0.6,
+        "he_error_deg": 3.0, "ht_error_db": float("nan"), "ht_error_deg": float("nan"),
+        "twin_source": "medians of the values its runs determine",
+    }  # fmt: skip
+    line = _data_check_line(g, full=True)
+    assert "p < 1e-15," in line and "p = <" not in line

@@ -51,7 +51,6 @@ __all__ = [
 ]
 
 
-
 class Kind(enum.Enum):
     """What a trial's inputs are (SPEC 12)."""
 

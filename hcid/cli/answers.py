@@ -183,7 +183,7 @@ def _calibrated_line(summary) -> str:
 def _data_check_line(g: dict, *, full: bool) -> str:
     """The group's model against the data's own frequency response (in ``full`` once per group:
     the model is the same for every method), and the method's runs whose own fits it contradicts."""
-    from hcid.hcfit.consistency import CONTRADICTED, format_p
+    from hcid.hcfit.consistency import CONTRADICTED, p_text
 
     if g["fc_dof"] <= 0:
         return f"    data check: {g['fc_verdict']}"
@@ -198,7 +198,7 @@ def _data_check_line(g: dict, *, full: bool) -> str:
         ht = f", Ht {g['ht_error_db']:.1f} dB {g['ht_error_deg']:.0f} deg"
     return (
         f"    data check: the group's model{_model_source(g)} is {g['fc_verdict']} "
-        f"(chi-square {g['fc_chi2']:.1f} on {g['fc_dof']} dof, p = {format_p(g['fc_p'])}, spread "
+        f"(chi-square {g['fc_chi2']:.1f} on {g['fc_dof']} dof, {p_text(g['fc_p'])}, spread "
         f"{g['fc_spread']}; median |error| against the Fourier-coefficient estimates He "
         f"{g['he_error_db']:.1f} dB {g['he_error_deg']:.0f} deg{ht}); {contradicted}"
     )

@@ -97,7 +97,7 @@ class Consistency:
         median |error| He 3.0 dB 18 deg, Ht 1.4 dB 9 deg)``."""
         ht = "" if math.isnan(self.ht_db) else f", Ht {self.ht_db:.1f} dB {self.ht_deg:.0f} deg"
         return (
-            f"{self.verdict} (chi-square {self.chi2:.1f} on {self.dof} dof, p = {format_p(self.p)}, "
+            f"{self.verdict} (chi-square {self.chi2:.1f} on {self.dof} dof, {p_text(self.p)}, "
             f"spread: {self.spread}; median |error| He {self.he_db:.1f} dB {self.he_deg:.0f} deg{ht})"
         )
 
@@ -107,6 +107,16 @@ def format_p(p: float) -> str:
     if not math.isfinite(p):
         return "n/a"
     return "< 1e-15" if p < 1e-15 else f"{p:.2g}"
+
+
+def p_text(p: float) -> str:
+    """A p-value in a sentence: ``p = 0.031``, or ``p < 1e-15`` (not ``p = < 1e-15``).
+
+    >>> p_text(0.0312), p_text(1e-20)
+    ('p = 0.031', 'p < 1e-15')
+    """
+    text = format_p(p)
+    return f"p {text}" if text.startswith("<") else f"p = {text}"
 
 
 def _chi2(t: np.ndarray, dof_noise: int, fitted: int = 0) -> tuple[float, int, float]:
