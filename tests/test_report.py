@@ -509,10 +509,10 @@ def test_the_run_table_is_split_in_two_that_fit_a_page():
         "VAF %",
         "data check (p)",
     ]
-    row = ["1", "dp", "direct", "0.01 (W*)", "0.9", "0.2", "0.35°", "66.0", "0.39"]
+    row = ["1", "dp", "direct", "0.01 (W*)", "0.9", "0.2", "0.35 (held)", "66.0", "0.39"]
     (h1, r1), (h2, r2) = _split_runs(header, [row])
     assert h1 == ["run", "subject", "method", "p (evidence)", "VAF %", "data check (p)"]
     assert h2 == ["run", "subject", "method", "Kpt", "TL s", "zeta_nms"]
     assert r1 == [["1", "dp", "direct", "0.01 (W*)", "66.0", "0.39"]] and r2 == [
-        ["1", "dp", "direct", "0.9", "0.2", "0.35°"]
+        ["1", "dp", "direct", "0.9", "0.2", "0.35 (held)"]
     ]

@@ -19,7 +19,8 @@ def test_errors_wrap_phase_and_skip_absent_paths():
 
 
 def test_each_status_has_its_mark_in_the_run_table():
-    # † undetermined, ‡ determined but to read with care, ° held (the table's own note says so).
+    # † undetermined, ‡ determined but to read with care, "(held)" held (the table's own note says
+    # so; a degree sign had read as a unit: "10.1°" rad/s, issue 46).
     from hcid.report.sections.study import _with_se
 
     def row(status, se=0.1):
@@ -30,7 +31,7 @@ def test_each_status_has_its_mark_in_the_run_table():
     assert _with_se(row("not told from 0 (se above |value|)"), "Kpe") == "33.5 ± 0.1‡"
     assert _with_se(row("in a failed fit (validation VAF below 0%)", 3.8e-9), "Kpe") == "33.5†"  # no se
     assert _with_se(row("correlated with TL (r = -0.97)", 3.3e5), "Kpe") == "33.5†"
-    assert _with_se(row("fixed at a literature value", float("nan")), "Kpe") == "33.5°"
+    assert _with_se(row("fixed at a literature value", float("nan")), "Kpe") == "33.5 (held)"
 
 
 def test_the_evidence_caption_names_each_run_by_the_factors_that_differ():
@@ -46,3 +47,25 @@ def test_the_evidence_caption_names_each_run_by_the_factors_that_differ():
     assert _run_names([{**r, "subject": "dp", "trial": "+1"} for r in runs]) == ""  # nothing differs
     many = [{"run_id": i, "method": "direct", "subject": f"S{i}"} for i in range(25)]
     assert _run_names(many) == "" and _run_names(many[:24]).startswith(" Runs (subject): 0 S0; 1 S1;")
+
+
+def test_the_data_check_table_gives_angles_in_whole_degrees():
+    # Issue 46 (4): "1.1e+02 deg" where the console says 114 deg.
+    from hcid.report.sections.study import _degrees
+
+    assert (_degrees(114.2), _degrees(3.4), _degrees(float("nan"))) == ("114", "3", "-")
+
+
+def test_no_per_subject_binomial_where_each_subject_has_one_run():
+    # Issue 46 (10): a binomial over one run cannot reject (its p is alpha at best); with one run
+    # per subject and group (the CPHS recordings --by trial) the per-subject summary is left out.
+    from hcid.pipeline.summary import GroupSummary
+
+    def summary(runs):
+        group = {"group": "trial=+1", "method": "direct", "alpha": 0.05}
+        return GroupSummary(group, runs, (0.9, 0.9), [], 2.0, 40.0)
+
+    one_each = [{"subject": s, "p_value": 0.01} for s in ("dp", "ef", "gy")]
+    assert summary(one_each).by_subject() == []
+    two_each = one_each + [{"subject": s, "p_value": 0.5} for s in ("dp", "ef", "gy")]
+    assert [row[:3] for row in summary(two_each).by_subject()] == [("dp", 1, 2), ("ef", 1, 2), ("gy", 1, 2)]

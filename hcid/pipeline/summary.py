@@ -34,8 +34,9 @@ class GroupSummary:
 
     def by_subject(self) -> list[tuple[str, int, int, float]]:
         """Per subject (the runs' ``subject`` factor, where the data have it and the group holds
-        more than one): ``(subject, runs at p <= alpha, runs, binomial p)``, so that a verdict
-        carried by one person's runs is seen as such (the group's binomial counts runs, not people)."""
+        more than one, not all with one run): ``(subject, runs at p <= alpha, runs, binomial p)``,
+        so that a verdict carried by one person's runs is seen as such (the group's binomial counts
+        runs, not people)."""
         return self._subjects
 
     @functools.cached_property
@@ -44,6 +45,8 @@ class GroupSummary:
         if len(subjects) < 2:
             return []
         p = {s: np.array([r["p_value"] for r in self.runs if str(r["subject"]) == s]) for s in subjects}
+        if all(x.size == 1 for x in p.values()):  # one run each: a binomial of one cannot reject
+            return []
         return [(s, *binomial_summary(p[s], self.group["alpha"])) for s in subjects]
 
     @property

@@ -44,6 +44,11 @@ def _num(x, digits: int = 3) -> str:
     return "-" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
 
 
+def _degrees(x: float) -> str:
+    """An angle in whole degrees, as the console prints it (114, not 1.1e+02)."""
+    return "-" if x is None or not math.isfinite(x) else f"{x:.0f}"
+
+
 def _percent(share: float) -> str:
     return "-" if not math.isfinite(share) else f"{100 * share:.0f}"
 
@@ -127,8 +132,8 @@ def _checks(groups) -> tuple[list[list[str]], list[str]]:
                 str(g["fc_dof"]),
                 format_p(g["fc_p"]),
                 g["fc_spread"],
-                f"{_num(g['he_error_db'], 2)} dB, {_num(g['he_error_deg'], 2)} deg",
-                f"{_num(g['ht_error_db'], 2)} dB, {_num(g['ht_error_deg'], 2)} deg",
+                f"{_num(g['he_error_db'], 2)} dB, {_degrees(g['he_error_deg'])} deg",
+                f"{_num(g['ht_error_db'], 2)} dB, {_degrees(g['ht_error_deg'])} deg",
                 g["twin_source"],
                 g["twin_undetermined"] or "-",
             ]
@@ -145,12 +150,13 @@ _SHOWN = ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
 def _with_se(r: dict, p: str) -> str:
     """The estimate with its se; † where the data do not determine it (no se then: its reason
     in analysis.csv's <p>_status), ‡ where determined but to read with care (outside its
-    plausible range, or not told from 0), ° where held at a literature value."""
+    plausible range, or not told from 0), "(held)" where held at a literature value (a degree
+    sign read as a unit)."""
     if not math.isfinite(r[p]):
         return "-"
     status = r[p + "_status"]
     if status.startswith("fixed"):
-        return _num(r[p]) + "°"
+        return _num(r[p]) + " (held)"
     if is_undetermined(status):  # its se says nothing (3e+05 in a correlated pair, 4e-09 in a failed fit)
         # On a bound within 1e-6 of 0 (a lead time held at 0) it reads as 0, not as 1.69e-08.
         at_zero = is_on_bound(status) and abs(r[p]) < 1e-6
@@ -343,7 +349,7 @@ def render(data: StudyData | None, doc: Doc) -> None:
     doc.text(
         "Then its parameters: estimates ± standard error; † a value the run does not determine, "
         "without its se (the reason and the se in `analysis.csv`), ‡ a value it determines but "
-        "outside the parameter's plausible range or not told from 0, ° held at a literature value "
+        "outside the parameter's plausible range or not told from 0, (held) held at a literature value "
         "(`hc_form` nms fixed)."
     )
     doc.table(parameter_header, parameter_rows)
