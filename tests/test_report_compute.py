@@ -69,3 +69,66 @@ def test_no_per_subject_binomial_where_each_subject_has_one_run():
     assert summary(one_each).by_subject() == []
     two_each = one_each + [{"subject": s, "p_value": 0.5} for s in ("dp", "ef", "gy")]
     assert [row[:3] for row in summary(two_each).by_subject()] == [("dp", 1, 2), ("ef", 1, 2), ("gy", 1, 2)]
+
+
+def test_no_model_feedforward_is_drawn_for_a_group_answered_without_it():
+    # Issue 46 (7): a group-model Ht curve had been drawn for a condition answered NO FEEDFORWARD
+    # SHOWN (its fitted Kpt above 0); now only where a method's verdict is FEEDFORWARD.
+    from types import SimpleNamespace
+
+    import pyarrow as pa
+
+    from hcid import tables
+    from hcid.io.resolve import load_config
+    from hcid.report.sections.study import _fourier
+
+    from .conftest import ROOT
+
+    config = load_config(ROOT / "configs" / "lab_example.yaml")
+    rows = [
+        {"group": "g", "path": path, "omega": w, "magnitude_db": 0.0, "phase_deg": 0.0, "sd_db": 0.0,
+         "sd_deg": 0.0, "extrapolated": False, "n_runs": 3, "model_db": 0.0, "model_deg": 0.0,
+         "inversion": 1.0, "inversion_deg": 0.0, "inversion_sd": 0.0, "inversion_sd_deg": 0.0,
+         "inversion_median": 1.0, "inversion_q25": 1.0, "inversion_q75": 1.0, "problem": ""}
+        for path, w in (("e", 1.0), ("ft", 2.0))
+    ]  # fmt: skip
+    run = SimpleNamespace(
+        config=config, fc_estimates=pa.Table.from_pylist(rows, schema=tables.FC_ESTIMATES.arrow)
+    )
+    fitted = {
+        "Kpe": 2.0,
+        "TL": 0.3,
+        "tau_pe": 0.2,
+        "w_nms": 10.1,
+        "zeta_nms": 0.35,
+        "Kpt": 0.5,
+        "TI": 0.2,
+        "tau_pt": 0.1,
+    }
+    group = {"group": "g", "twins_folder": "twins/g-1", **{f"fitted_{p}": v for p, v in fitted.items()}}
+    for verdicts, drawn in (
+        (("NO FEEDFORWARD SHOWN", "UNCERTAIN"), False),
+        (("FEEDFORWARD", "UNCERTAIN"), True),
+    ):
+        groups = [
+            {**group, "method": m, "verdict": v}
+            for m, v in zip(("direct", "indirect"), verdicts, strict=True)
+        ]
+        (fc,), _ = _fourier(run, groups)
+        assert (fc[3]["ft"] is not None) == drawn
+
+
+def test_a_point_at_zero_inversion_is_drawn_whole():
+    # Issue 46 (6): points at |Ht Yc| = 0 had been half clipped on the axis (ylim from 0).
+    from hcid.report.figures_hcfit import plot_inversion
+
+    rows = [
+        {"path": "ft", "omega": w, "extrapolated": False, "inversion": m, "inversion_deg": 0.0, "inversion_sd": 0.1,
+         "inversion_sd_deg": 5.0, "inversion_median": m, "inversion_q25": m, "inversion_q75": m}
+        for w, m in ((1.0, 0.0), (2.0, 0.8))
+    ]  # fmt: skip
+    fig = plot_inversion(rows, "g")
+    low, high = fig.axes[0].get_ylim()
+    marker = 6 / 72 * fig.dpi  # a default marker's radius, in pixels, at most
+    pixels_per_unit = fig.axes[0].bbox.height / (high - low)
+    assert -low * pixels_per_unit >= marker / 2

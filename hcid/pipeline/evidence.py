@@ -343,13 +343,17 @@ def decide(rows: list[dict], alpha: float, statistic: str) -> None:
         )
 
 
+#: A group's verdict where its runs show feedforward (beside UNCERTAIN and NO FEEDFORWARD SHOWN).
+FEEDFORWARD = "FEEDFORWARD"
+
+
 def group_verdict(rows: list[dict], alpha: float) -> dict:
     """A group's (or subject's) summary over its runs: k of n with p <= alpha against the binomial,
     the median power, and the verdict word."""
     k, n, p = binomial_summary(np.array([r["p_value"] for r in rows]), alpha)
     power = float(np.median([r["power"] for r in rows]))
     if p <= alpha:
-        verdict = "FEEDFORWARD"
+        verdict = FEEDFORWARD
     elif power < MIN_POWER:
         verdict = "UNCERTAIN"
     else:

@@ -245,7 +245,8 @@ def plot_inversion(rows: list[dict], title: str = "", axes=None):
     ax_ph.axhline(0.0, color="0.3", lw=1, ls="--")
     ax_mag.set_ylabel("|Ht Yc| (-)")
     shown = np.concatenate([mag, median])
-    ax_mag.set_ylim(0, max(1.9, float(np.nanmax(shown)) * 1.25))  # quartile bars may run off the top
+    top = max(1.9, float(np.nanmax(shown)) * 1.25)  # quartile bars may run off the top
+    ax_mag.set_ylim(-0.04 * top, top)  # a point at |Ht Yc| = 0 whole, not half cut by the axis
     handles, labels = ax_mag.get_legend_handles_labels()
     fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=1, frameon=False)  # below the data
     ax_ph.set_ylabel("phase of Ht Yc (deg)")

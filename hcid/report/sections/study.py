@@ -13,6 +13,7 @@ from hcid import tables
 from hcid.hcfit.consistency import CONTRADICTED, format_p
 from hcid.hcfit.determined import is_flagged, is_on_bound, is_undetermined
 from hcid.io import results
+from hcid.pipeline.evidence import FEEDFORWARD
 from hcid.pipeline.summary import has_safe_interval, rate_interval, summarise_groups
 from hcid.report import figures, figures_hcfit
 from hcid.report.document import Doc
@@ -249,6 +250,8 @@ def _fourier(run, group_rows: list[dict]) -> tuple[list[tuple], list[str]]:
         twin = next(g for g in group_rows if g["group"] == name)
         by_path = {path: [r for r in t if r["path"] == path] for path in ("e", "ft")}
         curves = _model_curves(run, twin, [r["omega"] for r in t])
+        if not any(g["verdict"] == FEEDFORWARD for g in group_rows if g["group"] == name):
+            curves["ft"] = None  # no model feedforward drawn where no method's answer shows it
         fc.append((name, twin["twins_folder"].removesuffix("-study"), by_path, curves))
     return fc, problems
 
@@ -557,7 +560,7 @@ def _render_parameters(data: StudyData, doc: Doc) -> None:
             f"fc_{_slug(folder)}.png",
             f"{name}: model-free (Fourier-coefficient) estimates of both paths at the forcing lines, "
             "the group's coefficient average (points) with its spread across runs (band: +-1 sd), "
-            "and the group's model (lines; Ht only where its Kpt is above 0).",
+            "and the group's model (lines; Ht only where a method answers FEEDFORWARD).",
             lambda p=paths, n=name, c=curves: figures_hcfit.plot_fc(p, c, title=n),
         )
         if paths.get("ft"):
