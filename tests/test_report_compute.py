@@ -123,7 +123,8 @@ def test_a_point_at_zero_inversion_is_drawn_whole():
     from hcid.report.figures_hcfit import plot_inversion
 
     rows = [
-        {"path": "ft", "omega": w, "extrapolated": False, "inversion": m, "inversion_deg": 0.0, "inversion_sd": 0.1,
+        {"path": "ft", "omega": w, "extrapolated": False, "inversion": m, "inversion_deg": 0.0,
+         "inversion_sd": 0.1,
          "inversion_sd_deg": 5.0, "inversion_median": m, "inversion_q25": m, "inversion_q75": m}
         for w, m in ((1.0, 0.0), (2.0, 0.8))
     ]  # fmt: skip
