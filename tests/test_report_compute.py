@@ -133,3 +133,29 @@ def test_a_point_at_zero_inversion_is_drawn_whole():
     marker = 6 / 72 * fig.dpi  # a default marker's radius, in pixels, at most
     pixels_per_unit = fig.axes[0].bbox.height / (high - low)
     assert -low * pixels_per_unit >= marker / 2
+
+
+def test_a_run_whose_test_and_selection_at_w_disagree_is_marked():
+    # Issue 46 (8): runs at p 0.02 and 0.01 read "feedforward at W: no" with no note why.
+    import pyarrow as pa
+
+    from hcid import tables
+    from hcid.report.sections.study import _run_table
+
+    base = {n: None for n in tables.ANALYSIS.names}
+    numbers = {n: float("nan") for n, t in tables.ANALYSIS.fields if t == pa.float64()}
+    row = {**base, **numbers, "run_id": 1, "method": "direct", "decided_by": "W*", "nb_ft": 0,
+           "uncertain": False, "p_value": 0.02, "fc_dof": 0, "fc_p": float("nan")}  # fmt: skip
+    row.update(
+        {
+            f"{p}_status": "determined"
+            for p in ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
+        }
+    )
+    runs = [
+        {**row, "run_id": 1, "evidence": "feedforward", "feedforward_at_w": False},
+        {**row, "run_id": 2, "evidence": "feedforward", "feedforward_at_w": True},
+    ]
+    header, rows = _run_table(pa.Table.from_pylist(runs))
+    at_w = header.index("feedforward at W")
+    assert [r[at_w] for r in rows] == ["no *", "yes"]

@@ -201,7 +201,9 @@ def _run_table(runs) -> tuple[list[str], list[list[str]]]:
                 r["method"],
                 f"{_num(r['p_value'], 2)} ({'W*' if r['decided_by'] == 'W*' else 'Fourier'})",
                 str(r["nb_ft"]),
-                ("yes" if r["feedforward_at_w"] else "no") + (" (uncertain)" if r["uncertain"] else ""),
+                ("yes" if r["feedforward_at_w"] else "no")
+                + (" (uncertain)" if r["uncertain"] else "")
+                + (" *" if bool(r["feedforward_at_w"]) != (r["evidence"] == "feedforward") else ""),
                 *[_with_se(r, p) for p in _SHOWN],
                 _num(r["crossover"]),
                 _num(r["phase_margin"]),
@@ -346,7 +348,11 @@ def render(data: StudyData | None, doc: Doc) -> None:
         "calibrated W (SPEC 10); remnant: the share of var(u) the fitted model's paths leave given "
         "the measured e (the remnant injected at u), and the remnant's share of var(u) in the closed "
         "loop from the data alone (u's power off the forcing lines; the remnant also moves e, so the "
-        "two differ); data check: the p-value of the run's own model against its data."
+        "two differ); data check: the p-value of the run's own model against its data. * marks a "
+        "run whose two answers disagree: its own test (its W* against its FB twins, at alpha) and its "
+        "selection at the one W calibrated for its whole group; a run's W* can lie below the group's W "
+        "(its feedforward found by its test, lost at W) or above it by chance (kept at W, not shown "
+        "by its test). The test is the run's answer."
     )
     doc.table(evidence_header, evidence_rows)
     doc.text(
