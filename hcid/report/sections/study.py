@@ -523,7 +523,7 @@ def _render_checks(data: StudyData, doc: Doc) -> None:
                 "He error",
                 "Ht error",
                 "model built from",
-                "no run determines",
+                "not determined (by any run, or by the run taken)",
             ],
             data.checks,
         )
