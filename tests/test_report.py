@@ -5,6 +5,7 @@ import re
 import shutil
 import struct
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -158,6 +159,43 @@ window.addEventListener("load", () => {
 </script>"""
 
 
+#: Appended to a copy of report.html: after load, the title lists every table or figure wider
+#: than the page at the window's width (a table's scroll box scrolling, an element past the edge).
+_WIDTH_PROBE = """<script>
+window.addEventListener("load", () => {
+  const page = document.documentElement.clientWidth, out = [];
+  document.querySelectorAll(".wide").forEach((box) => {
+    const head = (box.querySelector("th") || {}).textContent;
+    if (box.scrollWidth > box.clientWidth + 1) out.push("table " + head);
+  });
+  document.querySelectorAll("img, table").forEach((e) => {
+    if (e.getBoundingClientRect().right > page + 1) out.push(e.tagName);
+  });
+  document.title = "wider than the page: " + out.length + " " + out.join("; ");
+});
+</script>"""
+
+
+def wider_than_the_page(html: Path, tmp_path: Path, width: int = 1400) -> str | None:
+    """What of ``html`` is wider than a ``width`` px window in headless Chromium ('0 ' for
+    nothing), or None without Chromium (CI has it: HCID_REQUIRE_BROWSER)."""
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if chromium is None:
+        if os.environ.get("HCID_REQUIRE_BROWSER"):
+            pytest.fail("Chromium is not installed, and HCID_REQUIRE_BROWSER is set (CI)")
+        return None
+    probe = tmp_path / "width_probe.html"
+    probe.write_text(html.read_text().replace("</body>", _WIDTH_PROBE + "</body>"))
+    flags = ["--headless", "--no-sandbox", "--disable-gpu", f"--user-data-dir={tmp_path / 'width_profile'}",
+             f"--window-size={width},3000", "--virtual-time-budget=10000"]  # fmt: skip
+    proc = subprocess.run(
+        [chromium, *flags, "--dump-dom", probe.as_uri()], capture_output=True, text=True, timeout=120
+    )
+    found = re.search(r"<title>wider than the page: (.*?)</title>", proc.stdout, re.S)
+    assert found, proc.stdout[:300]
+    return found.group(1)
+
+
 def test_html_opens_in_headless_chromium(report, tmp_path):
     # A real browser opens report.html and every figure loads (an <img> that failed to load
     # has naturalWidth 0). CI installs Chromium (.ci/run) and sets HCID_REQUIRE_BROWSER, so
@@ -188,6 +226,7 @@ def test_html_opens_in_headless_chromium(report, tmp_path):
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-500:]
     _png_size(shot)
+    assert wider_than_the_page(report.html, tmp_path) == "0 "  # issue 46: nothing past the page
 
 
 def test_plots_draw_on_given_axes_and_colour_marks_by_method(ci_run):

@@ -114,7 +114,7 @@ def to_html(doc: Doc, out_dir: Path, title: str) -> str:
                 f'<div class="wide"><table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table></div>'
             )
     style = (
-        "body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;line-height:1.4}"
+        "body{font-family:sans-serif;max-width:1240px;margin:2em auto;padding:0 1em;line-height:1.4}"
         "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 6px;"
         "vertical-align:top;font-size:0.85em}th{background:#f0f0f0}img{max-width:100%}"
         ".wide{overflow-x:auto;max-width:100%}"

@@ -171,13 +171,20 @@ def _factors(columns) -> list[str]:
     return [c for c in columns if c not in tables.ANALYSIS.names]
 
 
+#: The most factors the run table gives a column each; more share one column.
+_FACTOR_COLUMNS = 3
+
+
 def _run_table(runs) -> tuple[list[str], list[list[str]]]:
     """The per-run table: its header (the runs' factors, units) and one row per run and method."""
     factors = _factors(runs.column_names)
     units = {p: tables.PARAMETER_UNITS[p] for p in _SHOWN}
+    # Many factors (a logger's names: subject, stamp, plant, ...) in one wrapped column: a column
+    # each would make the table wider than the page.
+    merged = len(factors) > _FACTOR_COLUMNS
     header = [
         "run",
-        *factors,
+        *(["factors"] if merged else factors),
         "method",
         "p (evidence)",
         "nb_ft at W",
@@ -197,7 +204,7 @@ def _run_table(runs) -> tuple[list[str], list[list[str]]]:
         rows.append(
             [
                 str(r["run_id"]),
-                *[str(r[f]) for f in factors],
+                *(["; ".join(f"{f} {r[f]}" for f in factors)] if merged else [str(r[f]) for f in factors]),
                 r["method"],
                 f"{_num(r['p_value'], 2)} ({'W*' if r['decided_by'] == 'W*' else 'Fourier'})",
                 str(r["nb_ft"]),
