@@ -159,3 +159,16 @@ def test_a_run_whose_test_and_selection_at_w_disagree_is_marked():
     header, rows = _run_table(pa.Table.from_pylist(runs))
     at_w = header.index("feedforward at W")
     assert [r[at_w] for r in rows] == ["no *", "yes"]
+
+
+def test_a_calibration_no_method_uses_is_captioned_as_such():
+    # Issue 46 (3): the compensatory own twins' caption said "used for no method" and then
+    # described a safe interval and a recommended W for both methods.
+    from hcid.report.sections.study import _calibration_caption
+
+    unused = _calibration_caption(
+        "c, twins of its own fitted model, used for no method", ["direct", "indirect"], {}, False
+    )
+    assert "safe interval" not in unused and "no method's W comes from these twins" in unused
+    used = _calibration_caption("c, used for direct", ["direct", "indirect"], {"indirect": 0.02}, True)
+    assert "direct: the safe interval" in used and "indirect: the W used, the least total error" in used

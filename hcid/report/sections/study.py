@@ -29,7 +29,7 @@ class StudyData:
     parameters: list[list[str]]
     runs_header: list[str]
     runs: list[list[str]]
-    calibrations: list[tuple[str, str, str, pa.Table, dict]] = field(default_factory=list)
+    calibrations: list[tuple[str, str, str, pa.Table, dict, bool]] = field(default_factory=list)
     fc: list[tuple[str, str, dict, dict]] = field(default_factory=list)
     fc_problems: list[str] = field(default_factory=list)
     checks: list[list[str]] = field(default_factory=list)
@@ -241,7 +241,7 @@ def _calibrations(run, group_rows: list[dict]) -> list[tuple]:
             title, twins = name, "twins of its own fitted model"
         methods = ", ".join(g["method"] for g in mine) or "no method (no W separates them, below)"
         if table is not None:
-            out.append((title, f"{name}, {twins}, used for {methods}", folder, table, used))
+            out.append((title, f"{name}, {twins}, used for {methods}", folder, table, used, bool(mine)))
     return out
 
 
@@ -492,19 +492,28 @@ def _render_evidence(data: StudyData, doc: Doc) -> None:
             + _run_names(runs),
             lambda t=twins, r=runs, n=f"{group}, {method}", a=alpha: figures_hcfit.plot_evidence(t, r, n, a),
         )
-    for title, caption, folder, table, used in data.calibrations:
-        drawn = dict.fromkeys(table.column("method").to_pylist())
+    for title, caption, folder, table, used, in_use in data.calibrations:
+        drawn = list(dict.fromkeys(table.column("method").to_pylist()))
+        doc.figure(
+            f"calibration_{_slug(folder)}.png",
+            _calibration_caption(caption, drawn, used, in_use),
+            lambda t=table, n=title, u=used: figures.plot_calibration(t, n, used=u),
+        )
+
+
+def _calibration_caption(caption: str, drawn: list[str], used: dict, in_use: bool) -> str:
+    """A calibration figure's caption: per method drawn, what it marks (the W used where no W is
+    safe, else the safe interval); for twins no method took its W from, their rates alone."""
+    if not in_use:
+        what = "their rates alone, for comparison (no method's W comes from these twins)"
+    else:
         what = "; ".join(
             f"{m}: the W used, the least total error (no W is safe)"
             if m in used
             else f"{m}: the safe interval and its recommended W where there is one"
             for m in drawn
         )
-        doc.figure(
-            f"calibration_{_slug(folder)}.png",
-            f"{caption}: the twins' FP and FN rates over W (exact 95% bands), {what}.",
-            lambda t=table, n=title, u=used: figures.plot_calibration(t, n, used=u),
-        )
+    return f"{caption}: the twins' FP and FN rates over W (exact 95% bands), {what}."
 
 
 def _render_checks(data: StudyData, doc: Doc) -> None:
