@@ -172,3 +172,39 @@ def test_a_calibration_no_method_uses_is_captioned_as_such():
     assert "safe interval" not in unused and "no method's W comes from these twins" in unused
     used = _calibration_caption("c, used for direct", ["direct", "indirect"], {"indirect": 0.02}, True)
     assert "direct: the safe interval" in used and "indirect: the W used, the least total error" in used
+
+
+def test_a_calibration_figures_legends_stay_in_their_panels_and_a_narrow_interval_shows():
+    # Issue 46 (3, the figure half): a narrow safe interval was a sliver hidden under the
+    # recommended W's line (its edges are drawn now); the legends are checked to stay within their
+    # panels (the issue saw an entry run off the figure; not reproduced on these rates).
+    import pyarrow as pa
+
+    from hcid.report.figures import plot_calibration
+
+    w = np.geomspace(1e-3, 1.0, 61)
+    rows = []
+    for method, (lo, hi) in (("direct", (0.0072, 0.0075)), ("indirect", (float("nan"), float("nan")))):
+        for x in w:
+            rows.append(
+                {"method": method, "w": x, "fp_rate": float(x < 0.007), "fp_low": 0.0, "fp_high": 0.2,
+                 "fn_rate": float(x > 0.5), "fn_low": 0.0, "fn_high": 0.2, "safe_low": lo, "safe_high": hi,
+                 "recommended": (lo * hi) ** 0.5 if lo == lo else float("nan"), "target_rate": 0.0,
+                 "n_fb": 20, "n_ff": 20}
+            )  # fmt: skip
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = plot_calibration(pa.Table.from_pylist(rows), "g", used={"indirect": 0.3})
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    for ax in fig.axes:
+        box, panel = ax.get_legend().get_window_extent(renderer), ax.get_tightbbox(renderer)
+        neighbours = [a.get_window_extent(renderer) for a in fig.axes if a is not ax]
+        own = ax.get_window_extent(renderer)
+        assert box.x0 >= fig.bbox.x0 and box.x1 <= fig.bbox.x1
+        assert own.x0 - 20 <= box.x0 and box.x1 <= own.x1 + 20  # within its own panel's width
+        assert not any(box.overlaps(n) for n in neighbours)
+        assert panel is not None
+    direct = fig.axes[0]
+    edges = [line.get_xdata()[0] for line in direct.get_lines() if line.get_linestyle() == "--"]
+    assert edges == pytest.approx([0.0072, 0.0075])  # the interval's edges drawn

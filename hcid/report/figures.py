@@ -344,9 +344,12 @@ def plot_calibration(table, name: str, axes=None, used: dict[str, float] | None 
             )
         lo, hi, rec = r[0]["safe_low"], r[0]["safe_high"], r[0]["recommended"]
         if lo < hi:
-            ax.axvspan(max(lo, w[0]), min(hi, w[-1]), color="tab:green", alpha=0.12, label="safe interval")
+            span = (max(lo, w[0]), min(hi, w[-1]))
+            ax.axvspan(*span, color="tab:green", alpha=0.12, label=f"safe interval [{lo:.3g}, {hi:.3g})")
+            for edge in span:  # its edges drawn: a narrow interval is not hidden under the W line
+                ax.axvline(edge, color="tab:green", lw=0.9, ls="--")
         if np.isfinite(rec):
-            ax.axvline(rec, color="tab:green", lw=2, label=f"recommended W = {rec:.3g}")
+            ax.axvline(rec, color="tab:green", lw=1.2, label=f"recommended W = {rec:.3g}")
         elif used is not None and method in used:
             ax.axvline(
                 used[method],
