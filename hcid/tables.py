@@ -5,44 +5,8 @@ schemas, :func:`hcid.io.results.read` checks what it reads against them, and the
 report reads the columns named here. A leaf module: it imports only pyarrow, so
 any layer may refer to a schema.
 
-Run directory layout (default ``runs/<config name>``):
-
-==============================  =============================================  ==========================
-file                            one row per                                    written by
-==============================  =============================================  ==========================
-``config.yaml``                 (the resolved config of the run)               every stage
-``simulations.parquet``         model, seed and sample                         ``hcid simulate``
-``simulation_summary.parquet``  model and seed                                 ``hcid simulate``
-``measured.parquet``            run and sample of imported data                ``hcid identify --data``
-``runs.parquet``                run of imported data: its file, the file's     ``hcid identify --data``
-                                own run id and its factors
-``frontier.parquet``            model, seed, method and order triple           ``hcid identify``
-``<stage>.parquet``             model and seed: the model a non-final stage    ``hcid identify``
-                                hands on (``stage1.parquet``)
-``identify_log.parquet``        model, seed and method (candidates, seconds)   ``hcid identify``
-``selection.parquet``           model, seed, method and W of the grid          ``hcid sweep-w``
-``breakpoints.parquet``         model, seed, method and interval of W          ``hcid sweep-w``
-``thresholds.parquet``          method and model                               ``hcid sweep-w``
-``rates.parquet``               method, model and W of the grid: the false-    ``hcid sweep-w``
-                                positive (FB) or false-negative (FF) rate
-``handoff.parquet``             model, seed, method and choosing stage: VAF    ``hcid identify``
-                                of the handed-on signal (e_r) against the
-                                noise-free simulated one, over the next
-                                stage's rows and over the whole record
-``calibration.parquet``         method and W of the grid                       ``hcid calibrate-w``
-``hc_parameters.parquet``       record, method, W and HC parameter             ``hcid fit-hc``
-``residuals.parquet``           record, method, W, residual series and lag     ``hcid fit-hc``
-``hc_loop.parquet``             record, method, W and source (ARX or fitted    ``hcid fit-hc``
-                                model): crossover, phase margin, variance
-                                split of u, the remnant's fitted filter
-``remnant_spectrum.parquet``    record, method, W, source and frequency        ``hcid fit-hc``
-``analysis.parquet`` (and .csv)  measured run and method: its group's W, the   ``hcid analyse``
-                                decision, the parameters with their standard
-                                errors, the loop; the run's factors
-``analysis_groups.parquet``     group of runs and method: the calibrated W,    ``hcid analyse``
-                                the twins' rates there, the twins
-``run_log.parquet``             stage run (wall seconds)                       every computing stage
-==============================  =============================================  ==========================
+The run directory's layout (every file, what a row is, which command writes it) is
+docs/tables.md's, with every column of every table.
 """
 
 from __future__ import annotations
@@ -579,14 +543,9 @@ FC_ESTIMATES = _schema(
 #: not a run (not of a data format, left out by ``data.exclude``, a copy of a recording in another
 #: format), with the one-line reason; empty when none was.
 SKIPPED = _schema("skipped.parquet", [("file", _STR), ("reason", _STR)], ("file",))
-#: ``session_trials.parquet`` (``hcid analyse`` on a whole experiment, SPEC 12): one row per run:
-#: its ``kind`` from the data (``target and disturbance``, ``disturbance only``, ``target only``),
-#: its ``person``, its lines (``target_lines``, ``disturbance_lines``: frequencies in rad/s, ``;``
-#: separated), ``problem`` (why it has no lines, else empty), and its u predicted by the person's
-#: model from the other kind of trials (``predicted_by``: ``single-input trials`` for a two-input
-#: trial and the other way round): ``error_fb`` and ``error_ff`` (``RMS(u - u_hat) / RMS(u)`` over
-#: the window, feedback-only and feedback plus feedforward), ``lines_error_fb`` and
-#: ``lines_error_ff`` (the same counted at the trial's lines only); then the run's factors.
+#: ``session_trials.parquet`` (a whole experiment, SPEC 12): one row per run, its kind from the
+#: data, its lines, and its u predicted by the person's model from the other kind of trials, then
+#: its factors (docs/tables.md).
 SESSION_TRIALS = _schema(
     "session_trials.parquet",
     [("data_set", _STR), ("run_id", _INT), ("file", _STR), ("person", _STR), ("kind", _STR)]
@@ -594,14 +553,8 @@ SESSION_TRIALS = _schema(
     + [("error_fb", _F64), ("error_ff", _F64), ("lines_error_fb", _F64), ("lines_error_ff", _F64)],
     ("run_id",),
 )
-#: ``session_lines.parquet`` (``hcid analyse`` on a whole experiment, SPEC 12): per person (and
-#: ``person`` ``median``: the median over people of each magnitude, the circular mean of each
-#: phase), ``source`` (the trials combined: ``all trials``, ``two-input trials``, ``single-input
-#: trials``) and line (``omega`` rad/s, ``hz``): the condition-averaged responses ``h_ur`` and
-#: ``h_ud`` (U/Ft, U/Fd), the feedback ``he`` and feedforward ``ht`` paths and the model inversion
-#: ``inversion`` = |Ht Yc| (linear; ``_db`` magnitudes in dB, ``_deg`` phases in deg), with the
-#: quartiles of the trials' own |Ht Yc| (``inversion_q25``, ``inversion_q75``); ``he_measured``
-#: (false: He interpolated from other lines), and the trials behind each line.
+#: ``session_lines.parquet`` (a whole experiment): per person (and ``median``), source of trials
+#: and line: the responses, He, Ht and the model inversion |Ht Yc| (docs/tables.md).
 SESSION_LINES = _schema(
     "session_lines.parquet",
     [("person", _STR), ("source", _STR), ("omega", _F64), ("hz", _F64)]
@@ -611,12 +564,8 @@ SESSION_LINES = _schema(
     + [("he_measured", _BOOL), ("n_target_trials", _INT), ("n_disturbance_trials", _INT)],
     ("person", "source", "omega"),
 )
-#: ``session_findings.parquet`` (``hcid analyse`` on a whole experiment, SPEC 12): the study's
-#: comparisons, one row each: ``finding`` (``model inversion``, ``superposition``,
-#: ``prediction``), ``person`` (one, or ``all``), ``source`` (the trials behind it, or a
-#: prediction's direction), ``quantity`` (what ``estimate`` is, with ``low`` and ``high`` its
-#: range or interval as ``spread`` says), ``omega`` (rad/s; NaN: over lines, ``band`` says which),
-#: ``p`` and ``test`` (the test behind ``p``, empty where none), ``n`` (pairs, people or trials).
+#: ``session_findings.parquet`` (a whole experiment): the study's comparisons, one row each, with
+#: what ``low`` and ``high`` are (``spread``) and the test behind ``p`` (docs/tables.md).
 SESSION_FINDINGS = _schema(
     "session_findings.parquet",
     [("finding", _STR), ("person", _STR), ("source", _STR), ("quantity", _STR), ("band", _STR)]
@@ -624,13 +573,8 @@ SESSION_FINDINGS = _schema(
     + [("p", _F64), ("test", _STR), ("n", _INT)],
     ("finding", "person", "source", "quantity", "band", "omega"),
 )
-#: ``feedback_runs.parquet`` (``hcid analyse`` on a whole experiment, SPEC 12): every
-#: disturbance-only run's feedback alone, one row per run and method: the ARX model identified
-#: without the target path (``nb_ft`` held at 0) and selected at ``w`` = W_BIC (no feedforward
-#: question, so no calibrated W): ``na``, ``nb_e``, ``nk_e``, its ``vaf_validation`` (%); the
-#: parametric feedback path fitted to the run (``fit_target`` the estimator, the same for every
-#: method): each parameter with ``_se`` and ``_status`` (``determined`` or why not, SPEC 11),
-#: ``crossover`` (rad/s) and ``phase_margin`` (deg) of its loop with the plant.
+#: ``feedback_runs.parquet`` (a whole experiment): each disturbance-only run's feedback alone per
+#: method: the ARX model without the target path at W_BIC and the parametric feedback fit.
 FEEDBACK_RUNS = _schema(
     "feedback_runs.parquet",
     [("data_set", _STR), ("run_id", _INT), ("person", _STR), ("method", _STR), ("w", _F64)]
@@ -638,7 +582,8 @@ FEEDBACK_RUNS = _schema(
     + [("fit_target", _STR), ("fit_vaf_validation", _F64), ("crossover", _F64), ("phase_margin", _F64)]
     + [
         field_
-        for p in ("Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
+        for p in HC_PARAMETER_NAMES
+        if p not in ("Kpt", "TI", "tau_pt")  # the feedback path's alone
         for field_ in ((p, _F64), (f"{p}_se", _F64), (f"{p}_status", _STR))
     ],
     ("run_id", "method"),

@@ -578,7 +578,8 @@ def test_a_group_whose_remnant_fits_are_all_on_their_bounds_still_gets_twins(fo_
 
     from hcid.analysis.descriptors import RemnantFit
     from hcid.errors import DataError
-    from hcid.pipeline.analyse import _Found, _group_models
+    from hcid.pipeline.analyse import _Found
+    from hcid.pipeline.twins import group_models
 
     config, _ = fo_study
     spectrum = np.zeros(1)  # not read
@@ -587,17 +588,17 @@ def test_a_group_whose_remnant_fits_are_all_on_their_bounds_still_gets_twins(fo_
     study = SimpleNamespace(config=config, groups={("4",): [5, 6]})
     found = _Found()
     found.fitted = {s: ({True: _a4_fit(s)}, remnants[s]) for s in (5, 6)}
-    _group_models(study, found)
+    found.models, found.remnants = group_models(study.config, study.groups, found.fitted)
     assert found.models[("4",)].source == A4_SOURCE + "; its remnant filter from fits on their search bounds)"
     assert found.remnants[("4",)] == (3.0, 6.25, 3.0)  # medians of the two
     found.fitted = {s: ({True: _a4_fit(s)}, None) for s in (5, 6)}
     with pytest.raises(DataError, match="group 4-.*: no run's remnant could be fitted"):
-        _group_models(study, found)
+        found.models, found.remnants = group_models(study.config, study.groups, found.fitted)
     # With another group whose runs can: the study goes on, this group's twins with its own model
     # and the remnant filter of every run of the study (said so), the other group's its own.
     study = SimpleNamespace(config=config, groups={("4",): [5], ("5",): [6]})
     found.fitted = {5: ({True: _a4_fit(5)}, None), 6: ({True: _a4_fit(6)}, remnants[6])}
-    _group_models(study, found)
+    found.models, found.remnants = group_models(study.config, study.groups, found.fitted)
     assert found.models[("4",)].source.endswith(
         "its own runs cannot make twins (no run's remnant could be fitted): the study's remnant filter)"
     )
@@ -610,7 +611,8 @@ def test_the_issues_group_gets_twins_their_config_takes(fo_study):
     from types import SimpleNamespace
 
     from hcid.analysis.descriptors import RemnantFit
-    from hcid.pipeline.analyse import _Found, _group_models
+    from hcid.pipeline.analyse import _Found
+    from hcid.pipeline.twins import group_models
 
     config, record = fo_study
     spectrum = np.zeros(1)  # not read
@@ -620,7 +622,7 @@ def test_the_issues_group_gets_twins_their_config_takes(fo_study):
         s: ({True: _a4_fit(s)}, RemnantFit(3.0, 8.0, 2.0, 100.0, False, spectrum, spectrum, spectrum))
         for s in (5, 6)
     }
-    _group_models(study, found)
+    found.models, found.remnants = group_models(study.config, study.groups, found.fitted)
     model = found.models[("4",)]
     twins = _twins_config(config, record, model.values, found.remnants[("4",)])
     assert {m.tau_pe for m in twins.models} == {0.01}

@@ -36,25 +36,22 @@ from __future__ import annotations
 import numbers
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
 
-from hcid import hcfit, methods, tables
+from hcid import methods, tables
 from hcid.analysis.conditions import Kind
-from hcid.analysis.descriptors import fit_remnant
 from hcid.analysis.selected import SelectedModel, analyse_selected
 from hcid.config import Config
 from hcid.config.fit import FEEDFORWARD_PARAMETERS
-from hcid.errors import ConfigError, DataError, IdentificationError
-from hcid.hcfit.determined import group_model
-from hcid.io import datasets, folders, results
+from hcid.errors import ConfigError, DataError
+from hcid.io import datasets, results
 from hcid.io.datasets import DataSet
 from hcid.io.resolve import read_study, with_data
-from hcid.loop.hcmodel import plant
 from hcid.pipeline import sessions
 from hcid.pipeline.analysis_tables import write_tables
 from hcid.pipeline.evidence import (
@@ -65,7 +62,7 @@ from hcid.pipeline.evidence import (
     group_name,
 )
 from hcid.pipeline.execution import Execution
-from hcid.pipeline.fit import _choices, _stage_choices, fit_windows, tracking_record
+from hcid.pipeline.fit import _choices, _stage_choices, fit_run, fit_windows
 from hcid.pipeline.parallel import labelled
 from hcid.pipeline.rundir import holds_run_dir
 from hcid.pipeline.sessions import Session
@@ -76,12 +73,11 @@ from hcid.pipeline.twins import (
     choose_w,
     draw_fb_twins,
     forcing_sets,
-    group_slug,
+    forget_twins,
+    group_models,
     pool_twins,
     separates,
-    twin_model,
     twin_rate,
-    twin_remnant,
 )
 from hcid.selection import over_w
 from hcid.selection.calibration import benjamini_hochberg
@@ -119,24 +115,6 @@ class AnalysisRun:
 
 
 # --------------------------------------------------------------------------- per-run fits
-
-
-def _fit_run(config: Config, seed: int, record: dict, kn_rate: float):
-    """The run's FF and FB fits and the remnant its FF fit leaves."""
-    yc = plant(config.loop)
-    tracking = tracking_record(record, config)
-    settings = config.fit_hc
-    fits = {
-        ff: hcfit.fit_parametric(settings, yc, ff, record=tracking, disturbance_at=config.loop.disturbance_at)
-        for ff in (True, False)
-    }
-    rows = slice(tracking.estimation.start, tracking.validation.stop)
-    n = record["u"] - hcfit.simulate_hc(fits[True].values, yc, tracking, settings.oversample)
-    try:
-        remnant = fit_remnant(n[rows], config.timing.output_rate, kn_rate)
-    except IdentificationError:
-        remnant = None
-    return seed, fits, remnant
 
 
 # --------------------------------------------------------------------------- the study
@@ -288,65 +266,8 @@ def _fit_runs(study: _Study, found: _Found) -> None:
     """Phase 2: every run fitted with and without feedforward."""
     tasks = [(study.config, s, study.records[s], study.kn_rate) for s in sorted(study.records)]
     found.fitted = {
-        seed: (fits, remnant) for seed, fits, remnant in study.execution.map(_fit_run, tasks, "fit runs")
+        seed: (fits, remnant) for seed, fits, remnant in study.execution.map(fit_run, tasks, "fit runs")
     }
-
-
-def _group_models(study: _Study, found: _Found) -> None:
-    """Per group: its model from what its runs determine, of those its twins can be made from
-    (:func:`group_model` judged by :func:`twin_model`: a value brought into the twins' range, or
-    the nearest run's own model), and its twins' remnant filter: the medians over the runs whose
-    remnant fit is off its search bounds, else over every run's fit (on a bound the filter's
-    shape means little, its level still measures the remnant); where its runs make no such model,
-    the model of every run of the study; each fallback in ``source``."""
-    config = study.config
-    num_c, den_c = np.array(config.loop.plant.num), np.array(config.loop.plant.den)
-    sim_rate = twin_rate(config.timing.output_rate)
-    remnant_names = ("kn", "w_n", "zeta_n")
-
-    def simulated(values: dict):
-        return twin_model(values, sim_rate, config.loop)
-
-    def model_of(seeds: list[int]):
-        fits = [found.fitted[s][0][True] for s in seeds]
-        return group_model(fits, [f"run {s}" for s in seeds], num_c, den_c, simulated)
-
-    def remnant_of(seeds: list[int]):
-        fitted = [found.fitted[s][1] for s in seeds if found.fitted[s][1] is not None]
-        if not fitted:
-            raise DataError("no run's remnant could be fitted")
-        off_bounds = [r for r in fitted if not r.at_bound]
-        medians = [float(np.median([getattr(r, a) for r in off_bounds or fitted])) for a in remnant_names]
-        remnant = twin_remnant(tuple(medians))
-        if remnant.problem:
-            raise DataError(f"its remnant cannot make twins: {remnant.problem}")
-        on_bounds = () if off_bounds else ("its remnant filter from fits on their search bounds",)
-        return (*on_bounds, *remnant.changes), tuple(remnant.values[a] for a in remnant_names)
-
-    every = sorted({s for seeds in study.groups.values() for s in seeds})
-
-    def own_or_study(key, seeds, make, what: str):
-        """The group's own, else the study's (all its runs), said so; only a study whose runs
-        together cannot make it stops."""
-        try:
-            return make(seeds), ()
-        except DataError as exc:
-            if sorted(seeds) == every:
-                raise DataError(
-                    f"group {group_slug(key)}: {exc}; look at its runs' fits or group them otherwise (--by)"
-                ) from None
-            try:
-                return make(every), (f"its own runs cannot make twins ({exc}): the study's {what}",)
-            except DataError as pooled:
-                raise DataError(
-                    f"group {group_slug(key)}: {exc}; nor can the study's runs together: {pooled}"
-                ) from None
-
-    for key, seeds in study.groups.items():
-        model, model_note = own_or_study(key, seeds, model_of, "model")
-        (remnant_notes, remnant), remnant_note = own_or_study(key, seeds, remnant_of, "remnant filter")
-        found.models[key] = model.noting(*model_note, *remnant_notes, *remnant_note)
-        found.remnants[key] = remnant
 
 
 def _twin_source(study: _Study, found: _Found, key, sets: list[list[int]], i: int, model: dict) -> TwinSource:
@@ -372,7 +293,7 @@ def _twin_sets(study: _Study, found: _Found, key, kind: str, model: dict, fb_fro
 
 def _twins(study: _Study, found: _Found) -> None:
     """Phase 3: per group, the twins and their calibration; which twins each method uses."""
-    _group_models(study, found)
+    found.models, found.remnants = group_models(study.config, study.groups, found.fitted)
     medians = {key: m.values for key, m in found.models.items()}
     # The study's strongest feedforward (--ff-twin study and auto): the group with the largest
     # fitted Kpt ("would feedforward of the size seen in this study be found here?").
@@ -490,13 +411,6 @@ def _select_and_fit(study: _Study, found: _Found, judge: Evidence, run_sizes: di
                 found.evidence[k] = {**found.evidence[k], "evidence": "feedforward" if hit else "none shown"}
 
 
-def _forget_twins(run_dir: Path) -> None:
-    """``--force``: every twins folder hcid made removed, so that they are made again."""
-    for folder in sorted((run_dir / "twins").glob("*/")) if (run_dir / "twins").is_dir() else []:
-        if (folder / folders.MANIFEST).is_file():
-            folders.remove_owned(folder)
-
-
 @holds_run_dir(create=True)
 def analyse_study(
     config: Config,
@@ -525,13 +439,14 @@ def analyse_study(
     config = with_data(config)
     check_plant(config, data)  # every run, the single-input ones too (identify checks its own)
     trials = sessions.classify(data, config)
-    person = _person(data, options.person)
-    if sessions.is_whole_experiment(trials):
+    person = sessions.person_factor(data, options.person)
+    whole_experiment = sessions.is_whole_experiment(trials)
+    if whole_experiment:
         sessions.check_factors(data.factors, person)
     whole = data
     two_input = [seed for seed, t in trials.items() if t.kind is Kind.TWO_INPUT]
     if len(two_input) < len(trials):  # single-input runs: combined per person, not tested for feedforward
-        data = _subset(data, two_input)
+        data = sessions.subset(data, two_input)
     by = _factors_and_groups(data, options.by)
     start = time.perf_counter()
     stages, lap = {}, [start]
@@ -553,7 +468,7 @@ def analyse_study(
             config, run_dir, tuple(methods.METHODS), data=data, execution=execution, force=force
         )
     if force:  # after the data's checks (in identify_study): a refused --force keeps the twins
-        _forget_twins(run_dir)
+        forget_twins(run_dir)
     lap_done("identify")
     runs = datasets.runs_table(config.data.name, data)
     study = _Study(
@@ -581,7 +496,7 @@ def analyse_study(
     _select_and_fit(study, found, judge, run_sizes)
     lap_done("fit selected")
     session = None
-    if sessions.is_whole_experiment(trials):
+    if whole_experiment:
         with labelled("conditions: "):
             session = sessions.combine_session(config, whole, trials, person, execution)
         lap_done("combine conditions")
@@ -603,29 +518,6 @@ def analyse_study(
         tuple(whole.skipped),
         kinds,
         session,
-    )
-
-
-def _person(data: DataSet, person: str | None) -> str | None:
-    """The factor naming people (``--person``; default :data:`sessions.PERSON` where the data set
-    has it, else None: one person)."""
-    if person is None:
-        return sessions.PERSON if sessions.PERSON in data.factors else None
-    if person not in data.factors:
-        raise ConfigError(
-            f"--person {person}: the data set has no factor {person!r} (its factors: "
-            f"{', '.join(data.factors) or 'none'})"
-        )
-    return person
-
-
-def _subset(data: DataSet, seeds: Sequence[int]) -> DataSet:
-    """The data set's runs ``seeds``, their ids and factors kept."""
-    keep = set(seeds)
-    return replace(
-        data,
-        records={s: r for s, r in data.records.items() if s in keep},
-        runs=[r for r in data.runs if int(r["run"]) in keep],
     )
 
 

@@ -32,6 +32,7 @@ import pyarrow as pa
 import pyarrow.compute  # noqa: F401  (pa.compute)
 
 from hcid import hcfit, methods, tables
+from hcid.analysis.descriptors import fit_remnant
 from hcid.analysis.selected import (
     RESIDUAL_CONFIDENCE,
     RESIDUAL_MAX_LAG,
@@ -41,10 +42,11 @@ from hcid.analysis.selected import (
     true_parameters,
 )
 from hcid.config import Config
-from hcid.errors import ConfigError, DataError, HcidError
+from hcid.errors import ConfigError, DataError, HcidError, IdentificationError
 from hcid.hcfit import FEEDBACK_PARAMETERS, TARGETS, UNITS, parse_fit_settings
 from hcid.hcfit.determined import parameter_status
 from hcid.io import results
+from hcid.loop.hcmodel import plant
 from hcid.pipeline.execution import Execution
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
 from hcid.selection import criteria, over_w
@@ -552,3 +554,22 @@ def tracking_record(record: dict, config: Config) -> hcfit.TrackingRecord:
         *fit_windows(config),
         fd=record["fd"],
     )
+
+
+def fit_run(config: Config, seed: int, record: dict, kn_rate: float):
+    """A measured run's FF and FB fits (``hcid analyse``) and the remnant its FF fit leaves:
+    ``(seed, {feedforward: HCFit}, remnant fit or None)``."""
+    yc = plant(config.loop)
+    tracking = tracking_record(record, config)
+    settings = config.fit_hc
+    fits = {
+        ff: hcfit.fit_parametric(settings, yc, ff, record=tracking, disturbance_at=config.loop.disturbance_at)
+        for ff in (True, False)
+    }
+    rows = slice(tracking.estimation.start, tracking.validation.stop)
+    n = record["u"] - hcfit.simulate_hc(fits[True].values, yc, tracking, settings.oversample)
+    try:
+        remnant = fit_remnant(n[rows], config.timing.output_rate, kn_rate)
+    except IdentificationError:
+        remnant = None
+    return seed, fits, remnant

@@ -37,6 +37,8 @@ __all__ = [
     "classify",
     "combine_session",
     "is_whole_experiment",
+    "person_factor",
+    "subset",
     "write_session",
 ]
 
@@ -90,6 +92,29 @@ def check_factors(factors: Sequence[str], person: str | None) -> None:
             f"factor {taken[0]!r}: the whole experiment's tables have a column of that name; rename "
             "the factor (data.pattern, the manifest's header or data.dimensions)"
         )
+
+
+def person_factor(data: DataSet, person: str | None) -> str | None:
+    """The factor naming people (``--person``; default :data:`PERSON` where the data set
+    has it, else None: one person)."""
+    if person is None:
+        return PERSON if PERSON in data.factors else None
+    if person not in data.factors:
+        raise ConfigError(
+            f"--person {person}: the data set has no factor {person!r} (its factors: "
+            f"{', '.join(data.factors) or 'none'})"
+        )
+    return person
+
+
+def subset(data: DataSet, seeds: Sequence[int]) -> DataSet:
+    """The data set's runs ``seeds``, their ids and factors kept."""
+    keep = set(seeds)
+    return replace(
+        data,
+        records={s: r for s, r in data.records.items() if s in keep},
+        runs=[r for r in data.runs if int(r["run"]) in keep],
+    )
 
 
 def is_whole_experiment(trials: Mapping[int, TrialLines]) -> bool:

@@ -17,7 +17,7 @@ import numpy as np
 from hcid import methods, tables
 from hcid.config import Config, HCModel, Loop
 from hcid.errors import ConfigError, DataError
-from hcid.hcfit.determined import Simulated
+from hcid.hcfit.determined import Simulated, group_model
 from hcid.hcfit.lines import feedforward_size, record_lines
 from hcid.io import folders, results
 from hcid.io.resolve import parse_config
@@ -48,6 +48,8 @@ __all__ = [
     "draw_fb_twins",
     "forcing_sets",
     "forcing_text",
+    "forget_twins",
+    "group_models",
     "group_slug",
     "pool_twins",
     "separates",
@@ -519,3 +521,74 @@ def twin_dir_ready(twin_dir: Path, text: str) -> None:
     path = twin_dir / "forcing.csv"
     if path.is_file() and path.read_text() != text:
         folders.remove_owned(twin_dir)
+
+
+def group_models(config: Config, groups: dict, fitted: dict) -> tuple[dict, dict]:
+    """Per group: its model from what its runs determine, of those its twins can be made from
+    (:func:`group_model` judged by :func:`twin_model`: a value brought into the twins' range, or
+    the nearest run's own model), and its twins' remnant filter: the medians over the runs whose
+    remnant fit is off its search bounds, else over every run's fit (on a bound the filter's
+    shape means little, its level still measures the remnant); where its runs make no such model,
+    the model of every run of the study; each fallback in ``source``.
+
+    ``groups`` maps a group to its runs (ids), ``fitted`` a run to ``({feedforward: HCFit},
+    remnant fit or None)``; returns the groups' models (:class:`GroupModel`) and remnants
+    ``(kn, w_n, zeta_n)``."""
+    num_c, den_c = np.array(config.loop.plant.num), np.array(config.loop.plant.den)
+    sim_rate = twin_rate(config.timing.output_rate)
+    remnant_names = ("kn", "w_n", "zeta_n")
+
+    def simulated(values: dict):
+        return twin_model(values, sim_rate, config.loop)
+
+    def model_of(seeds: list[int]):
+        fits = [fitted[s][0][True] for s in seeds]
+        return group_model(fits, [f"run {s}" for s in seeds], num_c, den_c, simulated)
+
+    def remnant_of(seeds: list[int]):
+        remnant_fits = [fitted[s][1] for s in seeds if fitted[s][1] is not None]
+        if not remnant_fits:
+            raise DataError("no run's remnant could be fitted")
+        off_bounds = [r for r in remnant_fits if not r.at_bound]
+        medians = [
+            float(np.median([getattr(r, a) for r in off_bounds or remnant_fits])) for a in remnant_names
+        ]
+        remnant = twin_remnant(tuple(medians))
+        if remnant.problem:
+            raise DataError(f"its remnant cannot make twins: {remnant.problem}")
+        on_bounds = () if off_bounds else ("its remnant filter from fits on their search bounds",)
+        return (*on_bounds, *remnant.changes), tuple(remnant.values[a] for a in remnant_names)
+
+    every = sorted({s for seeds in groups.values() for s in seeds})
+
+    def own_or_study(key, seeds, make, what: str):
+        """The group's own, else the study's (all its runs), said so; only a study whose runs
+        together cannot make it stops."""
+        try:
+            return make(seeds), ()
+        except DataError as exc:
+            if sorted(seeds) == every:
+                raise DataError(
+                    f"group {group_slug(key)}: {exc}; look at its runs' fits or group them otherwise (--by)"
+                ) from None
+            try:
+                return make(every), (f"its own runs cannot make twins ({exc}): the study's {what}",)
+            except DataError as pooled:
+                raise DataError(
+                    f"group {group_slug(key)}: {exc}; nor can the study's runs together: {pooled}"
+                ) from None
+
+    models, remnants = {}, {}
+    for key, seeds in groups.items():
+        model, model_note = own_or_study(key, seeds, model_of, "model")
+        (remnant_notes, remnant), remnant_note = own_or_study(key, seeds, remnant_of, "remnant filter")
+        models[key] = model.noting(*model_note, *remnant_notes, *remnant_note)
+        remnants[key] = remnant
+    return models, remnants
+
+
+def forget_twins(run_dir: Path) -> None:
+    """``--force``: every twins folder hcid made removed, so that they are made again."""
+    for folder in sorted((run_dir / "twins").glob("*/")) if (run_dir / "twins").is_dir() else []:
+        if (folder / folders.MANIFEST).is_file():
+            folders.remove_owned(folder)
