@@ -354,10 +354,9 @@ def print_skipped(skipped) -> None:
 
 
 def _skipped_line(skipped) -> str:
-    by_reason: dict[str, list[str]] = {}
-    for path, why in skipped:
-        key = why.split(" (")[0].split(" of ")[0]
-        by_reason.setdefault(key, []).append(path)
+    from hcid.io.datasets import skipped_by_reason
+
+    by_reason = skipped_by_reason(skipped)
     parts = [f"{len(paths)} {key} (e.g. {paths[0].rsplit('/', 1)[-1]})" for key, paths in by_reason.items()]
     return f"SKIPPED: {len(skipped)} file(s) found are not runs (RUN/skipped.parquet): " + "; ".join(parts)
 

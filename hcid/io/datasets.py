@@ -48,6 +48,7 @@ __all__ = [
     "read_set",
     "runs_table",
     "set_at",
+    "skipped_by_reason",
 ]
 
 _GLOB = re.compile(r"[*?\[]")
@@ -217,6 +218,20 @@ def _copies(files: list[DataFile], skipped: list) -> list[DataFile]:
                     copies.add(f.path)
                     skipped.append((str(f.path), f"a copy in another format of {kept.path.name}"))
     return [f for f in files if f.path not in copies]
+
+
+def skipped_by_reason(skipped: Sequence[tuple[str, str]]) -> dict[str, list[str]]:
+    """The files :func:`find_files` skipped, grouped by their reason without its detail (``not a
+    data file``, ``left out by data.exclude '<glob>'``, ``a copy in another format``), in order.
+
+    >>> skipped_by_reason([("a.ini", "not a data file (.ini; read: .csv)"),
+    ...                    ("b.npz", "a copy in another format of b.csv")])
+    {'not a data file': ['a.ini'], 'a copy in another format': ['b.npz']}
+    """
+    out: dict[str, list[str]] = {}
+    for path, why in skipped:
+        out.setdefault(why.split(" (")[0].split(" of ")[0], []).append(path)
+    return out
 
 
 def data_files(sources: Sequence[str | Path], pattern: str | None = None) -> list[DataFile]:

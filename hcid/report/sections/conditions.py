@@ -13,6 +13,7 @@ from matplotlib.figure import Figure
 from hcid.analysis.conditions import ANSWERS, SOURCES, Kind
 from hcid.config.fit import FEEDBACK_PARAMETERS
 from hcid.hcfit.determined import DETERMINED
+from hcid.io.datasets import skipped_by_reason
 from hcid.pipeline.sessions import ALL_PEOPLE, BANDS
 from hcid.report.document import Doc
 from hcid.report.figures import plain_log
@@ -51,9 +52,7 @@ def _skipped(run) -> list[list[str]]:
     """The files left out, by reason: how many, and the first two."""
     if run.skipped is None or run.skipped.num_rows == 0:
         return []
-    by_reason: dict[str, list[str]] = {}
-    for r in run.skipped.to_pylist():
-        by_reason.setdefault(r["reason"].split(" (")[0].split(" of ")[0], []).append(r["file"])
+    by_reason = skipped_by_reason([(r["file"], r["reason"]) for r in run.skipped.to_pylist()])
     return [
         [
             reason,
