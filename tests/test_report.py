@@ -413,12 +413,11 @@ def test_report_folder_is_reused_and_keeps_user_files(ci_run, report, tmp_path):
 
 
 @pytest.mark.parametrize("n_sets", [1, 2, 6])
-def test_the_runs_numbers_print_clear_of_each_other_and_of_every_marker(n_sets):
-    # No text over text, no text over data (issue 35), where it is hardest: fourteen runs per
-    # forcing set with W* so close that numbers placed alternately above and below their marker
-    # print over each other (51 overlaps on two sets). Every number's box is checked against the
-    # others and against every marker's extent (its half-size: 0.5 ms for a dot, 0.71 ms for a
-    # diamond, plus half its edge).
+def test_each_run_has_its_own_row_named_on_the_axis(n_sets):
+    # Issue 46 (2): numbers beside markers in stacked clusters ("10 / 23 24 / 22 6 12" over five
+    # diamonds) were not read as whose they are. Each run has a row of its own, its name the y
+    # tick label at its marker's height (measured in pixels), no two names overlap, and every name
+    # prints inside the figure; fourteen runs per set with W* so close their markers touch.
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     from hcid.report.figures_hcfit import plot_evidence
@@ -429,33 +428,32 @@ def test_the_runs_numbers_print_clear_of_each_other_and_of_every_marker(n_sets):
         {"forcing_set": fs, "twin": twin, "w_star": w}
         for fs in sets
         for twin, scale in (("FB", 0.1), ("FF", 0.4))
-        for w in scale * np.exp(rng.normal(0, 0.3, 20))  # the FB twins under the runs' numbers
+        for w in scale * np.exp(rng.normal(0, 0.3, 20))
     ]
     runs = [
-        {"forcing_set": fs, "run_id": 10 + k, "w_star": 0.1 * 1.004 ** (k * (fs * k % 5)), "p_w_star": 0.2}
+        {"forcing_set": fs, "run_id": 10 + k + 14 * fs, "w_star": 0.1 * 1.004 ** (k * (fs * k % 5)),
+         "p_w_star": 0.2}
         for fs in sets
         for k in range(14)
-    ]
+    ]  # fmt: skip
+    runs = [{**r, "label": f"run {r['run_id']}: S{r['run_id'] % 7}, trial {r['run_id'] % 3}"} for r in runs]
     fig = plot_evidence(twins, runs, "clustered runs")
-    FigureCanvasAgg(fig).draw()
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
     ax = fig.axes[0]
-    boxes = [t.get_window_extent() for t in ax.texts]
-    assert len(boxes) == 14 * n_sets
-    for i, a in enumerate(boxes):
-        for b in boxes[i + 1 :]:
-            assert not a.overlaps(b), (a, b)
-    px = fig.dpi / 72.0
-    markers = []  # (x, y, half-extent) in pixels
-    for line in ax.lines:
-        if len(line.get_xdata()):
-            half = (0.71 if line.get_marker() == "D" else 0.5) * line.get_markersize() + 0.5
-            for x, y in ax.transData.transform(line.get_xydata()):
-                markers.append((x, y, half * px))
-    assert len(markers) == (40 + 14) * n_sets
-    for box in boxes:
-        for x, y, h in markers:
-            clear = x + h <= box.x0 or box.x1 <= x - h or y + h <= box.y0 or box.y1 <= y - h
-            assert clear, (box, x, y, h)
+    ticks = {t.get_text(): t for t in ax.get_yticklabels() if t.get_visible()}
+    diamonds = [line for line in ax.lines if line.get_marker() == "D" and len(line.get_xdata())]
+    assert len(diamonds) == len(runs)
+    page = fig.bbox
+    for r, line in zip(runs, diamonds, strict=True):
+        label = ticks[r["label"]]
+        box = label.get_window_extent(renderer)
+        _, y = ax.transData.transform(line.get_xydata()[0])
+        assert box.y0 <= y <= box.y1, (r["label"], box, y)
+        assert page.x0 <= box.x0 and box.x1 <= page.x1 and page.y0 <= box.y0 and box.y1 <= page.y1
+    boxes = sorted((t.get_window_extent(renderer) for t in ticks.values()), key=lambda b: b.y0)
+    for a, b in zip(boxes, boxes[1:], strict=False):
+        assert a.y1 <= b.y0, (a, b)
 
 
 @pytest.mark.parametrize("low", [1e-4, 5e-4, 0.02])

@@ -34,19 +34,23 @@ def test_each_status_has_its_mark_in_the_run_table():
     assert _with_se(row("fixed at a literature value", float("nan")), "Kpe") == "33.5 (held)"
 
 
-def test_the_evidence_caption_names_each_run_by_the_factors_that_differ():
-    # The figure numbers runs; its caption keys them to the factors that differ within the group
-    # (the group's own factor is the same for all), up to 24 runs (beyond: the run table).
-    from hcid.report.sections.study import _run_names
+def test_the_evidence_figure_names_each_run_by_the_factors_that_differ():
+    # Issue 46 (2): the figure's run numbers, keyed to subject and trial only in a caption, were
+    # not read as whose they are. Each run is named by its number and the factors that differ
+    # within the group (the group's own factor is the same for all), a number-like value with its
+    # factor's name, at most three factors.
+    from hcid.report.sections.study import _run_labels
 
     runs = [
         {"run_id": i + 1, "method": "direct", "subject": s, "plant": "fo", "trial": t}
         for i, (s, t) in enumerate([("dp", "+1"), ("dp", "-1"), ("ef", "+1")])
     ]
-    assert _run_names(runs) == " Runs (subject, trial): 1 dp +1; 2 dp -1; 3 ef +1."
-    assert _run_names([{**r, "subject": "dp", "trial": "+1"} for r in runs]) == ""  # nothing differs
-    many = [{"run_id": i, "method": "direct", "subject": f"S{i}"} for i in range(25)]
-    assert _run_names(many) == "" and _run_names(many[:24]).startswith(" Runs (subject): 0 S0; 1 S1;")
+    names = ["run 1: dp, trial +1", "run 2: dp, trial -1", "run 3: ef, trial +1"]
+    assert [r["label"] for r in _run_labels(runs)] == names
+    same = [{**r, "subject": "dp", "trial": "+1"} for r in runs]
+    assert [r["label"] for r in _run_labels(same)] == ["run 1", "run 2", "run 3"]  # nothing differs
+    many = [{"run_id": 1, "method": "direct", "a": i, "b": f"x{i}", "c": "y", "d": i, "e": i} for i in (0, 1)]
+    assert _run_labels(many)[1]["label"] == "run 1: a 1, x1, d 1"
 
 
 def test_the_data_check_table_gives_angles_in_whole_degrees():

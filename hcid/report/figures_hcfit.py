@@ -259,106 +259,58 @@ def plot_inversion(rows: list[dict], title: str = "", axes=None):
     return fig
 
 
-#: Rows of a forcing set in the evidence figure (FB twins, FF twins, runs) and the room for its
-#: runs' numbers above them, in data units; the runs' markers' jitter about their row.
-_SET_ROWS = 4.0
-_RUN_JITTER = 0.12
-#: The runs' numbers: font size, and their offsets (points) above the runs' row, tried in this
-#: order: the lowest clears a diamond (half-height 0.71 x 7 pt) at the top of its jitter.
-_LABEL_FONT = 7.0
-_LABEL_LANES = (13.0, 22.5, 32.0)
-#: Points per data unit the lanes need: the highest lane's numbers clear of the next set's FB twins.
-_MIN_POINTS_PER_ROW = 23.0
+#: The evidence figure's rows: the twins' jitter about their row, and the height of one row
+#: (inches; a run's name in 7-point type, with room).
+_TWIN_JITTER = 0.25
+_ROW_INCHES = 0.2
 
 
 def plot_evidence(twins: list[dict], runs: list[dict], title: str = "", alpha: float = 0.05, axes=None):
-    """Each run's feedforward threshold W* on its forcing set's twins (SPEC 11): the FB twins'
-    W* (what a person without feedforward shows), the FF twins' (what one with the group's
-    feedforward shows) and the runs' (filled where their W*'s p-value is at most alpha), one row of
-    each per forcing set, each twins' row labelled with its count.
+    """Each run's feedforward threshold W* on its forcing set's twins (SPEC 11): per forcing set a
+    row of its FB twins' W* (what a person without feedforward shows), one of its FF twins' (what
+    one with the group's feedforward shows), then one row per run, named on the axis by its
+    ``label`` (else its ``run_id``) and filled where its W*'s p-value is at most alpha. A row per
+    run: a number beside a marker among others is not read as whose it is (issue 46).
 
     ``twins``: rows of ``evidence_twins.parquet`` for one group and method; ``runs``: its rows of
-    ``analysis.parquet`` (``forcing_set``, ``w_star``, ``p_w_star``, ``run_id``). The runs' numbers
-    print clear of each other and of the twins (:func:`_label_runs`); on the figure's own axes, made
-    tall enough for that, not on a caller's ``axes``, whose size is the caller's."""
-    own = axes is None
+    ``analysis.parquet`` (``forcing_set``, ``w_star``, ``p_w_star``, ``run_id``, optionally
+    ``label``). On the figure's own axes, tall enough for a row per run; on a caller's ``axes``,
+    their size is the caller's."""
     sets = sorted({r["forcing_set"] for r in runs})
-    fig, axes = _figure(axes, 1, 1, figsize=(8.0, 1.2 + 1.4 * len(sets)))
+    rows = sum(2 + sum(r["forcing_set"] == fs for r in runs) for fs in sets)
+    fig, axes = _figure(axes, 1, 1, figsize=(8.0, 1.6 + _ROW_INCHES * (rows + len(sets))))
     ax = axes[0][0]
     rng = np.random.default_rng(0)  # a fixed jitter: the same picture for the same tables
-    ticks, labels = [], []
+    ticks, labels, y = [], [], 0.0
     for i, fs in enumerate(sets):
-        base = _SET_ROWS * i
-        for offset, twin, color in ((0.0, "FB", "0.55"), (1.0, "FF", "C0")):
+        named = f"set {fs}: " if len(sets) > 1 else ""
+        for twin, color in (("FB", "0.55"), ("FF", "C0")):
             w = np.array([t["w_star"] for t in twins if t["forcing_set"] == fs and t["twin"] == twin])
             w = w[np.isfinite(w)]  # an FB twin drawn for the Fourier statistic only has no W*
-            ax.plot(
-                w,
-                base + offset + rng.uniform(-0.25, 0.25, w.size),
-                "o",
-                color=color,
-                ms=4,
-                alpha=0.7,
-                label=f"{twin} twins" if i == 0 else None,
-            )
-            ticks.append(base + offset)
-            labels.append(f"set {fs}: {w.size} {twin} twins")
-        mine = [r for r in runs if r["forcing_set"] == fs]
-        y = base + 2.0 + rng.uniform(-_RUN_JITTER, _RUN_JITTER, len(mine))
-        for r, yy in zip(mine, y, strict=True):
+            jitter = rng.uniform(-_TWIN_JITTER, _TWIN_JITTER, w.size)
+            label = f"{twin} twins" if i == 0 else None
+            ax.plot(w, y + jitter, "o", color=color, ms=3.5, alpha=0.7, label=label)
+            ticks.append(y)
+            labels.append(f"{named}{w.size} {twin} twins")
+            y -= 1.0
+        for r in (r for r in runs if r["forcing_set"] == fs):
             hit = r["p_w_star"] <= alpha
-            ax.plot(r["w_star"], yy, "D", color="C3", mfc="C3" if hit else "white", ms=7, label=None)
-        ticks.append(base + 2.0)
-        labels.append(f"set {fs}: runs")
-    ax.plot([], [], "D", color="C3", ms=7, label=f"runs, p(W*) <= {alpha:g}")
-    ax.plot([], [], "D", color="C3", mfc="white", ms=7, label=f"runs, p(W*) > {alpha:g}")
+            ax.plot(r["w_star"], y, "D", color="C3", mfc="C3" if hit else "white", ms=6)
+            ax.axhline(y, color="0.9", lw=0.6, zorder=0)  # the eye from the name to its marker
+            ticks.append(y)
+            labels.append(str(r.get("label") or r["run_id"]))
+            y -= 1.0
+        y -= 1.0  # a blank row between forcing sets
+    ax.plot([], [], "D", color="C3", ms=6, label=f"run, p(W*) <= {alpha:g}")
+    ax.plot([], [], "D", color="C3", mfc="white", ms=6, label=f"run, p(W*) > {alpha:g}")
     ax.set_yticks(ticks)
-    ax.set_yticklabels(labels, fontsize=8)
-    ax.set_ylim(-0.7, _SET_ROWS * (len(sets) - 1) + 3.8)  # room for the runs' numbers above their row
+    ax.set_yticklabels(labels, fontsize=7)
+    ax.set_ylim(y + 0.5, 0.7)
     _plain_log_x(ax)
     ax.set_xlabel("W* (largest W keeping feedforward, -)")
     ax.grid(True, axis="x", which="both", alpha=0.3)
+    bottom = 0.42 / fig.get_figheight()  # the legend's band, in inches whatever the height
     fig.legend(*ax.get_legend_handles_labels(), fontsize=7, loc="lower center", ncol=4)
     fig.suptitle(title)
-    fig.tight_layout(rect=(0, 0.12, 1, 1))
-    for _ in range(3 if own else 0):  # tall enough for the numbers' lanes
-        low, high = ax.get_ylim()
-        per_row = ax.get_window_extent().height * 72.0 / fig.dpi / (high - low)
-        if per_row >= _MIN_POINTS_PER_ROW:
-            break
-        fig.set_figheight(fig.get_figheight() * 1.02 * _MIN_POINTS_PER_ROW / per_row)
-        fig.tight_layout(rect=(0, 0.12, 1, 1))
-    for i, fs in enumerate(sets):  # the runs' numbers, laid out once the axes have their size
-        _label_runs(ax, [r for r in runs if r["forcing_set"] == fs], _SET_ROWS * i + 2.0)
+    fig.tight_layout(rect=(0, bottom, 1, 1))
     return fig
-
-
-def _label_runs(ax, runs: list[dict], row: float) -> None:
-    """Each run's number beside its W* above the runs' row of a forcing set, in the first lane
-    (:data:`_LABEL_LANES`) where it prints clear of the numbers placed before it (runs from the
-    smallest W* up); where every lane is taken, in the lane whose last number ends first, moved
-    right to start after it (past the last run, beyond the axes' right edge if need be). No number
-    prints over another or over a marker."""
-    fig = ax.figure
-    width = ax.get_window_extent().width * 72.0 / fig.dpi  # the axes' width in points
-    low, high = np.log10(ax.get_xlim())
-    ends = [-np.inf] * len(_LABEL_LANES)
-    gap = 3.0
-    drawn = [r for r in runs if np.isfinite(r["w_star"]) and r["w_star"] > 0]
-    for r in sorted(drawn, key=lambda r: (r["w_star"], str(r["run_id"]))):
-        text = str(r["run_id"])
-        at = (np.log10(r["w_star"]) - low) / (high - low) * width  # the marker, in points
-        start = at + 4.0
-        free = [k for k, end in enumerate(ends) if end + gap <= start]
-        lane = free[0] if free else int(np.argmin(ends))
-        start = max(start, ends[lane] + gap)
-        ends[lane] = start + 0.65 * _LABEL_FONT * len(text)
-        offset = (start - at, _LABEL_LANES[lane])
-        ax.annotate(
-            text,
-            (r["w_star"], row),
-            xytext=offset,
-            textcoords="offset points",
-            fontsize=_LABEL_FONT,
-            va="center",
-        )

@@ -464,33 +464,38 @@ def _render_answer_notes(data: StudyData, doc: Doc) -> None:
 #: The most rows of the per-subject table (beyond, the console's lines and analysis.csv have them).
 _SUBJECT_ROWS = 48
 
-#: The most runs whose factors an evidence figure's caption lists (beyond: the run table has them).
-_NAMED_RUNS = 24
+#: The most factors a run's name on the evidence figure gives (the run table has them all).
+_NAMED_FACTORS = 3
 
 
-def _run_names(runs: list[dict]) -> str:
-    """The caption's key from the figure's run numbers to the factors that differ between them
-    (e.g. ``1 dp +1``); empty where none differ or the runs are too many to list."""
+def _run_labels(runs: list[dict]) -> list[dict]:
+    """The runs, each with its name on the evidence figure: its number and the factors that differ
+    between the runs (e.g. ``run 1: dp, trial +1``; a number-like value with its factor's name)."""
     factors = _factors(runs[0]) if runs else []
-    varying = [f for f in factors if len({str(r[f]) for r in runs}) > 1]
-    if not varying or len(runs) > _NAMED_RUNS:
-        return ""
-    names = "; ".join(f"{r['run_id']} {' '.join(str(r[f]) for f in varying)}" for r in runs)
-    return f" Runs ({', '.join(varying)}): {names}."
+    varying = [f for f in factors if len({str(r[f]) for r in runs}) > 1][:_NAMED_FACTORS]
+
+    def value(f: str, v) -> str:
+        text = str(v)
+        return f"{f} {text}" if text.lstrip("+-").replace(".", "", 1).isdigit() else text
+
+    def name(r: dict) -> str:
+        return f"run {r['run_id']}" + (": " + ", ".join(value(f, r[f]) for f in varying) if varying else "")
+
+    return [{**r, "label": name(r)} for r in runs]
 
 
 def _render_evidence(data: StudyData, doc: Doc) -> None:
     """Each run's evidence on its twins, then each group's calibration of W."""
     for group, method, twins, runs, alpha, folder in data.evidence:
+        named = _run_labels(runs)
         doc.figure(
             f"evidence_{folder}_{method}.png",
             f"{group}, {method} method: each run's W* (the largest W at which its selection keeps "
             "feedforward) on its own forcing set's twins: a run shows feedforward where its p-value is "
             f"at most {alpha:g} (filled). FB twins are drawn until 5 are at or above the run's W* (p = 5 "
             "over the draws), else p = (1 + those at or above) / (1 + all drawn), Besag and Clifford's "
-            "sequential p-value; the FF twins show how often such a run would be found (the power)."
-            + _run_names(runs),
-            lambda t=twins, r=runs, n=f"{group}, {method}", a=alpha: figures_hcfit.plot_evidence(t, r, n, a),
+            "sequential p-value; the FF twins show how often such a run would be found (the power).",
+            lambda t=twins, r=named, n=f"{group}, {method}", a=alpha: figures_hcfit.plot_evidence(t, r, n, a),
         )
     for title, caption, folder, table, used, in_use in data.calibrations:
         drawn = list(dict.fromkeys(table.column("method").to_pylist()))
