@@ -12,6 +12,10 @@ The public API (:mod:`hcid.api`): :func:`read_records`, :class:`Experiment` and
 from importlib import import_module
 from importlib.metadata import PackageNotFoundError, version
 
+from hcid._blas import pin_openblas
+
+pin_openblas()  # before anything imports numpy: the same bits on every machine (hcid/_blas.py)
+
 try:
     __version__ = version("hcid")
 except PackageNotFoundError:  # running from a source tree that is not installed

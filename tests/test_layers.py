@@ -30,8 +30,8 @@ LAYERS = (
     ("cli", ("hcid.cli", "hcid.__main__")),
 )
 #: The only modules outside a layer's folder: the package itself, its entry point, the shared
-#: vocabulary and the public API.
-TOP_LEVEL = {"__init__.py", "__main__.py", "errors.py", "tables.py", "api.py"}
+#: vocabulary, the public API, and what the package sets before numpy loads (hcid/_blas.py).
+TOP_LEVEL = {"__init__.py", "__main__.py", "errors.py", "tables.py", "api.py", "_blas.py"}
 
 
 def module_name(path: Path, root: Path = PACKAGE) -> str:
