@@ -46,6 +46,7 @@ __all__ = [
     "SIMULATIONS",
     "SKIPPED",
     "SIMULATION_SUMMARY",
+    "STUDY_EFFECTS",
     "Schema",
     "UNCERTAINTY_COLUMNS",
     "rate_column",
@@ -443,8 +444,10 @@ _CONSISTENCY_FIELDS = [
 #: bands, the selected structure, ``feedforward`` (nb_ft > 0), the ARX and parametric
 #: models' validation VAF, the run's evidence (SPEC 11: its ``forcing_set`` of the group, its
 #: feedforward threshold ``w_star`` and model-free ``fourier_size``, each with its sequential
-#: p-value against its set's FB twins, the FB twins that p-value used (``fb_twins_*``: FB twins are
-#: drawn until 5 show at least the run's value, at most ``--max-fb-twins``) and the twins' power at
+#: p-value against its set's FB twins and how it was made (``p_*_method``: ``monte carlo``, or
+#: ``gpd tail`` where fewer than 5 of every twin drawn reach it, SPEC 13), the FB twins that p-value
+#: used (``fb_twins_*``: FB twins are drawn until 5 show at least the run's value, at most
+#: ``--max-fb-twins``) and the twins' power at
 #: the group's level, ``decided_by`` the statistic whose
 #: twins' power is higher, whose ``p_value`` and ``power`` decide ``evidence``
 #: (``feedforward`` or ``none shown``); ``evidence_uncertain`` where that power is below 0.8),
@@ -461,11 +464,17 @@ ANALYSIS = _schema(
     + [(c, _INT) for c in ORDER_COLUMNS]
     + [("feedforward_at_w", _BOOL), ("vaf_arx_validation", _F64)]
     + [("estimator", _STR), ("vaf_validation", _F64)]
-    + [("forcing_set", _INT), ("w_star", _F64), ("p_w_star", _F64), ("power_w_star", _F64)]
-    + [("fb_twins_w_star", _INT)]
-    + [("fourier_size", _F64), ("p_fourier", _F64), ("power_fourier", _F64), ("fb_twins_fourier", _INT)]
-    + [("decided_by", _STR)]
-    + [("p_value", _F64), ("power", _F64), ("evidence", _STR), ("evidence_uncertain", _BOOL)]
+    + [("forcing_set", _INT), ("w_star", _F64), ("p_w_star", _F64), ("p_w_star_method", _STR)]
+    + [("power_w_star", _F64), ("fb_twins_w_star", _INT)]
+    + [("fourier_size", _F64), ("p_fourier", _F64), ("p_fourier_method", _STR), ("power_fourier", _F64)]
+    + [("fb_twins_fourier", _INT), ("decided_by", _STR)]
+    + [
+        ("p_value", _F64),
+        ("p_method", _STR),
+        ("power", _F64),
+        ("evidence", _STR),
+        ("evidence_uncertain", _BOOL),
+    ]
     + [("hc_form", _STR)]
     + [f for p in HC_PARAMETER_NAMES for f in ((p, _F64), (f"{p}_se", _F64), (f"{p}_status", _STR))]
     + [("crossover", _F64), ("phase_margin", _F64), ("share_remnant", _F64), ("remnant_share_data", _F64)]
@@ -587,4 +596,13 @@ FEEDBACK_RUNS = _schema(
         for field_ in ((p, _F64), (f"{p}_se", _F64), (f"{p}_status", _STR))
     ],
     ("run_id", "method"),
+)
+#: ``study_effects.parquet`` (``hcid analyse --compare FACTOR``): per method, quantity and level
+#: against the reference, each test's effect with its 95% interval, p and Holm's p (docs/tables.md).
+STUDY_EFFECTS = _schema(
+    "study_effects.parquet",
+    [("method", _STR), ("quantity", _STR), ("effect", _STR), ("estimate", _F64), ("low", _F64)]
+    + [("high", _F64), ("p", _F64), ("p_holm", _F64), ("test", _STR), ("subjects", _INT), ("runs", _INT)]
+    + [("left_out", _INT), ("unit", _STR), ("note", _STR)],
+    ("method", "quantity", "effect", "test"),
 )

@@ -185,6 +185,27 @@ def test_sequential_p_value_has_its_level_under_the_null():
     assert 9.0 < np.mean(used) < 11.0  # negative binomial: 5 / 0.5 draws on average
 
 
+@pytest.mark.parametrize("null", ["lognormal", "exponential", "uniform"])
+def test_a_runs_p_value_from_39_twins_and_their_tail_has_its_level_under_the_null(null):
+    # Source: SPEC 13's calibration rule: under the null, P(p <= 0.01) and P(p <= 0.05) within their
+    # binomial 99% bands, over 4000 runs, each with its own 39 FB twins (the default), the run's
+    # p-value as hcid analyse makes it (sequential, then the generalized Pareto tail of all 39 where
+    # fewer than 5 reach the run: hcid.pipeline.evidence.run_p_value). Monte Carlo over 39 cannot
+    # give p <= 0.01 at all (1/40); the tail can, and must not too often.
+    from scipy import stats
+
+    from hcid.pipeline.evidence import run_p_value
+
+    rng = np.random.default_rng(47)
+    draw = {"lognormal": lambda k: np.exp(rng.normal(0, 1, k)), "uniform": lambda k: rng.random(k),
+            "exponential": lambda k: rng.exponential(1, k)}[null]  # fmt: skip
+    n = 4000
+    p = np.array([run_p_value(float(draw(1)[0]), draw(39))[0] for _ in range(n)])
+    for level in (0.01, 0.05):
+        low, high = stats.binom.ppf([0.005, 0.995], n, level) / n
+        assert low <= np.mean(p <= level) <= high, (null, level, np.mean(p <= level))
+
+
 def test_sequential_settled_needs_h_at_or_above_or_the_most_drawn():
     assert not sequential_settled(0.9, np.linspace(0, 1, 20), 5, 99)  # 2 at or above 0.9
     assert sequential_settled(0.5, np.linspace(0, 1, 20), 5, 99)  # 10 at or above

@@ -299,8 +299,8 @@ def analyse(
         typer.Option(
             "--max-fb-twins",
             help="The most FB twins per forcing set for the runs' p-values: drawn in batches until 5 show "
-            "at least each run's statistic (Besag-Clifford), so p reaches 1/(1 + this). Default: 99, "
-            "or --twins if more.",
+            "at least each run's statistic (Besag-Clifford); a run beyond nearly all of them gets its p "
+            "from their generalized Pareto tail (SPEC 13). Default: 39, or --twins if more.",
             show_default=False,
         ),
     ] = None,
@@ -337,6 +337,15 @@ def analyse(
             show_default=False,
         ),
     ] = None,
+    compare: Annotated[
+        str | None,
+        typer.Option(
+            "--compare",
+            help="A factor whose levels are compared across people (subjects as repeated measures: a "
+            "mixed model, the paired or rank test, Holm's correction; SPEC 13): RUN/study_effects.parquet.",
+            show_default=False,
+        ),
+    ] = None,
     skip_unreadable: Annotated[
         bool,
         typer.Option(
@@ -359,7 +368,7 @@ def analyse(
     from hcid.pipeline.analyse import analyse as analyse_
 
     execution = _execution(jobs, backend, scheduler, worker_timeout, quiet)
-    options = AnalysisOptions(by, twins, max_fb_twins, ff_twin, alpha, fdr, person)
+    options = AnalysisOptions(by, twins, max_fb_twins, ff_twin, alpha, fdr, person, compare)
     result = analyse_(config, data, _run_dir(config, run), options, execution=execution,
                       skip_unreadable=skip_unreadable, force=force)  # fmt: skip
     answers.print_analysis(result)

@@ -108,6 +108,8 @@ def print_analysis(result) -> None:
         typer.echo(_data_check_line(g, full=g["group"] not in checked))
         checked.add(g["group"])
     _print_session(result)
+    if result.effects is not None:
+        typer.echo(effects_line(result.effects.to_pylist(), float(result.groups.column("alpha")[0].as_py())))
     print_skipped(result.skipped)
     if result.set_aside:
         typer.echo(
@@ -372,6 +374,30 @@ def _range(r: dict, digits: int = 2) -> str:
 
 def _p(p: float) -> str:
     return "p -" if not math.isfinite(p) else f"p = {p:.2g}" if p >= 1e-4 else "p < 1e-4"
+
+
+def effects_line(rows: list[dict], alpha: float) -> str:
+    """What differs between the levels of the compared factor (SPEC 13): each effect whose p after
+    Holm's correction is at most ``alpha``, by method, with its 95% interval and test; or that none
+    does."""
+    compare = rows[0]["effect"].split(":", 1)[0] if rows else "the factor"
+    found = [r for r in rows if math.isfinite(r["p_holm"]) and r["p_holm"] <= alpha]
+    tested = {r["quantity"] for r in rows if math.isfinite(r["p"])}
+    head = (f"EFFECTS of {compare} (--compare; subjects as repeated measures, RUN/study_effects.parquet): "
+            f"{len(tested)} quantities tested")  # fmt: skip
+    if not found:
+        return f"{head}; none differs at p <= {alpha:g} after Holm's correction"
+
+    def unit(r: dict) -> str:
+        return f" {r['unit']}" if r["unit"] not in ("", "-", "1") else ""
+
+    parts = [
+        f"{r['method']} {r['quantity']} {r['effect'].split(': ', 1)[-1]} {r['estimate']:+.3g}{unit(r)} "
+        f"[{r['low']:.3g}, {r['high']:.3g}] ({r['test']}, Holm p = {r['p_holm']:.2g}, "
+        f"{r['subjects']} subjects)"
+        for r in found
+    ]
+    return f"{head}; at p <= {alpha:g} after Holm's correction: " + "; ".join(parts)
 
 
 def _print_session(result) -> None:

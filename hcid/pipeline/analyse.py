@@ -52,7 +52,7 @@ from hcid.errors import ConfigError, DataError
 from hcid.io import datasets, results
 from hcid.io.datasets import DataSet
 from hcid.io.resolve import read_study, with_data
-from hcid.pipeline import sessions
+from hcid.pipeline import effects, sessions
 from hcid.pipeline.analysis_tables import write_tables
 from hcid.pipeline.evidence import (
     MAX_FB_TWINS,
@@ -112,6 +112,8 @@ class AnalysisRun:
     kinds: dict[str, int] = field(default_factory=dict)
     #: A whole experiment's conditions combined per person (None: the runs need no combining).
     session: Session | None = None
+    #: ``study_effects.parquet`` (``compare``; None without a comparison).
+    effects: pa.Table | None = None
 
 
 # --------------------------------------------------------------------------- per-run fits
@@ -153,7 +155,8 @@ class AnalysisOptions:
     (None: :data:`MAX_FB_TWINS`, or ``twins`` if more); ``ff_twin``: :data:`FF_TWINS`;
     ``alpha``: each run's test level; ``fdr``: control the false discovery rate over the
     study's runs instead; ``person``: the factor naming the people whose conditions are combined
-    in a whole experiment (None: ``subject`` where the data set has it, else one person)."""
+    in a whole experiment (None: ``subject`` where the data set has it, else one person);
+    ``compare``: a factor whose levels are compared across people (:mod:`hcid.pipeline.effects`)."""
 
     by: tuple[str, ...] | None = None
     twins: int = TWINS
@@ -162,6 +165,7 @@ class AnalysisOptions:
     alpha: float = 0.05
     fdr: bool = False
     person: str | None = None
+    compare: str | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.by, str):  # "subject,condition", as --by takes it
@@ -183,8 +187,10 @@ class AnalysisOptions:
             )
         if not (isinstance(self.alpha, float | int) and 0.0 < self.alpha < 1.0):
             raise ConfigError(f"alpha (--alpha): must be a level in (0, 1), got {self.alpha!r}")
-        if self.person is not None and not (isinstance(self.person, str) and self.person.isidentifier()):
-            raise ConfigError(f"person (--person): must be a factor name, got {self.person!r}")
+        for name in ("person", "compare"):
+            value = getattr(self, name)
+            if value is not None and not (isinstance(value, str) and value.isidentifier()):
+                raise ConfigError(f"{name} (--{name}): must be a factor name, got {value!r}")
         if self.ff_twin not in FF_TWINS:
             raise ConfigError(
                 f"ff_twin (--ff-twin): must be one of {', '.join(FF_TWINS)}, got {self.ff_twin!r}"
@@ -448,6 +454,10 @@ def analyse_study(
     if len(two_input) < len(trials):  # single-input runs: combined per person, not tested for feedforward
         data = sessions.subset(data, two_input)
     by = _factors_and_groups(data, options.by)
+    if options.compare is not None:  # refused before anything is written
+        effects.compare_levels(
+            datasets.runs_table(config.data.name, data).to_pylist(), options.compare, person
+        )
     start = time.perf_counter()
     stages, lap = {}, [start]
 
@@ -506,6 +516,13 @@ def analyse_study(
         sessions.write_session(run_dir, session)
     else:
         sessions.forget_session(run_dir)
+    compared = None
+    if options.compare is not None:
+        compared = effects.write_effects(
+            run_dir, effects.effects_rows(run_table.to_pylist(), options.compare, person)
+        )
+    else:
+        effects.forget_effects(run_dir)
     lap_done("tables")
     aside = tuple((str(f), str(why)) for f, why in data.set_aside)
     return AnalysisRun(
@@ -518,6 +535,7 @@ def analyse_study(
         tuple(whole.skipped),
         kinds,
         session,
+        compared,
     )
 
 

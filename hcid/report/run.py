@@ -38,6 +38,7 @@ _READS = {
     "session_lines": (tables.SESSION_LINES, None),
     "session_findings": (tables.SESSION_FINDINGS, None),
     "feedback_runs": (tables.FEEDBACK_RUNS, None),
+    "study_effects": (tables.STUDY_EFFECTS, None),
     "remnant_spectrum": (tables.REMNANT_SPECTRUM, None),
     "rates": (tables.RATES, None),
     "handoff": (tables.HANDOFF, None),
@@ -78,6 +79,7 @@ class RunTables:
     session_lines: pa.Table | None = None
     session_findings: pa.Table | None = None
     feedback_runs: pa.Table | None = None
+    study_effects: pa.Table | None = None
 
     def simulations(self) -> dict | None:
         """The simulated records by (model, seed), or None without simulations."""

@@ -12,6 +12,7 @@ from hcid.report.sections import (
     conditions,
     curves,
     data,
+    effects,
     experiment,
     facts,
     handoff,
@@ -42,7 +43,8 @@ SECTIONS = (
 RENDER_ORDER = (verdicts, *(section for section in SECTIONS if section is not verdicts))
 
 #: The sections of a measured study's report (a run of ``hcid analyse``): the answer first, no
-#: paper sections; a whole experiment's conditions combined per person after it.
-STUDY_SECTIONS = (study, conditions)
+#: paper sections; what differs between the compared factor's levels, and a whole experiment's
+#: conditions combined per person, after it.
+STUDY_SECTIONS = (study, effects, conditions)
 
 __all__ = ["RENDER_ORDER", "SECTIONS", "STUDY_SECTIONS"]

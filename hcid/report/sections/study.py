@@ -493,8 +493,10 @@ def _render_evidence(data: StudyData, doc: Doc) -> None:
             f"{group}, {method} method: each run's W* (the largest W at which its selection keeps "
             "feedforward) on its own forcing set's twins: a run shows feedforward where its p-value is "
             f"at most {alpha:g} (filled). FB twins are drawn until 5 are at or above the run's W* (p = 5 "
-            "over the draws), else p = (1 + those at or above) / (1 + all drawn), Besag and Clifford's "
-            "sequential p-value; the FF twins show how often such a run would be found (the power).",
+            "over the draws: Besag and Clifford's sequential p-value), else p from the generalized Pareto "
+            "tail of all drawn (SPEC 13; the Monte Carlo (1 + those at or above) / (1 + all drawn) where "
+            "no tail fits: analysis.csv's p_method); the FF twins show how often such a run would be "
+            "found (the power).",
             lambda t=twins, r=named, n=f"{group}, {method}", a=alpha: figures_hcfit.plot_evidence(t, r, n, a),
         )
     for title, caption, folder, table, used, in_use in data.calibrations:

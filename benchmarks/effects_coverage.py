@@ -1,0 +1,277 @@
+"""Coverage and level of ``hcid.analysis.effects`` on simulated studies with known effects.
+
+A study (:func:`simulate_study`): 8 subjects x 2 conditions (``A`` the reference, ``B``) x 3
+trials. Per quantity (:data:`TRUTH`) the run's value is ``base + b_subject + effect [B] + e_run``:
+``b_subject`` a normal random offset per subject, ``e_run`` measurement noise of a standard error
+drawn per run (uniform over the quantity's range) and reported exactly, 10% of the runs
+undetermined (NaN). The phase (deg) lies near +-180 (reference 175 deg, effect +15 deg: condition B
+sits near -170 deg) and is wrapped to [-180, 180) like a measured phase. Two scenarios:
+
+- ``se exact``: nothing varies from trial to trial beyond the reported standard error;
+- ``trial spread``: each run also varies by an unreported normal amount whose sd is the mean of the
+  quantity's standard errors (a person's trials differ more than one fit's se says).
+
+Per scenario, quantity and test (``study_effects`` of the studies' long table): over ``--studies``
+studies with the true effect, the share of 95% intervals that cover it; over as many with a zero
+effect, the share with ``p <= 0.05``; each with its exact (Clopper-Pearson) binomial 95% interval.
+Targets: coverage 93-97%, level at most 6%. ``phase (naive)`` is the phase taken as a plain number
+(``angle=False``): what averaging raw phases near +-180 deg gives; ``Kpe (se ignored)`` is Kpe
+without its standard errors (unweighted): the intervals' widths show what the weights gain.
+
+``--end-to-end N`` (default 0: off) adds N studies simulated run by run: the same design with
+hcid's closed loop (configs/integrator_example.yaml's experiment as configs/lab_example/make.py
+runs it: plant 1.5/s, disturbance at its input, 300 Hz, remnant as the config says, both
+conditions with feedforward), each subject's parameters drawn (:data:`E2E_RANGES`) and condition B
+shifting Kpe, TL and Kpt by :data:`E2E_EFFECT`; each run identified at 20 Hz over one 40 s period
+(``hcid.identify``, direct, W at BIC) and fitted (``hcid.fit_hc``): its estimate, se and status
+(undetermined unless ``determined``) go to ``study_effects``. Printed: per quantity and test the
+studies whose interval covers the true effect, the runs left out, and the cost per study.
+
+Run: ``.venv/bin/python benchmarks/effects_coverage.py [--studies 200] [--seed 1] [--smoke]
+[--end-to-end 0]`` (``--smoke``: 4 studies, for tests); with ``OMP_NUM_THREADS=1`` one core. The
+CPU time (all threads) and the wall time are printed (the wall time grows with the machine's load).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+import hcid
+from hcid.analysis.effects import CIRCULAR, effects_frame, study_effects, wrap
+from hcid.config import HCModel
+from hcid.io.resolve import load_config
+from hcid.loop.simulate import remnant_gain, simulate_realization
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@dataclass(frozen=True)
+class Truth:
+    """A quantity's truth: reference value, sd of the subject offsets, the condition effect and
+    the range of the runs' standard errors (uniform)."""
+
+    base: float
+    subject_sd: float
+    effect: float
+    se_low: float
+    se_high: float
+    angle: bool = False
+
+
+TRUTH = {
+    "Kpe": Truth(2.0, 0.4, 0.3, 0.05, 0.4),
+    "TL": Truth(0.3, 0.08, 0.1, 0.01, 0.08),
+    "Kpt": Truth(0.8, 0.2, -0.2, 0.05, 0.3),
+    "phase": Truth(175.0, 10.0, 15.0, 3.0, 15.0, angle=True),
+}
+SCENARIOS = {"se exact": 0.0, "trial spread": 1.0}
+SUBJECTS, TRIALS, CONDITIONS = 8, 3, ("A", "B")
+UNDETERMINED = 0.1
+
+
+def simulate_study(rng: np.random.Generator, with_effect: bool, trial_spread: float = 0.0) -> pd.DataFrame:
+    """One study's long table: ``quantity, subject, condition, value, se`` (value NaN where undetermined).
+
+    ``trial_spread``: the sd of the unreported run-to-run variation as a multiple of the mean se.
+    """
+    subject = np.repeat(np.arange(SUBJECTS), len(CONDITIONS) * TRIALS)
+    condition = np.tile(np.repeat(np.array(CONDITIONS), TRIALS), SUBJECTS)
+    frames = []
+    for name, t in TRUTH.items():
+        offset = rng.normal(0.0, t.subject_sd, SUBJECTS)[subject]
+        se = rng.uniform(t.se_low, t.se_high, subject.size)
+        extra = trial_spread * (t.se_low + t.se_high) / 2
+        noise = rng.normal(0.0, 1.0, subject.size) * np.hypot(se, extra)
+        value = t.base + offset + with_effect * t.effect * (condition == "B") + noise
+        if t.angle:
+            value = wrap(value)
+        value[rng.random(subject.size) < UNDETERMINED] = np.nan
+        frames.append(
+            pd.DataFrame(
+                {"quantity": name, "subject": subject, "condition": condition, "value": value, "se": se}
+            )
+        )
+    table = pd.concat(frames, ignore_index=True)
+    naive = table[table.quantity == "phase"].assign(quantity="phase (naive)")
+    unweighted = table[table.quantity == "Kpe"].assign(quantity="Kpe (se ignored)", se=np.nan)
+    return pd.concat([table, unweighted, naive], ignore_index=True)
+
+
+def truth_of(quantity: str) -> Truth:
+    return TRUTH[quantity.split(" ")[0]]
+
+
+def covered(row: pd.Series) -> bool:
+    """The row's interval covers the true effect (on the circle for the circular test)."""
+    true = truth_of(row.quantity).effect
+    if row.test == CIRCULAR:
+        return bool(abs(wrap(true - row.estimate)) <= row.high - row.estimate)
+    return bool(row.low <= true <= row.high)
+
+
+def run(studies: int, seed: int) -> pd.DataFrame:
+    """Per scenario, quantity and test: coverage and level counts over ``studies`` studies each."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for scenario, spread in SCENARIOS.items():
+        for k in range(studies):
+            for with_effect in (True, False):
+                frame = effects_frame(
+                    study_effects(simulate_study(rng, with_effect, spread), "condition", angles=("phase",))
+                )
+                frame = frame[frame.effect == "condition: B - A"]
+                for row in frame.itertuples(index=False):
+                    figure = covered(row) if with_effect else bool(row.p <= 0.05)
+                    usable = math.isfinite(row.low if with_effect else row.p)
+                    rows.append(
+                        (scenario, row.quantity, row.test, "coverage" if with_effect else "level", k,
+                         figure and usable, usable, row.high - row.low)
+                    )  # fmt: skip
+    columns = ["scenario", "quantity", "test", "figure", "study", "hit", "usable", "width"]
+    return pd.DataFrame(rows, columns=columns)
+
+
+def summary(counts: pd.DataFrame) -> pd.DataFrame:
+    """The share of hits per scenario, quantity, test and figure, with its binomial 95% interval (%)."""
+    out = []
+    keys = ["scenario", "quantity", "test", "figure"]
+    for key, rows in counts.groupby(keys, sort=False):
+        n, hits = len(rows), int(rows.hit.sum())
+        ci = stats.binomtest(hits, n).proportion_ci(method="exact")
+        width = rows.width.median() if key[-1] == "coverage" else math.nan
+        out.append((*key, n, int((~rows.usable).sum()), 100 * hits / n, 100 * ci.low, 100 * ci.high, width))
+    columns = [*keys, "studies", "no_figure", "share", "ci_low", "ci_high", "median_width"]
+    return pd.DataFrame(out, columns=columns)
+
+
+def verdict(row: pd.Series) -> str:
+    if row.quantity.endswith("(naive)"):
+        return "(naive: expected to fail)" if row.figure == "coverage" else ""
+    ok = 93.0 <= row.share <= 97.0 if row.figure == "coverage" else row.share <= 6.0
+    return "ok" if ok else "OUT OF TARGET"
+
+
+#: End to end: the subjects' parameters (uniform ranges, around configs/lab_example's subjects) and
+#: the effect of condition B on each subject.
+E2E_RANGES = {"Kpe": (1.6, 2.1), "TL": (0.10, 0.18), "tau_pe": (0.22, 0.28), "Kpt": (0.6, 0.9),
+              "TI": (0.15, 0.25), "tau_pt": (0.15, 0.30)}  # fmt: skip
+E2E_EFFECT = {"Kpe": 0.3, "TL": 0.03, "Kpt": -0.2}
+E2E_RATE, E2E_SAMPLES = 20.0, 800  # Hz; one 40 s period of the forcing functions
+
+
+def fitted_study(rng: np.random.Generator, config, kn: float, experiment) -> pd.DataFrame:
+    """One study simulated run by run and fitted with hcid: ``quantity, subject, condition, value,
+    se, undetermined`` for Kpe, TL and Kpt."""
+    rows = []
+    for subject in range(SUBJECTS):
+        truth = {k: rng.uniform(*r) for k, r in E2E_RANGES.items()}
+        for condition in CONDITIONS:
+            p = {k: v + (condition == "B") * E2E_EFFECT.get(k, 0.0) for k, v in truth.items()}
+            model = HCModel(
+                f"S{subject}{condition}", p["Kpt"], p["TI"], p["tau_pt"], p["Kpe"], p["TL"], p["tau_pe"]
+            )
+            for _ in range(TRIALS):
+                r = simulate_realization(config, model, int(rng.integers(1, 2**31)), kn)
+                last = slice(r.t.size - E2E_SAMPLES, None)
+                record = hcid.Record(len(rows), E2E_RATE, r.t[last] - r.t[last][0], r.ft[last], r.fd[last],
+                                     r.e[last], r.u[last])  # fmt: skip
+                found = hcid.identify(record, "direct", threads=1)
+                fit = hcid.fit_hc(found.select(found.w_bic), record, experiment, plant_check=False)
+                for q in E2E_EFFECT:  # Kpt is not fitted where the selected model has no feedforward
+                    i = fit.names.index(q) if q in fit.names else None
+                    value, se = (math.nan, math.nan) if i is None else (fit.estimates[i], fit.se[i])
+                    rows.append((q, subject, condition, value, se, fit.status.get(q) != "determined"))
+    columns = ["quantity", "subject", "condition", "value", "se", "undetermined"]
+    table = pd.DataFrame(rows, columns=columns)
+    bad_se = ~table.undetermined & ~(np.isfinite(table.se) & (table.se > 0))
+    table.loc[bad_se, "undetermined"] = True  # no usable se: left out as undetermined
+    return table
+
+
+def end_to_end(studies: int, seed: int) -> None:
+    """Print the end-to-end variant's figures (see the module's docstring)."""
+    config = load_config(ROOT / "configs" / "integrator_example.yaml")
+    timing = dataclasses.replace(
+        config.timing, sim_rate=300.0, output_rate=E2E_RATE, run_in=10.0, window=80.0, periods=1
+    )
+    config = dataclasses.replace(config, timing=timing)
+    experiment = hcid.Experiment(hcid.Plant.integrator(1.5), "input")
+    rng = np.random.default_rng(seed)
+    start, cpu, rows = time.perf_counter(), time.process_time(), []
+    for _ in range(studies):
+        frame = effects_frame(
+            study_effects(fitted_study(rng, config, remnant_gain(config), experiment), "condition")
+        )
+        for row in frame.itertuples(index=False):
+            hit = row.low <= E2E_EFFECT[row.quantity] <= row.high
+            rows.append(
+                (row.quantity, row.test, hit, math.isfinite(row.low), row.estimate, row.left_out, row.runs)
+            )
+    elapsed = time.perf_counter() - start
+    columns = ["quantity", "test", "covered", "interval", "estimate", "left_out", "runs"]
+    table = pd.DataFrame(rows, columns=columns)
+    summary = table.groupby(["quantity", "test"], sort=False).agg(
+        studies=("covered", "size"), with_interval=("interval", "sum"), covered=("covered", "sum"),
+        median_estimate=("estimate", "median"),
+        mean_left_out=("left_out", "mean"), mean_runs=("runs", "mean"),
+    )  # fmt: skip
+    summary["true_effect"] = [E2E_EFFECT[q] for q, _ in summary.index]
+    runs = SUBJECTS * len(CONDITIONS) * TRIALS
+    print(
+        f"\nend to end: {studies} studies simulated and fitted run by run ({runs} runs each); "
+        "with_interval: studies with a 95% interval (the paired test has none below 6 subjects with both "
+        "conditions determined); covered: studies whose interval holds the true effect"
+    )
+    with pd.option_context("display.width", 200, "display.float_format", "{:.3f}".format):
+        print(summary.to_string())
+    print(
+        f"CPU {cpu:.0f} s ({cpu / studies:.0f} s per study, numba compiling included), wall {elapsed:.0f} s"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--studies", type=int, default=200, help="studies per scenario and figure")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--smoke", action="store_true", help="4 studies (a smoke run for tests)")
+    parser.add_argument("--end-to-end", type=int, default=0, help="studies simulated and fitted run by run")
+    args = parser.parse_args()
+    studies = 4 if args.smoke else args.studies
+    if studies < 1:
+        parser.error(f"--studies: must be at least 1, got {studies}")
+    start, cpu = time.perf_counter(), time.process_time()
+    counts = run(studies, args.seed)
+    elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu
+    table = summary(counts)
+    table["target"] = table.apply(verdict, axis=1)
+    print(
+        f"hcid.analysis.effects: {SUBJECTS} subjects x {len(CONDITIONS)} conditions x {TRIALS} trials, "
+        f"{UNDETERMINED:.0%} of runs undetermined; {studies} studies per scenario with the true effect "
+        f"(coverage of the 95% interval, %) and {studies} with none (share of p <= 0.05, %); "
+        "[ci_low, ci_high]: exact binomial 95% interval; no_figure: studies without an interval or p; "
+        "median_width: the intervals' median width in the quantity's unit"
+    )
+    table["median_width"] = table.median_width.map(lambda w: "" if math.isnan(w) else f"{w:.3g}")
+    with pd.option_context(
+        "display.width", 200, "display.max_rows", 200, "display.float_format", "{:.1f}".format
+    ):
+        print(table.to_string(index=False))
+    per_study = cpu / (2 * studies * len(SCENARIOS))
+    print(
+        f"CPU {cpu:.1f} s ({1000 * per_study:.0f} ms per simulated study, 6 quantities), wall {elapsed:.1f} s"
+    )
+    if args.end_to_end:
+        end_to_end(args.end_to_end, args.seed)
+
+
+if __name__ == "__main__":
+    main()
