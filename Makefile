@@ -15,12 +15,15 @@ LOCK_UPGRADE ?= --upgrade
 VARIANTS := $(sort $(wildcard configs/indirect_variants/*.yaml))
 
 # Installs exactly the lock (pip, setuptools and wheel included), then hcid itself with that
-# setuptools; pip check fails if the lock misses a dependency of pyproject.toml.
+# setuptools; pip check fails if the lock misses a dependency of pyproject.toml. Then the engine's
+# kernels are compiled into numba's cache, so that the first run costs what a warm one does
+# (docs/benchmarks.md, "issue 47 (4)").
 $(STAMP): pyproject.toml $(LOCK)
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --require-hashes --no-deps -r $(LOCK)
 	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
 	$(BIN)/python -m pip check
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -c "from hcid.pipeline.parallel import compile_before_fork as c; c()"
 	touch $(STAMP)
 
 # The lock's inputs: pyproject.toml with the dev and dask extras, plus pip and the build-system

@@ -26,12 +26,26 @@ typing pass only (``Literal[int](0)`` for a variable that starts at 0). The
 same child then runs warm on that cache, where a compile event means a
 kernel the cache missed.
 
+A third recorded ``hcid run --jobs 1`` starts from a fresh cache into which
+the install step's warm-up (:data:`WARM_UP`, the line of the Makefile's
+install recipe) has compiled the engine's kernels: the first run of a fresh
+install, whose compile events are what the warm-up leaves to it.
+
 Then the wall times from the plain ``hcid`` command, alternating: cold with
-``--jobs 2`` (the default), warm on that cache, and cold with ``--jobs 1``;
-beside each, the CPU seconds of the command and its workers.
+``--jobs 2`` (the default), warm on that cache, cold with ``--jobs 1``, and
+"installed" (``--jobs 2`` on a fresh cache after the warm-up, which is timed
+apart); beside each, the CPU seconds of the command and its workers.
 ``--json`` writes everything, to compare two commits.
 
-Run: ``.venv/bin/python benchmarks/cold_start.py`` from the project root. This
+The numba cache is the only thing made cold: hcid's own bytecode (``.pyc``),
+which a fresh editable install also lacks, is the checkout's, already written.
+
+``--smoke``: one round, and every run after the first recorded (cold) one
+starts from a copy of its cache, so that all paths of this script run in
+about half a minute; its cold and installed figures after the first are then
+warm, and say so.
+
+Run: ``.venv/bin/python benchmarks/cold_start.py [--repeat N] [--smoke]`` from the project root. This
 process imports nothing from hcid or numba; the children do the work.
 """
 
@@ -39,6 +53,7 @@ import argparse
 import json
 import os
 import resource
+import shutil
 import statistics
 import subprocess
 import sys
@@ -60,6 +75,9 @@ GROUPS = (
 )
 OTHER = "other"
 TOP_FUNCTIONS = 40
+#: The install step's warm-up, as the Makefile's install recipe runs it (``python -c``, with
+#: ``OPENBLAS_NUM_THREADS=1``): the engine's kernels compiled into numba's cache.
+WARM_UP = "from hcid.pipeline.parallel import compile_before_fork as c; c()"
 #: argv[1] of the recording child, this file run as ``cold_start.py --child OUT HCID_ARGS...``.
 CHILD = "--child"
 
@@ -296,14 +314,15 @@ def _check(proc: subprocess.CompletedProcess, what: str) -> None:
         sys.exit(f"cold_start: {what} failed with exit code {proc.returncode}")
 
 
-def _run(command: list[str], cache: Path, what: str) -> tuple[float, float]:
-    """Wall and CPU seconds of a command run with NUMBA_CACHE_DIR=cache.
+def _run(command: list[str], cache: Path, what: str, env: dict | None = None) -> tuple[float, float]:
+    """Wall and CPU seconds of a command run with NUMBA_CACHE_DIR=cache (and ``env`` set).
 
     The CPU seconds are those of the process and of every worker it waited for.
     """
     cpu = _children_cpu()
     start = time.perf_counter()
-    proc = subprocess.run(command, cwd=SOURCE, env=_environment(cache), capture_output=True, text=True)
+    environment = _environment(cache) | (env or {})
+    proc = subprocess.run(command, cwd=SOURCE, env=environment, capture_output=True, text=True)
     seconds = time.perf_counter() - start
     _check(proc, what)
     return seconds, _children_cpu() - cpu
@@ -325,6 +344,15 @@ def _recorded(config: Path, cache: Path, run: Path, out: Path) -> dict:
     result["cpu_s"] = cpu
     result["cache_index_files"] = _index_files(cache)
     return result
+
+
+def _warm_up(cache: Path) -> tuple[float, float]:
+    """Wall and CPU seconds of the install step's warm-up (:data:`WARM_UP`) into ``cache``.
+
+    An hcid from before ``compile_before_fork`` had no warm-up: there it does nothing.
+    """
+    command = [sys.executable, "-c", f"try:\n    exec({WARM_UP!r})\nexcept ImportError:\n    pass"]
+    return _run(command, cache, "the install's warm-up", {"OPENBLAS_NUM_THREADS": "1"})
 
 
 def _timed(config: Path, cache: Path, run: Path, jobs: int) -> tuple[float, float]:
@@ -474,19 +502,54 @@ def _notes(cold: dict, warm: dict) -> list[str]:
     return notes
 
 
-def _print_walls(repeat, kinds, walls, cpus, warm, cold, j2_index_files):
+def _print_installed(installed: dict, cold: dict) -> None:
+    """What the first run after the install's warm-up still compiles."""
+    functions = installed["functions"]
+    seconds = sum(f["self_s"] for f in functions)
+    n_sigs = sum(len(f["signatures"]) for f in functions)
+    print(
+        f"install's warm-up on a fresh cache: {installed['warm_up_s']:.1f} s wall "
+        f"({installed['warm_up_cpu_s']:.1f} s cpu), {installed['warm_up_index_files']} cache index files "
+        f"(cold --jobs 1 recorded: {cold['cache_index_files']})"
+    )
+    print(
+        f"first run after it, --jobs 1, recorded: {installed['process_s']:.1f} s wall "
+        f"({installed['cpu_s']:.1f} s cpu); {len(functions)} functions compiled ({n_sigs} signatures), "
+        f"{seconds:.2f} s self"
+    )
+    for f in sorted(functions, key=lambda f: f["self_s"], reverse=True):
+        if f["module"].startswith("hcid"):
+            name = f"{f['module']}.{f['qualname']}"
+            print(f"    {name}: {len(f['signatures'])} signatures, {f['self_s']:.2f} s self")
+    others = [f for f in functions if not f["module"].startswith("hcid")]
+    if others:
+        print(f"    and {len(others)} of numba's own, {sum(f['self_s'] for f in others):.2f} s self")
+
+
+def _print_walls(repeat, kinds, walls, cpus, warm_ups, warm, cold, j2_index_files):
     """The alternated rounds' wall (and CPU) seconds side by side."""
-    print(f"{'seconds, wall / cpu':<20}" + "".join(f"{kind:>17}" for kind in kinds))
+    print(f"{'seconds, wall / cpu':<20}" + "".join(f"{kind:>20}" for kind in kinds))
     for i in range(repeat):
-        cells = "".join(f"{walls[k][i]:>9.1f} / {cpus[k][i]:>5.1f}" for k in kinds)
+        cells = "".join(f"{walls[k][i]:>12.1f} / {cpus[k][i]:>5.1f}" for k in kinds)
         print(f"{f'round {i + 1}':<20}{cells}")
     if repeat > 1:
         for label, pick in (("best wall", min), ("median wall", statistics.median)):
-            print(f"{label:<20}" + "".join(f"{pick(walls[k]):>9.1f}{'':>8}" for k in kinds))
-    cold2, warm2, cold1 = (min(walls[k]) for k in kinds)
+            print(f"{label:<20}" + "".join(f"{pick(walls[k]):>12.1f}{'':>8}" for k in kinds))
+    cold2, warm2, cold1, installed = (min(walls[k]) for k in kinds)
+
+    def per_round(kind):
+        return ", ".join(f"{x / w:.2f}" for x, w in zip(walls[kind], walls["warm --jobs 2"], strict=True))
+
     print(
-        f"cold start over warm, --jobs 2: {cold2 - warm2:.1f} s ({cold2 / warm2:.1f} x); "
-        f"--jobs 1: {cold1 - warm['process_s']:.1f} s (warm: the recorded run)"
+        f"cold start over warm, --jobs 2: {cold2 - warm2:.1f} s ({cold2 / warm2:.1f} x, best walls; "
+        f"per round {per_round('cold --jobs 2')} x); --jobs 1: {cold1 - warm['process_s']:.1f} s "
+        f"(warm: the recorded run)"
+    )
+    walls_s, cpus_s = (", ".join(f"{x:.1f}" for x in values) for values in zip(*warm_ups, strict=True))
+    print(
+        f"first run after the install's warm-up over warm, --jobs 2: {installed - warm2:.1f} s "
+        f"({installed / warm2:.2f} x, best walls; per round {per_round('installed --jobs 2')} x); "
+        f"the warm-up itself (not in them): {walls_s} s wall, {cpus_s} s cpu"
     )
     if any(n != cold["cache_index_files"] for n in j2_index_files):
         print(
@@ -506,6 +569,11 @@ def main():
     parser.add_argument(
         "--source", type=Path, default=ROOT, help="the hcid checkout to measure (default: this one)"
     )
+    parser.add_argument(
+        "--smoke",
+        action="store_true",
+        help="one round, every run after the first on a copy of its cache: every path in about 30 s",
+    )
     args = parser.parse_args()
     global SOURCE
     SOURCE = args.source.resolve()
@@ -513,6 +581,7 @@ def main():
         parser.error(f"--source: no hcid package in {args.source}")
     if args.repeat < 0:
         parser.error(f"--repeat: must be at least 0, got {args.repeat}")
+    repeat = 1 if args.smoke else args.repeat
     config = Path(args.config).resolve()
     if not config.is_file():
         parser.error(f"--config: no such file: {args.config}")
@@ -524,27 +593,54 @@ def main():
     commit = _commit()
     print(f"cold start of hcid run {args.config} (commit {commit})")
     print(f"cpu {_cpu()}, {os.cpu_count()} cores; load before {_load()}")
+    if args.smoke:
+        print(
+            "smoke run: every run after the first recorded one starts from a copy of its cache, so the "
+            "later cold and installed figures are warm ones, not worth keeping"
+        )
     print()
 
-    kinds = ("cold --jobs 2", "warm --jobs 2", "cold --jobs 1")
+    kinds = ("cold --jobs 2", "warm --jobs 2", "cold --jobs 1", "installed --jobs 2")
     walls = {kind: [] for kind in kinds}
     cpus = {kind: [] for kind in kinds}
+    warm_ups = []
     j2_index_files = []
     with tempfile.TemporaryDirectory(prefix="hcid-cold-start-") as tmp:
         tmp = Path(tmp)
-        cold = _recorded(config, tmp / "cache-recorded", tmp / "run-cold", tmp / "cold.json")
-        warm = _recorded(config, tmp / "cache-recorded", tmp / "run-warm", tmp / "warm.json")
+        recorded = tmp / "cache-recorded"
+
+        def fresh(name: str) -> Path:
+            """A cache folder for a cold run: empty, or in a smoke run a copy of the recorded one."""
+            if args.smoke:
+                shutil.copytree(recorded, tmp / name)
+            return tmp / name
+
+        cold = _recorded(config, recorded, tmp / "run-cold", tmp / "cold.json")
+        warm = _recorded(config, recorded, tmp / "run-warm", tmp / "warm.json")
+        cache = fresh("cache-installed")
+        warm_up_s, warm_up_cpu_s = _warm_up(cache)
+        warm_up_index_files = _index_files(cache)
+        installed = _recorded(config, cache, tmp / "run-installed", tmp / "installed.json")
+        installed.update(
+            warm_up_s=warm_up_s, warm_up_cpu_s=warm_up_cpu_s, warm_up_index_files=warm_up_index_files
+        )
         _print_compiles(cold, warm)
         print()
+        _print_installed(installed, cold)
+        print()
         # Alternating, so that load from other work on the machine hits every kind of run alike.
-        for i in range(args.repeat):
-            cache = tmp / f"cache-{i}-jobs2"
+        for i in range(repeat):
+            cache = fresh(f"cache-{i}-jobs2")
+            installed_cache = fresh(f"cache-{i}-installed")
             runs = (
                 ("cold --jobs 2", cache, 2),
                 ("warm --jobs 2", cache, 2),
-                ("cold --jobs 1", tmp / f"cache-{i}-jobs1", 1),
+                ("cold --jobs 1", fresh(f"cache-{i}-jobs1"), 1),
+                ("installed --jobs 2", installed_cache, 2),
             )
             for kind, folder, jobs in runs:
+                if kind.startswith("installed"):
+                    warm_ups.append(_warm_up(folder))
                 wall, cpu = _timed(config, folder, tmp / f"run-{i}-{kind.replace(' ', '')}", jobs)
                 walls[kind].append(wall)
                 cpus[kind].append(cpu)
@@ -552,8 +648,8 @@ def main():
                     j2_index_files.append(_index_files(cache))
     load_after = os.getloadavg()
 
-    if args.repeat:
-        _print_walls(args.repeat, kinds, walls, cpus, warm, cold, j2_index_files)
+    if repeat:
+        _print_walls(repeat, kinds, walls, cpus, warm_ups, warm, cold, j2_index_files)
     for note in _notes(cold, warm):
         print(f"note: {note}")
     seconds = time.perf_counter() - began
@@ -563,6 +659,7 @@ def main():
         result = {
             "commit": commit,
             "config": args.config,
+            "smoke": args.smoke,
             "cpu": _cpu(),
             "cores": os.cpu_count(),
             "load_before": load_before,
@@ -570,8 +667,10 @@ def main():
             "numba": cold["numba"],
             "recorded_cold": cold,
             "recorded_warm": warm,
+            "recorded_installed": installed,
             "wall_s": walls,
             "cpu_s": cpus,
+            "warm_up_s": warm_ups,
             "cold_jobs2_cache_index_files": j2_index_files,
             "benchmark_s": seconds,
         }

@@ -27,7 +27,7 @@ import numpy as np
 import pyarrow.parquet as pq
 from scipy import stats
 
-from hcid.pipeline.evidence import run_p_value
+from hcid.selection.calibration import run_p_value
 
 NULLS = (19, 39, 98)
 LEVELS = (0.01, 0.05)

@@ -112,7 +112,7 @@ def test_each_runs_p_value_is_sequential_over_its_fb_twins_in_the_order_drawn(an
     # (1 + k)/(1 + n) over the n drawn, and beyond every twin (k = 0) SPEC 13's generalized Pareto
     # tail of the n drawn (log W*), at most 1/(1 + n) (hcid.pipeline.evidence.run_p_value, whose
     # tail tests/test_tail.py checks). Recomputed from evidence_twins.parquet.
-    from hcid.pipeline.evidence import run_p_value
+    from hcid.selection.calibration import run_p_value
 
     _, out = analysed
     run = out[1][0]

@@ -101,7 +101,15 @@ def test_a_runs_p_value_and_power_follow_spec_11():
     assert evidence_p_value(0.0, fb) == 1.0
     # FF twins: 3 of 4 above every FB twin (p = 0.05 <= 0.05), one among them.
     assert evidence_power(np.array([0.3, 0.5, 1.0, 0.1]), fb, 0.05) == 0.75
-    assert evidence_power(np.array([0.3, 0.5, 1.0, 0.1]), fb, 0.01) == 0.0  # 20 twins: p >= 1/20
+    # At 0.01, below the count's 1/20, the power is the tail's (run_p_value, SPEC 13): the FF
+    # twins far beyond the FB twins' evenly spread tail are found, the one among them is not.
+    from hcid.selection.calibration import run_p_value
+
+    assert run_p_value(1.0, fb)[1:] == (19, "gpd tail") and run_p_value(1.0, fb)[0] < 0.01
+    assert evidence_power(np.array([0.3, 0.5, 1.0, 0.1]), fb, 0.01) == np.mean(
+        [run_p_value(w, fb)[0] <= 0.01 for w in (0.3, 0.5, 1.0, 0.1)]
+    )
+    assert evidence_power(np.array([0.1]), fb, 0.01) == 0.0
 
 
 def test_the_threshold_is_the_selection_paths_last_feedforward_w_clipped_to_the_grid():
@@ -194,7 +202,7 @@ def test_a_runs_p_value_from_39_twins_and_their_tail_has_its_level_under_the_nul
     # give p <= 0.01 at all (1/40); the tail can, and must not too often.
     from scipy import stats
 
-    from hcid.pipeline.evidence import run_p_value
+    from hcid.selection.calibration import run_p_value
 
     rng = np.random.default_rng(47)
     draw = {"lognormal": lambda k: np.exp(rng.normal(0, 1, k)), "uniform": lambda k: rng.random(k),

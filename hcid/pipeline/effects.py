@@ -9,11 +9,9 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-import pandas as pd
 import pyarrow as pa
 
 from hcid import tables
-from hcid.analysis.effects import Effect, study_effects
 from hcid.errors import ConfigError
 from hcid.hcfit.determined import DETERMINED
 from hcid.io import folders, results
@@ -44,9 +42,12 @@ def compare_levels(rows: Sequence[dict], compare: str, person: str | None) -> li
     return levels
 
 
-def long_table(rows: Sequence[dict], compare: str, person: str) -> pd.DataFrame:
+def long_table(rows: Sequence[dict], compare: str, person: str):
     """One row per run and quantity of one method's runs: the parameter with its standard error
-    (undetermined where its status is not ``determined``), and each loop figure (no se)."""
+    (undetermined where its status is not ``determined``), and each loop figure (no se): a pandas
+    DataFrame (pandas and statsmodels are imported here, not with ``hcid analyse``)."""
+    import pandas as pd
+
     out = []
     for r in rows:
         base = {"subject": str(r[person]), compare: str(r[compare])}
@@ -71,11 +72,13 @@ def long_table(rows: Sequence[dict], compare: str, person: str) -> pd.DataFrame:
 def effects_rows(rows: Sequence[dict], compare: str, person: str) -> list[dict]:
     """Every method's effects of ``compare`` (its first level the reference), one dict per
     effect with its ``method`` (rows of ``study_effects.parquet``)."""
+    from hcid.analysis.effects import study_effects
+
     units = {**tables.PARAMETER_UNITS, **dict(LOOP_FIGURES)}
     out = []
     for method in sorted({r["method"] for r in rows}):
         mine = [r for r in rows if r["method"] == method]
-        effects: list[Effect] = study_effects(long_table(mine, compare, person), compare, units=units)
+        effects = study_effects(long_table(mine, compare, person), compare, units=units)
         out += [{"method": method, **e.__dict__} for e in effects]
     return out
 

@@ -24,14 +24,12 @@ from hcid.selection.calibration import (
     binomial_summary,
     evidence_power,
     feedforward_threshold,
-    sequential_p_value,
+    run_p_value,
     sequential_settled,
 )
-from hcid.selection.tail import MONTE_CARLO, tail_p_value
 
 __all__ = [
     "EXCEEDANCES",
-    "run_p_value",
     "MAX_FB_TWINS",
     "MIN_POWER",
     "STATISTICS",
@@ -58,41 +56,6 @@ EXCEEDANCES = 5
 MAX_FB_TWINS = 39
 #: The two statistics of a run's evidence, by name in the tables: (p-value, power) columns.
 STATISTICS = {"W*": ("p_w_star", "power_w_star"), "Fourier coefficients": ("p_fourier", "power_fourier")}
-
-
-def run_p_value(value: float, fb_in_order: np.ndarray) -> tuple[float, int, str]:
-    """A run's p-value against its FB twins in the order drawn, the twins it used, and how it was
-    made: Besag and Clifford's sequential p where :data:`EXCEEDANCES` twins reached the run's
-    value (the draws stopped there: ``h / m``), else the Monte Carlo ``(1 + k) / (1 + N)`` over
-    every twin drawn; and where the run is beyond every twin (k = 0), where Monte Carlo stops at
-    ``1 / (N + 1)``, the generalized Pareto tail of SPEC 13 (:func:`hcid.selection.tail.tail_p_value`;
-    on the log scale where every value is positive, as W* and the Fourier size are), at most that.
-    Between ``1 / (N + 1)`` and ``10 / (N + 1)`` the tail is conservative (measured on real twins
-    and in tests/test_calibration.py: docs/methodology.md), so the exact count stands there; and
-    at levels below ``1 / (N + 1)`` the minimum is the tail's p alone, so its level is the tail's.
-
-    Examples
-    --------
-    >>> fb = np.exp(np.linspace(-3.0, 0.0, 39))  # 39 FB twins' W*, the largest 1.0
-    >>> run_p_value(0.5, fb)[1:]  # 5 reached by the 35th draw: the sequential p, 5/35
-    (35, 'monte carlo')
-    >>> run_p_value(0.95, fb)  # one at or above: (1 + 1) / (1 + 39)
-    (0.05, 39, 'monte carlo')
-    >>> p, n, how = run_p_value(2.0, fb)  # beyond every twin: the tail
-    >>> n, how, p < 1 / 40
-    (39, 'gpd tail', True)
-    """
-    fb = np.asarray(fb_in_order, dtype=np.float64)
-    p, n = sequential_p_value(value, fb, EXCEEDANCES)
-    if n < fb.size or np.count_nonzero(fb >= value) > 0 or fb.size < 2:
-        return p, n, MONTE_CARLO
-    drawn = fb[np.isfinite(fb)]  # a twin drawn for the other statistic only has none of this one
-    if drawn.size < 2 or not math.isfinite(value):
-        return p, n, MONTE_CARLO
-    log = value > 0 and bool(np.all(drawn > 0))
-    tail = tail_p_value(math.log(value) if log else value, np.log(drawn) if log else drawn)
-    # At most the Monte Carlo 1 / (N + 1): below it the tail's own p, above it the exact count's.
-    return min(tail.p, p), n, tail.method
 
 
 def group_name(by: Sequence[str], key: tuple[str, ...]) -> str:
@@ -314,11 +277,11 @@ class Evidence:
         forcing_set = pair.sets.index(own) + 1
         self._judged[(group, method, forcing_set)] = own
         fb, fb_sizes = self.used(group, forcing_set, own, method, deciding)
-        p_w, n_w, how_w = run_p_value(w_star, fb)
+        p_w, n_w, how_w = run_p_value(w_star, fb, EXCEEDANCES)
         sizes = self.sizes(own)
         fourier = (math.nan, math.nan, math.nan, 0, "")
         if sizes is not None and run_size is not None:
-            p_f, n_f, how_f = run_p_value(run_size, fb_sizes)
+            p_f, n_f, how_f = run_p_value(run_size, fb_sizes, EXCEEDANCES)
             fourier = (run_size, p_f, evidence_power(sizes["FF"], fb_sizes, self.alpha), n_f, how_f)
         return {
             "forcing_set": forcing_set,

@@ -13,6 +13,7 @@ Pure functions; no I/O.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +22,7 @@ from scipy.special import _ufuncs
 
 from hcid import tables
 from hcid.selection.over_w import SelectionPath, false_positive_extent
+from hcid.selection.tail import MONTE_CARLO, tail_p_value
 
 __all__ = [
     "ERRORS",
@@ -35,6 +37,7 @@ __all__ = [
     "evidence_power",
     "feedforward_threshold",
     "rates_at",
+    "run_p_value",
     "sequential_p_value",
     "sequential_settled",
 ]
@@ -297,8 +300,8 @@ def evidence_p_value(w_star: float, fb_thresholds: np.ndarray) -> float:
 
 def evidence_power(ff_thresholds: np.ndarray, fb_thresholds: np.ndarray, alpha: float) -> float:
     """The share of FF twins that the run's own rule calls feedforward at level ``alpha``: their
-    :func:`evidence_p_value` against the FB twins at most ``alpha`` (SPEC 11's power: FF twins
-    above the FB twins' (1 - alpha) quantile, with the p-value's own count).
+    :func:`run_p_value` against the FB twins at most ``alpha`` (SPEC 11's power: FF twins above
+    the FB twins' (1 - alpha) quantile, with the p-value's own rule, the tail beyond every twin).
 
     Examples
     --------
@@ -306,7 +309,7 @@ def evidence_power(ff_thresholds: np.ndarray, fb_thresholds: np.ndarray, alpha: 
     0.75
     """
     ff = np.asarray(ff_thresholds, dtype=np.float64)
-    return float(np.mean([evidence_p_value(w, fb_thresholds) <= alpha for w in ff]))
+    return float(np.mean([run_p_value(w, fb_thresholds)[0] <= alpha for w in ff]))
 
 
 def sequential_p_value(value: float, fb_in_order: np.ndarray, h: int) -> tuple[float, int]:
@@ -330,6 +333,41 @@ def sequential_p_value(value: float, fb_in_order: np.ndarray, h: int) -> tuple[f
         m = int(np.searchsorted(seen, h)) + 1
         return h / m, m
     return evidence_p_value(value, fb), int(fb.size)
+
+
+def run_p_value(value: float, fb_in_order: np.ndarray, h: int = 5) -> tuple[float, int, str]:
+    """A run's p-value against its FB twins in the order drawn, the twins it used, and how it was
+    made: Besag and Clifford's sequential p where ``h`` twins reached the run's
+    value (the draws stopped there: ``h / m``), else the Monte Carlo ``(1 + k) / (1 + N)`` over
+    every twin drawn; and where the run is beyond every twin (k = 0), where Monte Carlo stops at
+    ``1 / (N + 1)``, the generalized Pareto tail of SPEC 13 (:func:`hcid.selection.tail.tail_p_value`;
+    on the log scale where every value is positive, as W* and the Fourier size are), at most that.
+    Between ``1 / (N + 1)`` and ``10 / (N + 1)`` the tail is conservative (measured on real twins
+    and in tests/test_calibration.py: docs/methodology.md), so the exact count stands there; and
+    at levels below ``1 / (N + 1)`` the minimum is the tail's p alone, so its level is the tail's.
+
+    Examples
+    --------
+    >>> fb = np.exp(np.linspace(-3.0, 0.0, 39))  # 39 FB twins' W*, the largest 1.0
+    >>> run_p_value(0.5, fb)[1:]  # 5 reached by the 35th draw: the sequential p, 5/35
+    (35, 'monte carlo')
+    >>> run_p_value(0.95, fb)  # one at or above: (1 + 1) / (1 + 39)
+    (0.05, 39, 'monte carlo')
+    >>> p, n, how = run_p_value(2.0, fb)  # beyond every twin: the tail
+    >>> n, how, p < 1 / 40
+    (39, 'gpd tail', True)
+    """
+    fb = np.asarray(fb_in_order, dtype=np.float64)
+    p, n = sequential_p_value(value, fb, h)
+    if n < fb.size or np.count_nonzero(fb >= value) > 0 or fb.size < 2:
+        return p, n, MONTE_CARLO
+    drawn = fb[np.isfinite(fb)]  # a twin drawn for the other statistic only has none of this one
+    if drawn.size < 2 or not math.isfinite(value):
+        return p, n, MONTE_CARLO
+    log = value > 0 and bool(np.all(drawn > 0))
+    tail = tail_p_value(math.log(value) if log else value, np.log(drawn) if log else drawn)
+    # At most the Monte Carlo 1 / (N + 1): below it the tail's own p, above it the exact count's.
+    return min(tail.p, p), n, tail.method
 
 
 def sequential_settled(value: float, fb_in_order: np.ndarray, h: int, n_max: int) -> bool:

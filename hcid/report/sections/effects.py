@@ -10,7 +10,6 @@ from dataclasses import dataclass
 import numpy as np
 from matplotlib.figure import Figure
 
-from hcid.analysis.effects import MIXED
 from hcid.report.document import Doc
 
 TITLE = "What differs between conditions"
@@ -92,6 +91,8 @@ def plot_forest(effects: list[dict], alpha: float) -> Figure:
     estimate over the half-width, the interval then -1 to +1 about it: it crosses 0 where the
     effect is not told from none) and its value in its own unit is written at the right; filled
     where Holm's p is at most ``alpha``; a quantity that could not be compared says so."""
+    from hcid.analysis.effects import MIXED  # statsmodels and pandas loaded only where effects are drawn
+
     rows = [e for e in effects if e["test"] == MIXED]
     fig = Figure(figsize=(9.0, 1.3 + 0.26 * max(len(rows), 1)))
     ax = fig.subplots()

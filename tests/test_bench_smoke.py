@@ -1,0 +1,125 @@
+"""``make bench``'s scripts run in their smoke mode (``--smoke``), so that a broken benchmark
+fails ``make test`` instead of the next person who times something.
+
+Each script runs as ``make bench`` runs it, a subprocess of this venv's python from the
+project root with BLAS on one thread; all three start at once (about 35 s of wall on two
+idle cores, the cold-start benchmark's first compile of every kernel the longest part), and
+each test checks its exit code and the lines its script must print.
+"""
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+#: The scripts of ``make bench``, in its order, and their arguments besides ``--smoke``.
+SCRIPTS = {"arx_engine": [], "fit_hc": [], "cold_start": ["--json", "{tmp}/cold_start.json"]}
+TIMEOUT_S = 600
+
+pytestmark = pytest.mark.skipif(
+    os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0"),
+    reason="NUMBA_DISABLE_JIT: the benchmarks time and count compiled kernels",
+)
+
+
+@pytest.fixture(scope="module")
+def smoke_runs(tmp_path_factory):
+    """Every script started at once; per script, a function that waits for it and returns
+    (exit code, stdout, stderr)."""
+    tmp = tmp_path_factory.mktemp("bench-smoke")
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
+    started = {}
+    for name, extra in SCRIPTS.items():
+        out, err = open(tmp / f"{name}.out", "w"), open(tmp / f"{name}.err", "w")  # noqa: SIM115
+        args = [a.format(tmp=tmp) for a in extra]
+        command = [sys.executable, str(ROOT / "benchmarks" / f"{name}.py"), "--smoke", *args]
+        started[name] = (subprocess.Popen(command, cwd=ROOT, env=env, stdout=out, stderr=err), out, err)
+
+    def result(name):
+        proc, out, err = started[name]
+        try:
+            code = proc.wait(TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            raise
+        finally:
+            out.close()
+            err.close()
+        return code, (tmp / f"{name}.out").read_text(), (tmp / f"{name}.err").read_text()
+
+    result.tmp = tmp
+    yield result
+    for proc, out, err in started.values():
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        out.close()
+        err.close()
+
+
+def _lines(text: str, pattern: str) -> list[str]:
+    return [line for line in text.splitlines() if re.match(pattern, line)]
+
+
+def test_arx_engine_smoke(smoke_runs):
+    code, out, err = smoke_runs("arx_engine")
+    assert code == 0, out + err
+    # Both engines (fused, unfused) against the old kernel on the direct, stage-1 and stage-2 grids.
+    identical = _lines(
+        out, r"(direct|stage 1|stage 2), engine, (fused|unfused) vs old .* frontier identical: "
+    )
+    assert len(identical) == 6, out
+    assert all(line.endswith("frontier identical: True") for line in identical), out
+    assert _lines(out, r"agreement on the sample +unstable flags equal: True, max relative V difference"), out
+    assert _lines(out, r"per candidate vs reference loop +engine +[0-9.]+ x"), out
+    assert _lines(out, r"stage 1 vs stage 2 per candidate +[0-9.]+ x the stage-2 rate"), out
+
+
+def test_fit_hc_smoke(smoke_runs):
+    code, out, err = smoke_runs("fit_hc")
+    assert code == 0, out + err
+    assert out.count("\n\nintegrator_example (") == 1, out
+    ci, integrator = out.split("\n\nintegrator_example (")
+    row = r"{} +1 +[0-9.]+ +[0-9.]+ +[0-9.]+"
+    # The CI config's record (the paper's forcing functions) has no forcing lines: every
+    # estimator but lines is timed, lines is skipped with hcid's reason.
+    for target in ("auto", "time", "closed_loop", "frequency"):
+        assert _lines(ci, row.format(target)), ci
+    assert _lines(ci, r"lines +skipped on 1 of 1 models, their records: no forcing lines: "), ci
+    assert not _lines(ci, row.format("lines")), ci
+    # The integrator example's multisines have them: every estimator is timed, auto as lines.
+    for target in ("lines", "time", "closed_loop", "frequency"):
+        assert _lines(integrator, row.format(target)), integrator
+    assert _lines(integrator, row.format("auto") + r" +ran as lines on 1$"), integrator
+    assert "skipped" not in integrator, integrator
+    assert out.count("the config's estimator (auto), whole task per model and method:") == 2, out
+
+
+def test_cold_start_smoke(smoke_runs):
+    code, out, err = smoke_runs("cold_start")
+    assert code == 0, out + err
+    for pattern in (
+        r"cold --jobs 1, recorded: [0-9.]+ s compiling of [0-9.]+ s wall",
+        r"hcid\.arx\._kernels +\d+ +\d+",
+        r"warm --jobs 1, recorded: .* 0 functions compiled \(0 signatures\)",
+        r"install's warm-up on a fresh cache: [0-9.]+ s wall",
+        r"first run after it, --jobs 1, recorded: [0-9.]+ s wall",
+        r"round 1 +[0-9.]+ / +[0-9.]+",
+        r"cold start over warm, --jobs 2: -?[0-9.]+ s \(",
+        r"first run after the install's warm-up over warm, --jobs 2: -?[0-9.]+ s \(",
+        r"load after ",
+    ):
+        assert _lines(out, pattern), f"no line matching {pattern!r} in:\n{out}"
+    result = json.loads((smoke_runs.tmp / "cold_start.json").read_text())
+    assert result["smoke"] is True
+    # The cold run compiled the engine's kernels; the warm one, on that cache, compiled nothing
+    # (a kernel compiled again there is a cache miss: its @njit lacks cache=True, or its cache
+    # entry does not load).
+    assert {f["module"] for f in result["recorded_cold"]["functions"]} >= {"hcid.arx._kernels"}
+    assert result["recorded_warm"]["functions"] == []
+    assert set(result["wall_s"]) == {"cold --jobs 2", "warm --jobs 2", "cold --jobs 1", "installed --jobs 2"}
