@@ -23,7 +23,7 @@ except PackageNotFoundError:  # running from a source tree that is not installed
 
 #: Public name -> the module that defines it.
 _EXPORTS = {
-    "AnalysisOptions": "hcid.pipeline.analyse",
+    "AnalysisOptions": "hcid.pipeline.options",
     "AnalysisRun": "hcid.pipeline.analyse",
     "Execution": "hcid.pipeline.execution",
     "analyse": "hcid.pipeline.analyse",

@@ -39,7 +39,10 @@ def test_the_evidence_figure_names_each_run_by_the_factors_that_differ():
     # not read as whose they are. Each run is named by its number and the factors that differ
     # within the group (the group's own factor is the same for all), a number-like value with its
     # factor's name, at most three factors.
-    from hcid.report.sections.study import _run_labels
+    from hcid.report.figures_hcfit import run_labels
+
+    def _run_labels(runs):
+        return run_labels(runs, [f for f in runs[0] if f not in ("run_id", "method")])
 
     runs = [
         {"run_id": i + 1, "method": "direct", "subject": s, "plant": "fo", "trial": t}

@@ -259,6 +259,26 @@ def plot_inversion(rows: list[dict], title: str = "", axes=None):
     return fig
 
 
+#: The most factors a run's name on the evidence figure gives (the run table has them all).
+_NAMED_FACTORS = 3
+
+
+def run_labels(runs: list[dict], factors: list[str]) -> list[dict]:
+    """The runs (rows of ``analysis.parquet``), each with its ``label`` on :func:`plot_evidence`:
+    its number and the ``factors`` that differ between the runs (e.g. ``run 1: dp, trial +1``; a
+    number-like value with its factor's name), at most :data:`_NAMED_FACTORS`."""
+    varying = [f for f in factors if len({str(r[f]) for r in runs}) > 1][:_NAMED_FACTORS]
+
+    def value(f: str, v) -> str:
+        text = str(v)
+        return f"{f} {text}" if text.lstrip("+-").replace(".", "", 1).isdigit() else text
+
+    def name(r: dict) -> str:
+        return f"run {r['run_id']}" + (": " + ", ".join(value(f, r[f]) for f in varying) if varying else "")
+
+    return [{**r, "label": name(r)} for r in runs]
+
+
 #: The evidence figure's rows: the twins' jitter about their row, and the height of one row
 #: (inches; a run's name in 7-point type, with room).
 _TWIN_JITTER = 0.25

@@ -464,30 +464,11 @@ def _render_answer_notes(data: StudyData, doc: Doc) -> None:
 #: The most rows of the per-subject table (beyond, the console's lines and analysis.csv have them).
 _SUBJECT_ROWS = 48
 
-#: The most factors a run's name on the evidence figure gives (the run table has them all).
-_NAMED_FACTORS = 3
-
-
-def _run_labels(runs: list[dict]) -> list[dict]:
-    """The runs, each with its name on the evidence figure: its number and the factors that differ
-    between the runs (e.g. ``run 1: dp, trial +1``; a number-like value with its factor's name)."""
-    factors = _factors(runs[0]) if runs else []
-    varying = [f for f in factors if len({str(r[f]) for r in runs}) > 1][:_NAMED_FACTORS]
-
-    def value(f: str, v) -> str:
-        text = str(v)
-        return f"{f} {text}" if text.lstrip("+-").replace(".", "", 1).isdigit() else text
-
-    def name(r: dict) -> str:
-        return f"run {r['run_id']}" + (": " + ", ".join(value(f, r[f]) for f in varying) if varying else "")
-
-    return [{**r, "label": name(r)} for r in runs]
-
 
 def _render_evidence(data: StudyData, doc: Doc) -> None:
     """Each run's evidence on its twins, then each group's calibration of W."""
     for group, method, twins, runs, alpha, folder in data.evidence:
-        named = _run_labels(runs)
+        named = figures_hcfit.run_labels(runs, _factors(runs[0]) if runs else [])
         doc.figure(
             f"evidence_{folder}_{method}.png",
             f"{group}, {method} method: each run's W* (the largest W at which its selection keeps "
