@@ -19,7 +19,7 @@ TITLE = "What differs between conditions"
 class EffectsData:
     compare: str
     alpha: float
-    answer: list[str]
+    answer: list[list[str]]
     rows: list[list[str]]
     effects: list[dict]
 
@@ -32,6 +32,18 @@ def _p(p: float) -> str:
     return "-" if not math.isfinite(p) else f"{p:.2g}" if p >= 1e-15 else "< 1e-15"
 
 
+def _interval(e: dict) -> str:
+    if not math.isfinite(e["estimate"]):
+        return "-"
+    if not (math.isfinite(e["low"]) and math.isfinite(e["high"])):
+        return f"{_num(e['estimate'])} (no interval)"
+    return f"{_num(e['estimate'])} [{_num(e['low'])}, {_num(e['high'])}]"
+
+
+def _unit(e: dict) -> str:
+    return "" if e["unit"] in ("-", "1") else e["unit"]
+
+
 def compute(run, done) -> EffectsData | None:
     if run.study_effects is None or run.study_effects.num_rows == 0:
         return None
@@ -39,14 +51,13 @@ def compute(run, done) -> EffectsData | None:
     alpha = float(run.analysis_groups.column("alpha")[0].as_py()) if run.analysis_groups is not None else 0.05
     found = [e for e in effects if math.isfinite(e["p_holm"]) and e["p_holm"] <= alpha]
     answer = [
-        f"{e['method']}, {e['quantity']}: {e['effect'].split(': ', 1)[-1]} = {_num(e['estimate'])} "
-        f"[{_num(e['low'])}, {_num(e['high'])}] {e['unit']} ({e['test']}, Holm p = {_p(e['p_holm'])})"
+        [e["method"], e["quantity"], e["effect"].split(": ", 1)[-1], _interval(e), _unit(e), e["test"],
+         _p(e["p_holm"]), str(e["subjects"])]
         for e in found
-    ]
+    ]  # fmt: skip
     rows = [
-        [e["method"], e["quantity"], e["effect"].split(": ", 1)[-1], e["test"],
-         f"{_num(e['estimate'])} [{_num(e['low'])}, {_num(e['high'])}]", e["unit"], _p(e["p"]),
-         _p(e["p_holm"]), str(e["subjects"]), str(e["runs"]), str(e["left_out"]), e["note"]]
+        [e["method"], e["quantity"], e["effect"].split(": ", 1)[-1], e["test"], _interval(e), _unit(e),
+         _p(e["p"]), _p(e["p_holm"]), str(e["subjects"]), str(e["runs"]), str(e["left_out"]), e["note"]]
         for e in effects
     ]  # fmt: skip
     return EffectsData(effects[0]["effect"].split(":", 1)[0], alpha, answer, rows, effects)
@@ -59,8 +70,10 @@ def render(data: EffectsData | None, doc: Doc) -> None:
     if data.answer:
         doc.text(
             f"**{len(data.answer)} effect(s) of {data.compare} at p <= {data.alpha:g} after Holm's "
-            "correction** (subjects as repeated measures):\n\n" + "\n".join(f"- {a}" for a in data.answer)
+            "correction** (subjects as repeated measures):"
         )
+        header = ["method", "quantity", "effect", "estimate [95% interval]", "unit", "test", "Holm p"]
+        doc.table([*header, "subjects"], data.answer)
     else:
         doc.text(f"**No effect of {data.compare} at p <= {data.alpha:g} after Holm's correction.**")
     doc.text(
