@@ -300,7 +300,7 @@ def analyse(
             "--max-fb-twins",
             help="The most FB twins per forcing set for the runs' p-values: drawn in batches until 5 show "
             "at least each run's statistic (Besag-Clifford); a run beyond nearly all of them gets its p "
-            "from their generalized Pareto tail (SPEC 13). Default: 39, or --twins if more.",
+            "from their generalized Pareto tail (SPEC 13). Default: 99, or --twins if more.",
             show_default=False,
         ),
     ] = None,
