@@ -597,12 +597,13 @@ FEEDBACK_RUNS = _schema(
     ],
     ("run_id", "method"),
 )
-#: ``study_effects.parquet`` (``hcid analyse --compare FACTOR``): per method, quantity and level
-#: against the reference, each test's effect with its 95% interval, p and Holm's p (docs/tables.md).
+#: ``study_effects.parquet`` (``hcid analyse --compare FACTOR``): per source (a method's fits, or
+#: ``model-free``), quantity and level against the reference, each test's effect with its 95%
+#: interval, p and Holm's p (docs/tables.md).
 STUDY_EFFECTS = _schema(
     "study_effects.parquet",
-    [("method", _STR), ("quantity", _STR), ("effect", _STR), ("estimate", _F64), ("low", _F64)]
+    [("source", _STR), ("quantity", _STR), ("effect", _STR), ("estimate", _F64), ("low", _F64)]
     + [("high", _F64), ("p", _F64), ("p_holm", _F64), ("test", _STR), ("subjects", _INT), ("runs", _INT)]
     + [("left_out", _INT), ("unit", _STR), ("note", _STR)],
-    ("method", "quantity", "effect", "test"),
+    ("source", "quantity", "effect", "test"),
 )

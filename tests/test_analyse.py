@@ -267,13 +267,14 @@ def test_the_report_answers_first(analysed):
 
 def test_compare_gives_each_quantitys_effect_across_subjects(analysed):
     # Issue 49: --compare condition writes study_effects.parquet (its schema) and .csv (the same
-    # rows), per method and quantity each test's effect of pursuit against compensatory (the first
+    # rows), per source (method) and quantity each test's effect of pursuit against compensatory (the first
     # level, sorted, is the reference); every run is counted once per quantity, as compared or left
     # out (8 runs per method); the answer names the effects at p <= 0.05 after Holm's correction,
     # and the report has its section with the forest plot. The API's run compared nothing: none.
     import pandas as pd
 
-    from hcid.analysis.effects import MIXED, WILCOXON
+    from hcid.analysis.effects import CIRCULAR, MIXED, WILCOXON
+    from hcid.pipeline.effects import MODEL_FREE
 
     _, out = analysed
     run, output = out[1]
@@ -282,14 +283,22 @@ def test_compare_gives_each_quantitys_effect_across_subjects(analysed):
     rows = effects.to_pylist()
     assert len(pd.read_csv(run / "study_effects.csv")) == len(rows)
     quantities = {*tables.HC_PARAMETER_NAMES, "crossover", "phase_margin", "remnant_share_data"}
-    assert {(r["method"], r["quantity"]) for r in rows} == {
-        (m, q) for m in ("direct", "indirect") for q in quantities
-    }
+    fitted = {(r["source"], r["quantity"]) for r in rows if r["source"] != MODEL_FREE}
+    assert fitted == {(m, q) for m in ("direct", "indirect") for q in quantities}
     assert {r["effect"] for r in rows} == {"condition: pursuit - compensatory"}
+    # Each run's Fourier-coefficient responses at the lines (SPEC 10), magnitude in dB and phase
+    # in deg (the phase also by circular statistics), their own family: the source "model-free".
+    free = [r for r in rows if r["source"] == MODEL_FREE]
+    assert free and all(
+        r["quantity"].startswith(("|He| at", "He phase at", "|Ht| at", "Ht phase at")) for r in free
+    )
+    phases = {r["quantity"] for r in free if "phase" in r["quantity"]}
+    assert phases and {r["quantity"] for r in free if r["test"] == CIRCULAR} == phases
+    assert {r["unit"] for r in free} == {"dB", "deg"}
     for r in rows:
         if r["test"] == MIXED:
             assert r["runs"] + r["left_out"] == 8, r
-        assert r["test"] in (MIXED, WILCOXON)
+        assert r["test"] in (MIXED, WILCOXON, CIRCULAR)
         assert r["subjects"] <= 2
     holm = [r for r in rows if r["test"] == MIXED and np.isfinite(r["p"])]
     assert all(r["p_holm"] >= r["p"] for r in holm)
@@ -311,6 +320,7 @@ def test_a_comparison_that_cannot_be_made_is_refused_before_anything_is_written(
     args = ["analyse", str(CONFIG), "--data", str(data), "--run", str(run), "--compare", compare, "--quiet"]
     result = runner.invoke(app, args)
     assert result.exit_code == 2 and said in result.output, result.output
+    assert "'model'" not in result.output and "'seed'" not in result.output  # hcid's columns, not factors
     assert not run.exists() or not any(run.iterdir())
 
 

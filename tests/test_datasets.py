@@ -510,8 +510,8 @@ def test_identify_lists_the_files_it_skips(session_folders, tmp_path):
     assert result.exit_code == 0, result.output
     assert "read 2 measured run(s)" in result.output
     assert (
-        "SKIPPED: 3 file(s) found are not runs (RUN/skipped.parquet): 1 not a data file (e.g. desktop.ini); "
-        "2 left out by data.exclude '*_rst?.csv' (e.g. easy_trial1_rst1.csv)"
+        f"SKIPPED: 3 file(s) found are not runs ({run}/skipped.parquet): 1 not a data file "
+        "(e.g. desktop.ini); 2 left out by data.exclude '*_rst?.csv' (e.g. easy_trial1_rst1.csv)"
     ) in result.output
     factors = pq.read_table(run / "runs.parquet").column("subject").to_pylist()
     assert factors == ["P01", "P01"]

@@ -194,7 +194,7 @@ def identify(
         (cfg, run_dir), data_set = _load(config, run, _methods(method)), None
     result = identify_study(cfg, run_dir, _methods(method), data=data_set, execution=execution, force=force)
     answers.print_identification(result, answers.is_paper(cfg))
-    answers.print_skipped(data_set.skipped if data_set is not None else ())
+    answers.print_skipped(data_set.skipped if data_set is not None else (), run_dir)
 
 
 @app.command("sweep-w")

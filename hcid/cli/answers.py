@@ -110,7 +110,7 @@ def print_analysis(result) -> None:
     _print_session(result)
     if result.effects is not None:
         typer.echo(effects_line(result.effects.to_pylist(), float(result.groups.column("alpha")[0].as_py())))
-    print_skipped(result.skipped)
+    print_skipped(result.skipped, result.run_dir)
     if result.set_aside:
         typer.echo(
             f"SET ASIDE (--skip-unreadable): {len(result.set_aside)} file(s) could not be read and are "
@@ -349,18 +349,20 @@ def _kinds_line(kinds: dict) -> str:
     return "CONDITIONS (each run's kind from its data): " + "; ".join(parts)
 
 
-def print_skipped(skipped) -> None:
-    """The files a folder or glob found that are not runs, counted by reason (one example each)."""
+def print_skipped(skipped, run_dir) -> None:
+    """The files a folder or glob found that are not runs, counted by reason (one example each),
+    and the table in ``run_dir`` that lists them all."""
     if skipped:
-        typer.echo(_skipped_line(skipped))
+        typer.echo(_skipped_line(skipped, run_dir))
 
 
-def _skipped_line(skipped) -> str:
+def _skipped_line(skipped, run_dir) -> str:
     from hcid.io.datasets import skipped_by_reason
 
     by_reason = skipped_by_reason(skipped)
     parts = [f"{len(paths)} {key} (e.g. {paths[0].rsplit('/', 1)[-1]})" for key, paths in by_reason.items()]
-    return f"SKIPPED: {len(skipped)} file(s) found are not runs (RUN/skipped.parquet): " + "; ".join(parts)
+    where = f"{run_dir}/skipped.parquet"
+    return f"SKIPPED: {len(skipped)} file(s) found are not runs ({where}): " + "; ".join(parts)
 
 
 def _range(r: dict, digits: int = 2) -> str:
@@ -392,7 +394,7 @@ def effects_line(rows: list[dict], alpha: float) -> str:
         return f" {r['unit']}" if r["unit"] not in ("", "-", "1") else ""
 
     parts = [
-        f"{r['method']} {r['quantity']} {r['effect'].split(': ', 1)[-1]} {r['estimate']:+.3g}{unit(r)} "
+        f"{r['source']} {r['quantity']} {r['effect'].split(': ', 1)[-1]} {r['estimate']:+.3g}{unit(r)} "
         f"[{r['low']:.3g}, {r['high']:.3g}] ({r['test']}, Holm p = {r['p_holm']:.2g}, "
         f"{r['subjects']} subjects)"
         for r in found

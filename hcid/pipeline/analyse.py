@@ -451,9 +451,10 @@ def analyse_study(
         sessions.forget_session(run_dir)
     compared = None
     if options.compare is not None:
-        compared = effects.write_effects(
-            run_dir, effects.effects_rows(run_table.to_pylist(), options.compare, person)
-        )
+        timing = config.timing
+        lines = effects.line_values(data.records, timing.output_rate, timing.record_samples)
+        rows = effects.effects_rows(run_table.to_pylist(), options.compare, person, lines)
+        compared = effects.write_effects(run_dir, rows)
     else:
         effects.forget_effects(run_dir)
     lap_done("tables")

@@ -1,22 +1,31 @@
 """Effects across people (SPEC 13; ``hcid analyse --compare FACTOR``): what differs between the
 levels of a factor, per method, for every fitted parameter and loop figure of the study's runs,
+and (method ``model-free``) for each run's Fourier-coefficient responses at the forcing lines,
 with subjects as repeated measures (:mod:`hcid.analysis.effects`), written to
 ``study_effects.parquet`` and ``.csv``."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+import numpy as np
 import pyarrow as pa
 
 from hcid import tables
-from hcid.errors import ConfigError
+from hcid.analysis.fourier import fc_estimate
+from hcid.errors import ConfigError, DataError
 from hcid.hcfit.determined import DETERMINED
 from hcid.io import folders, results
 
-__all__ = ["LOOP_FIGURES", "compare_levels", "effects_rows", "forget_effects", "long_table", "write_effects"]
+__all__ = [
+    "LOOP_FIGURES", "MODEL_FREE", "compare_levels", "effects_rows", "forget_effects", "line_values",
+    "long_table", "write_effects",
+]  # fmt: skip
+
+#: The source of the effects on the runs' Fourier-coefficient responses (no model behind them).
+MODEL_FREE = "model-free"
 
 #: The loop figures compared beside the parameters: (column, unit); none has a standard error.
 LOOP_FIGURES = (("crossover", "rad/s"), ("phase_margin", "deg"), ("remnant_share_data", "1"))
@@ -28,7 +37,8 @@ def compare_levels(rows: Sequence[dict], compare: str, person: str | None) -> li
     if not rows:
         return []
     if compare not in rows[0]:
-        factors = [c for c in rows[0] if c not in tables.ANALYSIS.names]
+        ours = {*tables.ANALYSIS.names, *tables.RUNS.names}
+        factors = [c for c in rows[0] if c not in ours]
         raise ConfigError(f"compare (--compare): the data have no factor {compare!r}; they have {factors}")
     if person is None:
         raise ConfigError(
@@ -69,9 +79,45 @@ def long_table(rows: Sequence[dict], compare: str, person: str):
     return table
 
 
-def effects_rows(rows: Sequence[dict], compare: str, person: str) -> list[dict]:
+def line_values(records: Mapping[int, dict], rate: float, n: int) -> dict[int, list[tuple[str, float]]]:
+    """Each run's Fourier-coefficient responses (SPEC 10) over the first ``n`` samples: |He| (dB)
+    and its phase (deg) at every disturbance line, |Ht| and its phase at every target line, each
+    named with the line's frequency; none for a run whose design allows no estimate."""
+    out = {}
+    for seed, record in records.items():
+        try:
+            fc = fc_estimate([record], rate, slice(0, n))
+        except DataError:
+            continue
+        values = []
+        for path, omega, h in (("He", fc.omega_e, fc.he), ("Ht", fc.omega_t, fc.ht)):
+            for w, x in zip(omega, h, strict=True):
+                if np.isfinite(x) and abs(x) > 0:
+                    values.append((f"|{path}| at {w:.3g} rad/s", float(20 * np.log10(abs(x)))))
+                    values.append((f"{path} phase at {w:.3g} rad/s", float(np.degrees(np.angle(x)))))
+        out[seed] = values
+    return out
+
+
+def _line_table(rows: Sequence[dict], lines: Mapping[int, list], compare: str, person: str):
+    import pandas as pd
+
+    out = [
+        {"subject": str(r[person]), compare: str(r[compare]), "quantity": name, "value": value,
+         "se": math.nan, "undetermined": False}
+        for r in rows
+        for name, value in lines.get(int(r["run_id"]), [])
+    ]  # fmt: skip
+    return pd.DataFrame(out)
+
+
+def effects_rows(
+    rows: Sequence[dict], compare: str, person: str, lines: Mapping[int, list] | None = None
+) -> list[dict]:
     """Every method's effects of ``compare`` (its first level the reference), one dict per
-    effect with its ``method`` (rows of ``study_effects.parquet``)."""
+    effect with its ``source`` (the method whose fits it compares: rows of
+    ``study_effects.parquet``); with each run's ``lines`` (:func:`line_values`), their effects as
+    source :data:`MODEL_FREE` (Holm's correction over each source's quantities apart)."""
     from hcid.analysis.effects import study_effects
 
     units = {**tables.PARAMETER_UNITS, **dict(LOOP_FIGURES)}
@@ -79,7 +125,16 @@ def effects_rows(rows: Sequence[dict], compare: str, person: str) -> list[dict]:
     for method in sorted({r["method"] for r in rows}):
         mine = [r for r in rows if r["method"] == method]
         effects = study_effects(long_table(mine, compare, person), compare, units=units)
-        out += [{"method": method, **e.__dict__} for e in effects]
+        out += [{"source": method, **e.__dict__} for e in effects]
+    if lines:
+        runs = list({int(r["run_id"]): r for r in rows}.values())  # one row per run
+        table = _line_table(runs, lines, compare, person)
+        if len(table):
+            names = list(dict.fromkeys(table["quantity"]))
+            angles = {q for q in names if " phase at " in q}
+            units = {q: "deg" if q in angles else "dB" for q in names}
+            effects = study_effects(table, compare, angles=angles, units=units)
+            out += [{"source": MODEL_FREE, **e.__dict__} for e in effects]
     return out
 
 

@@ -51,12 +51,12 @@ def compute(run, done) -> EffectsData | None:
     alpha = float(run.analysis_groups.column("alpha")[0].as_py()) if run.analysis_groups is not None else 0.05
     found = [e for e in effects if math.isfinite(e["p_holm"]) and e["p_holm"] <= alpha]
     answer = [
-        [e["method"], e["quantity"], e["effect"].split(": ", 1)[-1], _interval(e), _unit(e), e["test"],
+        [e["source"], e["quantity"], e["effect"].split(": ", 1)[-1], _interval(e), _unit(e), e["test"],
          _p(e["p_holm"]), str(e["subjects"])]
         for e in found
     ]  # fmt: skip
     rows = [
-        [e["method"], e["quantity"], e["effect"].split(": ", 1)[-1], e["test"], _interval(e), _unit(e),
+        [e["source"], e["quantity"], e["effect"].split(": ", 1)[-1], e["test"], _interval(e), _unit(e),
          _p(e["p"]), _p(e["p_holm"]), str(e["subjects"]), str(e["runs"]), str(e["left_out"]), e["note"]]
         for e in effects
     ]  # fmt: skip
@@ -72,7 +72,7 @@ def render(data: EffectsData | None, doc: Doc) -> None:
             f"**{len(data.answer)} effect(s) of {data.compare} at p <= {data.alpha:g} after Holm's "
             "correction** (subjects as repeated measures):"
         )
-        header = ["method", "quantity", "effect", "estimate [95% interval]", "unit", "test", "Holm p"]
+        header = ["source", "quantity", "effect", "estimate [95% interval]", "unit", "test", "Holm p"]
         doc.table([*header, "subjects"], data.answer)
     else:
         doc.text(f"**No effect of {data.compare} at p <= {data.alpha:g} after Holm's correction.**")
@@ -92,7 +92,7 @@ def render(data: EffectsData | None, doc: Doc) -> None:
         lambda d=data: plot_forest(d.effects, d.alpha),
     )
     doc.table(
-        ["method", "quantity", "effect", "test", "estimate [95% interval]", "unit", "p", "Holm p", "subjects",
+        ["source", "quantity", "effect", "test", "estimate [95% interval]", "unit", "p", "Holm p", "subjects",
          "runs", "left out", "note"],
         data.rows,
     )  # fmt: skip
@@ -112,7 +112,7 @@ def plot_forest(effects: list[dict], alpha: float) -> Figure:
     right = ax.get_yaxis_transform()  # x in axes fraction, y in data
     labels = []
     for i, e in enumerate(rows):
-        labels.append(f"{e['method']}: {e['quantity']}")
+        labels.append(f"{e['source']}: {e['quantity']}")
         half = (e["high"] - e["low"]) / 2.0
         if not (math.isfinite(e["estimate"]) and math.isfinite(half) and half > 0):
             ax.text(1.01, -i, "not compared", transform=right, va="center", fontsize=7, color="0.4")
