@@ -342,7 +342,8 @@ def analyse(
         typer.Option(
             "--compare",
             help="A factor whose levels are compared across people (subjects as repeated measures: a "
-            "mixed model, the paired or rank test, Holm's correction; SPEC 13): RUN/study_effects.parquet.",
+            "mixed model, the paired or rank test, Holm's correction; SPEC 13), written to the run's "
+            "study_effects.parquet.",
             show_default=False,
         ),
     ] = None,
