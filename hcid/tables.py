@@ -363,25 +363,10 @@ PARAMETER_UNITS = {
     "tau_pt": "s",
 }
 _SHARES = (
-    "fp_rate",
-    "fp_low",
-    "fp_high",
-    "fn_rate",
-    "fn_low",
-    "fn_high",
-    "p_w_star",
-    "power_w_star",
-    "p_fourier",
-    "power_fourier",
-    "p_value",
-    "power",
-    "binomial_p",
-    "median_power",
-    "fc_p",
-    "share_remnant",
-    "remnant_share_data",
-    "alpha",
-)
+    "fp_rate", "fp_low", "fp_high", "fn_rate", "fn_low", "fn_high", "p_w_star", "power_w_star", "p_fourier",
+    "power_fourier", "p_value", "power", "binomial_p", "median_power", "fc_p", "share_remnant",
+    "remnant_share_data", "alpha",
+)  # fmt: skip
 #: The units of the analysis tables' numeric columns (Parquet field metadata ``unit``; "-": none,
 #: "1": a share or probability, "%").
 _ANALYSIS_UNITS = tuple(

@@ -237,3 +237,20 @@ def test_clopper_pearson_is_scipy_stats_beta_ppf_bit_for_bit():
             got_low, got_high = clopper_pearson(k, n, level)
             assert np.array_equal(got_low.view(np.int64), low.view(np.int64))
             assert np.array_equal(got_high.view(np.int64), high.view(np.int64))
+
+
+def test_the_power_skips_the_tail_only_where_it_cannot_change_the_decision():
+    # evidence_power's shortcut (an FF twin beyond every FB twin is found at a level >= 1/(N+1)
+    # without fitting the tail) against its definition, the share of run_p_value <= alpha, on
+    # random twins with NaN draws, levels on both sides of 1/(N+1).
+    from hcid.selection.calibration import evidence_power, run_p_value
+
+    rng = np.random.default_rng(49)
+    for _ in range(200):
+        n = int(rng.integers(5, 100))
+        fb = np.exp(rng.normal(-3, 1, n))
+        fb[rng.random(n) < 0.05] = np.nan
+        ff = np.exp(rng.normal(rng.normal(-2, 1), 0.5, 20))
+        for alpha in (0.005, 0.01, 0.05, 0.1):
+            slow = float(np.mean([run_p_value(w, fb)[0] <= alpha for w in ff]))
+            assert evidence_power(ff, fb, alpha) == slow

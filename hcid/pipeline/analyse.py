@@ -387,10 +387,9 @@ def analyse_study(
     if len(two_input) < len(trials):  # single-input runs: combined per person, not tested for feedforward
         data = sessions.subset(data, two_input)
     by = _factors_and_groups(data, options.by)
+    runs = datasets.runs_table(config.data.name, data)
     if options.compare is not None:  # refused before anything is written
-        effects.compare_levels(
-            datasets.runs_table(config.data.name, data).to_pylist(), options.compare, person
-        )
+        effects.compare_levels(runs.to_pylist(), options.compare, person)
     start = time.perf_counter()
     stages, lap = {}, [start]
 
@@ -413,7 +412,6 @@ def analyse_study(
     if force:  # after the data's checks (in identify_study): a refused --force keeps the twins
         forget_twins(run_dir)
     lap_done("identify")
-    runs = datasets.runs_table(config.data.name, data)
     study = _Study(
         config,
         run_dir,

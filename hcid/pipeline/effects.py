@@ -32,8 +32,8 @@ LOOP_FIGURES = (("crossover", "rad/s"), ("phase_margin", "deg"), ("remnant_share
 
 
 def compare_levels(rows: Sequence[dict], compare: str, person: str | None) -> list[str]:
-    """The compared factor's levels in the runs, checked: the factor exists, is not the people's
-    own factor, and has at least two levels, each with runs of at least two people."""
+    """The compared factor's levels in the runs, checked: the factor exists, the runs belong to
+    people (``person``), it is not the people's own factor, and it has at least two levels."""
     if not rows:
         return []
     if compare not in rows[0]:

@@ -309,7 +309,11 @@ def evidence_power(ff_thresholds: np.ndarray, fb_thresholds: np.ndarray, alpha: 
     0.75
     """
     ff = np.asarray(ff_thresholds, dtype=np.float64)
-    return float(np.mean([run_p_value(w, fb_thresholds)[0] <= alpha for w in ff]))
+    fb = np.asarray(fb_thresholds, dtype=np.float64)
+    # Beyond every FB twin the p is at most the count's 1 / (N + 1): at a level at or above that,
+    # such an FF twin is found without fitting the tail (the fit is most of the time here).
+    beyond = alpha >= 1.0 / (fb.size + 1)
+    return float(np.mean([(beyond and not np.any(fb >= w)) or run_p_value(w, fb)[0] <= alpha for w in ff]))
 
 
 def sequential_p_value(value: float, fb_in_order: np.ndarray, h: int) -> tuple[float, int]:

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from matplotlib.figure import Figure
 
+from hcid.hcfit.consistency import format_p
 from hcid.report.document import Doc
 
 TITLE = "What differs between conditions"
@@ -29,7 +30,7 @@ def _num(x: float) -> str:
 
 
 def _p(p: float) -> str:
-    return "-" if not math.isfinite(p) else f"{p:.2g}" if p >= 1e-15 else "< 1e-15"
+    return "-" if not math.isfinite(p) else format_p(p)
 
 
 def _interval(e: dict) -> str:
