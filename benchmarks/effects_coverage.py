@@ -25,10 +25,12 @@ conditions with feedforward), each subject's parameters drawn (:data:`E2E_RANGES
 shifting Kpe, TL and Kpt by :data:`E2E_EFFECT`; each run identified at 20 Hz over one 40 s period
 (``hcid.identify``, direct, W at BIC) and fitted (``hcid.fit_hc``): its estimate, se and status
 (undetermined unless ``determined``) go to ``study_effects``. Printed: per quantity and test the
-studies whose interval covers the true effect, the runs left out, and the cost per study.
+share of studies whose interval covers the true effect; for tau_pe, TI and tau_pt (no effect)
+the share with p <= 0.05 (the level); the runs left out, and the cost per study. ``--jobs``
+spreads the studies over processes (each study its own spawned seed: the same figures).
 
 Run: ``.venv/bin/python benchmarks/effects_coverage.py [--studies 200] [--seed 1] [--smoke]
-[--end-to-end 0]`` (``--smoke``: 4 studies, for tests); with ``OMP_NUM_THREADS=1`` one core. The
+[--end-to-end 0] [--jobs 1]`` (``--smoke``: 4 studies, for tests); with ``OMP_NUM_THREADS=1`` one core. The
 CPU time (all threads) and the wall time are printed (the wall time grows with the machine's load).
 """
 
@@ -43,6 +45,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from joblib import Parallel, delayed
 from scipy import stats
 
 import hcid
@@ -161,7 +164,7 @@ def verdict(row: pd.Series) -> str:
 
 
 #: End to end: the subjects' parameters (uniform ranges, around configs/lab_example's subjects) and
-#: the effect of condition B on each subject.
+#: the effect of condition B on each subject (none on the other three: their level is measured).
 E2E_RANGES = {"Kpe": (1.6, 2.1), "TL": (0.10, 0.18), "tau_pe": (0.22, 0.28), "Kpt": (0.6, 0.9),
               "TI": (0.15, 0.25), "tau_pt": (0.15, 0.30)}  # fmt: skip
 E2E_EFFECT = {"Kpe": 0.3, "TL": 0.03, "Kpt": -0.2}
@@ -170,7 +173,7 @@ E2E_RATE, E2E_SAMPLES = 20.0, 800  # Hz; one 40 s period of the forcing function
 
 def fitted_study(rng: np.random.Generator, config, kn: float, experiment) -> pd.DataFrame:
     """One study simulated run by run and fitted with hcid: ``quantity, subject, condition, value,
-    se, undetermined`` for Kpe, TL and Kpt."""
+    se, undetermined`` for every parameter of :data:`E2E_RANGES`."""
     rows = []
     for subject in range(SUBJECTS):
         truth = {k: rng.uniform(*r) for k, r in E2E_RANGES.items()}
@@ -186,7 +189,7 @@ def fitted_study(rng: np.random.Generator, config, kn: float, experiment) -> pd.
                                      r.e[last], r.u[last])  # fmt: skip
                 found = hcid.identify(record, "direct", threads=1)
                 fit = hcid.fit_hc(found.select(found.w_bic), record, experiment, plant_check=False)
-                for q in E2E_EFFECT:  # Kpt is not fitted where the selected model has no feedforward
+                for q in E2E_RANGES:  # the ft path is not fitted where the selected model has none
                     i = fit.names.index(q) if q in fit.names else None
                     value, se = (math.nan, math.nan) if i is None else (fit.estimates[i], fit.se[i])
                     rows.append((q, subject, condition, value, se, fit.status.get(q) != "determined"))
@@ -197,45 +200,69 @@ def fitted_study(rng: np.random.Generator, config, kn: float, experiment) -> pd.
     return table
 
 
-def end_to_end(studies: int, seed: int) -> None:
-    """Print the end-to-end variant's figures (see the module's docstring)."""
+def _e2e_study(seed: np.random.SeedSequence, config, kn: float, experiment) -> list[tuple]:
+    """One end-to-end study's rows: per quantity and test, the interval, p and left-out runs."""
+    frame = effects_frame(
+        study_effects(fitted_study(np.random.default_rng(seed), config, kn, experiment), "condition")
+    )
+    return [
+        (row.quantity, row.test, E2E_EFFECT.get(row.quantity, 0.0), row.low, row.high, row.p, row.estimate,
+         row.left_out, row.runs)
+        for row in frame.itertuples(index=False)
+    ]  # fmt: skip
+
+
+def end_to_end(studies: int, seed: int, jobs: int) -> None:
+    """Print the end-to-end variant's figures (see the module's docstring). Each study has its own
+    seed (spawned from ``seed``): the figures do not depend on ``jobs``."""
     config = load_config(ROOT / "configs" / "integrator_example.yaml")
     timing = dataclasses.replace(
         config.timing, sim_rate=300.0, output_rate=E2E_RATE, run_in=10.0, window=80.0, periods=1
     )
     config = dataclasses.replace(config, timing=timing)
     experiment = hcid.Experiment(hcid.Plant.integrator(1.5), "input")
-    rng = np.random.default_rng(seed)
-    start, cpu, rows = time.perf_counter(), time.process_time(), []
-    for _ in range(studies):
-        frame = effects_frame(
-            study_effects(fitted_study(rng, config, remnant_gain(config), experiment), "condition")
-        )
-        for row in frame.itertuples(index=False):
-            hit = row.low <= E2E_EFFECT[row.quantity] <= row.high
-            rows.append(
-                (row.quantity, row.test, hit, math.isfinite(row.low), row.estimate, row.left_out, row.runs)
-            )
+    seeds = np.random.SeedSequence(seed).spawn(studies)
+    start = time.perf_counter()
+    done = Parallel(n_jobs=jobs)(
+        delayed(_e2e_study)(s, config, remnant_gain(config), experiment) for s in seeds
+    )
     elapsed = time.perf_counter() - start
-    columns = ["quantity", "test", "covered", "interval", "estimate", "left_out", "runs"]
-    table = pd.DataFrame(rows, columns=columns)
-    summary = table.groupby(["quantity", "test"], sort=False).agg(
-        studies=("covered", "size"), with_interval=("interval", "sum"), covered=("covered", "sum"),
-        median_estimate=("estimate", "median"),
-        mean_left_out=("left_out", "mean"), mean_runs=("runs", "mean"),
-    )  # fmt: skip
-    summary["true_effect"] = [E2E_EFFECT[q] for q, _ in summary.index]
-    runs = SUBJECTS * len(CONDITIONS) * TRIALS
+    columns = ["quantity", "test", "true_effect", "low", "high", "p", "estimate", "left_out", "runs"]
+    table = pd.DataFrame([row for rows in done for row in rows], columns=columns)
     print(
-        f"\nend to end: {studies} studies simulated and fitted run by run ({runs} runs each); "
-        "with_interval: studies with a 95% interval (the paired test has none below 6 subjects with both "
-        "conditions determined); covered: studies whose interval holds the true effect"
+        f"\nend to end: {studies} studies simulated and fitted run by run "
+        f"({SUBJECTS * len(CONDITIONS) * TRIALS} runs each, {jobs} jobs); per quantity and test: "
+        "with_interval, the studies with a 95% interval (the paired test has none below 6 subjects with "
+        "both conditions determined); coverage, the share of those whose interval holds the true effect; "
+        "level, for a quantity without an effect, the share of studies with p <= 0.05 "
+        "(each [exact binomial 95% interval], %)"
     )
-    with pd.option_context("display.width", 200, "display.float_format", "{:.3f}".format):
-        print(summary.to_string())
+    out = []
+    for (quantity, test), rows in table.groupby(["quantity", "test"], sort=False):
+        usable = rows[np.isfinite(rows.low)]
+        hits = int(((usable.low <= usable.true_effect) & (usable.true_effect <= usable.high)).sum())
+        level = ""
+        if rows.true_effect.iloc[0] == 0.0:
+            tested = rows[np.isfinite(rows.p)]
+            level = _share(int((tested.p <= 0.05).sum()), len(tested))
+        out.append((quantity, test, rows.true_effect.iloc[0], len(usable), _share(hits, len(usable)), level,
+                    rows.estimate.median(), rows.left_out.mean(), rows.runs.mean()))  # fmt: skip
+    names = ["quantity", "test", "true_effect", "with_interval", "coverage", "level", "median_estimate",
+             "mean_left_out", "mean_runs"]  # fmt: skip
+    summary = pd.DataFrame(out, columns=names)
+    with pd.option_context("display.width", 220, "display.float_format", "{:.3f}".format):
+        print(summary.to_string(index=False))
     print(
-        f"CPU {cpu:.0f} s ({cpu / studies:.0f} s per study, numba compiling included), wall {elapsed:.0f} s"
+        f"wall {elapsed:.0f} s ({elapsed * jobs / studies:.0f} s of a core per study, "
+        "numba compiling included)"
     )
+
+
+def _share(hits: int, n: int) -> str:
+    if n == 0:
+        return "-"
+    ci = stats.binomtest(hits, n).proportion_ci(method="exact")
+    return f"{100 * hits / n:.1f} [{100 * ci.low:.1f}, {100 * ci.high:.1f}]"
 
 
 def main() -> None:
@@ -244,6 +271,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--smoke", action="store_true", help="4 studies (a smoke run for tests)")
     parser.add_argument("--end-to-end", type=int, default=0, help="studies simulated and fitted run by run")
+    parser.add_argument("--jobs", type=int, default=1, help="processes for --end-to-end (same figures)")
     args = parser.parse_args()
     studies = 4 if args.smoke else args.studies
     if studies < 1:
@@ -270,7 +298,7 @@ def main() -> None:
         f"CPU {cpu:.1f} s ({1000 * per_study:.0f} ms per simulated study, 6 quantities), wall {elapsed:.1f} s"
     )
     if args.end_to_end:
-        end_to_end(args.end_to_end, args.seed)
+        end_to_end(args.end_to_end, args.seed, args.jobs)
 
 
 if __name__ == "__main__":
