@@ -44,24 +44,26 @@ def calibration_table(run: Path, truth: Callable[[dict], bool] | None = None) ->
 
 def evidence_table(run: Path, truth: Callable[[dict], bool] | None = None) -> str:
     """Per group and method: each run's own test (SPEC 11): the statistic that decides, the FB
-    twins drawn, the runs at p <= alpha with the binomial p of that count, the median power of
-    each statistic over its FB twins, and the verdict; with each run's truth, the runs' truth."""
+    twins drawn, the runs at p <= alpha with the binomial p of that count, then per statistic (W*,
+    the Fourier coefficients' size, the likelihood ratio) the runs its own p puts at p <= alpha
+    (a statistic that does not decide has the calibration's FB twins only) and its median power,
+    and the verdict; with each run's truth, the runs' truth."""
     groups, rows = _tables(run)
     head = ("| group | method | decided by | FB twins drawn | runs at p <= alpha (binomial p) | truth | "
-            "median power: W*, Fourier | verdict |")  # fmt: skip
+            "at p <= alpha: W*, Fourier, LR | median power: W*, Fourier, LR | verdict |")  # fmt: skip
     if truth is None:
         head = head.replace(" truth |", "")
     lines = [head, "|---" * head.count(" | ") + "|---|"]
+    stems = ("w_star", "fourier", "lr")
     for g in groups:
         mine = [r for r in rows if r["group"] == g["group"] and r["method"] == g["method"]]
         k = sum(r["p_value"] <= g["alpha"] for r in mine)
-        powers = ", ".join(
-            f"{np.median([r[c] for r in mine]):.2f}" for c in ("power_w_star", "power_fourier")
-        )
+        found = ", ".join(str(sum(r[f"p_{c}"] <= g["alpha"] for r in mine)) for c in stems)
+        powers = ", ".join(f"{np.median([r[f'power_{c}'] for r in mine]):.2f}" for c in stems)
         fact = "" if truth is None else f" {'feedforward' if mine and truth(mine[0]) else 'none'} |"
         lines.append(
             f"| {g['group']} | {g['method']} | {g['decided_by']} | "
-            f"{g['fb_twins']} | {k} of {len(mine)} ({g['binomial_p']:.2g}) |{fact} {powers} | "
+            f"{g['fb_twins']} | {k} of {len(mine)} ({g['binomial_p']:.2g}) |{fact} {found} | {powers} | "
             f"{g['verdict']} |"
         )
     return "\n".join(lines)

@@ -364,14 +364,14 @@ PARAMETER_UNITS = {
 }
 _SHARES = (
     "fp_rate", "fp_low", "fp_high", "fn_rate", "fn_low", "fn_high", "p_w_star", "power_w_star", "p_fourier",
-    "power_fourier", "p_value", "power", "binomial_p", "median_power", "fc_p", "share_remnant",
-    "remnant_share_data", "alpha",
+    "power_fourier", "p_lr", "power_lr", "p_value", "power", "binomial_p", "median_power", "fc_p",
+    "share_remnant", "remnant_share_data", "alpha",
 )  # fmt: skip
 #: The units of the analysis tables' numeric columns (Parquet field metadata ``unit``; "-": none,
 #: "1": a share or probability, "%").
 _ANALYSIS_UNITS = tuple(
     {
-        **dict.fromkeys(("w", "safe_low", "safe_high", "w_star", "fourier_size"), "-"),
+        **dict.fromkeys(("w", "safe_low", "safe_high", "w_star", "fourier_size", "likelihood_ratio"), "-"),
         **dict.fromkeys(_SHARES, "1"),
         **dict.fromkeys(("vaf_arx_validation", "vaf_validation"), "%"),
         **{
@@ -428,7 +428,8 @@ _CONSISTENCY_FIELDS = [
 #: true), the twins' false-positive and false-negative rates there with their exact 95%
 #: bands, the selected structure, ``feedforward`` (nb_ft > 0), the ARX and parametric
 #: models' validation VAF, the run's evidence (SPEC 11: its ``forcing_set`` of the group, its
-#: feedforward threshold ``w_star`` and model-free ``fourier_size``, each with its sequential
+#: feedforward threshold ``w_star``, model-free ``fourier_size`` and the parametric fits'
+#: ``likelihood_ratio`` (with and without feedforward, at the lines), each with its sequential
 #: p-value against its set's FB twins and how it was made (``p_*_method``: ``monte carlo``, or
 #: ``gpd tail`` where fewer than 5 of every twin drawn reach it, SPEC 13), the FB twins that p-value
 #: used (``fb_twins_*``: FB twins are drawn until 5 show at least the run's value, at most
@@ -452,7 +453,8 @@ ANALYSIS = _schema(
     + [("forcing_set", _INT), ("w_star", _F64), ("p_w_star", _F64), ("p_w_star_method", _STR)]
     + [("power_w_star", _F64), ("fb_twins_w_star", _INT)]
     + [("fourier_size", _F64), ("p_fourier", _F64), ("p_fourier_method", _STR), ("power_fourier", _F64)]
-    + [("fb_twins_fourier", _INT), ("decided_by", _STR)]
+    + [("fb_twins_fourier", _INT), ("likelihood_ratio", _F64), ("p_lr", _F64), ("p_lr_method", _STR)]
+    + [("power_lr", _F64), ("fb_twins_lr", _INT), ("decided_by", _STR)]
     + [
         ("p_value", _F64),
         ("p_method", _STR),
@@ -512,11 +514,12 @@ ANALYSIS_GROUPS = _schema(
 #: ``evidence_twins.parquet`` (``hcid analyse``): the twins each run's p-value is judged against
 #: (SPEC 11): per group, method, forcing set, twin (``FB`` or ``FF``) and realization in the
 #: order drawn, its feedforward threshold ``w_star`` (NaN for an FB twin drawn for the
-#: Fourier statistic only) and its model-free ``fourier_size`` (NaN where the forcing has no lines).
+#: line statistics only) and its ``fourier_size`` and ``likelihood_ratio`` (NaN where the forcing
+#: has no lines).
 EVIDENCE_TWINS = _schema(
     "evidence_twins.parquet",
     [("group", _STR), ("method", _STR), ("forcing_set", _INT), ("twin", _STR), ("seed", _INT)]
-    + [("w_star", _F64), ("fourier_size", _F64)],
+    + [("w_star", _F64), ("fourier_size", _F64), ("likelihood_ratio", _F64)],
     ("group", "method", "forcing_set", "twin", "seed"),
 )
 #: ``set_aside.parquet`` (``hcid analyse --skip-unreadable``): every file of the data set that could

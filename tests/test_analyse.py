@@ -149,6 +149,63 @@ def test_each_runs_p_value_is_sequential_over_its_fb_twins_in_the_order_drawn(an
     } == {12}
 
 
+def test_the_line_statistics_p_values_and_the_deciding_statistic_come_from_the_twins(analysed):
+    # Source: SPEC 11 as for W* (the test above): each line statistic's p-value over its set's FB
+    # twins in evidence_twins.parquet, sequential where it decides, else over the calibration's 4;
+    # the deciding statistic is the one whose calibration twins have the highest median power
+    # over the group's runs (hcid.selection.calibration.evidence_power), the first on a tie.
+    from hcid.pipeline.evidence import STATISTICS
+    from hcid.pipeline.line_statistics import LINE_STATISTICS
+    from hcid.selection.calibration import evidence_power, run_p_value
+
+    _, out = analysed
+    run = out[1][0]
+    rows = pq.read_table(run / tables.ANALYSIS.file).to_pylist()
+    twins = pq.read_table(run / tables.EVIDENCE_TWINS.file).to_pylist()
+    assert all(r["likelihood_ratio"] >= 0 for r in rows)
+    for r in rows:
+        mine = [
+            t
+            for t in twins
+            if (t["group"], t["method"], t["forcing_set"]) == (r["group"], r["method"], r["forcing_set"])
+        ]
+        for name, (column, stem) in LINE_STATISTICS.items():
+            fb = np.array([t[column] for t in sorted(mine, key=lambda t: t["seed"]) if t["twin"] == "FB"])
+            fb = fb[np.isfinite(fb)]
+            assert fb.size == (len([t for t in mine if t["twin"] == "FB"]) if r["decided_by"] == name else 4)
+            hits = np.cumsum(fb >= r[column])
+            if r["decided_by"] == name and hits[-1] >= 5:
+                m = int(np.argmax(hits >= 5)) + 1
+                assert (r[f"p_{stem}"], r[f"fb_twins_{stem}"]) == (5 / m, m)
+            else:
+                assert (r[f"p_{stem}"], r[f"fb_twins_{stem}"]) == (run_p_value(r[column], fb)[0], fb.size)
+    # The pursuit runs' feedforward is strong: every FF twin's ratio is above every FB twin's.
+    pursuit = [t for t in twins if t["group"] == "condition=pursuit"]
+    assert min(t["likelihood_ratio"] for t in pursuit if t["twin"] == "FF") > max(
+        t["likelihood_ratio"] for t in pursuit if t["twin"] == "FB"
+    )
+    for (group, method), group_rows in _by(rows, "group", "method").items():
+        calibration = [t for t in twins if (t["group"], t["method"]) == (group, method)]
+        ff = {n: np.array([t[c] for t in calibration if t["twin"] == "FF"]) for n, c in _COLUMNS.items()}
+        fb = {
+            n: np.array([t[c] for t in calibration if t["twin"] == "FB" and t["seed"] <= 4])
+            for n, c in _COLUMNS.items()
+        }
+        power = {n: evidence_power(ff[n], fb[n], 0.05) for n in STATISTICS}
+        best = max(power.values())
+        assert group_rows[0]["decided_by"] == next(n for n in STATISTICS if power[n] == best)
+
+
+_COLUMNS = {"W*": "w_star", "Fourier coefficients": "fourier_size", "likelihood ratio": "likelihood_ratio"}
+
+
+def _by(rows, *keys):
+    out = {}
+    for r in rows:
+        out.setdefault(tuple(r[k] for k in keys), []).append(r)
+    return out
+
+
 def test_a_group_whose_own_twins_no_w_separates_is_calibrated_on_the_studys_feedforward(analysed):
     # --ff-twin auto (the default): the compensatory condition (nobody uses feedforward) has own
     # twins that nearly coincide; for every method where no W separates them, its FF twin takes

@@ -61,6 +61,7 @@ from hcid.pipeline.evidence import (
 )
 from hcid.pipeline.execution import Execution
 from hcid.pipeline.fit import _choices, _stage_choices, fit_run, fit_windows
+from hcid.pipeline.line_statistics import run_statistics
 from hcid.pipeline.options import AnalysisOptions
 from hcid.pipeline.parallel import labelled
 from hcid.pipeline.rundir import holds_run_dir
@@ -269,26 +270,24 @@ def _selection_paths(study: _Study, found: _Found, frontier: pa.Table) -> None:
             found.paths[(seed, method_name)] = (t, path, t.column("nb_ft").to_numpy())
 
 
-def _more_fb_twins(study: _Study, found: _Found, judge: Evidence, run_sizes: dict) -> None:
+def _more_fb_twins(study: _Study, found: _Found, judge: Evidence, run_lines: dict) -> None:
     """Phase 4: more FB twins wherever a run's p-value is not settled (sequential, Besag and
     Clifford), in batches of ``twins``, up to ``max_fb_twins`` per forcing set."""
     names, most, batch = tuple(methods.METHODS), study.options.most_fb_twins, study.options.twins
     for key in study.groups:
         name, sets = group_name(study.by, key), found.used[(key, names[0])].runs
-        found.deciding[key] = {m: judge.statistic(found.used[(key, m)], m) for m in names}
+        found.deciding[key] = {m: judge.statistic(name, found.used[(key, m)], m) for m in names}
         model = found.models[key].values
         for i, members in enumerate(sets):
             twin_of = {m: found.used[(key, m)].sets[i] for m in names}
             values = [
-                ({m: judge.w_star(*found.paths[(s, m)][1:]) for m in names}, run_sizes.get(s))
+                ({m: judge.w_star(*found.paths[(s, m)][1:]) for m in names}, run_lines.get(s))
                 for s in members
             ]
             source = _twin_source(study, found, key, sets, i, model)
             while (drawn := judge.drawn(name, i + 1, twin_of[names[0]])) < most:
-                open_methods, fourier_open = judge.unsettled(
-                    name, i + 1, twin_of, found.deciding[key], values
-                )
-                if not (open_methods or fourier_open):
+                open_methods, lines_open = judge.unsettled(name, i + 1, twin_of, found.deciding[key], values)
+                if not (open_methods or lines_open):
                     break
                 draws = draw_fb_twins(
                     source, drawn + 1, min(batch, most - drawn), open_methods, study.execution
@@ -302,7 +301,7 @@ def _more_fb_twins(study: _Study, found: _Found, judge: Evidence, run_sizes: dic
                 found.fb_drawn[(key, m)] = max(found.fb_drawn.get((key, m), 0), n)
 
 
-def _select_and_fit(study: _Study, found: _Found, judge: Evidence, run_sizes: dict) -> None:
+def _select_and_fit(study: _Study, found: _Found, judge: Evidence, run_lines: dict) -> None:
     """Phase 5: every run's evidence, its selection at its group's W, and the selected
     structure's parametric fit."""
     config, run_dir = study.config, study.run_dir
@@ -324,7 +323,7 @@ def _select_and_fit(study: _Study, found: _Found, judge: Evidence, run_sizes: di
                     pair,
                     seed,
                     method_name,
-                    run_sizes.get(seed),
+                    run_lines.get(seed),
                     deciding,
                 )
                 row = int(path.at(np.array([w]))[0])
@@ -430,11 +429,25 @@ def analyse_study(
     lap_done("twins")
     _selection_paths(study, found, identified.frontier)
     checks = Checks(config, data.records)
-    run_sizes = checks.sizes()
-    judge = Evidence(config, run_dir, options.alpha, options.most_fb_twins)
-    _more_fb_twins(study, found, judge, run_sizes)
+    starts = {key: found.models[key].values for key in study.groups}  # each group's model
+    with labelled("runs: "):
+        run_lines = run_statistics(
+            data.records,
+            config,
+            {s: starts[key] for key, seeds in study.groups.items() for s in seeds},
+            execution,
+        )
+    judge = Evidence(
+        config,
+        run_dir,
+        options.alpha,
+        options.most_fb_twins,
+        {group_name(by, key): start for key, start in starts.items()},
+        execution,
+    )
+    _more_fb_twins(study, found, judge, run_lines)
     lap_done("more FB twins")
-    _select_and_fit(study, found, judge, run_sizes)
+    _select_and_fit(study, found, judge, run_lines)
     lap_done("fit selected")
     session = None
     if whole_experiment:

@@ -5,7 +5,7 @@ the group's verdict, and the group's parameters from the runs that determine the
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,9 +17,10 @@ from hcid.config import Config
 from hcid.errors import DataError
 from hcid.hcfit.consistency import consistency, group_consistency
 from hcid.hcfit.determined import is_flagged, is_undetermined, reason
-from hcid.hcfit.lines import feedforward_size, record_lines
+from hcid.hcfit.lines import record_lines
 from hcid.loop.hcmodel import plant
-from hcid.pipeline.twins import twin_sizes
+from hcid.pipeline.execution import Execution
+from hcid.pipeline.line_statistics import LINE_STATISTICS, twin_statistics
 from hcid.selection.calibration import (
     binomial_summary,
     evidence_power,
@@ -55,8 +56,12 @@ EXCEEDANCES = 5
 #: 2 of the direct method's 3 runs at p <= 0.05 lose it (docs/methodology.md, "p-values from few
 #: twins"): judged on the real recordings, the default stays 99.
 MAX_FB_TWINS = 99
-#: The two statistics of a run's evidence, by name in the tables: (p-value, power) columns.
-STATISTICS = {"W*": ("p_w_star", "power_w_star"), "Fourier coefficients": ("p_fourier", "power_fourier")}
+#: The statistics of a run's evidence, by name in the tables: (p-value, power) columns. On a tie
+#: of their twins' power the first decides.
+STATISTICS = {
+    "W*": ("p_w_star", "power_w_star"),
+    **{name: (f"p_{stem}", f"power_{stem}") for name, (_, stem) in LINE_STATISTICS.items()},
+}
 
 
 def group_name(by: Sequence[str], key: tuple[str, ...]) -> str:
@@ -104,10 +109,6 @@ class Checks:
             self.problems[seeds[0]] = f"no test: {exc}"
             return None
 
-    def sizes(self) -> dict[int, float]:
-        """Each run's model-free feedforward size (:func:`hcid.hcfit.lines.feedforward_size`)."""
-        return {seed: feedforward_size(data) for seed, data in self.lines.items()}
-
 
 def consistency_columns(check, problem: str) -> dict:
     """The tables' consistency columns of a check (:class:`hcid.hcfit.consistency.Consistency`),
@@ -142,21 +143,31 @@ def consistency_columns(check, problem: str) -> dict:
 
 
 class Evidence:
-    """Each run's two statistics against its own forcing set's twins (SPEC 11): its W* and its
-    model-free feedforward size, each with its sequential p-value (:data:`EXCEEDANCES`, at most
-    ``max_fb`` FB twins) and its twins' power. The twins' values are computed once per twin
-    folder (and method) whatever the number of runs they judge; FB twins drawn beyond the
-    calibration's (:meth:`add`) are kept per group and forcing set, shared by the group's own
-    and study twins (whose FB twin is the same loop)."""
+    """Each run's statistics against its own forcing set's twins (SPEC 11): its W* and its line
+    statistics (:data:`LINE_STATISTICS`), each with its sequential p-value (:data:`EXCEEDANCES`,
+    at most ``max_fb`` FB twins) and its twins' power. The twins' values are computed once per
+    twin folder (and method) whatever the number of runs they judge, the line statistics from
+    the group's model (``starts``: group name -> model values, as the runs' own); FB twins drawn
+    beyond the calibration's (:meth:`add`) are kept per group and forcing set, shared by the
+    group's own and study twins (whose FB twin is the same loop)."""
 
-    def __init__(self, config: Config, run_dir: Path, alpha: float, max_fb: int):
+    def __init__(
+        self,
+        config: Config,
+        run_dir: Path,
+        alpha: float,
+        max_fb: int,
+        starts: Mapping[str, dict],
+        execution: Execution,
+    ):
         grid = config.selection.w_grid
         self.lo, self.hi = float(min(grid)), float(max(grid))
         self.config, self.run_dir, self.alpha, self.max_fb = config, run_dir, alpha, max_fb
+        self.starts, self.execution = starts, execution
         self._thresholds: dict[tuple[str, str], dict[str, np.ndarray]] = {}
-        self._sizes: dict[str, dict | None] = {}
-        # (group, forcing set) -> per draw: its count, its W* by identified method, its sizes
-        self._more: dict[tuple[str, int], list[tuple[int, dict, np.ndarray | None]]] = {}
+        self._lines: dict[str, dict[str, dict[str, np.ndarray]]] = {}  # folder -> model -> statistic
+        # (group, forcing set) -> per draw: its count, its W* by identified method, its folder
+        self._more: dict[tuple[str, int], list[tuple[int, dict, str]]] = {}
         self._judged: dict[tuple[str, str, int], str] = {}  # (group, method, forcing set) -> folder
 
     def w_star(self, path, nb_ft) -> float:
@@ -172,10 +183,21 @@ class Evidence:
             }
         return self._thresholds[key]
 
-    def sizes(self, twin) -> dict[str, np.ndarray] | None:
-        if twin.folder not in self._sizes:
-            self._sizes[twin.folder] = twin_sizes(twin, self.run_dir, self.config)
-        return self._sizes[twin.folder]
+    def _folder_lines(self, group: str, folder: str) -> dict[str, dict[str, np.ndarray]]:
+        if folder not in self._lines:
+            self._lines[folder] = twin_statistics(
+                self.run_dir / folder, self.config, self.starts[group], self.execution
+            )
+        return self._lines[folder]
+
+    def lines(self, group: str, twin) -> dict[str, dict[str, np.ndarray]] | None:
+        """The calibration twins' line statistics: statistic -> ``FB`` / ``FF`` -> values; None
+        where the forcing has no lines."""
+        own = self._folder_lines(group, twin.folder)
+        fb = self._folder_lines(group, twin.fb_folder) if twin.fb_folder else own
+        if "FF" not in own or "FB" not in fb:
+            return None
+        return {name: {"FB": fb["FB"][name], "FF": own["FF"][name]} for name in LINE_STATISTICS}
 
     def add(self, group: str, forcing_set: int, draws) -> None:
         """More FB twins of a group's forcing set (:class:`hcid.pipeline.twins.FbDraws`), in order;
@@ -184,7 +206,7 @@ class Evidence:
             m: np.array([self.w_star(p, n) for p, n in zip(*pair, strict=True)])
             for m, pair in draws.paths.items()
         }
-        self._more.setdefault((group, forcing_set), []).append((draws.count, w, draws.sizes))
+        self._more.setdefault((group, forcing_set), []).append((draws.count, w, draws.folder))
 
     def drawn(self, group: str, forcing_set: int, twin) -> int:
         """FB twins simulated so far for a group's forcing set (the next draw's first seed - 1)."""
@@ -201,46 +223,57 @@ class Evidence:
             out.append(w[method])
         return np.concatenate(out)
 
-    def fb_sizes(self, group: str, forcing_set: int, twin) -> np.ndarray | None:
-        base = self.sizes(twin)
+    def fb_lines(
+        self, group: str, forcing_set: int, twin, drawn: bool = True
+    ) -> dict[str, np.ndarray] | None:
+        """Every FB twin's line statistics in the order drawn (statistic -> values); the
+        calibration's only unless ``drawn`` (the draws' statistics are computed when first asked)."""
+        base = self.lines(group, twin)
         if base is None:
             return None
-        more = [sizes for _, _, sizes in self._more.get((group, forcing_set), []) if sizes is not None]
-        return np.concatenate([base["FB"], *more])
+        draws = self._more.get((group, forcing_set), []) if drawn else []
+        more = [self._folder_lines(group, folder) for _, _, folder in draws]
+        return {
+            name: np.concatenate([base[name]["FB"], *(m["FB"][name] for m in more if "FB" in m)])
+            for name in LINE_STATISTICS
+        }
 
     def used(self, group: str, forcing_set: int, twin, method: str, deciding: str):
-        """The FB twins' W* and sizes in the order drawn, as the run's two p-values use them: the
-        deciding statistic's every draw, the other's the calibration's only (:meth:`run`)."""
+        """The FB twins' W* and line statistics in the order drawn, as the run's p-values use
+        them: the deciding statistic's every draw, the others' the calibration's only (:meth:`run`)."""
         base = len(self.thresholds(twin, method)["FB"])
-        w, sizes = (
-            self.fb_thresholds(group, forcing_set, twin, method),
-            self.fb_sizes(group, forcing_set, twin),
-        )
+        w = self.fb_thresholds(group, forcing_set, twin, method)
+        lines = self.fb_lines(group, forcing_set, twin, drawn=deciding in LINE_STATISTICS)
         if deciding != "W*":
             w = w[:base]
-        if sizes is not None and deciding == "W*":
-            sizes = sizes[:base]
-        return w, sizes
+        if lines is not None:
+            lines = {name: v if name == deciding else v[:base] for name, v in lines.items()}
+        return w, lines
 
-    def statistic(self, pair, method: str) -> str:
+    def statistic(self, group: str, pair, method: str) -> str:
         """Which statistic decides for a group and method (a name of :data:`STATISTICS`): the one
-        whose calibration twins give the higher median power over the group's runs (each run its
-        forcing set's), W* on a tie or where the forcing has no lines. From the twins alone, before
-        any run's value is read and before more FB twins are drawn (only its p-values are drawn for)."""
+        whose calibration twins give the highest median power over the group's runs (each run its
+        forcing set's); on a tie the first of :data:`STATISTICS` (W* where the forcing has no
+        lines). From the twins alone, before any run's value is read and before more FB twins are
+        drawn (only its p-values are drawn for)."""
         powers: dict[str, list[float]] = {name: [] for name in STATISTICS}
         for twin, runs in zip(pair.sets, pair.runs, strict=True):
-            w, sizes = self.thresholds(twin, method), self.sizes(twin)
+            w, lines = self.thresholds(twin, method), self.lines(group, twin)
             powers["W*"] += [evidence_power(w["FF"], w["FB"], self.alpha)] * len(runs)
-            fourier = evidence_power(sizes["FF"], sizes["FB"], self.alpha) if sizes else math.nan
-            powers["Fourier coefficients"] += [fourier] * len(runs)
+            for name in LINE_STATISTICS:
+                power = (
+                    evidence_power(lines[name]["FF"], lines[name]["FB"], self.alpha) if lines else math.nan
+                )
+                powers[name] += [power] * len(runs)
         median = {name: float(np.median(v)) for name, v in powers.items() if np.isfinite(v).all()}
-        return max(median, key=lambda name: (median[name], name == "W*"))
+        order = list(STATISTICS)
+        return max(median, key=lambda name: (median[name], -order.index(name)))
 
     def unsettled(self, group: str, forcing_set: int, twin_of: dict, deciding: dict, runs: list):
         """What more FB twins of a group's forcing set are drawn for: the methods (``twin_of``:
         method -> twins) that W* decides (``deciding``: method -> statistic) and under which some
-        run (``runs``: (W* by method, feedforward size)) has a p-value more twins could change;
-        and whether the feedforward size decides somewhere and has such a run."""
+        run (``runs``: (W* by method, line statistics)) has a p-value more twins could change;
+        and whether a line statistic decides somewhere and has such a run."""
         methods_open = [
             m
             for m, twin in twin_of.items()
@@ -252,55 +285,64 @@ class Evidence:
                 for w, _ in runs
             )
         ]
-        sizes = self.fb_sizes(group, forcing_set, next(iter(twin_of.values())))
-        fourier_open = (
-            "Fourier coefficients" in deciding.values()
-            and sizes is not None
-            and any(
-                size is not None and not sequential_settled(size, sizes, EXCEEDANCES, self.max_fb)
-                for _, size in runs
-            )
+        line_deciding = [name for name in LINE_STATISTICS if name in deciding.values()]
+        fb = self.fb_lines(group, forcing_set, next(iter(twin_of.values()))) if line_deciding else None
+        lines_open = fb is not None and any(
+            values is not None and not sequential_settled(values[name], fb[name], EXCEEDANCES, self.max_fb)
+            for name in line_deciding
+            for _, values in runs
         )
-        return methods_open, fourier_open
+        return methods_open, lines_open
 
     def run(
-        self, group: str, w_star: float, pair, seed: int, method: str, run_size: float | None, deciding: str
+        self, group: str, w_star: float, pair, seed: int, method: str, run_lines: dict | None, deciding: str
     ) -> dict:
-        """The run's evidence columns from its W* (:meth:`w_star`) and its Fourier size
-        (``run_size``; ``decide`` adds the deciding ones). The ``deciding``
-        statistic's p-value is over every FB twin drawn for it (each run stops at its own 5th, or
-        all were drawn: Besag and Clifford's p); the other's over the calibration's FB twins only,
-        a fixed number, since how many more were drawn depended on the deciding statistic. Each
-        power is over the same FB twins as its p-value: the deciding one's then estimates the
-        power of the test actually made (p <= alpha against up to all the draws) more precisely
-        than the calibration's 20 can (the largest of 20 FB twins stands for their 95% quantile)."""
+        """The run's evidence columns from its W* (:meth:`w_star`) and its line statistics
+        (``run_lines``, :func:`hcid.pipeline.line_statistics.record_statistics`; ``decide`` adds
+        the deciding ones). The ``deciding`` statistic's p-value is over every FB twin drawn for
+        it (each run stops at its own 5th, or all were drawn: Besag and Clifford's p); the others'
+        over the calibration's FB twins only, a fixed number, since how many more were drawn
+        depended on the deciding statistic. Each power is over the same FB twins as its p-value:
+        the deciding one's then estimates the power of the test actually made (p <= alpha against
+        up to all the draws) more precisely than the calibration's 20 can (the largest of 20 FB
+        twins stands for their 95% quantile)."""
         own = pair.of_run(seed)
         forcing_set = pair.sets.index(own) + 1
         self._judged[(group, method, forcing_set)] = own
-        fb, fb_sizes = self.used(group, forcing_set, own, method, deciding)
+        fb, fb_lines = self.used(group, forcing_set, own, method, deciding)
         p_w, n_w, how_w = run_p_value(w_star, fb, EXCEEDANCES)
-        sizes = self.sizes(own)
-        fourier = (math.nan, math.nan, math.nan, 0, "")
-        if sizes is not None and run_size is not None:
-            p_f, n_f, how_f = run_p_value(run_size, fb_sizes, EXCEEDANCES)
-            fourier = (run_size, p_f, evidence_power(sizes["FF"], fb_sizes, self.alpha), n_f, how_f)
-        return {
+        out = {
             "forcing_set": forcing_set,
             "w_star": w_star,
             "p_w_star": p_w,
             "p_w_star_method": how_w,
             "power_w_star": evidence_power(self.thresholds(own, method)["FF"], fb, self.alpha),
             "fb_twins_w_star": n_w,
-            "fourier_size": fourier[0],
-            "p_fourier": fourier[1],
-            "p_fourier_method": fourier[4],
-            "power_fourier": fourier[2],
-            "fb_twins_fourier": fourier[3],
         }
+        lines = self.lines(group, own)
+        for name, (column, stem) in LINE_STATISTICS.items():
+            cells = (math.nan, math.nan, "", math.nan, 0)
+            if lines is not None and run_lines is not None:
+                p, n, how = run_p_value(run_lines[name], fb_lines[name], EXCEEDANCES)
+                cells = (
+                    run_lines[name],
+                    p,
+                    how,
+                    evidence_power(lines[name]["FF"], fb_lines[name], self.alpha),
+                    n,
+                )
+            out.update(
+                zip(
+                    (column, f"p_{stem}", f"p_{stem}_method", f"power_{stem}", f"fb_twins_{stem}"),
+                    cells,
+                    strict=True,
+                )
+            )
+        return out
 
     def twins_table(self, groups: dict, by: Sequence[str], evidence: dict) -> pa.Table:
         """``evidence_twins.parquet``: the twins each group's runs were judged against (their W* and
-        feedforward size, as the p-values used them), once per group, method and forcing set (in
+        line statistics, as the p-values used them), once per group, method and forcing set (in
         the order of the groups and their runs)."""
         rows, done = [], set()
         for key, seeds in groups.items():
@@ -311,16 +353,25 @@ class Evidence:
                     continue
                 done.add(judged)
                 twin, forcing_set = self._judged[judged], e["forcing_set"]
-                sizes = self.sizes(twin) or {}
+                lines = self.lines(name, twin)
+                fb_w, fb_lines = self.used(name, forcing_set, twin, method, e["decided_by"])
                 drawn = {
-                    "FB": self.used(name, forcing_set, twin, method, e["decided_by"]),
-                    "FF": (self.thresholds(twin, method)["FF"], sizes.get("FF")),
+                    "FB": (fb_w, fb_lines),
+                    "FF": (
+                        self.thresholds(twin, method)["FF"],
+                        lines and {k: v["FF"] for k, v in lines.items()},
+                    ),
                 }
-                for kind, (w_stars, fourier) in drawn.items():
-                    fourier = np.full(0, math.nan) if fourier is None else fourier
-                    n = max(w_stars.size, fourier.size)
-                    w_stars = np.pad(w_stars, (0, n - w_stars.size), constant_values=math.nan)
-                    fourier = np.pad(fourier, (0, n - fourier.size), constant_values=math.nan)
+                for kind, (w_stars, values) in drawn.items():
+                    columns = {"w_star": w_stars}
+                    columns.update(
+                        (col, (values or {}).get(stat)) for stat, (col, _) in LINE_STATISTICS.items()
+                    )
+                    columns = {c: np.full(0, math.nan) if v is None else v for c, v in columns.items()}
+                    n = max(v.size for v in columns.values())
+                    columns = {
+                        c: np.pad(v, (0, n - v.size), constant_values=math.nan) for c, v in columns.items()
+                    }
                     rows += [
                         {
                             "group": name,
@@ -328,8 +379,7 @@ class Evidence:
                             "forcing_set": forcing_set,
                             "twin": kind,
                             "seed": i + 1,
-                            "w_star": float(w_stars[i]),
-                            "fourier_size": float(fourier[i]),
+                            **{c: float(v[i]) for c, v in columns.items()},
                         }
                         for i in range(n)
                     ]

@@ -18,8 +18,7 @@ from hcid import methods, tables
 from hcid.config import Config, HCModel, Loop
 from hcid.errors import ConfigError, DataError
 from hcid.hcfit.determined import Simulated, group_model
-from hcid.hcfit.lines import feedforward_size, record_lines
-from hcid.io import folders, results
+from hcid.io import folders
 from hcid.io.resolve import parse_config
 from hcid.loop.hcmodel import check_closed_loops
 from hcid.pipeline.execution import Execution
@@ -58,7 +57,6 @@ __all__ = [
     "twin_model",
     "twin_rate",
     "twin_remnant",
-    "twin_sizes",
     "twin_values",
 ]
 
@@ -355,15 +353,6 @@ class Twins:
     fb_folder: str = ""  # where the FB twin was simulated when not in ``folder`` (shared)
 
 
-def twin_sizes(twin: Twins, run_dir: Path, config: Config) -> dict[str, np.ndarray] | None:
-    """Each FB and FF twin realization's model-free feedforward size
-    (:func:`hcid.hcfit.lines.feedforward_size`), by twin; None where the forcing has no lines."""
-    sizes = _sizes(run_dir / twin.folder, config.timing.output_rate)
-    if twin.fb_folder and sizes:
-        sizes["FB"] = _sizes(run_dir / twin.fb_folder, config.timing.output_rate).get("FB")
-    return sizes if sizes and sizes.get("FB") is not None else None
-
-
 def separates(cal) -> bool:
     """Whether a calibration has a safe interval (a W that tells its twins apart)."""
     return bool(cal.has_safe_interval and math.isfinite(cal.recommended))
@@ -431,13 +420,13 @@ def calibrate_twins(
 @dataclass(frozen=True)
 class FbDraws:
     """More FB twins of one group and forcing set (seeds ``first`` on): per identified method
-    their selection paths and nb_ft, and every twin's model-free feedforward size (None where
-    the forcing has no lines)."""
+    their selection paths and nb_ft, and their folder (under the run directory: their
+    simulations, for the line statistics)."""
 
     first: int
     count: int
     paths: dict  # method -> (paths, nb_ft)
-    sizes: np.ndarray | None
+    folder: str
 
 
 def draw_fb_twins(
@@ -466,7 +455,7 @@ def draw_fb_twins(
             simulate_study(twin_config, twin_dir, execution=execution)
     found = model_paths(twin_config, twin_dir, ("FB",), method_names) if method_names else {}
     paths = {method: fb for method, (fb,) in found.items()}
-    return FbDraws(first, count, paths, _sizes(twin_dir, config.timing.output_rate).get("FB"))
+    return FbDraws(first, count, paths, f"twins/{slug}")
 
 
 @contextmanager
@@ -501,19 +490,6 @@ def _twin_folder(source: TwinSource, slug: str, kind: str, make_raw):
 
 def _set_label(forcing_set: int) -> str:
     return f", forcing set {forcing_set}" if forcing_set else ""
-
-
-def _sizes(folder: Path, rate: float) -> dict[str, np.ndarray]:
-    """Each twin realization's model-free feedforward size in a twin folder, by model (in seed
-    order); empty where the forcing has no lines."""
-    records = results.records(results.read(tables.SIMULATIONS, folder), folder / tables.SIMULATIONS.file)
-    out: dict[str, list[float]] = {}
-    try:
-        for (model, _), r in sorted(records.items()):
-            out.setdefault(model, []).append(feedforward_size(record_lines(r, rate)))
-    except DataError:
-        return {}
-    return {k: np.array(v) for k, v in out.items()}
 
 
 def twin_dir_ready(twin_dir: Path, text: str) -> None:

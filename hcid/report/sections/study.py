@@ -145,6 +145,8 @@ def _checks(groups) -> tuple[list[list[str]], list[str]]:
 
 
 #: The per-run table's parameters, in reading order.
+#: The deciding statistics' names in the runs' table.
+_SHORT = {"Fourier coefficients": "Fourier", "likelihood ratio": "LR"}
 _SHOWN = ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
 
 
@@ -206,7 +208,7 @@ def _run_table(runs) -> tuple[list[str], list[list[str]]]:
                 str(r["run_id"]),
                 *(["; ".join(f"{f} {r[f]}" for f in factors)] if merged else [str(r[f]) for f in factors]),
                 r["method"],
-                f"{_num(r['p_value'], 2)} ({'W*' if r['decided_by'] == 'W*' else 'Fourier'})",
+                f"{_num(r['p_value'], 2)} ({_SHORT.get(r['decided_by'], r['decided_by'])})",
                 str(r["nb_ft"]),
                 ("yes" if r["feedforward_at_w"] else "no")
                 + (" (uncertain)" if r["uncertain"] else "")
@@ -351,7 +353,9 @@ def render(data: StudyData | None, doc: Doc) -> None:
         "Every run (`analysis.csv` holds all columns, one row per run and method, ready for a "
         "repeated-measures ANOVA or a mixed model), in two tables. First its evidence and fit: "
         "p (evidence): the run's feedforward p-value by the statistic that decides for its group "
-        "(W* or the Fourier coefficients); nb_ft and feedforward at W: its selection at the group's "
+        "(W*, the Fourier coefficients' model-free size, or LR: the likelihood ratio of the parametric "
+        "fits with and without feedforward at the forcing lines); nb_ft and feedforward at W: its "
+        "selection at the group's "
         "calibrated W (SPEC 10); remnant: the share of var(u) the fitted model's paths leave given "
         "the measured e (the remnant injected at u), and the remnant's share of var(u) in the closed "
         "loop from the data alone (u's power off the forcing lines; the remnant also moves e, so the "

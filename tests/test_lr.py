@@ -1,0 +1,66 @@
+"""The feedforward path's likelihood ratio at the forcing lines (hcid.hcfit.lr, issue 47 item 5).
+
+Records are tests/test_hcfit_lines.py's, built in the frequency domain from the loop's own
+equations, so that a noise-free record is fitted exactly by its true model (cost 0)."""
+
+import numpy as np
+import pytest
+from scipy.optimize._numdiff import approx_derivative
+
+from hcid import hcfit
+from hcid.hcfit.fit import fit_lines
+from hcid.hcfit.lines import LinesProblem, line_data
+from hcid.hcfit.lr import feedforward_lr
+from tests.test_hcfit_lines import PLANT, TRUTH, _record
+
+FEEDBACK = {p: v for p, v in TRUTH.items() if p not in ("Kpt", "TI", "tau_pt")}
+#: A start away from the truth, as a group's medians are from one run's values.
+START = {**TRUTH, "Kpe": 2.0, "TL": 0.15, "tau_pe": 0.2, "Kpt": 0.6, "TI": 0.3, "tau_pt": 0.1}
+
+
+def test_without_feedforward_and_remnant_at_the_lines_the_ratio_is_zero():
+    # Source: the feedback-only truth makes every residual 0 (no remnant at the lines), so the
+    # feedback-only fit's cost is 0 and no model can do better: C_FB - C_FF = 0.
+    record, _ = _record(values=FEEDBACK, remnant=1e-3, at_lines=False)
+    assert feedforward_lr(line_data(record), PLANT, "input", START) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_with_feedforward_the_ratio_is_the_feedback_only_models_least_cost():
+    # Source: the true model with feedforward fits exactly (C_FF = 0), so the ratio is the least
+    # cost of the feedback-only model, which fit_lines' global search (differential evolution and
+    # random starts) finds independently of the local fits from the start.
+    record, _ = _record(remnant=1e-3, at_lines=False)
+    data = line_data(record)
+    reduced = fit_lines(record, PLANT, False, hcfit.FitSettings(), "input", data=data)
+    assert reduced.cost > 1e3  # the feedforward path is far from negligible here
+    assert feedforward_lr(data, PLANT, "input", START) == pytest.approx(reduced.cost, rel=1e-4)
+
+
+def test_the_ratio_grows_with_the_feedforward_gain_under_a_remnant():
+    # Source: the same remnant realization (seed) on loops of growing Kpt: the feedforward path's
+    # share of U at the target lines grows, and with it what the feedback-only model cannot fit.
+    ratios = []
+    for kpt in (0.0, 0.2, 1.0):
+        values = {**TRUTH, "Kpt": kpt} if kpt else FEEDBACK
+        record, _ = _record(values=values, remnant=0.05, at_lines=True, seed=9)
+        ratios.append(feedforward_lr(line_data(record), PLANT, "input", START))
+    assert ratios[0] < ratios[1] < ratios[2]
+    assert ratios[0] < 0.1 * ratios[1]
+
+
+@pytest.mark.parametrize("feedforward", [False, True])
+def test_the_one_call_jacobian_is_scipys_finite_difference(feedforward):
+    # Slow reference: scipy's own forward differences (approx_derivative '2-point' with bounds),
+    # one residual evaluation per column; the fast path evaluates every column in one call.
+    record, _ = _record(remnant=0.05, at_lines=True, seed=3)
+    problem = LinesProblem(line_data(record), PLANT, feedforward, "input")
+    settings = hcfit.FitSettings()
+    lower = np.array([settings.bound(n).lower for n in problem.names])
+    upper = np.array([settings.bound(n).upper for n in problem.names])
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        x = np.array([START[n] for n in problem.names]) * rng.uniform(0.8, 1.2, len(problem.names))
+        x[-1] = upper[-1] if feedforward else x[-1]  # tau_pt at its bound: the step turns back
+        fast = problem.jacobian(x, lower, upper)
+        slow = approx_derivative(problem.residuals, x, method="2-point", bounds=(lower, upper))
+        assert fast == pytest.approx(slow, rel=1e-6, abs=1e-6 * np.abs(slow).max())
