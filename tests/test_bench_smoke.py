@@ -17,8 +17,14 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-#: The scripts of ``make bench``, in its order, and their arguments besides ``--smoke``.
-SCRIPTS = {"arx_engine": [], "fit_hc": [], "cold_start": ["--json", "{tmp}/cold_start.json"]}
+#: The scripts of ``make bench``, in its order, and their arguments besides ``--smoke``; then
+#: serial_part (issue 47: where ``hcid analyse``'s serial part lies).
+SCRIPTS = {
+    "arx_engine": [],
+    "fit_hc": [],
+    "cold_start": ["--json", "{tmp}/cold_start.json"],
+    "serial_part": [],
+}
 TIMEOUT_S = 600
 
 pytestmark = pytest.mark.skipif(
@@ -123,3 +129,22 @@ def test_cold_start_smoke(smoke_runs):
     assert {f["module"] for f in result["recorded_cold"]["functions"]} >= {"hcid.arx._kernels"}
     assert result["recorded_warm"]["functions"] == []
     assert set(result["wall_s"]) == {"cold --jobs 2", "warm --jobs 2", "cold --jobs 1", "installed --jobs 2"}
+
+
+def test_serial_part_smoke(smoke_runs):
+    # hcid analyse with --jobs 1 and 2, each phase named with its wall, pool and outside times;
+    # every phase's pool time within its wall (both measured on one clock, the pool's spans
+    # clipped to the phase).
+    code, out, err = smoke_runs("serial_part")
+    assert code == 0, out + err
+    phases = ("read the data", "identify", "fit runs", "twins", "line statistics", "more FB twins")
+    phases += ("fit selected", "tables", "report")
+    for jobs in (1, 2):
+        assert _lines(out, rf"--jobs {jobs}: wall [0-9.]+ s, in the pool [0-9.]+ s \(.*\), outside it"), out
+    for name in phases:
+        found = _lines(out, rf"    {name}: wall ")
+        assert len(found) == 2, out
+        for line in found:
+            wall, inside, outside = (float(x) for x in re.findall(r"([0-9.]+) s", line))
+            assert inside <= wall + 0.05 and abs(wall - inside - outside) <= 0.15, line
+    assert _lines(out, r"Amdahl from the two walls .*: serial S = 2 T2 - T1 = -?[0-9.]+ s"), out

@@ -314,3 +314,47 @@ def test_coverage_benchmark_smoke_run():
         check=True, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert "circular (paired)" in out.stdout and "CPU" in out.stdout
+
+
+def test_superposition_is_compared_per_line_as_an_effect_of_the_trials():
+    # Source: one value per person and level is the paired t test (test above): the mixed
+    # model's estimate is the mean of the people's single-input minus two-input differences, its
+    # interval mean +- t(0.975, n - 1) sd / sqrt(n); the phase by the paired circular difference.
+    # Three people with both kinds, one with two-input trials only (left out: not paired).
+    import pyarrow as pa
+
+    from hcid.pipeline.effects import SUPERPOSITION, superposition_rows
+
+    diff = {"a": 2.5, "b": 3.0, "c": 3.7}
+    own = {"a": 0.0, "b": 6.2, "c": -4.8, "d": 1.0}  # the people differ: the variance is interior
+    rows = []
+    for person in ("a", "b", "c", "d"):
+        for source in ("two-input trials", "single-input trials"):
+            if person == "d" and source.startswith("single"):
+                continue
+            shift = diff.get(person, 0.0) if source.startswith("single") else 0.0
+            base = {"h_ud_db": math.nan, "h_ud_deg": math.nan}
+            rows.append({"person": person, "source": source, "omega": 1.5, "h_ur_db": own[person] + shift,
+                         "h_ur_deg": -40.0 + 2 * shift, **base})  # fmt: skip
+    rows.append({**rows[0], "person": "median"})  # the people's median row is no person
+    rows.append({**rows[0], "source": "all trials"})  # nor is the estimate from every trial
+    found = superposition_rows(pa.Table.from_pylist(rows))
+    assert {r["source"] for r in found} == {SUPERPOSITION}
+    assert {r["effect"] for r in found} == {"trials: single-input - two-input"}
+    mixed = next(
+        r for r in found if r["quantity"] == "|U/R| at 1.5 rad/s" and r["test"] == "mixed model (REML)"
+    )
+    d = np.array(list(diff.values()))
+    half = stats.t.ppf(0.975, 2) * d.std(ddof=1) / math.sqrt(3)
+    assert mixed["estimate"] == pytest.approx(d.mean(), rel=1e-9)
+    # (REML's variance by an optimizer: with three people within 1e-4 of the closed form)
+    assert (mixed["low"], mixed["high"]) == pytest.approx((d.mean() - half, d.mean() + half), rel=1e-4)
+    assert (mixed["subjects"], mixed["unit"]) == (3, "dB")
+    phase = [r for r in found if r["quantity"] == "U/R phase at 1.5 rad/s"]
+    assert phase and all(r["unit"] == "deg" for r in phase)
+    circular = next(r for r in phase if r["test"] == "circular (paired)")
+    assert circular["estimate"] == pytest.approx(
+        np.degrees(np.angle(np.mean(np.exp(1j * np.radians(2 * d)))))
+    )
+    # Fewer than two people with both kinds: nothing to compare.
+    assert superposition_rows(pa.Table.from_pylist([r for r in rows if r["person"] in ("a", "d")])) == []

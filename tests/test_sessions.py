@@ -183,6 +183,8 @@ def test_analyse_takes_a_session_folder_as_the_logger_left_it(session_run):
     assert len(feedback) == 2 and {r["method"] for r in feedback} == {"direct", "indirect"}
     assert all(r["fit_target"] == "lines" and math.isfinite(r["Kpe"]) for r in feedback)
     assert (run / "report" / "conditions_inversion.png").is_file()
+    # One person: no superposition across people to compare as an effect, no study_effects.
+    assert not (run / "study_effects.parquet").exists()
 
 
 # --------------------------------------------------------------------------- people who differ
@@ -237,6 +239,21 @@ def test_people_with_other_lines_are_compared_line_by_line():
     pooled = [r for r in session.findings.to_pylist() if r["finding"] == "superposition" and r["band"]]
     assert {round(r["estimate"], 9) for r in pooled if "ratio" in r["quantity"]} == {1.0}
     assert all(math.isnan(r["p"]) for r in pooled)
+    # The same as effects across people (study_effects' source superposition): a line enters
+    # where both people measured it both ways, and a difference of exactly 0 in every pair gives
+    # the estimate 0 (the Wilcoxon test has no interval below 6 people).
+    from hcid.pipeline.effects import superposition_rows
+
+    effects = superposition_rows(session.lines)
+    both = {r["omega"] for r in lines if r["source"] == "single-input trials" and math.isfinite(r["h_ur_db"])}
+    both &= {r["omega"] for r in lines if r["person"] == "A" and math.isfinite(r["h_ur_db"])}
+    assert {r["quantity"] for r in effects if r["quantity"].startswith("|U/R|")} == {
+        f"|U/R| at {w:.3g} rad/s" for w in both if all(
+            math.isfinite(x["h_ur_db"]) for x in lines if x["omega"] == w and x["person"] in "AB"
+            and x["source"] in ("single-input trials", "two-input trials"))
+    }  # fmt: skip
+    assert all(abs(r["estimate"]) < 1e-6 for r in effects if math.isfinite(r["estimate"]))
+    assert {r["subjects"] for r in effects if r["test"] == "mixed model (REML)"} == {2}
 
 
 def test_a_trial_whose_models_ht_is_unknown_at_its_target_lines_is_not_predicted():

@@ -382,11 +382,12 @@ def effects_line(rows: list[dict], alpha: float) -> str:
     """What differs between the levels of the compared factor (SPEC 13): each effect whose p after
     Holm's correction is at most ``alpha``, by method, with its 95% interval and test; or that none
     does."""
-    compare = rows[0]["effect"].split(":", 1)[0] if rows else "the factor"
+    compared = list(dict.fromkeys(r["effect"].split(":", 1)[0] for r in rows)) or ["the factor"]
+    how = "--compare; " if compared != ["trials"] else "a whole experiment's superposition; "
     found = [r for r in rows if math.isfinite(r["p_holm"]) and r["p_holm"] <= alpha]
     tested = {r["quantity"] for r in rows if math.isfinite(r["p"])}
-    head = (f"EFFECTS of {compare} (--compare; subjects as repeated measures, RUN/study_effects.parquet): "
-            f"{len(tested)} quantities tested")  # fmt: skip
+    head = (f"EFFECTS of {' and '.join(compared)} ({how}subjects as repeated measures, "
+            f"RUN/study_effects.parquet): {len(tested)} quantities tested")  # fmt: skip
     if not found:
         return f"{head}; none differs at p <= {alpha:g} after Holm's correction"
 

@@ -460,11 +460,14 @@ def analyse_study(
         sessions.write_session(run_dir, session)
     else:
         sessions.forget_session(run_dir)
-    compared = None
+    compared, rows = None, []
     if options.compare is not None:
         timing = config.timing
         lines = effects.line_values(data.records, timing.output_rate, timing.record_samples)
         rows = effects.effects_rows(run_table.to_pylist(), options.compare, person, lines)
+    if session is not None:
+        rows += effects.superposition_rows(session.lines)
+    if rows:
         compared = effects.write_effects(run_dir, rows)
     else:
         effects.forget_effects(run_dir)

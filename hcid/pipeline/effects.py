@@ -2,7 +2,9 @@
 levels of a factor, per method, for every fitted parameter and loop figure of the study's runs,
 and (method ``model-free``) for each run's Fourier-coefficient responses at the forcing lines,
 with subjects as repeated measures (:mod:`hcid.analysis.effects`), written to
-``study_effects.parquet`` and ``.csv``."""
+``study_effects.parquet`` and ``.csv``. A whole experiment's superposition (SPEC 12: each
+person's single-input trials against their two-input ones) is compared the same way, with or
+without ``--compare`` (source ``superposition``)."""
 
 from __future__ import annotations
 
@@ -20,12 +22,18 @@ from hcid.hcfit.determined import DETERMINED
 from hcid.io import folders, results
 
 __all__ = [
-    "LOOP_FIGURES", "MODEL_FREE", "compare_levels", "effects_rows", "forget_effects", "line_values",
-    "long_table", "write_effects",
+    "LOOP_FIGURES", "MODEL_FREE", "SUPERPOSITION", "compare_levels", "effects_rows", "forget_effects",
+    "line_values", "long_table", "superposition_rows", "write_effects",
 ]  # fmt: skip
 
 #: The source of the effects on the runs' Fourier-coefficient responses (no model behind them).
 MODEL_FREE = "model-free"
+
+#: The source of the superposition effects, its factor and levels (the reference first), and the
+#: combined estimates (:data:`hcid.analysis.conditions.SOURCES`) each level is.
+SUPERPOSITION = "superposition"
+TRIALS = "trials"
+TRIAL_LEVELS = {"two-input": "two-input trials", "single-input": "single-input trials"}
 
 #: The loop figures compared beside the parameters: (column, unit); none has a standard error.
 LOOP_FIGURES = (("crossover", "rad/s"), ("phase_margin", "deg"), ("remnant_share_data", "1"))
@@ -136,6 +144,55 @@ def effects_rows(
             effects = study_effects(table, compare, angles=angles, units=units)
             out += [{"source": MODEL_FREE, **e.__dict__} for e in effects]
     return out
+
+
+def superposition_rows(lines: pa.Table) -> list[dict]:
+    """A whole experiment's superposition (SPEC 12) as effects across people: per response (U/R
+    at the target lines, U/D at the disturbance lines) and line, each person's single-input
+    estimate of |H| (dB) and of its phase (deg, by circular statistics) against their two-input
+    one (the reference), from ``session_lines`` (:class:`hcid.pipeline.sessions.Session`); Holm's
+    correction over these quantities. A line is compared where at least two people measured it
+    both ways; empty where no line is."""
+    import pandas as pd
+
+    from hcid.analysis.effects import study_effects
+
+    sources = {source: level for level, source in TRIAL_LEVELS.items()}
+    rows = [r for r in lines.to_pylist() if r["source"] in sources and r["person"] != "median"]
+    both = {r["person"] for r in rows if r["source"] == TRIAL_LEVELS["two-input"]} & {
+        r["person"] for r in rows if r["source"] == TRIAL_LEVELS["single-input"]
+    }
+    if len(both) < 2:
+        return []
+    out = []
+    for r in rows:
+        if r["person"] not in both:
+            continue
+        for name, column in (("U/R", "h_ur"), ("U/D", "h_ud")):
+            db, deg = r[f"{column}_db"], r[f"{column}_deg"]
+            if not (math.isfinite(db) and math.isfinite(deg)):
+                continue
+            at = f"at {r['omega']:.3g} rad/s"
+            base = {
+                "subject": r["person"],
+                TRIALS: sources[r["source"]],
+                "se": math.nan,
+                "undetermined": False,
+            }
+            out += [{**base, "quantity": f"|{name}| {at}", "value": db},
+                    {**base, "quantity": f"{name} phase {at}", "value": deg}]  # fmt: skip
+    table = pd.DataFrame(out)
+    # A line is compared where at least two people measured it both ways (not every person's
+    # trials measured every line of the study).
+    paired = table.groupby(["quantity", "subject"])[TRIALS].nunique().eq(2).groupby("quantity").sum()
+    table = table[table["quantity"].isin(paired[paired >= 2].index)]
+    if table.empty:
+        return []
+    names = list(dict.fromkeys(table["quantity"]))
+    angles = {q for q in names if " phase at " in q}
+    units = {q: "deg" if q in angles else "dB" for q in names}
+    effects = study_effects(table, TRIALS, reference="two-input", angles=angles, units=units)
+    return [{"source": SUPERPOSITION, **e.__dict__} for e in effects]
 
 
 def write_effects(run_dir: Path, rows: list[dict]) -> pa.Table:

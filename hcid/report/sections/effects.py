@@ -61,7 +61,8 @@ def compute(run, done) -> EffectsData | None:
          _p(e["p"]), _p(e["p_holm"]), str(e["subjects"]), str(e["runs"]), str(e["left_out"]), e["note"]]
         for e in effects
     ]  # fmt: skip
-    return EffectsData(effects[0]["effect"].split(":", 1)[0], alpha, answer, rows, effects)
+    compared = " and ".join(dict.fromkeys(e["effect"].split(":", 1)[0] for e in effects))
+    return EffectsData(compared, alpha, answer, rows, effects)
 
 
 def render(data: EffectsData | None, doc: Doc) -> None:
