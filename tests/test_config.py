@@ -478,3 +478,24 @@ def test_a_measured_study_names_its_optional_sections_among_the_allowed_keys():
         ConfigError, match=r"^loops: unknown key \(allowed: data, fit_hc, identify, loop, name, "
     ):
         parse_config(raw, "x")
+
+
+def test_a_measured_study_with_both_timings_is_told_which_to_keep():
+    # data.analysis_rate and a timing section give the analysis rate twice: the refusal says so
+    # (it had asked for timing.sim_rate, a simulation's key, as if timing were meant whole).
+    raw = {"name": "x", "data": {"analysis_rate": 25.0, "window": 40.0}, "timing": {"output_rate": 25.0}}
+    with pytest.raises(ConfigError, match=r"^timing: a measured study's timing is data.analysis_rate and "):
+        parse_config(raw, "x")
+
+
+def test_a_window_in_seconds_given_as_samples_is_told_the_unit_key():
+    # 40 s at 20 Hz: 800 samples; [0.2, 21.24] are seconds, not samples: the refusal names
+    # identify.windows_in. Whole numbers stay samples and get no hint.
+    window = {"estimation": [0.2, 21.24], "validation": [21.24, 40.0]}
+    raw = {"name": "x", "data": {"analysis_rate": 20.0, "window": 40.0}, "identify": {"direct": window}}
+    with pytest.raises(ConfigError, match=r"\(1-based, inclusive\); in seconds \(40 s of record\) with "
+                       r"identify.windows_in: seconds, got \[0.2, 21.24\]$"):  # fmt: skip
+        parse_config(raw, "x")
+    raw["identify"]["direct"] = {"estimation": [0, 400], "validation": [401, 800]}
+    with pytest.raises(ConfigError, match=r"\(1-based, inclusive\), got \[0, 400\]$"):
+        parse_config(raw, "x")

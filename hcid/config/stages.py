@@ -70,9 +70,15 @@ def _window(section: Section, name: str, n_record: int, auto_first: int, rate: f
         and 1 <= value[0] <= value[1] <= n_record
     )
     if not ok:
+        seconds = isinstance(value, list) and any(isinstance(v, float) and not v.is_integer() for v in value)
+        hint = (
+            f"; in seconds ({n_record / rate:g} s of record) with identify.windows_in: seconds"
+            if seconds
+            else ""
+        )
         raise ConfigError(
             f"{key}: must be 'auto' or a sample range [first, last] with "
-            f"1 <= first <= last <= {n_record} (1-based, inclusive), got {fmt(value)}"
+            f"1 <= first <= last <= {n_record} (1-based, inclusive){hint}, got {fmt(value)}"
         )
     return Window(int(value[0]), int(value[1]))
 
