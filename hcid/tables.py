@@ -303,7 +303,7 @@ HC_PARAMETERS = _schema(
     + [("parameter_status", _STR)]
     + [("cost", _F64), ("vaf_validation", _F64), ("starts", _INT)],
     (*_ANALYSIS_KEY, "parameter"),
-    # se..covariance absent from a fit-hc before issue 26, parameter_status before issue 33
+    # run directories written by older hcid lack these: read without them
     optional=("se", "ci_low", "ci_high", "covariance", "parameter_status"),
 )
 #: ``hc_loop.parquet`` (``hcid fit-hc``): one row per record, method, W and ``source``

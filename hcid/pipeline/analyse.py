@@ -1,7 +1,8 @@
 """``hcid analyse``: a measured study end to end, W calibrated on twins of each group's fitted model.
 
 1. Identify every run of the data set by every method (:func:`identify_study`).
-2. Fit the parametric HC model (the config's estimator, ``time`` by default) to every run
+2. Fit the parametric HC model (the config's estimator: ``auto``, the ``lines`` estimator where
+   the forcing functions are multisines, by default) to every run
    with and without its feedforward path, and SPEC 1's remnant filter to what the
    feedforward fit leaves.
 3. Per group of runs (``--by``, default the factor ``condition``; one group without it):
@@ -198,7 +199,7 @@ def _check_config(config: Config) -> None:
     if config.fit_hc.target == "frequency":
         raise ConfigError(
             "fit_hc.target: frequency fits an ARX model's responses, and hcid analyse fits every run "
-            "before any model is selected; use time (the default) or closed_loop"
+            "before any model is selected; use auto (the default), lines, time or closed_loop"
         )
 
 
