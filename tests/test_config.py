@@ -499,3 +499,119 @@ def test_a_window_in_seconds_given_as_samples_is_told_the_unit_key():
     raw["identify"]["direct"] = {"estimation": [0, 400], "validation": [401, 800]}
     with pytest.raises(ConfigError, match=r"\(1-based, inclusive\), got \[0, 400\]$"):
         parse_config(raw, "x")
+
+
+# --------------------------------------------------------------------------- a plant per level
+
+
+@pytest.fixture()
+def both_plants_raw():
+    return yaml.safe_load((PAPER_CONFIG.parent / "cphs2017.yaml").read_text())
+
+
+def test_a_plant_per_level_is_parsed_into_each_levels_plant(both_plants_raw):
+    # configs/cphs2017.yaml: fo 1/s and so 1/(s (s + 1)), the plants of cphs2017_fo.yaml and
+    # cphs2017_so.yaml; a level's config is the one-plant config of that plant.
+    from hcid.config import PlantByFactor
+
+    config = parse_config(both_plants_raw, "x")
+    assert isinstance(config.loop.plant, PlantByFactor) and config.plant_factor == "plant"
+    assert [(n, p.num, p.den) for n, p in config.loop.plant.levels] == [
+        ("fo", (1.0,), (1.0, 0.0)),
+        ("so", (1.0,), (1.0, 1.0, 0.0)),
+    ]
+    for level in ("fo", "so"):
+        own = load_config(PAPER_CONFIG.parent / f"cphs2017_{level}.yaml")
+        mine = config.with_plant(level)
+        assert mine.loop == own.loop and mine.plant_factor is None
+        assert mine.raw["loop"] == own.raw["loop"]  # the twins' configs copy it
+    with pytest.raises(
+        ConfigError, match=r"^loop.plant.levels: gives no plant for plant 'xo' \(it has fo, so\)$"
+    ):
+        config.with_plant("xo")
+
+
+@pytest.mark.parametrize(
+    ("plant", "message"),
+    [
+        (
+            {
+                "by": "plant",
+                "levels": {
+                    "fo": {"kind": "integrator", "K": 1.0},
+                    "so": {"kind": "second_order", "K": 1.0, "wb": -1},
+                },
+            },
+            "loop.plant.levels.so.wb: must be a number in (0, 10000], got -1.0",
+        ),
+        (
+            {"by": "plant", "levels": {"fo": {"kind": "integrator", "K": 1.0, "wb": 2.0}}},
+            "loop.plant.levels.fo.wb: unknown key (allowed: K, kind)",
+        ),
+        (
+            {"by": "plant", "levels": {"fo": {"kind": "cubic"}}},
+            "loop.plant.levels.fo.kind: unknown plant shorthand 'cubic' (allowed: second_order, integrator, "
+            "double_integrator, tf)",
+        ),
+        (
+            {"by": "plant", "levels": {"so": {"kind": "tf", "num": [1.0], "den": [0.0, 1.0, 0.0]}}},
+            "loop.plant.levels.so.den: the leading coefficient must not be 0, got [0.0, 1.0, 0.0]",
+        ),
+        (
+            {"by": "plant", "levels": {"so": {"kind": "tf", "num": [1.0, 0.0, 0.0], "den": [1.0, 1.0]}}},
+            "loop.plant.levels.so: must be proper (degree of num <= degree of den), got degrees 2 and 1",
+        ),
+        (
+            {"by": "plant", "kind": "integrator", "levels": {"fo": {"kind": "integrator", "K": 1.0}}},
+            "loop.plant.kind: unknown key (allowed: by, levels)",
+        ),
+        (
+            {"by": "run", "levels": {"fo": {"kind": "integrator", "K": 1.0}}},
+            "loop.plant.by: must be a data factor's name (an identifier other than model, seed, run, file, "
+            "file_run, method, w, k, t), got 'run'",
+        ),
+        ({"by": "plant"}, "loop.plant.levels: missing"),
+        (
+            {"by": "plant", "levels": {}},
+            "loop.plant.levels: must be a non-empty mapping of each level of 'plant' to its plant, got {}",
+        ),
+        (
+            {"by": "session", "levels": {1: {"kind": "integrator", "K": 1.0}}},
+            "loop.plant.levels: each level must be a factor value as text (quote a number: '1'), got 1",
+        ),
+    ],
+)
+def test_a_bad_plant_per_level_names_its_dotted_key(both_plants_raw, plant, message):
+    data = copy.deepcopy(both_plants_raw)
+    data["loop"]["plant"] = plant
+    with pytest.raises(ConfigError) as info:
+        parse_config(data, "x")
+    assert str(info.value) == message
+
+
+def test_a_config_that_simulates_refuses_a_plant_per_level(paper_raw):
+    # hcid simulate / run / calibrate-w of the paper study simulate one plant.
+    plant = {"by": "plant", "levels": {"fo": {"kind": "integrator", "K": 1.0}}}
+    with pytest.raises(ConfigError) as info:
+        parse_config(_with_plant(paper_raw, plant), "x")
+    assert str(info.value) == (
+        "loop.plant.by: a plant per level of a data factor is for a measured study (hcid analyse); a "
+        "config that simulates (models, signals, seeds) needs one plant"
+    )
+
+
+def test_fit_hc_refuses_a_plant_per_level_in_one_line(tmp_path):
+    from typer.testing import CliRunner
+
+    from hcid.cli import app
+
+    (tmp_path / "run").mkdir()  # a run directory to fit in (as hcid analyse leaves one)
+    found = CliRunner().invoke(
+        app, ["fit-hc", str(PAPER_CONFIG.parent / "cphs2017.yaml"), "--run", str(tmp_path / "run")]
+    )
+    assert found.exit_code == 2
+    assert found.output.strip() == (
+        "hcid: error: loop.plant.by: `hcid fit-hc` needs one plant; this config gives one per level of "
+        "'plant' (fo, so): give each plant a config of its own"
+    )
+    assert not any((tmp_path / "run").iterdir())  # nothing written

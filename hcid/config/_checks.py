@@ -25,6 +25,10 @@ LIMITS = {
 }
 
 
+#: Names a file-name pattern's factors may not take: hcid's own columns in the tables.
+RESERVED_FACTORS = ("model", "seed", "run", "file", "file_run", "method", "w", "k", "t")
+
+
 class Section:
     """A mapping under a dotted path; every key taken is checked, leftovers are errors."""
 

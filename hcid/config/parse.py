@@ -4,8 +4,9 @@ Each ``_section`` function checks one top-level section and returns its
 dataclass; :func:`describe_config` runs them in order and checks what spans
 sections (timing against the target, delays against the simulation rate).
 The forcing functions and timing are parsed in :mod:`hcid.config.forcing`, the
-``identify`` section in :mod:`hcid.config.stages`. Nothing is read from disk:
-:mod:`hcid.io.resolve` reads what a config names and builds the methods' stages.
+``identify`` section in :mod:`hcid.config.stages`, ``loop.plant`` in :mod:`hcid.config.plant`.
+Nothing is read from disk: :mod:`hcid.io.resolve` reads what a config names and builds the
+methods' stages.
 """
 
 from __future__ import annotations
@@ -16,9 +17,10 @@ import re
 from pathlib import Path
 from typing import Any
 
-from hcid.config._checks import LIMITS, Section, fmt, integer, number_list
+from hcid.config._checks import LIMITS, RESERVED_FACTORS, Section, fmt, integer
 from hcid.config.fit import FitSettings, parse_fit_settings
 from hcid.config.forcing import check_against_timing, signals_section, timing_section
+from hcid.config.plant import PLANTS, plant_section
 from hcid.config.stages import MOST_LAGS, identify_section
 from hcid.config.types import (
     Config,
@@ -29,7 +31,6 @@ from hcid.config.types import (
     Plant,
     SelectionConfig,
     Timing,
-    check_plant,
 )
 from hcid.errors import ConfigError
 
@@ -86,51 +87,8 @@ def _models_section(top: Section) -> tuple[HCModel, ...]:
     return tuple(_model(k, v) for k, v in raw.items())
 
 
-def _integrator(s: Section) -> Plant:
-    return Plant.integrator(s.number("K", 0.0, 1e4, open_lo=True))
-
-
-def _double_integrator(s: Section) -> Plant:
-    return Plant.double_integrator(s.number("K", 0.0, 1e4, open_lo=True))
-
-
-def _second_order(s: Section) -> Plant:
-    return Plant.second_order(s.number("K", 0.0, 1e4, open_lo=True), s.number("wb", 0.0, 1e4, open_lo=True))
-
-
-def _transfer_function(s: Section) -> Plant:
-    num, den = number_list(s, "num"), number_list(s, "den")
-    if den and den[0] == 0 and any(den):  # a config writes den from its leading power: a 0 is a slip
-        raise ConfigError(f"loop.plant.den: the leading coefficient must not be 0, got {list(den)}")
-    check_plant(num, den, "loop.plant")
-    return Plant.tf(num, den)
-
-
-#: Plant shorthands of ``loop.plant.kind``, each a builder from its section (SPEC 7);
-#: ``tf`` takes any proper transfer function in s. Add a shorthand here.
-PLANTS = {
-    "second_order": _second_order,
-    "integrator": _integrator,
-    "double_integrator": _double_integrator,
-    "tf": _transfer_function,
-}
-
 #: Where the disturbance enters: at the plant's output (the paper) or its input.
 DISTURBANCE_POINTS = ("output", "input")
-
-
-def _plant(loop: Section) -> Plant:
-    s = loop.section("plant")
-    kind = s.get("kind")
-    try:
-        builder = PLANTS[kind]
-    except (KeyError, TypeError):
-        raise ConfigError(
-            f"loop.plant.kind: unknown plant shorthand {fmt(kind)} (allowed: {', '.join(PLANTS)})"
-        ) from None
-    plant = builder(s)
-    s.done()
-    return plant
 
 
 #: A measured study's loop needs only its plant: the rest is the simulations' (SPEC 1's values).
@@ -138,7 +96,8 @@ _LOOP_DEFAULTS = {"w_nms": 10.1, "zeta_nms": 0.35, "w_n": 12.7, "zeta_n": 0.26, 
 
 
 def _loop_section(top: Section, plant_only: bool = False) -> Loop:
-    """``loop``; with ``plant_only`` (a measured study) every key but the plant may be left out."""
+    """``loop``; with ``plant_only`` (a measured study) every key but the plant may be left out,
+    and the plant may be one per level of a data factor."""
     s = top.section("loop")
     if "plant" in s.data:
         both = [k for k in ("Kc", "wb") if k in s.data]
@@ -147,7 +106,7 @@ def _loop_section(top: Section, plant_only: bool = False) -> Loop:
                 f"loop.{both[0]}: give the plant either as loop.Kc and loop.wb (the paper's "
                 "Kc wb / (s (s + wb))) or as loop.plant, not both"
             )
-        plant = _plant(s)
+        plant = plant_section(s, per_level=plant_only)
     else:
         Kc = s.number("Kc", 0.0, 1e3, open_lo=True)
         plant = Plant.second_order(Kc, s.number("wb", 0.0, 1e3, open_lo=True))
@@ -427,8 +386,6 @@ def _data_dimensions(dimensions) -> tuple[str, ...] | None:
     return tuple(dimensions)
 
 
-#: Names a file-name pattern's factors may not take: hcid's own columns in the tables.
-RESERVED_FACTORS = ("model", "seed", "run", "file", "file_run", "method", "w", "k", "t")
 _PLACEHOLDER = re.compile(r"\{([^{}]*)\}")
 
 

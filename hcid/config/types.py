@@ -7,9 +7,8 @@ output rate (``[129, 1088]``); :meth:`Window.rows` gives the Python slice
 
 from __future__ import annotations
 
+import dataclasses
 import math
-import numbers
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -18,6 +17,7 @@ import yaml
 
 from hcid.config._checks import GRID_LOWEST, checked_grid_range
 from hcid.config.fit import FitSettings
+from hcid.config.plant import Plant, PlantByFactor
 from hcid.errors import ConfigError
 
 __all__ = [
@@ -31,6 +31,7 @@ __all__ = [
     "Loop",
     "Multisine",
     "Plant",
+    "PlantByFactor",
     "Segment",
     "Segments",
     "SelectionConfig",
@@ -61,156 +62,16 @@ class HCModel:
 
 
 @dataclass(frozen=True)
-class Plant:
-    """The controlled element ``Yc(s) = num(s) / den(s)``, theta per u.
-
-    ``num`` and ``den`` are polynomial coefficients in s, highest power first;
-    ``kind`` is the shorthand it was written as (``second_order``, ``integrator``,
-    ``double_integrator``) or ``tf``; ``text`` is how the report prints it.
-
-    Examples
-    --------
-    >>> Plant.second_order(2.75, 2.0).den
-    (1.0, 2.0, 0.0)
-    """
-
-    kind: str
-    num: tuple[float, ...]
-    den: tuple[float, ...]
-    text: str
-
-    def __post_init__(self) -> None:
-        check_plant(self.num, self.den, "plant")
-
-    @classmethod
-    def second_order(cls, K: float, wb: float) -> Plant:
-        """The paper's plant ``K wb / (s (s + wb))``."""
-        K, wb = _real(K, "K"), _real(wb, "wb")
-        return cls("second_order", (K * wb,), (1.0, wb, 0.0), f"{K:g}*{wb:g}/(s (s + {wb:g}))")
-
-    @property
-    def relative_degree(self) -> int:
-        """Degree of ``den`` minus degree of ``num`` (leading zeros ignored): >= 0, as a plant is proper.
-
-        Examples
-        --------
-        >>> Plant.integrator(1.0).relative_degree, Plant.tf([1.0, 1.0], [1.0, 3.0]).relative_degree
-        (1, 0)
-        """
-        return relative_degree(self.num, self.den)
-
-    @classmethod
-    def integrator(cls, K: float) -> Plant:
-        """``K / s``."""
-        K = _real(K, "K")
-        return cls("integrator", (K,), (1.0, 0.0), f"{K:g}/s")
-
-    @classmethod
-    def double_integrator(cls, K: float) -> Plant:
-        """``K / s^2``."""
-        K = _real(K, "K")
-        return cls("double_integrator", (K,), (1.0, 0.0, 0.0), f"{K:g}/s^2")
-
-    @classmethod
-    def tf(cls, num: Sequence[float], den: Sequence[float]) -> Plant:
-        """Any transfer function ``num(s) / den(s)`` (coefficients highest power first).
-
-        Examples
-        --------
-        >>> Plant.tf([0, 2.0], [1.0, 3.0, 0.0]).text
-        '(2) / (1 s^2 + 3 s)'
-        """
-        check_plant(num, den, "plant")  # before float() could take "1" or True for a number
-        num = tuple(float(c) for c in num)
-        num = num[next((i for i, c in enumerate(num) if c != 0), len(num)) :]
-        den = tuple(float(c) for c in den)
-        return cls("tf", num, den, f"({_poly_text(num)}) / ({_poly_text(den)})")
-
-
-def _real(x: Any, name: str) -> float:
-    """A shorthand's gain or break frequency as a float: a finite number > 0, as a config's is."""
-    if isinstance(x, bool) or not isinstance(x, numbers.Real) or not (math.isfinite(x) and x > 0):
-        raise ConfigError(f"plant.{name}: must be a finite number > 0, got {x!r}")
-    return float(x)
-
-
-#: The most coefficients of ``num`` or of ``den`` (degree 10).
-MAX_PLANT_COEFFICIENTS = 11
-
-
-def check_plant(num: Sequence[float], den: Sequence[float], where: str) -> None:
-    """Refuse a plant that is no proper transfer function: coefficients not finite, more than
-    :data:`MAX_PLANT_COEFFICIENTS`, ``num`` or ``den`` all zero, or ``num`` of higher degree
-    than ``den`` (leading zeros ignored).
-
-    Examples
-    --------
-    >>> check_plant((float("nan"),), (1.0, 0.0), "plant")
-    Traceback (most recent call last):
-    ...
-    hcid.errors.ConfigError: plant.num: must be finite numbers, got [nan]
-    """
-    for key, coefs in (("num", num), ("den", den)):
-        if not all(
-            isinstance(c, numbers.Real) and not isinstance(c, bool) and math.isfinite(c) for c in coefs
-        ):
-            raise ConfigError(f"{where}.{key}: must be finite numbers, got {list(coefs)}")
-        if len(coefs) > MAX_PLANT_COEFFICIENTS:
-            raise ConfigError(
-                f"{where}.{key}: must hold at most {MAX_PLANT_COEFFICIENTS} coefficients (degree 10), "
-                f"got {len(coefs)}"
-            )
-    for key, coefs in (("num", num), ("den", den)):
-        if not any(c != 0 for c in coefs):
-            raise ConfigError(f"{where}.{key}: must not be all zero")
-    if relative_degree(num, den) < 0:
-        raise ConfigError(
-            f"{where}: must be proper (degree of num <= degree of den), got degrees {_degree(num)} and "
-            f"{_degree(den)}"
-        )
-
-
-#: The largest relative degree of a plant with an Inverse Feedforward Model (SPEC 7):
-#: ``Ynms Kpt / Yc / (TI s + 1)^2`` is proper exactly up to it.
-MAX_INVERTIBLE_DEGREE = 4
-
-
-def relative_degree(num: Sequence[float], den: Sequence[float]) -> int:
-    """Degree of ``den`` minus degree of ``num`` (in s, highest power first; leading zeros ignored).
-
-    Examples
-    --------
-    >>> relative_degree([1.0], [1.0, 0.0]), relative_degree([1.0, 0.0, 0.0], [0.0, 1.0, 1.0])
-    (1, -1)
-    """
-    return _degree(den) - _degree(num)
-
-
-def _degree(coefs: Sequence[float]) -> int:
-    first = next((i for i, c in enumerate(coefs) if c != 0), len(coefs))
-    return len(coefs) - first - 1
-
-
-def _poly_text(coefs: tuple[float, ...]) -> str:
-    n = len(coefs) - 1
-    terms = [
-        f"{c:g}" + ("" if i == n else " s" if i == n - 1 else f" s^{n - i}")
-        for i, c in enumerate(coefs)
-        if c != 0
-    ]
-    return " + ".join(terms).replace("+ -", "- ")
-
-
-@dataclass(frozen=True)
 class Loop:
     """Plant, neuromuscular and remnant-filter parameters (rad/s, unitless).
 
     ``plant`` is the controlled element (a config's ``loop.plant``, or the paper's
-    ``Kc wb / (s (s + wb))`` from ``loop.Kc`` and ``loop.wb``). ``disturbance_at`` is
-    ``output`` (the paper: ``theta = Yc u + fd``) or ``input`` (``theta = Yc (u + fd)``).
+    ``Kc wb / (s (s + wb))`` from ``loop.Kc`` and ``loop.wb``), or a plant per level of a data
+    factor (a measured study's: :meth:`Config.with_plant` gives a level's loop). ``disturbance_at``
+    is ``output`` (the paper: ``theta = Yc u + fd``) or ``input`` (``theta = Yc (u + fd)``).
     """
 
-    plant: Plant
+    plant: Plant | PlantByFactor
     w_nms: float
     zeta_nms: float
     w_n: float
@@ -544,6 +405,45 @@ class Config:
             raise ConfigError(
                 f"{missing}: missing; `hcid {command}` simulates and needs them (this config describes "
                 f"measured data only{hint if self.loop is not None else ''})"
+            )
+
+    @property
+    def plant_factor(self) -> str | None:
+        """The data factor whose levels have a plant each (``loop.plant.by``); None for one plant."""
+        plant = None if self.loop is None else self.loop.plant
+        return plant.by if isinstance(plant, PlantByFactor) else None
+
+    def with_plant(self, level: str) -> Config:
+        """This config with the plant of ``level`` (of :attr:`plant_factor`) as its one plant, in
+        ``raw`` too (the twins' configs copy ``raw``'s plant): what a run of that level is analysed
+        with, the same as a config giving that plant alone.
+
+        Raises
+        ------
+        ConfigError
+            For a config of one plant, or a level ``loop.plant.levels`` does not give.
+        """
+        if self.plant_factor is None:
+            raise ConfigError(f"loop.plant: gives one plant, not one per level (asked for {level!r})")
+        plant = self.loop.plant.of(level)
+        raw_loop = dict(self.raw.get("loop", {}))
+        raw_loop["plant"] = raw_loop["plant"]["levels"][level]
+        loop = dataclasses.replace(self.loop, plant=plant)
+        return dataclasses.replace(self, loop=loop, raw={**self.raw, "loop": raw_loop})
+
+    def require_one_plant(self, what: str) -> None:
+        """Refuse a plant per level where ``what`` (a command) needs one plant.
+
+        Raises
+        ------
+        ConfigError
+            Naming ``loop.plant.by`` and its levels.
+        """
+        by = self.plant_factor
+        if by is not None:
+            raise ConfigError(
+                f"loop.plant.by: {what} needs one plant; this config gives one per level of {by!r} "
+                f"({', '.join(self.loop.plant.names)}): give each plant a config of its own"
             )
 
     @staticmethod

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from hcid.config import HCModel, Loop, Plant
-from hcid.config.types import MAX_INVERTIBLE_DEGREE
+from hcid.config.plant import MAX_INVERTIBLE_DEGREE
 from hcid.errors import ConfigError, quote
 from hcid.loop import _lti
 
@@ -48,7 +48,16 @@ def _tf(polynomials: _lti.Polynomials) -> control.TransferFunction:
 
 
 def plant(loop: Loop) -> control.TransferFunction:
-    """The configured plant ``Yc`` (the paper's ``Kc wb / (s (s + wb))`` by default), theta per u."""
+    """The configured plant ``Yc`` (the paper's ``Kc wb / (s (s + wb))`` by default), theta per u.
+
+    Raises
+    ------
+    ConfigError
+        For a plant per level of a data factor: each run's own comes from
+        :meth:`hcid.config.Config.with_plant`.
+    """
+    if not isinstance(loop.plant, Plant):
+        raise ConfigError(f"loop.plant.by: one plant is needed here, got one per level of {loop.plant.by!r}")
     return transfer_function(loop.plant)
 
 

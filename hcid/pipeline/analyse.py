@@ -5,7 +5,9 @@
    the forcing functions are multisines, by default) to every run
    with and without its feedforward path, and SPEC 1's remnant filter to what the
    feedforward fit leaves.
-3. Per group of runs (``--by``, default the factor ``condition``; one group without it):
+3. Per group of runs (``--by``, default the factor ``condition``; one group without it; with a
+   plant per level of a factor, that factor too, so that a group holds one plant and every run is
+   fitted and described with its own plant: :mod:`hcid.pipeline.plants`):
    the twins are the group's fitted model (medians over its runs; the FF twin) and the
    same with ``Kpt = 0`` (the FB twin), with the group's fitted neuromuscular system
    and remnant, driven by the group's first run's recorded ft and fd at the data's
@@ -65,6 +67,7 @@ from hcid.pipeline.fit import _choices, _stage_choices, fit_run, fit_windows
 from hcid.pipeline.line_statistics import run_statistics
 from hcid.pipeline.options import AnalysisOptions
 from hcid.pipeline.parallel import labelled
+from hcid.pipeline.plants import RunPlants, run_plants
 from hcid.pipeline.rundir import holds_run_dir
 from hcid.pipeline.sessions import Session
 from hcid.pipeline.studies import check_plant, identify_study, write_skipped
@@ -150,6 +153,7 @@ class _Study:
     records: dict[int, dict]
     groups: dict[tuple[str, ...], list[int]]
     kn_rate: float
+    plants: RunPlants  # each run's config, with its own plant
 
 
 @dataclass
@@ -205,7 +209,7 @@ def _check_config(config: Config) -> None:
 
 def _fit_runs(study: _Study, found: _Found) -> None:
     """Phase 2: every run fitted with and without feedforward."""
-    tasks = [(study.config, s, study.records[s], study.kn_rate) for s in sorted(study.records)]
+    tasks = [(study.plants.of_run(s), s, study.records[s], study.kn_rate) for s in sorted(study.records)]
     found.fitted = {
         seed: (fits, remnant) for seed, fits, remnant in study.execution.map(fit_run, tasks, "fit runs")
     }
@@ -216,9 +220,8 @@ def _twin_source(study: _Study, found: _Found, key, sets: list[list[int]], i: in
     the group's remnant; numbered from 1 only where the group has several sets."""
     record = study.records[sets[i][0]]
     number = i + 1 if len(sets) > 1 else 0
-    return TwinSource(
-        study.config, study.run_dir, key, record, model, found.remnants[key], study.kn_rate, number
-    )
+    config = study.plants.of_runs(study.groups[key])  # the group's plant
+    return TwinSource(config, study.run_dir, key, record, model, found.remnants[key], study.kn_rate, number)
 
 
 def _twin_sets(study: _Study, found: _Found, key, kind: str, model: dict, fb_from=None):
@@ -233,25 +236,29 @@ def _twin_sets(study: _Study, found: _Found, key, kind: str, model: dict, fb_fro
 
 
 def _twins(study: _Study, found: _Found) -> None:
-    """Phase 3: per group, the twins and their calibration; which twins each method uses."""
-    found.models, found.remnants = group_models(study.config, study.groups, found.fitted)
+    """Phase 3: per group, the twins and their calibration; which twins each method uses.
+
+    The groups' models, and the study's strongest feedforward, come from the groups of each plant
+    apart: a plant's groups are calibrated as a study of that plant alone would calibrate them."""
+    strongest = {}
+    for level, groups in study.plants.split(study.groups).items():
+        models, remnants = group_models(study.plants.configs[level], groups, found.fitted)
+        found.models.update(models)
+        found.remnants.update(remnants)
+        # The study's strongest feedforward (--ff-twin study and auto): the group with the largest
+        # fitted Kpt ("would feedforward of the size seen in this study be found here?").
+        strongest.update(dict.fromkeys(groups, max(groups, key=lambda k: models[k].values["Kpt"])))
     medians = {key: m.values for key, m in found.models.items()}
-    # The study's strongest feedforward (--ff-twin study and auto): the group with the largest
-    # fitted Kpt ("would feedforward of the size seen in this study be found here?").
-    strongest = max(medians, key=lambda k: medians[k]["Kpt"])
     ff_twin = study.options.ff_twin
     for key in study.groups:
-        study_model = {**medians[key], **{p: medians[strongest][p] for p in FEEDFORWARD_PARAMETERS}}
-        first = "study" if ff_twin == "study" and key != strongest else "own"
+        top = strongest[key]
+        study_model = {**medians[key], **{p: medians[top][p] for p in FEEDFORWARD_PARAMETERS}}
+        first = "study" if ff_twin == "study" and key != top else "own"
         twins_of = {
             first: _twin_sets(study, found, key, first, medians[key] if first == "own" else study_model)
         }
         earlier = twins_of[first]
-        if (
-            ff_twin == "auto"
-            and key != strongest
-            and not all(separates(c) for c in earlier.calibrations.values())
-        ):
+        if ff_twin == "auto" and key != top and not all(separates(c) for c in earlier.calibrations.values()):
             # The study's FB twin is the own twins' (Kpt = 0: the same loop), shared, not made again.
             twins_of["study"] = _twin_sets(study, found, key, "study", study_model, earlier)
         for method_name in methods.METHODS:
@@ -334,7 +341,8 @@ def _select_and_fit(study: _Study, found: _Found, judge: Evidence, run_lines: di
                 )
                 choices = _stage_choices(run_dir, stored, method_name, data_name, seed)
                 own = _same_fit(config, sel, found.fitted[seed][0])  # shared, not fitted twice
-                tasks.append((config, seed, study.records[seed], method_name, sel, choices, own))
+                mine = study.plants.of_run(seed)  # the run's own plant
+                tasks.append((mine, seed, study.records[seed], method_name, sel, choices, own))
             decide([found.evidence[(seed, method_name)] for seed in seeds], study.options.alpha, deciding)
     found.finals = {
         (seed, method_name): analysis
@@ -370,23 +378,26 @@ def analyse_study(
     Raises
     ------
     ConfigError
-        Without a plant (``loop``), or for a ``by`` factor the data set does not have.
+        Without a plant (``loop``), for a ``by`` factor or a plant factor (``loop.plant.by``) the
+        data set does not have, or a plant per level in a whole experiment.
     DataError
-        For a bad data set (one line, nothing written).
+        For a bad data set, or a run whose level has no plant (one line, nothing written).
     """
     _check_config(config)
     config = with_data(config)
-    check_plant(config, data)  # every run, the single-input ones too (identify checks its own)
+    plants = run_plants(config, data)  # each run's plant: its factor and levels checked first
+    check_plant(config, data, plants)  # every run, the single-input ones too (identify checks its own)
     trials = sessions.classify(data, config)
     person = sessions.person_factor(data, options.person)
     whole_experiment = sessions.is_whole_experiment(trials)
     if whole_experiment:
         sessions.check_factors(data.factors, person)
+        config.require_one_plant("a whole experiment, its conditions combined per person,")
     whole = data
     two_input = [seed for seed, t in trials.items() if t.kind is Kind.TWO_INPUT]
     if len(two_input) < len(trials):  # single-input runs: combined per person, not tested for feedforward
         data = sessions.subset(data, two_input)
-    by = _factors_and_groups(data, options.by)
+    by = plants.grouping(_factors_and_groups(data, options.by))  # a group never mixes plants
     runs = datasets.runs_table(config.data.name, data)
     if options.compare is not None:  # refused before anything is written
         effects.compare_levels(runs.to_pylist(), options.compare, person)
@@ -422,6 +433,7 @@ def analyse_study(
         data.records,
         _groups(runs, by),
         twin_rate(config.timing.output_rate),
+        plants,
     )
     found = _Found()
     _fit_runs(study, found)
@@ -429,12 +441,12 @@ def analyse_study(
     _twins(study, found)
     lap_done("twins")
     _selection_paths(study, found, identified.frontier)
-    checks = Checks(config, data.records)
+    checks = Checks(config, data.records, {s: plants.of_run(s).loop for s in data.records})
     starts = {key: found.models[key].values for key in study.groups}  # each group's model
     with labelled("runs: "):
         run_lines = run_statistics(
             data.records,
-            config,
+            {s: plants.of_run(s) for s in data.records},
             {s: starts[key] for key, seeds in study.groups.items() for s in seeds},
             execution,
         )
@@ -443,7 +455,7 @@ def analyse_study(
         run_dir,
         options.alpha,
         options.most_fb_twins,
-        {group_name(by, key): start for key, start in starts.items()},
+        {group_name(by, key): (plants.of_runs(seeds), starts[key]) for key, seeds in study.groups.items()},
         execution,
     )
     _more_fb_twins(study, found, judge, run_lines)
@@ -464,7 +476,9 @@ def analyse_study(
     compared, rows = None, []
     if options.compare is not None:
         timing = config.timing
-        lines = effects.line_values(data.records, timing.output_rate, timing.record_samples)
+        # |Ht Yc| at the lines too where the runs' plants differ (each run's own plant).
+        own = {s: plants.plant_of(s) for s in data.records} if plants.several else None
+        lines = effects.line_values(data.records, timing.output_rate, timing.record_samples, own)
         rows = effects.effects_rows(run_table.to_pylist(), options.compare, person, lines)
     if session is not None:
         rows += effects.superposition_rows(session.lines)

@@ -41,9 +41,8 @@ def write_tables(study, found, checks: Checks, judge: Evidence, set_aside) -> tu
     group_table, run_table = _tables(study, found, checks)
     fc_rows = []
     for key, seeds in study.groups.items():
-        fc_rows += _fc_rows(
-            study.config, group_name(study.by, key), seeds, study.records, found.models[key].values
-        )
+        config = study.plants.of_runs(seeds)  # the group's plant
+        fc_rows += _fc_rows(config, group_name(study.by, key), seeds, study.records, found.models[key].values)
     results.write(
         tables.FC_ESTIMATES, pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow), run_dir
     )

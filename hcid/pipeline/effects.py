@@ -17,6 +17,7 @@ import pyarrow as pa
 
 from hcid import tables
 from hcid.analysis.fourier import fc_estimate
+from hcid.config import Plant
 from hcid.errors import ConfigError, DataError
 from hcid.hcfit.determined import DETERMINED
 from hcid.io import folders, results
@@ -87,10 +88,18 @@ def long_table(rows: Sequence[dict], compare: str, person: str):
     return table
 
 
-def line_values(records: Mapping[int, dict], rate: float, n: int) -> dict[int, list[tuple[str, float]]]:
+def line_values(
+    records: Mapping[int, dict], rate: float, n: int, plants: Mapping[int, Plant] | None = None
+) -> dict[int, list[tuple[str, float]]]:
     """Each run's Fourier-coefficient responses (SPEC 10) over the first ``n`` samples: |He| (dB)
     and its phase (deg) at every disturbance line, |Ht| and its phase at every target line, each
-    named with the line's frequency; none for a run whose design allows no estimate."""
+    named with the line's frequency; none for a run whose design allows no estimate.
+
+    With each run's plant (``plants``: a study whose runs' plants differ), also the model
+    inversion |Ht Yc| (dB, SPEC 11; 0 dB the plant's exact inverse) at every target line, with the
+    run's own Yc. A study of one plant leaves it out: there |Ht Yc| in dB is |Ht| plus the same
+    constant per line in every run, so its effects would be |Ht|'s again, doubling the Holm family.
+    """
     out = {}
     for seed, record in records.items():
         try:
@@ -98,11 +107,14 @@ def line_values(records: Mapping[int, dict], rate: float, n: int) -> dict[int, l
         except DataError:
             continue
         values = []
-        for path, omega, h in (("He", fc.omega_e, fc.he), ("Ht", fc.omega_t, fc.ht)):
+        yc = None if plants is None else plants[seed].response(fc.omega_t)
+        paths = [("He", fc.omega_e, fc.he), ("Ht", fc.omega_t, fc.ht)]
+        for path, omega, h in paths + ([("Ht Yc", fc.omega_t, fc.ht * yc)] if yc is not None else []):
             for w, x in zip(omega, h, strict=True):
                 if np.isfinite(x) and abs(x) > 0:
                     values.append((f"|{path}| at {w:.3g} rad/s", float(20 * np.log10(abs(x)))))
-                    values.append((f"{path} phase at {w:.3g} rad/s", float(np.degrees(np.angle(x)))))
+                    if path != "Ht Yc":  # the inversion's size, as SPEC 12's |Ht Yc|; no phase
+                        values.append((f"{path} phase at {w:.3g} rad/s", float(np.degrees(np.angle(x)))))
         out[seed] = values
     return out
 
@@ -125,7 +137,9 @@ def effects_rows(
     """Every method's effects of ``compare`` (its first level the reference), one dict per
     effect with its ``source`` (the method whose fits it compares: rows of
     ``study_effects.parquet``); with each run's ``lines`` (:func:`line_values`), their effects as
-    source :data:`MODEL_FREE` (Holm's correction over each source's quantities apart)."""
+    source :data:`MODEL_FREE` at the lines every level of ``compare`` has (the CPHS `so` trials'
+    forcing lines are some of the `fo` trials'), with Holm's correction over each source's
+    quantities apart."""
     from hcid.analysis.effects import study_effects
 
     units = {**tables.PARAMETER_UNITS, **dict(LOOP_FIGURES)}
@@ -137,7 +151,9 @@ def effects_rows(
     if lines:
         runs = list({int(r["run_id"]): r for r in rows}.values())  # one row per run
         table = _line_table(runs, lines, compare, person)
-        if len(table):
+        if len(table):  # the lines every level has: a line of some levels only has no contrast
+            levels = table.groupby("quantity")[compare].nunique()
+            table = table[table["quantity"].map(levels) == table[compare].nunique()]
             names = list(dict.fromkeys(table["quantity"]))
             angles = {q for q in names if " phase at " in q}
             units = {q: "deg" if q in angles else "dB" for q in names}

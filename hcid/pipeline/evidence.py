@@ -13,7 +13,7 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import hcfit, tables
-from hcid.config import Config
+from hcid.config import Config, Loop
 from hcid.errors import DataError
 from hcid.hcfit.consistency import consistency, group_consistency
 from hcid.hcfit.determined import is_flagged, is_undetermined, reason
@@ -74,10 +74,13 @@ def group_name(by: Sequence[str], key: tuple[str, ...]) -> str:
 
 class Checks:
     """Every run at its forcing lines, read once, for the consistency of any model with it (SPEC
-    11); ``problem(seeds)`` says why some run (or the group) has no test."""
+    11); ``problem(seeds)`` says why some run (or the group) has no test. ``loops``: each run's
+    loop where the runs' plants differ (:mod:`hcid.pipeline.plants`; a group's runs share one),
+    else the config's."""
 
-    def __init__(self, config: Config, records: dict):
-        self.yc = plant(config.loop)
+    def __init__(self, config: Config, records: dict, loops: Mapping[int, Loop] | None = None):
+        loops = dict.fromkeys(records, config.loop) if loops is None else loops
+        self.yc_of = {seed: plant(loops[seed]) for seed in records}
         self.rate = config.timing.output_rate
         self.records = records
         self.lines, self.problems = {}, {}
@@ -96,15 +99,15 @@ class Checks:
         if seed not in self.lines:
             return None
         fitted = len(fit.names) - len(fit.fixed) if fit.target == "lines" else 0
-        return consistency(fit.values, self.yc, self.lines[seed], self.records[seed], self.rate, fitted)
+        yc = self.yc_of[seed]
+        return consistency(fit.values, yc, self.lines[seed], self.records[seed], self.rate, fitted)
 
     def group(self, seeds: list[int], values: dict):
         if not all(s in self.lines for s in seeds):
             return None
         try:
-            return group_consistency(
-                values, self.yc, [self.lines[s] for s in seeds], [self.records[s] for s in seeds], self.rate
-            )
+            lines, records = [self.lines[s] for s in seeds], [self.records[s] for s in seeds]
+            return group_consistency(values, self.yc_of[seeds[0]], lines, records, self.rate)
         except DataError as exc:
             self.problems[seeds[0]] = f"no test: {exc}"
             return None
@@ -147,7 +150,8 @@ class Evidence:
     statistics (:data:`LINE_STATISTICS`), each with its sequential p-value (:data:`EXCEEDANCES`,
     at most ``max_fb`` FB twins) and its twins' power. The twins' values are computed once per
     twin folder (and method) whatever the number of runs they judge, the line statistics from
-    the group's model (``starts``: group name -> model values, as the runs' own); FB twins drawn
+    the group's model in the group's plant's loop (``starts``: group name -> (the group's config,
+    its model values), as the runs' own); FB twins drawn
     beyond the calibration's (:meth:`add`) are kept per group and forcing set, shared by the
     group's own and study twins (whose FB twin is the same loop)."""
 
@@ -157,7 +161,7 @@ class Evidence:
         run_dir: Path,
         alpha: float,
         max_fb: int,
-        starts: Mapping[str, dict],
+        starts: Mapping[str, tuple[Config, dict]],
         execution: Execution,
     ):
         grid = config.selection.w_grid
@@ -185,9 +189,8 @@ class Evidence:
 
     def _folder_lines(self, group: str, folder: str) -> dict[str, dict[str, np.ndarray]]:
         if folder not in self._lines:
-            self._lines[folder] = twin_statistics(
-                self.run_dir / folder, self.config, self.starts[group], self.execution
-            )
+            config, start = self.starts[group]
+            self._lines[folder] = twin_statistics(self.run_dir / folder, config, start, self.execution)
         return self._lines[folder]
 
     def lines(self, group: str, twin) -> dict[str, dict[str, np.ndarray]] | None:

@@ -496,6 +496,7 @@ def fit_hc_study(
             "model inverts it), which a data-only config does not give: add models, loop, signals "
             "and seeds as in configs/integrator_example.yaml"
         )
+    config.require_one_plant("`hcid fit-hc`")
     check_run_dir(config, run_dir, "select")
     start = time.perf_counter()
     config = dataclasses.replace(config, fit_hc=_fit_settings(config, target))

@@ -47,13 +47,14 @@ def record_statistics(
 
 def run_statistics(
     records: Mapping[int, Mapping[str, np.ndarray]],
-    config: Config,
+    configs: Mapping[int, Config],
     starts: Mapping[int, Mapping[str, float]],
     execution: Execution,
 ) -> dict[int, dict[str, float] | None]:
-    """:func:`record_statistics` of every run (``starts``: each run's group model), by run."""
+    """:func:`record_statistics` of every run (``configs``: each run's, with its own plant;
+    ``starts``: each run's group model), by run."""
     seeds = sorted(starts)
-    tasks = [(records[s], config.timing.output_rate, config.loop, dict(starts[s])) for s in seeds]
+    tasks = [(records[s], configs[s].timing.output_rate, configs[s].loop, dict(starts[s])) for s in seeds]
     return dict(zip(seeds, execution.map(record_statistics, tasks, "line statistics"), strict=True))
 
 

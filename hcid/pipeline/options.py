@@ -25,7 +25,8 @@ class AnalysisOptions:
     """How ``hcid analyse`` groups and decides (its options; checked when made).
 
     ``by``: the factors whose runs share one calibrated W (None: ``condition`` if the data set
-    has it, else one group; a string is split at commas, as ``--by`` is); ``twins``:
+    has it, else one group; a string is split at commas, as ``--by`` is; a config's plant factor,
+    ``loop.plant.by``, is added where missing: :meth:`hcid.pipeline.plants.RunPlants.grouping`); ``twins``:
     realizations of each twin per group and forcing set (also the batch in which more FB twins
     are drawn); ``max_fb_twins``: the most FB twins per forcing set for the runs' p-values
     (None: :data:`MAX_FB_TWINS`, or ``twins`` if more); ``ff_twin``: :data:`FF_TWINS`;

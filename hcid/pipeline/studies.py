@@ -27,6 +27,7 @@ from hcid.io.resolve import with_data
 from hcid.loop.simulate import remnant_gain, simulate_realization
 from hcid.pipeline.execution import Execution
 from hcid.pipeline.parallel import compile_before_fork
+from hcid.pipeline.plants import RunPlants, run_plants
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
 from hcid.pipeline.sweep import SweepRun, selections, sweep_study
 from hcid.selection.calibration import calibrate
@@ -404,20 +405,24 @@ def write_skipped(run_dir: Path, data: datasets.DataSet) -> None:
     results.write(tables.SKIPPED, pa.Table.from_pylist(rows, schema=tables.SKIPPED.arrow), run_dir)
 
 
-def check_plant(config: Config, data: datasets.DataSet) -> None:
+def check_plant(config: Config, data: datasets.DataSet, plants: RunPlants | None = None) -> None:
     """Refuse runs whose e is not ft minus the configured plant's output (a data set of another
     plant, or the disturbance at the other point): every result would be for the wrong loop.
     Each run is checked over the analysis window (where its multisines have whole periods; a
-    single-input run at its input's lines); runs whose forcing functions have no lines there, a
-    config without a loop (identification alone) and one with ``data.plant_check: false`` are not
-    checked."""
+    single-input run at its input's lines) against its own plant (``plants``, from
+    :func:`hcid.pipeline.plants.run_plants` where not given); runs whose forcing functions have no
+    lines there, a config without a loop (identification alone) and one with
+    ``data.plant_check: false`` are not checked."""
     loop, rate = config.loop, config.timing.output_rate
-    if loop is None or not config.data.plant_check:
+    if loop is None:
+        return
+    plants = run_plants(config, data) if plants is None else plants  # the factor checked first
+    if not config.data.plant_check:
         return
     n = config.timing.record_samples
     found = {
-        run: plant_mismatch({k: rec[k][:n] for k in ("ft", "fd", "e", "u")}, rate, loop.plant.num,
-                            loop.plant.den, loop.disturbance_at)
+        run: plant_mismatch({k: rec[k][:n] for k in ("ft", "fd", "e", "u")}, rate,
+                            plants.plant_of(run).num, plants.plant_of(run).den, loop.disturbance_at)
         for run, rec in data.records.items()
     }  # fmt: skip
     over = {run: m for run, m in found.items() if is_other_plant(m)}
@@ -425,10 +430,11 @@ def check_plant(config: Config, data: datasets.DataSet) -> None:
         return
     worst = max(over, key=over.get)
     file = next((r["file"] for r in data.runs if r.get("run") == worst), None)
+    key = "loop.plant" if plants.factor is None else f"loop.plant.levels.{plants.level_of[worst]}"
     raise DataError(
         f"data: run {worst}{f' ({file})' if file else ''} is not the configured plant: "
         f"{over[worst]:.0%} (RMS) of its theta = ft - e at the forcing lines is not what "
-        f"loop.plant {loop.plant.text} with the disturbance at its {loop.disturbance_at} gives "
+        f"{key} {plants.plant_of(worst).text} with the disturbance at its {loop.disturbance_at} gives "
         f"({len(over)} of {len(found)} runs over {PLANT_MISMATCH_LIMIT:.0%}); check loop.plant and "
         "loop.disturbance_at, or the data files (data.plant_check: false where the plant leaves out "
         "a display delay)"

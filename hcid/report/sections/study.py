@@ -59,6 +59,15 @@ def _slug(folder: str) -> str:
     return folder.rsplit("/", 1)[-1]
 
 
+def _group_loop(run, group: str):
+    """The group's loop: with a plant per level of a factor, its runs' (a group holds one plant)."""
+    factor = run.config.plant_factor
+    if factor is None:
+        return run.config.loop
+    level = next(r[factor] for r in run.analysis.to_pylist() if r["group"] == group)
+    return run.config.with_plant(level).loop
+
+
 def _model_curves(run, twin: dict, lines: list[float]) -> dict:
     """The group's fitted model (the FF twin's parameters) on a dense grid around the forcing
     lines (half the lowest to 1.5 times the highest): omega, He, Ht."""
@@ -69,7 +78,7 @@ def _model_curves(run, twin: dict, lines: list[float]) -> dict:
     omega = np.geomspace(0.5 * min(lines), top, 300)
     # The group's own model (from what its runs determine), as fc_estimates.parquet's model columns.
     values = {p: twin[f"fitted_{p}"] for p in HC_PARAMETER_NAMES}
-    hft, he = hc_response(values, plant(run.config.loop), omega)
+    hft, he = hc_response(values, plant(_group_loop(run, twin["group"])), omega)
     return {"omega": omega, "e": he, "ft": hft if values["Kpt"] > 0 else None}
 
 
