@@ -214,6 +214,39 @@ def test_a_runs_p_value_from_39_twins_and_their_tail_has_its_level_under_the_nul
         assert low <= np.mean(p <= level) <= high, (null, level, np.mean(p <= level))
 
 
+@pytest.mark.parametrize("null", ["lognormal", "exponential"])
+def test_stopping_a_run_beyond_every_twin_at_its_tail_keeps_the_level(null):
+    # Source: SPEC 13's calibration rule, for the draws as hcid analyse makes them: 20 FB twins,
+    # then batches of 20 up to 99, stopped once 5 reach the run, or once 40 or more are drawn with
+    # none reaching it and their tail's p at most alpha / 10 = 0.005 (sequential_settled); the p
+    # over the twins drawn. Over 4000 null runs P(p <= 0.01) and P(p <= 0.05) within their
+    # binomial 99% bands; a run far beyond every twin stops at 40, not 99.
+    from scipy import stats
+
+    from hcid.selection.calibration import run_p_value
+
+    rng = np.random.default_rng(4747)
+    draw = {
+        "lognormal": lambda k: np.exp(rng.normal(0, 1, k)),
+        "exponential": lambda k: rng.exponential(1, k),
+    }[null]
+
+    def drawn_for(value):
+        fb = draw(20)
+        while not sequential_settled(value, fb, 5, 99, tail_below=0.005):
+            fb = np.concatenate([fb, draw(min(20, 99 - fb.size))])
+        return fb
+
+    n = 4000
+    p = np.array([run_p_value(x, drawn_for(x))[0] for x in draw(n)])
+    for level in (0.01, 0.05):
+        low, high = stats.binom.ppf([0.005, 0.995], n, level) / n
+        assert low <= np.mean(p <= level) <= high, (null, level, np.mean(p <= level))
+    far = float(np.max(draw(10000)))  # beyond 10000 draws: settled by the tail before 99
+    assert drawn_for(far).size < 99
+    assert drawn_for(100 * far).size == 40  # far beyond: at the first chance, 40
+
+
 def test_sequential_settled_needs_h_at_or_above_or_the_most_drawn():
     assert not sequential_settled(0.9, np.linspace(0, 1, 20), 5, 99)  # 2 at or above 0.9
     assert sequential_settled(0.5, np.linspace(0, 1, 20), 5, 99)  # 10 at or above

@@ -168,6 +168,7 @@ class Evidence:
         self.lo, self.hi = float(min(grid)), float(max(grid))
         self.config, self.run_dir, self.alpha, self.max_fb = config, run_dir, alpha, max_fb
         self.starts, self.execution = starts, execution
+        self.tail_below = alpha / 10  # a run beyond every twin, its tail p this far below alpha, is settled
         self._thresholds: dict[tuple[str, str], dict[str, np.ndarray]] = {}
         self._lines: dict[str, dict[str, dict[str, np.ndarray]]] = {}  # folder -> model -> statistic
         # (group, forcing set) -> per draw: its count, its W* by identified method, its folder
@@ -283,7 +284,11 @@ class Evidence:
             if deciding[m] == "W*"
             and any(
                 not sequential_settled(
-                    w[m], self.fb_thresholds(group, forcing_set, twin, m), EXCEEDANCES, self.max_fb
+                    w[m],
+                    self.fb_thresholds(group, forcing_set, twin, m),
+                    EXCEEDANCES,
+                    self.max_fb,
+                    self.tail_below,
                 )
                 for w, _ in runs
             )
@@ -291,7 +296,8 @@ class Evidence:
         line_deciding = [name for name in LINE_STATISTICS if name in deciding.values()]
         fb = self.fb_lines(group, forcing_set, next(iter(twin_of.values()))) if line_deciding else None
         lines_open = fb is not None and any(
-            values is not None and not sequential_settled(values[name], fb[name], EXCEEDANCES, self.max_fb)
+            values is not None
+            and not sequential_settled(values[name], fb[name], EXCEEDANCES, self.max_fb, self.tail_below)
             for name in line_deciding
             for _, values in runs
         )

@@ -374,9 +374,21 @@ def run_p_value(value: float, fb_in_order: np.ndarray, h: int = 5) -> tuple[floa
     return min(tail.p, p), n, tail.method
 
 
-def sequential_settled(value: float, fb_in_order: np.ndarray, h: int, n_max: int) -> bool:
-    """Whether more FB twins could change :func:`sequential_p_value` of ``value``: not once
-    ``h`` are at or above it, nor once ``n_max`` are drawn.
+#: The fewest FB twins whose tail may settle a run beyond every one of them (the calibration's 20
+#: and one batch more: the tail fit's quarter is then at least 10 twins, SPEC 13).
+TAIL_SETTLES_FROM = 40
+
+
+def sequential_settled(
+    value: float, fb_in_order: np.ndarray, h: int, n_max: int, tail_below: float | None = None
+) -> bool:
+    """Whether more FB twins could change the decision on ``value``: not once ``h`` are at or
+    above it (Besag and Clifford's stop), nor once ``n_max`` are drawn; and, with ``tail_below``,
+    not once at least :data:`TAIL_SETTLES_FROM` are drawn, none at or above it, and their
+    generalized Pareto tail (:func:`run_p_value`) puts its p at most ``tail_below``. A run far
+    beyond every twin then stops at 40 where it took every one of ``n_max``: under the null such
+    a stop happens with probability about ``tail_below`` (the tail's level), which bounds what it
+    can add to the level of a decision at ``alpha`` (``tail_below = alpha / 10``: at most a tenth).
 
     Examples
     --------
@@ -384,9 +396,18 @@ def sequential_settled(value: float, fb_in_order: np.ndarray, h: int, n_max: int
     False
     >>> sequential_settled(0.25, np.array([0.5, 0.3]), 2, 99)
     True
+    >>> fb = np.exp(np.linspace(-3.0, 0.0, 40))  # 40 FB twins' W*, the largest 1.0
+    >>> sequential_settled(5.0, fb, 5, 99), sequential_settled(5.0, fb, 5, 99, tail_below=0.005)
+    (False, True)
     """
     fb = np.asarray(fb_in_order, dtype=np.float64)
-    return bool(fb.size >= n_max or np.count_nonzero(fb >= value) >= h)
+    hits = np.count_nonzero(fb >= value)
+    if fb.size >= n_max or hits >= h:
+        return True
+    if tail_below is None or hits > 0 or fb.size < TAIL_SETTLES_FROM:
+        return False
+    p, _, how = run_p_value(value, fb, h)
+    return how != MONTE_CARLO and p <= tail_below
 
 
 def binomial_summary(p_values: np.ndarray, alpha: float) -> tuple[int, int, float]:
