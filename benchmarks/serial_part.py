@@ -144,14 +144,11 @@ def main() -> None:
     args = parser.parse_args()
     if args.smoke:
         folder = Path(tempfile.mkdtemp(prefix="hcid-serial-data-"))
-        for f in sorted(Path("configs/lab_example").glob("S1_*_trial[12].csv")):
+        root = Path(__file__).resolve().parents[1]
+        for f in sorted((root / "configs" / "lab_example").glob("S1_*_trial[12].csv")):
             shutil.copy(f, folder)
-        args.config, args.analyse, args.twins, args.max_fb_twins = (
-            "configs/lab_example.yaml",
-            str(folder),
-            4,
-            8,
-        )
+        config = str(root / "configs" / "lab_example.yaml")
+        args.config, args.analyse, args.twins, args.max_fb_twins = config, str(folder), 4, 8
     analyse = None
     if args.analyse:
         analyse = ["--data", args.analyse]

@@ -486,6 +486,9 @@ def test_a_measured_study_with_both_timings_is_told_which_to_keep():
     raw = {"name": "x", "data": {"analysis_rate": 25.0, "window": 40.0}, "timing": {"output_rate": 25.0}}
     with pytest.raises(ConfigError, match=r"^timing: a measured study's timing is data.analysis_rate and "):
         parse_config(raw, "x")
+    raw["data"] = {"window": 40.0}  # either of data's two timing keys
+    with pytest.raises(ConfigError, match=r"^timing: a measured study's timing is data.analysis_rate and "):
+        parse_config(raw, "x")
 
 
 def test_a_window_in_seconds_given_as_samples_is_told_the_unit_key():

@@ -134,7 +134,7 @@ def _verdict_line(summary) -> str:
     return (
         f"{g['group']}, {g['method']}: {g['verdict']}: {g['n_evidence']} of {g['n_runs']} runs show "
         f"feedforward at p <= {g['alpha']:g} (decided by their {g['decided_by']} against their own "
-        f"forcing set's FB twins, up to {g['fb_twins']} drawn: the statistic with the higher power; "
+        f"forcing set's FB twins, up to {g['fb_twins']} drawn: the statistic with the most power; "
         f"binomial p = {g['binomial_p']:.2g}; power (FF twins found at this level) {power}, "
         f"{g['forcing_sets']} forcing set{'s' if g['forcing_sets'] > 1 else ''})"
     )

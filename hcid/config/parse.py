@@ -486,7 +486,7 @@ def describe_config(data: Any, name: str, base: Path | None = None) -> Config:
     study_name = _study_name(top.get("name", name))
     simulates = "data" not in top.data or any(k in top.data for k in _SIMULATING)
     given_data = data.get("data") if isinstance(data.get("data"), dict) else {}
-    if not simulates and "timing" in data and "analysis_rate" in given_data:
+    if not simulates and "timing" in data and ({"analysis_rate", "window"} & set(given_data)):
         raise ConfigError(
             "timing: a measured study's timing is data.analysis_rate and data.window, or a timing "
             "section (sim_rate, output_rate, run_in, window, periods), not both; leave timing out"

@@ -441,11 +441,14 @@ def analyse_study(
     _twins(study, found)
     lap_done("twins")
     _selection_paths(study, found, identified.frontier)
-    checks = Checks(config, data.records, {s: plants.of_run(s).loop for s in data.records})
+    # Each run over the analysis window, as long as its twins (a file may run on beyond it).
+    n = config.timing.record_samples
+    windowed = {s: {k: np.asarray(v)[:n] for k, v in r.items()} for s, r in data.records.items()}
+    checks = Checks(config, windowed, {s: plants.of_run(s).loop for s in data.records})
     starts = {key: found.models[key].values for key in study.groups}  # each group's model
     with labelled("runs: "):
         run_lines = run_statistics(
-            data.records,
+            windowed,
             {s: plants.of_run(s) for s in data.records},
             {s: starts[key] for key, seeds in study.groups.items() for s in seeds},
             execution,
@@ -457,6 +460,9 @@ def analyse_study(
         options.most_fb_twins,
         {group_name(by, key): (plants.of_runs(seeds), starts[key]) for key, seeds in study.groups.items()},
         execution,
+        # Beyond every twin, settled at a tail p of alpha / 10; not under --fdr, whose thresholds
+        # go down to alpha / (runs): there more twins can still change a decision.
+        None if options.fdr else options.alpha / 10,
     )
     _more_fb_twins(study, found, judge, run_lines)
     lap_done("more FB twins")

@@ -197,6 +197,8 @@ def superposition_rows(lines: pa.Table) -> list[dict]:
             }
             out += [{**base, "quantity": f"|{name}| {at}", "value": db},
                     {**base, "quantity": f"{name} phase {at}", "value": deg}]  # fmt: skip
+    if not out:
+        return []
     table = pd.DataFrame(out)
     # A line is compared where at least two people measured it both ways (not every person's
     # trials measured every line of the study).

@@ -153,7 +153,9 @@ class Evidence:
     the group's model in the group's plant's loop (``starts``: group name -> (the group's config,
     its model values), as the runs' own); FB twins drawn
     beyond the calibration's (:meth:`add`) are kept per group and forcing set, shared by the
-    group's own and study twins (whose FB twin is the same loop)."""
+    group's own and study twins (whose FB twin is the same loop). ``tail_below``: a run beyond
+    every FB twin is settled once their tail puts its p this low
+    (:func:`hcid.selection.calibration.sequential_settled`); None draws on to ``max_fb``."""
 
     def __init__(
         self,
@@ -163,14 +165,16 @@ class Evidence:
         max_fb: int,
         starts: Mapping[str, tuple[Config, dict]],
         execution: Execution,
+        tail_below: float | None = None,
     ):
         grid = config.selection.w_grid
         self.lo, self.hi = float(min(grid)), float(max(grid))
         self.config, self.run_dir, self.alpha, self.max_fb = config, run_dir, alpha, max_fb
         self.starts, self.execution = starts, execution
-        self.tail_below = alpha / 10  # a run beyond every twin, its tail p this far below alpha, is settled
+        self.tail_below = tail_below  # a run beyond every twin settled at this tail p (sequential_settled)
         self._thresholds: dict[tuple[str, str], dict[str, np.ndarray]] = {}
-        self._lines: dict[str, dict[str, dict[str, np.ndarray]]] = {}  # folder -> model -> statistic
+        # (group, folder) -> model -> statistic -> values (a group's start makes them)
+        self._lines: dict[tuple[str, str], dict[str, dict[str, np.ndarray]]] = {}
         # (group, forcing set) -> per draw: its count, its W* by identified method, its folder
         self._more: dict[tuple[str, int], list[tuple[int, dict, str]]] = {}
         self._judged: dict[tuple[str, str, int], str] = {}  # (group, method, forcing set) -> folder
@@ -189,10 +193,12 @@ class Evidence:
         return self._thresholds[key]
 
     def _folder_lines(self, group: str, folder: str) -> dict[str, dict[str, np.ndarray]]:
-        if folder not in self._lines:
+        if (group, folder) not in self._lines:
             config, start = self.starts[group]
-            self._lines[folder] = twin_statistics(self.run_dir / folder, config, start, self.execution)
-        return self._lines[folder]
+            self._lines[(group, folder)] = twin_statistics(
+                self.run_dir / folder, config, start, self.execution
+            )
+        return self._lines[(group, folder)]
 
     def lines(self, group: str, twin) -> dict[str, dict[str, np.ndarray]] | None:
         """The calibration twins' line statistics: statistic -> ``FB`` / ``FF`` -> values; None

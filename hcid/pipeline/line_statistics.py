@@ -13,6 +13,7 @@ import numpy as np
 
 from hcid import tables
 from hcid.config import Config, Loop
+from hcid.config.fit import FitSettings
 from hcid.errors import DataError
 from hcid.hcfit.lines import feedforward_size, record_lines
 from hcid.hcfit.lr import feedforward_lr
@@ -31,17 +32,22 @@ LINE_STATISTICS = {
 
 
 def record_statistics(
-    signals: Mapping[str, np.ndarray], rate: float, loop: Loop, start: Mapping[str, float]
+    signals: Mapping[str, np.ndarray],
+    rate: float,
+    loop: Loop,
+    start: Mapping[str, float],
+    settings: FitSettings = FitSettings(),  # noqa: B008 (frozen)
 ) -> dict[str, float] | None:
     """Each statistic of :data:`LINE_STATISTICS` of one record (``ft``, ``fd``, ``e``, ``u`` at
-    ``rate`` Hz); None where its forcing functions have no lines."""
+    ``rate`` Hz; the parameters' bounds of ``settings``, the config's ``fit_hc``); None where its
+    forcing functions have no lines."""
     try:
         data = record_lines(signals, rate)
     except DataError:
         return None
     return {
         "Fourier coefficients": feedforward_size(data),
-        "likelihood ratio": feedforward_lr(data, plant(loop), loop.disturbance_at, start),
+        "likelihood ratio": feedforward_lr(data, plant(loop), loop.disturbance_at, start, settings),
     }
 
 
@@ -65,7 +71,7 @@ def twin_statistics(
     ``FF``) -> statistic -> values in seed order; empty where the forcing has no lines."""
     records = results.records(results.read(tables.SIMULATIONS, folder), folder / tables.SIMULATIONS.file)
     keys = sorted(records)
-    tasks = [(records[k], config.timing.output_rate, config.loop, dict(start)) for k in keys]
+    tasks = [(records[k], config.timing.output_rate, config.loop, dict(start), config.fit_hc) for k in keys]
     found = list(execution.map(record_statistics, tasks, "twins' line statistics"))
     if any(f is None for f in found):
         return {}

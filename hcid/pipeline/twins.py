@@ -236,8 +236,9 @@ def forcing_sets(seeds: list[int], records: dict, config: Config) -> list[list[i
 
     A flipped set needs no twins of its own: the twins' loop is linear and their remnant
     symmetric, so a twin driven by -ft, -fd with remnant n is exactly the negative of one driven
-    by ft, fd with remnant -n, a remnant as likely as n; W* and the Fourier size do not see the
-    sign (every signal of the identification and of the coefficients flips together). The set's
+    by ft, fd with remnant -n, a remnant as likely as n; W*, the Fourier size and the likelihood
+    ratio do not see the sign (every signal of the identification and of the coefficients flips
+    together, and the lines fits' residuals with them). The set's
     twins, driven by its first run's functions, are therefore a sample of exactly the same
     distribution for its flipped runs."""
     n = round(config.timing.window * config.timing.output_rate)
