@@ -64,3 +64,27 @@ def test_the_one_call_jacobian_is_scipys_finite_difference(feedforward):
         fast = problem.jacobian(x, lower, upper)
         slow = approx_derivative(problem.residuals, x, method="2-point", bounds=(lower, upper))
         assert fast == pytest.approx(slow, rel=1e-6, abs=1e-6 * np.abs(slow).max())
+
+
+def test_a_twins_start_is_as_far_from_its_truth_as_a_runs_from_its_own_fit():
+    # Source: hcid.pipeline.line_statistics' rule: the deviations are the runs' determined fitted
+    # values minus the group model's (0 where a fit does not determine the parameter); twin k
+    # starts at the model minus deviation (k - 1) mod n, the FB and the FF twin of a seed alike.
+    from types import SimpleNamespace
+
+    from hcid.pipeline.line_statistics import _offset, deviations
+
+    model = {"Kpe": 2.0, "TL": 0.15, "Kpt": 0.8}
+    fits = [
+        SimpleNamespace(values={"Kpe": 2.5, "TL": 0.9, "Kpt": 0.7},
+                        status={"Kpe": "determined", "TL": "correlated with Kpe", "Kpt": "determined"}),
+        SimpleNamespace(values={"Kpe": 1.75, "TL": 0.1, "Kpt": 0.8},
+                        status={"Kpe": "determined", "TL": "determined", "Kpt": "determined"}),
+    ]  # fmt: skip
+    found = deviations(model, fits)
+    assert found == [pytest.approx({"Kpe": 0.5, "TL": 0.0, "Kpt": -0.1}),
+                     pytest.approx({"Kpe": -0.25, "TL": -0.05, "Kpt": 0.0})]  # fmt: skip
+    assert _offset(model, found, 1) == pytest.approx({"Kpe": 1.5, "TL": 0.15, "Kpt": 0.9})
+    assert _offset(model, found, 2) == pytest.approx({"Kpe": 2.25, "TL": 0.2, "Kpt": 0.8})
+    assert _offset(model, found, 3) == _offset(model, found, 1)  # the cycle
+    assert _offset(model, [], 7) == model  # no runs' deviations: the model itself

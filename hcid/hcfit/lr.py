@@ -67,17 +67,20 @@ def feedforward_lr(
         ``output`` or ``input`` (SPEC 7).
     start : mapping of str to float
         Every parameter's start (the group's fitted model): the feedback-only fit starts at its
-        feedback part, the full fit at ``start``; where the full fit ends above the feedback-only
-        one (a local minimum: the full model holds the feedback-only one), again from the
-        feedback-only optimum with ``start``'s feedforward part, the lower cost kept.
+        feedback part; the full fit at ``start`` and at the feedback-only optimum with Kpt = 0
+        (the nested model, so the full fit never ends above it), the lower cost kept.
     settings : FitSettings
         The parameters' bounds.
     """
     fb = LinesProblem(data, plant, False, disturbance_at)
     ff = LinesProblem(data, plant, True, disturbance_at)
     cost_fb, x_fb = _local_fit(fb, np.array([start[n] for n in fb.names]), settings)
-    cost_ff, _ = _local_fit(ff, np.array([start[n] for n in ff.names]), settings)
-    if cost_ff > cost_fb:  # a local minimum worse than no feedforward: start again from the FB fit
-        on_fb = {**dict(zip(fb.names, x_fb, strict=True)), **{n: start[n] for n in FEEDFORWARD_PARAMETERS}}
-        cost_ff = min(cost_ff, _local_fit(ff, np.array([on_fb[n] for n in ff.names]), settings)[0])
+    # The full model from the start, and from the feedback-only optimum with no feedforward (Kpt
+    # 0: the nested model itself, cost C_FB, which least squares only lowers): C_FF <= C_FB.
+    nested = {
+        **dict(zip(fb.names, x_fb, strict=True)),
+        **{n: start[n] for n in FEEDFORWARD_PARAMETERS},
+        "Kpt": 0.0,
+    }
+    cost_ff = min(_local_fit(ff, np.array([s[n] for n in ff.names]), settings)[0] for s in (start, nested))
     return max(cost_fb - cost_ff, 0.0)

@@ -64,7 +64,7 @@ from hcid.pipeline.evidence import (
 )
 from hcid.pipeline.execution import Execution
 from hcid.pipeline.fit import _choices, _stage_choices, fit_run, fit_windows
-from hcid.pipeline.line_statistics import run_statistics
+from hcid.pipeline.line_statistics import deviations, run_statistics
 from hcid.pipeline.options import AnalysisOptions
 from hcid.pipeline.parallel import labelled
 from hcid.pipeline.plants import RunPlants, run_plants
@@ -458,7 +458,14 @@ def analyse_study(
         run_dir,
         options.alpha,
         options.most_fb_twins,
-        {group_name(by, key): (plants.of_runs(seeds), starts[key]) for key, seeds in study.groups.items()},
+        {
+            group_name(by, key): (
+                plants.of_runs(seeds),
+                starts[key],
+                deviations(starts[key], [found.fitted[s][0][True] for s in sorted(seeds)]),
+            )
+            for key, seeds in study.groups.items()
+        },
         execution,
         # Beyond every twin, settled at a tail p of alpha / 10; not under --fdr, whose thresholds
         # go down to alpha / (runs): there more twins can still change a decision.

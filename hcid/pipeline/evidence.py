@@ -151,7 +151,9 @@ class Evidence:
     at most ``max_fb`` FB twins) and its twins' power. The twins' values are computed once per
     twin folder (and method) whatever the number of runs they judge, the line statistics from
     the group's model in the group's plant's loop (``starts``: group name -> (the group's config,
-    its model values), as the runs' own); FB twins drawn
+    its model values, its runs' deviations from them: each twin's start is as far from its truth
+    as a run's from its own optimum, :func:`hcid.pipeline.line_statistics.twin_statistics`), as
+    the runs' own); FB twins drawn
     beyond the calibration's (:meth:`add`) are kept per group and forcing set, shared by the
     group's own and study twins (whose FB twin is the same loop). ``tail_below``: a run beyond
     every FB twin is settled once their tail puts its p this low
@@ -163,7 +165,7 @@ class Evidence:
         run_dir: Path,
         alpha: float,
         max_fb: int,
-        starts: Mapping[str, tuple[Config, dict]],
+        starts: Mapping[str, tuple[Config, dict, list]],
         execution: Execution,
         tail_below: float | None = None,
     ):
@@ -194,9 +196,9 @@ class Evidence:
 
     def _folder_lines(self, group: str, folder: str) -> dict[str, dict[str, np.ndarray]]:
         if (group, folder) not in self._lines:
-            config, start = self.starts[group]
+            config, start, offsets = self.starts[group]
             self._lines[(group, folder)] = twin_statistics(
-                self.run_dir / folder, config, start, self.execution
+                self.run_dir / folder, config, start, self.execution, offsets
             )
         return self._lines[(group, folder)]
 

@@ -6,7 +6,7 @@ twin it is judged against get the same start, so their statistics are made alike
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -15,13 +15,14 @@ from hcid import tables
 from hcid.config import Config, Loop
 from hcid.config.fit import FitSettings
 from hcid.errors import DataError
+from hcid.hcfit.determined import DETERMINED
 from hcid.hcfit.lines import feedforward_size, record_lines
 from hcid.hcfit.lr import feedforward_lr
 from hcid.io import results
 from hcid.loop.hcmodel import plant
 from hcid.pipeline.execution import Execution
 
-__all__ = ["LINE_STATISTICS", "record_statistics", "run_statistics", "twin_statistics"]
+__all__ = ["LINE_STATISTICS", "deviations", "record_statistics", "run_statistics", "twin_statistics"]
 
 #: The statistics of a record's lines, by name in the tables: (value column, columns' stem, as in
 #: ``p_<stem>``, ``p_<stem>_method``, ``power_<stem>``, ``fb_twins_<stem>``).
@@ -65,13 +66,26 @@ def run_statistics(
 
 
 def twin_statistics(
-    folder: Path, config: Config, start: Mapping[str, float], execution: Execution
+    folder: Path,
+    config: Config,
+    start: Mapping[str, float],
+    execution: Execution,
+    offsets: Sequence[Mapping[str, float]] = (),
 ) -> dict[str, dict[str, np.ndarray]]:
     """:func:`record_statistics` of every twin realization in a twin folder: model (``FB``,
-    ``FF``) -> statistic -> values in seed order; empty where the forcing has no lines."""
+    ``FF``) -> statistic -> values in seed order; empty where the forcing has no lines.
+
+    A twin is simulated from ``start`` (the group's model), so fits started there would start at
+    its truth, where a run's start lies away from its own optimum by the run's deviation from its
+    group's medians. ``offsets`` are the group's runs' deviations (each run's fitted values minus
+    the group model's): twin ``k`` (the FB and the FF twin of seed ``k`` alike) starts at ``start``
+    minus deviation ``(k - 1) mod len(offsets)``, away from its truth as a run is from its own."""
     records = results.records(results.read(tables.SIMULATIONS, folder), folder / tables.SIMULATIONS.file)
     keys = sorted(records)
-    tasks = [(records[k], config.timing.output_rate, config.loop, dict(start), config.fit_hc) for k in keys]
+    tasks = [
+        (records[k], config.timing.output_rate, config.loop, _offset(start, offsets, k[1]), config.fit_hc)
+        for k in keys
+    ]
     found = list(execution.map(record_statistics, tasks, "twins' line statistics"))
     if any(f is None for f in found):
         return {}
@@ -80,3 +94,30 @@ def twin_statistics(
         for name, value in values.items():
             out.setdefault(model, {}).setdefault(name, []).append(value)
     return {m: {n: np.array(v) for n, v in by.items()} for m, by in out.items()}
+
+
+def _offset(start: Mapping[str, float], offsets: Sequence[Mapping[str, float]], seed: int) -> dict:
+    if not offsets:
+        return dict(start)
+    deviation = offsets[(int(seed) - 1) % len(offsets)]
+    return {p: v - deviation.get(p, 0.0) for p, v in start.items()}
+
+
+def deviations(model: Mapping[str, float], fits: Sequence) -> list[dict[str, float]]:
+    """Each run's fitted values minus the group model's, over the parameters its fit determines
+    (:data:`hcid.hcfit.determined.DETERMINED`; 0 for the others: along an undetermined direction
+    the cost is flat, and a run's optimum there says nothing of how far its start is), in the
+    order given (``fits``: the runs' :class:`hcid.hcfit.fit.HCFit`): the offsets of
+    :func:`twin_statistics`."""
+    out = []
+    for fit in fits:
+        values, status = fit.values, fit.status
+        out.append(
+            {
+                p: float(values[p] - v)
+                if status.get(p) == DETERMINED and np.isfinite(values.get(p, np.nan) - v)
+                else 0.0
+                for p, v in model.items()
+            }
+        )
+    return out
