@@ -2,8 +2,8 @@
 fails ``make test`` instead of the next person who times something.
 
 Each script runs as ``make bench`` runs it, a subprocess of this venv's python from the
-project root with BLAS on one thread; all three start at once (about 35 s of wall on two
-idle cores, the cold-start benchmark's first compile of every kernel the longest part), and
+project root with BLAS on one thread; all five start at once (about 50 s of wall on two
+idle cores, measured 2026-11-28 on a 2-core Xeon), and
 each test checks its exit code and the lines its script must print.
 """
 
@@ -18,12 +18,14 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 #: The scripts of ``make bench``, in its order, and their arguments besides ``--smoke``; then
-#: serial_part (issue 47: where ``hcid analyse``'s serial part lies).
+#: serial_part (issue 47: where ``hcid analyse``'s serial part lies) and null_study (SPEC 13's
+#: null study end to end).
 SCRIPTS = {
     "arx_engine": [],
     "fit_hc": [],
     "cold_start": ["--json", "{tmp}/cold_start.json"],
     "serial_part": [],
+    "null_study": ["--out", "{tmp}/null_study.csv"],
 }
 TIMEOUT_S = 600
 
@@ -148,3 +150,22 @@ def test_serial_part_smoke(smoke_runs):
             wall, inside, outside = (float(x) for x in re.findall(r"([0-9.]+) s", line))
             assert inside <= wall + 0.05 and abs(wall - inside - outside) <= 0.15, line
     assert _lines(out, r"Amdahl from the two walls .*: serial S = 2 T2 - T1 = -?[0-9.]+ s"), out
+
+
+def test_null_study_smoke(smoke_runs):
+    # One study of 4 feedback-only runs through hcid analyse (4 + 8 twins): the table has a row per
+    # method and statistic (W*, Fourier, LR and the deciding p), and the per-run CSV a row per run
+    # and method with every p-value a probability.
+    import csv
+
+    code, out, err = smoke_runs("null_study")
+    assert code == 0, out + err
+    for method in ("direct", "indirect"):
+        for statistic in (r"W\*", "Fourier", "LR", r"p_value \(.*\)"):
+            assert _lines(out, rf"\| {method} \| {statistic} \| 4 \| "), out
+    with open(smoke_runs.tmp / "null_study.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 8 and {r["method"] for r in rows} == {"direct", "indirect"}
+    for r in rows:
+        for column in ("p_w_star", "p_fourier", "p_lr", "p_value"):
+            assert 0.0 < float(r[column]) <= 1.0, (column, r)
