@@ -514,6 +514,44 @@ def _resolve(target: str, record: TrackingRecord | None) -> tuple[str, LineData 
     return "lines", data
 
 
+@dataclass(frozen=True)
+class _Asked:
+    """What :func:`fit_parametric` was given, for the estimator its target names."""
+
+    settings: FitSettings
+    plant: control.TransferFunction
+    feedforward: bool
+    record: TrackingRecord | None
+    omega: np.ndarray | None
+    he: np.ndarray | None
+    hft: np.ndarray | None
+    disturbance_at: str
+    data: LineData | None
+
+
+def _by_frequency(a: _Asked, fixed) -> HCFit:
+    if a.omega is None or a.he is None or (a.hft is None) == a.feedforward:
+        raise IdentificationError(
+            "omega, he, hft: the frequency target needs omega and he, and hft exactly when feedforward"
+        )
+    return fit_frequency(a.omega, a.he, a.hft, a.plant, a.settings, a.record, fixed)
+
+
+#: The estimators by target (``FitSettings.target``; ``auto`` is resolved to ``lines`` or ``time``
+#: first, :func:`resolve_target`): each takes what :func:`fit_parametric` was given and the held
+#: parameters.
+ESTIMATORS = {
+    "lines": lambda a, fixed: fit_lines(
+        a.record, a.plant, a.feedforward, a.settings, a.disturbance_at, fixed, a.data
+    ),
+    "closed_loop": lambda a, fixed: fit_closed_loop(
+        a.record, a.plant, a.feedforward, a.settings, a.disturbance_at, fixed
+    ),
+    "time": lambda a, fixed: fit_time(a.record, a.plant, a.feedforward, a.settings, fixed),
+    "frequency": _by_frequency,
+}
+
+
 def fit_parametric(
     settings: FitSettings,
     plant: control.TransferFunction,
@@ -542,21 +580,12 @@ def fit_parametric(
     are correlated, no such test is made: an undetermined pair is held.
     """
     target, data = _resolve(settings.target, record)
+    if target != "frequency" and record is None:
+        raise IdentificationError(f"record: the {target} target needs the measured record")
+    asked = _Asked(settings, plant, bool(feedforward), record, omega, he, hft, disturbance_at, data)
 
     def fit(fixed):
-        if target in ("closed_loop", "time", "lines") and record is None:
-            raise IdentificationError(f"record: the {target} target needs the measured record")
-        if target == "lines":
-            return fit_lines(record, plant, feedforward, settings, disturbance_at, fixed, data)
-        if target == "closed_loop":
-            return fit_closed_loop(record, plant, feedforward, settings, disturbance_at, fixed)
-        if target == "time":
-            return fit_time(record, plant, feedforward, settings, fixed)
-        if omega is None or he is None or (hft is None) == bool(feedforward):
-            raise IdentificationError(
-                "omega, he, hft: the frequency target needs omega and he, and hft exactly when feedforward"
-            )
-        return fit_frequency(omega, he, hft, plant, settings, record, fixed)
+        return ESTIMATORS[target](asked, fixed)
 
     if settings.nms == "fixed":
         return fit(LITERATURE_NMS)
