@@ -28,7 +28,8 @@ from hcid.hcfit.determined import (
     nms_undetermined,
     parameter_status,
 )
-from hcid.hcfit.fit import HCFit, fit_lines, resolve_target
+from hcid.hcfit.estimators import resolve_target
+from hcid.hcfit.fit import HCFit, fit_lines
 from hcid.hcfit.lines import NEIGHBOURS, line_data
 
 N, RATE = 1000, 25.0  # 40 s at 25 Hz: bin k is k * 2 pi / 40 rad/s
@@ -317,7 +318,7 @@ def test_nms_auto_holds_an_undetermined_pair_unless_the_data_reject_it():
     # test does not reject them. With the truth's pair far from the literature (w_nms 6 rad/s,
     # zeta 0.9, inside the lines' range) and little remnant, it rejects the held pair and the
     # full fit stays.
-    from hcid.hcfit.fit import nested_test
+    from hcid.hcfit.estimators import nested_test
 
     def fit(record, nms):
         return hcfit.fit_parametric(hcfit.FitSettings(target="lines", nms=nms), PLANT, True, record=record,

@@ -41,7 +41,7 @@ def test_both_plants_answer_with_by_trial(analysed):
     assert sorted({g["group"] for g in groups}) == ["trial=+1", "trial=-1"]
     assert len(result.runs) == 12  # 6 files x 2 methods
     # The forcing functions are multisines; fo's disturbance has 5 lines, so's 3 (the data's
-    # README): the default estimator is lines for fo, time for so (hcid.hcfit.fit.resolve_target).
+    # README): the default estimator is lines for fo, time for so (hcid.hcfit.estimators.resolve_target).
     assert set(result.runs.column("estimator").to_pylist()) == {"lines" if plant == "fo" else "time"}
 
 

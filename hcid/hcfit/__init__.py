@@ -56,15 +56,14 @@ from hcid.config.fit import (
     parse_fit_settings,
 )
 from hcid.hcfit.closed_loop import closed_loop_u, loop_is_stable
+from hcid.hcfit.estimators import fit_parametric, resolve_target
 from hcid.hcfit.fit import (
     BOUND_TOLERANCE,
     HCFit,
     fit_closed_loop,
     fit_frequency,
     fit_lines,
-    fit_parametric,
     fit_time,
-    resolve_target,
 )
 from hcid.hcfit.model import TrackingRecord, hc_response, simulate_hc
 

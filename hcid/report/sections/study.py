@@ -153,10 +153,9 @@ def _checks(groups) -> tuple[list[list[str]], list[str]]:
     return checks, contradicted
 
 
-#: The per-run table's parameters, in reading order.
-#: The deciding statistics' names in the runs' table.
-_SHORT = {"Fourier coefficients": "Fourier", "likelihood ratio": "LR"}
+#: The per-run table's parameters in reading order, and its short names of deciding statistics.
 _SHOWN = ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
+_SHORT = {"Fourier coefficients": "Fourier", "likelihood ratio": "LR"}
 
 
 def _with_se(r: dict, p: str) -> str:
