@@ -12,6 +12,15 @@ Its null distribution is not chi-square: the fits are local (bounded least squar
 group's fitted model, the same start for a run and for its twins, so that their statistics are
 made alike), the weights are estimated, and the model only approximates a person. As for W*,
 the run's p-value comes from its FB twins (:func:`hcid.selection.calibration.run_p_value`).
+
+**Ties at 0.** Where the lines do not ask for feedforward, the full fit stays at the nested model
+(Kpt = 0 is its bound) and ``C_FB - C_FF`` is exactly 0: a point mass shared by runs and twins,
+whose ties make the p-values of such runs near 1 rather than uniform (SPEC 13's KS test failed on
+it: docs/methodology.md). There the statistic is instead minus the cost's slope in Kpt at the
+nested model, ``-dC_FF/dKpt`` (<= 0): how steeply the lines oppose a feedforward path. The slope
+is exact, not a finite difference: the closed loop's U is linear in Ht, so in Kpt. Every value
+above 0 is a likelihood ratio, every value below it a slope; the order of runs and twins is all
+a p-value reads.
 """
 
 from __future__ import annotations
@@ -25,7 +34,7 @@ from scipy import optimize
 from hcid.config.fit import FEEDFORWARD_PARAMETERS, FitSettings
 from hcid.hcfit.lines import LineData, LinesProblem
 
-__all__ = ["feedforward_lr"]
+__all__ = ["feedforward_lr", "nested_slope"]
 
 
 def _local_fit(problem: LinesProblem, start: np.ndarray, settings: FitSettings) -> tuple[float, np.ndarray]:
@@ -48,6 +57,17 @@ def _local_fit(problem: LinesProblem, start: np.ndarray, settings: FitSettings) 
     return float(np.sum(fit.fun**2)), fit.x
 
 
+def nested_slope(problem: LinesProblem, nested: np.ndarray) -> float:
+    """``dC/dKpt`` of the model with feedforward at ``nested`` (its Kpt 0): the residuals are
+    linear in Kpt (the closed loop's U is linear in Ht), so ``r(Kpt) = r0 + Kpt d`` with
+    ``d = r(1) - r0`` and the slope at 0 is ``2 r0 . d``, exactly."""
+    i = problem.names.index("Kpt")
+    unit = nested.copy()
+    unit[i] = 1.0
+    r0 = problem.residuals(nested)
+    return float(2.0 * r0 @ (problem.residuals(unit) - r0))
+
+
 def feedforward_lr(
     data: LineData,
     plant: control.TransferFunction,
@@ -55,7 +75,8 @@ def feedforward_lr(
     start: Mapping[str, float],
     settings: FitSettings = FitSettings(),  # noqa: B008 (frozen)
 ) -> float:
-    """``C_FB - C_FF`` (module notes), never below 0.
+    """``C_FB - C_FF`` where the feedforward path lowers the cost, else ``-dC_FF/dKpt`` at the
+    nested model (at most 0; module notes).
 
     Parameters
     ----------
@@ -83,4 +104,6 @@ def feedforward_lr(
         "Kpt": 0.0,
     }
     cost_ff = min(_local_fit(ff, np.array([s[n] for n in ff.names]), settings)[0] for s in (start, nested))
-    return max(cost_fb - cost_ff, 0.0)
+    if cost_fb - cost_ff > 0.0:
+        return cost_fb - cost_ff
+    return -max(nested_slope(ff, np.array([nested[n] for n in ff.names])), 0.0)
