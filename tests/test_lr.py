@@ -105,10 +105,12 @@ def test_the_slope_in_kpt_at_the_nested_model_is_exact():
         fb = LinesProblem(line_data(record), PLANT, False, "input")
         ff = LinesProblem(line_data(record), PLANT, True, "input")
         _, x_fb = _local_fit(fb, np.array([START[n] for n in fb.names]), hcfit.FitSettings())
-        nested = {**START, **dict(zip(fb.names, x_fb)), "Kpt": 0.0}  # the feedback-only optimum
+        nested = {**START, **dict(zip(fb.names, x_fb, strict=True)), "Kpt": 0.0}  # the feedback-only optimum
         x = np.array([nested[n] for n in ff.names])
         h = 1e-3
-        thetas = np.column_stack([np.array([{**nested, "Kpt": k}[n] for n in ff.names]) for k in (0.0, h, 2 * h)])
+        thetas = np.column_stack(
+            [np.array([{**nested, "Kpt": k}[n] for n in ff.names]) for k in (0.0, h, 2 * h)]
+        )
         c0, c1, c2 = ff.costs(thetas)
         expected = (4 * c1 - c2 - 3 * c0) / (2 * h)
         assert nested_slope(ff, x) == pytest.approx(expected, rel=1e-6)
@@ -138,7 +140,12 @@ def test_where_the_full_fit_stays_at_the_nested_model_the_statistic_is_minus_the
         ff = LinesProblem(data, PLANT, True, "input")
         nested_cost["C_FB"], x_fb = real(fb, np.array([START[n] for n in fb.names]), hcfit.FitSettings())
         value = feedforward_lr(data, PLANT, "input", START)
-        nested = {**dict(zip(fb.names, x_fb)), "Kpt": 0.0, "TI": START["TI"], "tau_pt": START["tau_pt"]}
+        nested = {
+            **dict(zip(fb.names, x_fb, strict=True)),
+            "Kpt": 0.0,
+            "TI": START["TI"],
+            "tau_pt": START["tau_pt"],
+        }
         slope = lr.nested_slope(ff, np.array([nested[n] for n in ff.names]))
         assert value == -max(slope, 0.0)
         seen.append(value)
