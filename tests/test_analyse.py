@@ -639,7 +639,7 @@ def _twins_config(config, record, values, remnant=(3.0, 8.0, 2.0)):
 def test_a_group_whose_fallback_run_has_its_delay_at_0_gets_twins_the_config_takes(fo_study):
     from hcid.cli.answers import _model_source
     from hcid.hcfit.determined import group_model
-    from hcid.pipeline.twins import twin_model, twin_values
+    from hcid.pipeline.twin_values import twin_model, twin_values
 
     config, record = fo_study
     plant = (np.array(config.loop.plant.num), np.array(config.loop.plant.den))
@@ -662,7 +662,8 @@ def test_the_twins_ranges_are_those_their_config_takes(fo_study):
 
     from hcid.config.parse import describe_config
     from hcid.errors import ConfigError
-    from hcid.pipeline.twins import TWIN_RANGES, twin_config_raw
+    from hcid.pipeline.twin_values import TWIN_RANGES
+    from hcid.pipeline.twins import twin_config_raw
 
     config, _ = fo_study
     base = twin_config_raw(config, A4_RUNS[6][0], (3.0, 8.0, 2.0), Path("forcing.csv"), 2, "twins")
@@ -687,7 +688,7 @@ def test_the_twins_ranges_are_those_their_config_takes(fo_study):
 
 
 def test_values_the_twins_cannot_take_are_brought_into_range_or_named(fo_study):
-    from hcid.pipeline.twins import twin_model, twin_remnant
+    from hcid.pipeline.twin_values import twin_model, twin_remnant
 
     config, record = fo_study
     far = {**A4_RUNS[6][0], "Kpe": 150.0, "tau_pt": -2.5, "tau_pe": 0.004}
@@ -720,7 +721,7 @@ def test_a_group_whose_remnant_fits_are_all_on_their_bounds_still_gets_twins(fo_
 
     from hcid.analysis.descriptors import RemnantFit
     from hcid.errors import DataError
-    from hcid.pipeline.analyse import _Found
+    from hcid.pipeline.analyse_state import Found
     from hcid.pipeline.twins import group_models
 
     config, _ = fo_study
@@ -728,7 +729,7 @@ def test_a_group_whose_remnant_fits_are_all_on_their_bounds_still_gets_twins(fo_
     remnants = {5: RemnantFit(2.0, 0.5, 1.0, 100.0, True, spectrum, spectrum, spectrum),
                 6: RemnantFit(4.0, 12.0, 5.0, 100.0, True, spectrum, spectrum, spectrum)}  # fmt: skip
     study = SimpleNamespace(config=config, groups={("4",): [5, 6]})
-    found = _Found()
+    found = Found()
     found.fitted = {s: ({True: _a4_fit(s)}, remnants[s]) for s in (5, 6)}
     found.models, found.remnants = group_models(study.config, study.groups, found.fitted)
     assert found.models[("4",)].source == A4_SOURCE + "; its remnant filter from fits on their search bounds)"
@@ -753,13 +754,13 @@ def test_the_issues_group_gets_twins_their_config_takes(fo_study):
     from types import SimpleNamespace
 
     from hcid.analysis.descriptors import RemnantFit
-    from hcid.pipeline.analyse import _Found
+    from hcid.pipeline.analyse_state import Found
     from hcid.pipeline.twins import group_models
 
     config, record = fo_study
     spectrum = np.zeros(1)  # not read
     study = SimpleNamespace(config=config, groups={("4",): [5, 6]})
-    found = _Found()
+    found = Found()
     found.fitted = {
         s: ({True: _a4_fit(s)}, RemnantFit(3.0, 8.0, 2.0, 100.0, False, spectrum, spectrum, spectrum))
         for s in (5, 6)

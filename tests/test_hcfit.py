@@ -342,7 +342,7 @@ def _determined_fit(values, at_bound=(), vaf=50.0):
 
 def test_a_group_model_is_judged_by_its_values_as_simulated():
     # A simulation that takes delays of at least 10 ms and Kpe up to 10 (a stand-in for the twins'
-    # hcid.pipeline.twins.twin_model). Every loop below is stable on 1/s: TRUE_FF's feedback with
+    # hcid.pipeline.twin_values.twin_model). Every loop below is stable on 1/s: TRUE_FF's feedback with
     # tau_pe 3 to 10 ms and Kpe 2.5 to 12 (hcid.hcfit.loop_is_stable; Kpe 2.5 with tau_pe 0.24 s is
     # not, TL 0.4 s being for the paper's plant): only the simulation's limits decide.
 

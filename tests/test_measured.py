@@ -769,7 +769,7 @@ def test_a_run_longer_than_the_window_is_checked_over_the_window(tmp_path):
     """The multisines have whole periods over the window only: a run that goes on after it (10 s
     more here) is checked over the window, not skipped for having no lines (a review's find)."""
     from hcid.io.resolve import read_study
-    from hcid.pipeline.studies import check_plant
+    from hcid.pipeline.measured_data import check_plant
 
     longer = tmp_path / "longer"
     longer.mkdir()
@@ -822,7 +822,7 @@ def test_recordings_of_both_plants_under_one_plant_are_refused(tmp_path):
     import glob
 
     from hcid.io.resolve import read_study
-    from hcid.pipeline.studies import check_plant
+    from hcid.pipeline.measured_data import check_plant
 
     run = tmp_path / "mixed"
     result = runner.invoke(

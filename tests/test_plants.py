@@ -76,7 +76,7 @@ def test_a_run_of_a_level_without_a_plant_is_one_line_and_nothing_is_written(tmp
 
 def test_each_run_is_checked_against_its_own_plant():
     # The so runs against 1/s (both levels the fo plant) are not that plant: refused, naming the level.
-    from hcid.pipeline.studies import check_plant
+    from hcid.pipeline.measured_data import check_plant
 
     raw = _raw()
     raw["loop"]["plant"]["levels"]["so"] = raw["loop"]["plant"]["levels"]["fo"]

@@ -199,7 +199,7 @@ class GroupModel:
 @dataclass(frozen=True)
 class Simulated:
     """A model's values as a simulation takes them (what :func:`group_model`'s ``simulated``
-    gives, e.g. :func:`hcid.pipeline.twins.twin_model`).
+    gives, e.g. :func:`hcid.pipeline.twin_values.twin_model`).
 
     Attributes
     ----------

@@ -49,12 +49,13 @@ from hcid import methods, tables
 from hcid.analysis.conditions import Kind
 from hcid.analysis.selected import SelectedModel, analyse_selected
 from hcid.config import Config
-from hcid.config.fit import FEEDFORWARD_PARAMETERS
 from hcid.errors import ConfigError, DataError
 from hcid.io import datasets, results
 from hcid.io.datasets import DataSet
 from hcid.io.resolve import read_study, with_data
 from hcid.pipeline import effects, sessions
+from hcid.pipeline.analyse_state import Found, Study
+from hcid.pipeline.analyse_twins import make_twins, more_fb_twins
 from hcid.pipeline.analysis_tables import write_tables
 from hcid.pipeline.evidence import (
     Checks,
@@ -65,23 +66,17 @@ from hcid.pipeline.evidence import (
 from hcid.pipeline.execution import Execution
 from hcid.pipeline.fit import _choices, _stage_choices, fit_run, fit_windows
 from hcid.pipeline.line_statistics import deviations, run_statistics
+from hcid.pipeline.measured_data import check_plant, write_skipped
 from hcid.pipeline.options import AnalysisOptions
 from hcid.pipeline.parallel import labelled
-from hcid.pipeline.plants import RunPlants, run_plants
+from hcid.pipeline.plants import run_plants
 from hcid.pipeline.rundir import holds_run_dir
 from hcid.pipeline.sessions import Session
-from hcid.pipeline.studies import check_plant, identify_study, write_skipped
+from hcid.pipeline.studies import identify_study
+from hcid.pipeline.twin_values import twin_rate
 from hcid.pipeline.twins import (
-    TwinSource,
-    calibrate_twins,
     choose_w,
-    draw_fb_twins,
-    forcing_sets,
     forget_twins,
-    group_models,
-    pool_twins,
-    separates,
-    twin_rate,
 )
 from hcid.selection import over_w
 from hcid.selection.calibration import benjamini_hochberg
@@ -140,39 +135,6 @@ def _same_fit(config: Config, sel: SelectedModel, fits: dict):
     return fits[bool(sel.has_feedforward)]
 
 
-@dataclass(frozen=True)
-class _Study:
-    """A study being analysed: what every phase reads."""
-
-    config: Config
-    run_dir: Path
-    options: AnalysisOptions
-    execution: Execution
-    by: tuple[str, ...]
-    runs: pa.Table
-    records: dict[int, dict]
-    groups: dict[tuple[str, ...], list[int]]
-    kn_rate: float
-    plants: RunPlants  # each run's config, with its own plant
-
-
-@dataclass
-class _Found:
-    """What the phases found: each run's fits; per group its model, twins (per method) and their
-    remnant; per run and method its frontier and selection path, evidence and final analysis."""
-
-    fitted: dict = field(default_factory=dict)  # seed -> ({ff: HCFit}, remnant fit or None)
-    models: dict = field(default_factory=dict)  # group -> GroupModel
-    remnants: dict = field(default_factory=dict)  # group -> (kn, w_n, zeta_n)
-    used: dict = field(default_factory=dict)  # (group, method) -> TwinSets
-    paths: dict = field(default_factory=dict)  # (seed, method) -> (frontier, selection path, nb_ft)
-    deciding: dict = field(default_factory=dict)  # group -> {method: statistic}
-    fb_drawn: dict = field(default_factory=dict)  # (group, method) -> FB twins the p-values used
-    chosen: dict = field(default_factory=dict)  # (group, method) -> (w, rule, uncertain)
-    evidence: dict = field(default_factory=dict)  # (seed, method) -> evidence columns
-    finals: dict = field(default_factory=dict)  # (seed, method) -> SelectedAnalysis
-
-
 def _factors_and_groups(data: DataSet, by: Sequence[str] | None) -> tuple[str, ...]:
     """The data set's factors checked against the tables' columns, and the ``by`` factors (the
     default: ``condition`` where the data set has it); refused before any work."""
@@ -207,7 +169,7 @@ def _check_config(config: Config) -> None:
         )
 
 
-def _fit_runs(study: _Study, found: _Found) -> None:
+def _fit_runs(study: Study, found: Found) -> None:
     """Phase 2: every run fitted with and without feedforward."""
     tasks = [(study.plants.of_run(s), s, study.records[s], study.kn_rate) for s in sorted(study.records)]
     found.fitted = {
@@ -215,59 +177,7 @@ def _fit_runs(study: _Study, found: _Found) -> None:
     }
 
 
-def _twin_source(study: _Study, found: _Found, key, sets: list[list[int]], i: int, model: dict) -> TwinSource:
-    """The twins of forcing set ``i`` (of a group's ``sets``): driven by its first run's record,
-    the group's remnant; numbered from 1 only where the group has several sets."""
-    record = study.records[sets[i][0]]
-    number = i + 1 if len(sets) > 1 else 0
-    config = study.plants.of_runs(study.groups[key])  # the group's plant
-    return TwinSource(config, study.run_dir, key, record, model, found.remnants[key], study.kn_rate, number)
-
-
-def _twin_sets(study: _Study, found: _Found, key, kind: str, model: dict, fb_from=None):
-    """One kind of twins of a group, for each of its forcing sets, pooled."""
-    runs_of_set = forcing_sets(study.groups[key], study.records, study.config)  # each set its own twins
-    made = []
-    for i in range(len(runs_of_set)):
-        source = _twin_source(study, found, key, runs_of_set, i, model)
-        previous = fb_from.sets[i] if fb_from is not None else None
-        made.append(calibrate_twins(source, study.options.twins, kind, study.execution, previous))
-    return pool_twins(kind, made, runs_of_set, study.config)
-
-
-def _twins(study: _Study, found: _Found) -> None:
-    """Phase 3: per group, the twins and their calibration; which twins each method uses.
-
-    The groups' models, and the study's strongest feedforward, come from the groups of each plant
-    apart: a plant's groups are calibrated as a study of that plant alone would calibrate them."""
-    strongest = {}
-    for level, groups in study.plants.split(study.groups).items():
-        models, remnants = group_models(study.plants.configs[level], groups, found.fitted)
-        found.models.update(models)
-        found.remnants.update(remnants)
-        # The study's strongest feedforward (--ff-twin study and auto): the group with the largest
-        # fitted Kpt ("would feedforward of the size seen in this study be found here?").
-        strongest.update(dict.fromkeys(groups, max(groups, key=lambda k: models[k].values["Kpt"])))
-    medians = {key: m.values for key, m in found.models.items()}
-    ff_twin = study.options.ff_twin
-    for key in study.groups:
-        top = strongest[key]
-        study_model = {**medians[key], **{p: medians[top][p] for p in FEEDFORWARD_PARAMETERS}}
-        first = "study" if ff_twin == "study" and key != top else "own"
-        twins_of = {
-            first: _twin_sets(study, found, key, first, medians[key] if first == "own" else study_model)
-        }
-        earlier = twins_of[first]
-        if ff_twin == "auto" and key != top and not all(separates(c) for c in earlier.calibrations.values()):
-            # The study's FB twin is the own twins' (Kpt = 0: the same loop), shared, not made again.
-            twins_of["study"] = _twin_sets(study, found, key, "study", study_model, earlier)
-        for method_name in methods.METHODS:
-            # The first twins where they separate; else the last made (study's, or the same).
-            use = first if separates(earlier.calibrations[method_name]) else next(reversed(twins_of))
-            found.used[(key, method_name)] = twins_of[use]
-
-
-def _selection_paths(study: _Study, found: _Found, frontier: pa.Table) -> None:
+def _selection_paths(study: Study, found: Found, frontier: pa.Table) -> None:
     """Every run's frontier (of the run's ``frontier`` table) and selection path over W, per method."""
     name = study.config.data.name
     by_key = results.split_by_key(frontier, tables.FRONTIER.key)
@@ -278,38 +188,7 @@ def _selection_paths(study: _Study, found: _Found, frontier: pa.Table) -> None:
             found.paths[(seed, method_name)] = (t, path, t.column("nb_ft").to_numpy())
 
 
-def _more_fb_twins(study: _Study, found: _Found, judge: Evidence, run_lines: dict) -> None:
-    """Phase 4: more FB twins wherever a run's p-value is not settled (sequential, Besag and
-    Clifford), in batches of ``twins``, up to ``max_fb_twins`` per forcing set."""
-    names, most, batch = tuple(methods.METHODS), study.options.most_fb_twins, study.options.twins
-    for key in study.groups:
-        name, sets = group_name(study.by, key), found.used[(key, names[0])].runs
-        found.deciding[key] = {m: judge.statistic(name, found.used[(key, m)], m) for m in names}
-        model = found.models[key].values
-        for i, members in enumerate(sets):
-            twin_of = {m: found.used[(key, m)].sets[i] for m in names}
-            values = [
-                ({m: judge.w_star(*found.paths[(s, m)][1:]) for m in names}, run_lines.get(s))
-                for s in members
-            ]
-            source = _twin_source(study, found, key, sets, i, model)
-            while (drawn := judge.drawn(name, i + 1, twin_of[names[0]])) < most:
-                open_methods, lines_open = judge.unsettled(name, i + 1, twin_of, found.deciding[key], values)
-                if not (open_methods or lines_open):
-                    break
-                draws = draw_fb_twins(
-                    source, drawn + 1, min(batch, most - drawn), open_methods, study.execution
-                )
-                judge.add(name, i + 1, draws)
-            for m in names:
-                if found.deciding[key][m] == "W*":
-                    n = judge.fb_thresholds(name, i + 1, twin_of[m], m).size
-                else:
-                    n = judge.drawn(name, i + 1, twin_of[m])
-                found.fb_drawn[(key, m)] = max(found.fb_drawn.get((key, m), 0), n)
-
-
-def _select_and_fit(study: _Study, found: _Found, judge: Evidence, run_lines: dict) -> None:
+def _select_and_fit(study: Study, found: Found, judge: Evidence, run_lines: dict) -> None:
     """Phase 5: every run's evidence, its selection at its group's W, and the selected
     structure's parametric fit."""
     config, run_dir = study.config, study.run_dir
@@ -423,7 +302,7 @@ def analyse_study(
     if force:  # after the data's checks (in identify_study): a refused --force keeps the twins
         forget_twins(run_dir)
     lap_done("identify")
-    study = _Study(
+    study = Study(
         config,
         run_dir,
         options,
@@ -435,10 +314,10 @@ def analyse_study(
         twin_rate(config.timing.output_rate),
         plants,
     )
-    found = _Found()
+    found = Found()
     _fit_runs(study, found)
     lap_done("fit runs")
-    _twins(study, found)
+    make_twins(study, found)
     lap_done("twins")
     _selection_paths(study, found, identified.frontier)
     # Each run over the analysis window, as long as its twins (a file may run on beyond it).
@@ -471,7 +350,7 @@ def analyse_study(
         # go down to alpha / (runs): there more twins can still change a decision.
         None if options.fdr else options.alpha / 10,
     )
-    _more_fb_twins(study, found, judge, run_lines)
+    more_fb_twins(study, found, judge, run_lines)
     lap_done("more FB twins")
     _select_and_fit(study, found, judge, run_lines)
     lap_done("fit selected")

@@ -20,7 +20,7 @@ from hcid.hcfit.determined import is_flagged, is_undetermined, reason
 from hcid.hcfit.lines import record_lines
 from hcid.loop.hcmodel import plant
 from hcid.pipeline.execution import Execution
-from hcid.pipeline.line_statistics import LINE_STATISTICS, twin_statistics
+from hcid.pipeline.line_statistics import LINE_STATISTICS, twin_statistics_of
 from hcid.selection.calibration import (
     binomial_summary,
     evidence_power,
@@ -195,12 +195,29 @@ class Evidence:
         return self._thresholds[key]
 
     def _folder_lines(self, group: str, folder: str) -> dict[str, dict[str, np.ndarray]]:
-        if (group, folder) not in self._lines:
-            config, start, offsets = self.starts[group]
-            self._lines[(group, folder)] = twin_statistics(
-                self.run_dir / folder, config, start, self.execution, offsets
-            )
+        self.prefetch_folders([(group, folder)])
         return self._lines[(group, folder)]
+
+    def prefetch_folders(self, pairs: Sequence[tuple[str, str]]) -> None:
+        """The line statistics of every ``(group, twin folder)`` not yet computed, in one pool
+        (:func:`hcid.pipeline.line_statistics.twin_statistics_of`)."""
+        missing = list(dict.fromkeys(p for p in pairs if p not in self._lines))
+        items = []
+        for group, folder in missing:
+            config, start, offsets = self.starts[group]
+            items.append((self.run_dir / folder, config, start, offsets))
+        for pair, lines in zip(missing, twin_statistics_of(items, self.execution), strict=True):
+            self._lines[pair] = lines
+
+    def prefetch(self, twins: Sequence[tuple[str, object]]) -> None:
+        """The line statistics of every forcing set's calibration twins of ``(group, TwinSets)``."""
+        self.prefetch_folders(
+            [(g, f) for g, pair in twins for t in pair.sets for f in (t.folder, t.fb_folder) if f]
+        )
+
+    def prefetch_draws(self, sets: Sequence[tuple[str, int]]) -> None:
+        """The line statistics of every draw of ``(group, forcing set)`` not yet computed."""
+        self.prefetch_folders([(g, folder) for g, i in sets for _, _, folder in self._more.get((g, i), [])])
 
     def lines(self, group: str, twin) -> dict[str, dict[str, np.ndarray]] | None:
         """The calibration twins' line statistics: statistic -> ``FB`` / ``FF`` -> values; None

@@ -22,7 +22,14 @@ from hcid.io import results
 from hcid.loop.hcmodel import plant
 from hcid.pipeline.execution import Execution
 
-__all__ = ["LINE_STATISTICS", "deviations", "record_statistics", "run_statistics", "twin_statistics"]
+__all__ = [
+    "LINE_STATISTICS",
+    "deviations",
+    "record_statistics",
+    "run_statistics",
+    "twin_statistics",
+    "twin_statistics_of",
+]
 
 #: The statistics of a record's lines, by name in the tables: (value column, columns' stem, as in
 #: ``p_<stem>``, ``p_<stem>_method``, ``power_<stem>``, ``fb_twins_<stem>``).
@@ -80,20 +87,36 @@ def twin_statistics(
     group's medians. ``offsets`` are the group's runs' deviations (each run's fitted values minus
     the group model's): twin ``k`` (the FB and the FF twin of seed ``k`` alike) starts at ``start``
     minus deviation ``(k - 1) mod len(offsets)``, away from its truth as a run is from its own."""
-    records = results.records(results.read(tables.SIMULATIONS, folder), folder / tables.SIMULATIONS.file)
-    keys = sorted(records)
-    tasks = [
-        (records[k], config.timing.output_rate, config.loop, _offset(start, offsets, k[1]), config.fit_hc)
-        for k in keys
-    ]
-    found = list(execution.map(record_statistics, tasks, "twins' line statistics"))
-    if any(f is None for f in found):
-        return {}
-    out: dict[str, dict[str, list[float]]] = {}
-    for (model, _), values in zip(keys, found, strict=True):
-        for name, value in values.items():
-            out.setdefault(model, {}).setdefault(name, []).append(value)
-    return {m: {n: np.array(v) for n, v in by.items()} for m, by in out.items()}
+    return twin_statistics_of([(folder, config, start, offsets)], execution)[0]
+
+
+def twin_statistics_of(
+    folders: Sequence[tuple[Path, Config, Mapping[str, float], Sequence[Mapping[str, float]]]],
+    execution: Execution,
+) -> list[dict[str, dict[str, np.ndarray]]]:
+    """:func:`twin_statistics` of every ``(folder, config, start, offsets)``, in one pool."""
+    keys, tasks = [], []
+    for folder, config, start, offsets in folders:
+        table = results.read(tables.SIMULATIONS, folder)
+        records = results.records(table, folder / tables.SIMULATIONS.file)
+        keys.append(sorted(records))
+        tasks += [
+            (records[k], config.timing.output_rate, config.loop, _offset(start, offsets, k[1]), config.fit_hc)
+            for k in keys[-1]
+        ]
+    found = list(execution.map(record_statistics, tasks, "twins' line statistics")) if tasks else []
+    out, first = [], 0
+    for mine in keys:
+        values_of, first = found[first : first + len(mine)], first + len(mine)
+        if any(f is None for f in values_of):
+            out.append({})
+            continue
+        by_model: dict[str, dict[str, list[float]]] = {}
+        for (model, _), values in zip(mine, values_of, strict=True):
+            for name, value in values.items():
+                by_model.setdefault(model, {}).setdefault(name, []).append(value)
+        out.append({m: {n: np.array(v) for n, v in by.items()} for m, by in by_model.items()})
+    return out
 
 
 def _offset(start: Mapping[str, float], offsets: Sequence[Mapping[str, float]], seed: int) -> dict:

@@ -8,6 +8,7 @@ missing, identify what is not done, sweep W"; the CLI calls one of these.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import socket
 import time
@@ -19,16 +20,15 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import methods, tables
-from hcid.analysis.fourier import PLANT_MISMATCH_LIMIT, is_other_plant, plant_mismatch
 from hcid.config import Config, IdentifyConfig
 from hcid.errors import ConfigError, DataError
-from hcid.io import datasets, measured, results
+from hcid.io import datasets, results
 from hcid.io.resolve import with_data
 from hcid.loop.simulate import remnant_gain, simulate_realization
 from hcid.pipeline.execution import Execution
+from hcid.pipeline.measured_data import check_data, import_data, write_skipped
 from hcid.pipeline.parallel import compile_before_fork
-from hcid.pipeline.plants import RunPlants, run_plants
-from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
+from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config, using
 from hcid.pipeline.sweep import SweepRun, selections, sweep_study
 from hcid.selection.calibration import calibrate
 
@@ -38,11 +38,11 @@ __all__ = [
     "SimulationRun",
     "StudyRun",
     "calibrate_study",
-    "check_plant",
+    "identify_studies",
     "identify_study",
     "run_study",
+    "simulate_studies",
     "simulate_study",
-    "write_skipped",
 ]
 
 
@@ -76,20 +76,40 @@ def simulate_study(
     Writes ``config.yaml``, ``simulations.parquet`` and
     ``simulation_summary.parquet`` in ``run_dir``, each atomically.
     """
-    config.require_simulation("simulate")
-    check_run_dir(config, run_dir, "simulate", force=force)
-    start = time.perf_counter()
-    kn = remnant_gain(config)
-    tasks = [(config, m.name, seed, kn) for m in config.models for seed in config.seeds]
-    pairs = execution.run(_simulate_task, tasks, "simulate")
-    realizations = [p[0] for p in pairs]
-    simulations = results.realizations_table(realizations)
-    summary = results.summary_table(realizations, [p[1] for p in pairs])
-    record_config(config, run_dir)
-    results.write(tables.SIMULATIONS, simulations, run_dir)
-    results.write(tables.SIMULATION_SUMMARY, summary, run_dir)
-    results.append_run_log(run_dir, "simulate", time.perf_counter() - start, execution.jobs)
-    return SimulationRun(simulations=simulations, summary=summary, kn=kn, run_dir=run_dir)
+    return simulate_studies([(config, run_dir)], execution=execution, force=force)[0]
+
+
+def simulate_studies(
+    studies: Sequence[tuple[Config, Path]], *, execution: Execution = Execution(), force: bool = False
+) -> list[SimulationRun]:
+    """:func:`simulate_study` of several ``(config, run_dir)`` at once: their tasks in one pool, so
+    that the workers stay busy across them (many small studies, e.g. a group's twins of every
+    forcing set); each run directory's tables are those its own simulation writes."""
+    with contextlib.ExitStack() as held:
+        for config, run_dir in studies:
+            held.enter_context(using(Path(run_dir)))
+            config.require_simulation("simulate")
+            check_run_dir(config, Path(run_dir), "simulate", force=force)
+        start = time.perf_counter()
+        kns = [remnant_gain(config) for config, _ in studies]
+        tasks = [
+            [(config, m.name, seed, kn) for m in config.models for seed in config.seeds]
+            for (config, _), kn in zip(studies, kns, strict=True)
+        ]
+        pairs = execution.run(_simulate_task, [t for each in tasks for t in each], "simulate")
+        seconds = time.perf_counter() - start
+        out, first = [], 0
+        for (config, run_dir), kn, each in zip(studies, kns, tasks, strict=True):
+            mine, first = pairs[first : first + len(each)], first + len(each)
+            realizations = [p[0] for p in mine]
+            simulations = results.realizations_table(realizations)
+            summary = results.summary_table(realizations, [p[1] for p in mine])
+            record_config(config, Path(run_dir))
+            results.write(tables.SIMULATIONS, simulations, Path(run_dir))
+            results.write(tables.SIMULATION_SUMMARY, summary, Path(run_dir))
+            results.append_run_log(Path(run_dir), "simulate", seconds, execution.jobs)
+            out.append(SimulationRun(simulations=simulations, summary=summary, kn=kn, run_dir=Path(run_dir)))
+    return out
 
 
 # --------------------------------------------------------------------------- identification
@@ -258,26 +278,6 @@ def _load_records(
     return recs
 
 
-def _import_data(config: Config, run_dir: Path, data_set: datasets.DataSet, force: bool) -> None:
-    """Keep a copy of a data set in ``measured.parquet`` and its runs' factors in
-    ``runs.parquet``. Other data than the run's earlier identification results were made from
-    are refused without ``force``: their results would be reused as if they were these data's."""
-    data = config.data
-    check_run_dir(config, run_dir, "identify", force=force)
-    table = measured.records_table(data.name, data_set.records)
-    if not force:
-        old = results.read_optional(tables.MEASURED, run_dir)
-        if old is not None and (run_dir / tables.FRONTIER.file).exists() and not old.equals(table):
-            raise DataError(
-                f"{run_dir}: holds identification results of other measured data (its "
-                f"{tables.MEASURED.file} differs from these files); use --force to replace them, "
-                "or another --run"
-            )
-    record_config(config, run_dir)
-    results.write(tables.MEASURED, table, run_dir)
-    results.write(tables.RUNS, datasets.runs_table(data.name, data_set), run_dir)
-
-
 def _done(run_dir: Path, keys: list, names: tuple[str, ...], force: bool) -> dict:
     """The finished (model, seed, method) tasks to keep: tables and an interrupted run's parts."""
     if not force:
@@ -336,13 +336,83 @@ def identify_study(
     ``runs.parquet`` keeps), beside any simulated realizations already in the tables.
     ``method_names`` defaults to every registered method.
     """
-    names = tuple(methods.METHODS) if method_names is None else tuple(method_names)
-    for name in names:
-        methods.get(name)
+    names = _method_names(method_names)
     if data is not None:
         config = with_data(config)
     execution.check()  # a dask scheduler without workers is refused before anything is written
     records, keys, noise_free, simulation = _records_to_identify(config, run_dir, data, execution, force)
+    job = _prepare_identification(config, run_dir, names, records, keys, noise_free, simulation, force)
+    _run_identifications([job], execution)
+    return _finish_identification(job, execution, data)
+
+
+def identify_studies(
+    studies: Sequence[tuple[Config, Path, Sequence[str] | None]], *, execution: Execution = Execution()
+) -> list[IdentifyRun]:
+    """:func:`identify_study` of several simulated studies ``(config, run_dir, method_names)`` at
+    once: the ones without simulations simulated together (:func:`simulate_studies`), then every
+    identification task in one pool, so that the workers stay busy across them (a group's twins
+    of every forcing set, the twins of every group); each run directory's tables are those its
+    own :func:`identify_study` writes, bit for bit."""
+    with contextlib.ExitStack() as held:
+        for _, run_dir, _ in studies:
+            held.enter_context(using(Path(run_dir)))
+        execution.check()
+        for config, _, _ in studies:
+            config.require_simulation("identify (without --data)")
+        # Before the simulations: forked workers then start with this process's loops,
+        # forcing functions and compiled loop kernel (hcid.pipeline.parallel).
+        noise_free = [noise_free_records(config) for config, _, _ in studies]
+        missing = [
+            i
+            for i, (_, run_dir, _) in enumerate(studies)
+            if not (Path(run_dir) / tables.SIMULATIONS.file).exists()
+        ]
+        made = dict(
+            zip(
+                missing, simulate_studies([studies[i][:2] for i in missing], execution=execution), strict=True
+            )
+        )
+        jobs = []
+        for i, (config, run_dir, names) in enumerate(studies):
+            run_dir = Path(run_dir)
+            keys = [(m.name, s) for m in config.models for s in config.seeds]
+            check_run_dir(config, run_dir, "identify")
+            simulation = made.get(i)
+            records = _load_records(config, run_dir, simulation.simulations if simulation else None)
+            jobs.append(
+                _prepare_identification(
+                    config, run_dir, _method_names(names), records, keys, noise_free[i], simulation, False
+                )
+            )
+        _run_identifications(jobs, execution)
+        return [_finish_identification(job, execution, None) for job in jobs]
+
+
+def _method_names(method_names: Sequence[str] | None) -> tuple[str, ...]:
+    names = tuple(methods.METHODS) if method_names is None else tuple(method_names)
+    for name in names:
+        methods.get(name)
+    return names
+
+
+@dataclass
+class _Identification:
+    """One run directory's identification in the making: its tasks, and what they add to."""
+
+    config: Config
+    run_dir: Path
+    keys: list
+    names: tuple[str, ...]
+    done: dict
+    tasks: list
+    reused: int
+    simulation: SimulationRun | None
+    start: float
+
+
+def _prepare_identification(config, run_dir, names, records, keys, noise_free, simulation, force):
+    """What is left to identify in ``run_dir`` (finished tasks kept unless ``force``)."""
     start = time.perf_counter()
     done = _done(run_dir, keys, names, force)
     record_config(config, run_dir)
@@ -354,90 +424,42 @@ def identify_study(
         if (model, seed, method) not in done
     ]
     reused = sum(1 for k in keys for me in names if (*k, me) in done)
+    return _Identification(config, run_dir, keys, names, done, tasks, reused, simulation, start)
+
+
+def _identify_in(index: int, *task):
+    """:func:`_identify_task` of one task of the ``index``-th run directory (:func:`identify_studies`)."""
+    return index, *_identify_task(*task)
+
+
+def _run_identifications(jobs: Sequence[_Identification], execution: Execution) -> None:
+    """Every job's tasks in one pool, each result kept as a part (for a resume) as it arrives."""
+    tasks = [(i, *task) for i, job in enumerate(jobs) for task in job.tasks]
     if tasks and execution.backend == "loky":
         compile_before_fork()  # once, here: forked workers start with them (hcid.pipeline.parallel)
-    for key, parts in execution.map(_identify_task, tasks, "identify"):
-        results.write_part(run_dir, *key, parts)  # for a resume, if this run is interrupted
-        done[key] = parts
+    for i, key, parts in execution.map(_identify_in, tasks, "identify"):
+        results.write_part(jobs[i].run_dir, *key, parts)  # for a resume, if this run is interrupted
+        jobs[i].done[key] = parts
 
-    frontier, choices, log = _write_identification(config, run_dir, done)
+
+def _finish_identification(job: _Identification, execution: Execution, data) -> IdentifyRun:
+    frontier, choices, log = _write_identification(job.config, job.run_dir, job.done)
     if data is not None:
-        write_skipped(run_dir, data)
-    if tasks:
+        write_skipped(job.run_dir, data)
+    if job.tasks:
         results.append_run_log(
-            run_dir, f"identify ({len(tasks)} tasks)", time.perf_counter() - start, execution.jobs
+            job.run_dir, f"identify ({len(job.tasks)} tasks)", time.perf_counter() - job.start, execution.jobs
         )
     return IdentifyRun(
         frontier=frontier,
         choices=choices,
         log=log,
-        computed=len(tasks),
-        reused=reused,
-        run_dir=run_dir,
-        simulation=simulation,
-        imported=len(keys) if data is not None else 0,
+        computed=len(job.tasks),
+        reused=job.reused,
+        run_dir=job.run_dir,
+        simulation=job.simulation,
+        imported=len(job.keys) if data is not None else 0,
         set_aside=data.set_aside if data is not None else (),
-    )
-
-
-def _check_data(config: Config, data: datasets.DataSet) -> None:
-    """A data set made for this config: at its analysis rate, every run as long as its windows
-    need (what :func:`hcid.io.resolve.read_study` gives; a data set read otherwise may not be)."""
-    rate = config.timing.output_rate
-    if not np.isclose(data.rate, rate, rtol=1e-9):
-        raise DataError(
-            f"data: the data set is at {data.rate:g} Hz, the config analyses at {rate:g} Hz; read it "
-            "for this config (hcid.io.resolve.read_study)"
-        )
-    need = measured.samples_needed(config)
-    short = next((run for run, rec in data.records.items() if rec["u"].size < need), None)
-    if short is not None:
-        raise DataError(
-            f"data: run {short} holds {data.records[short]['u'].size} samples, the config's windows "
-            f"need {need}; read it for this config (hcid.io.resolve.read_study)"
-        )
-    check_plant(config, data)
-
-
-def write_skipped(run_dir: Path, data: datasets.DataSet) -> None:
-    """``skipped.parquet``: the files a folder or glob of the data set found that are not runs."""
-    rows = [{"file": f, "reason": why} for f, why in data.skipped]
-    results.write(tables.SKIPPED, pa.Table.from_pylist(rows, schema=tables.SKIPPED.arrow), run_dir)
-
-
-def check_plant(config: Config, data: datasets.DataSet, plants: RunPlants | None = None) -> None:
-    """Refuse runs whose e is not ft minus the configured plant's output (a data set of another
-    plant, or the disturbance at the other point): every result would be for the wrong loop.
-    Each run is checked over the analysis window (where its multisines have whole periods; a
-    single-input run at its input's lines) against its own plant (``plants``, from
-    :func:`hcid.pipeline.plants.run_plants` where not given); runs whose forcing functions have no
-    lines there, a config without a loop (identification alone) and one with
-    ``data.plant_check: false`` are not checked."""
-    loop, rate = config.loop, config.timing.output_rate
-    if loop is None:
-        return
-    plants = run_plants(config, data) if plants is None else plants  # the factor checked first
-    if not config.data.plant_check:
-        return
-    n = config.timing.record_samples
-    found = {
-        run: plant_mismatch({k: rec[k][:n] for k in ("ft", "fd", "e", "u")}, rate,
-                            plants.plant_of(run).num, plants.plant_of(run).den, loop.disturbance_at)
-        for run, rec in data.records.items()
-    }  # fmt: skip
-    over = {run: m for run, m in found.items() if is_other_plant(m)}
-    if not over:
-        return
-    worst = max(over, key=over.get)
-    file = next((r["file"] for r in data.runs if r.get("run") == worst), None)
-    key = "loop.plant" if plants.factor is None else f"loop.plant.levels.{plants.level_of[worst]}"
-    raise DataError(
-        f"data: run {worst}{f' ({file})' if file else ''} is not the configured plant: "
-        f"{over[worst]:.0%} (RMS) of its theta = ft - e at the forcing lines is not what "
-        f"{key} {plants.plant_of(worst).text} with the disturbance at its {loop.disturbance_at} gives "
-        f"({len(over)} of {len(found)} runs over {PLANT_MISMATCH_LIMIT:.0%}); check loop.plant and "
-        "loop.disturbance_at, or the data files (data.plant_check: false where the plant leaves out "
-        "a display delay)"
     )
 
 
@@ -445,8 +467,8 @@ def _records_to_identify(config: Config, run_dir: Path, data, execution: Executi
     """The records to identify by (model, seed) and their keys in order, each simulated model's
     noise-free record, and the simulation if it was made here (a study without one yet)."""
     if data is not None:
-        _check_data(config, data)
-        _import_data(config, run_dir, data, force)
+        check_data(config, data)
+        import_data(config, run_dir, data, force)
         records = {(config.data.name, run): rec for run, rec in data.records.items()}
         check_run_dir(config, run_dir, "identify", force=force)
         return records, list(records), {}, None
@@ -523,11 +545,18 @@ class CalibrationRun:
 
 
 def model_paths(
-    config: Config, run_dir: Path, models: Sequence[str], method_names: Sequence[str] | None = None
+    config: Config,
+    run_dir: Path,
+    models: Sequence[str],
+    method_names: Sequence[str] | None = None,
+    frontier: pa.Table | None = None,
 ) -> dict[str, tuple]:
     """Per method (``method_names``, default every registered one), each of ``models``' seeds'
-    selection paths and nb_ft, in the order of ``models``: what rates at any W are taken from."""
-    chosen = selections(results.read(tables.FRONTIER, run_dir), run_dir)
+    selection paths and nb_ft, in the order of ``models``: what rates at any W are taken from.
+    ``frontier``: the run's, where the caller has just made it (not read back)."""
+    if frontier is None:
+        frontier = results.read(tables.FRONTIER, run_dir)
+    chosen = selections(frontier, run_dir)
     out = {}
     for method in methods.METHODS if method_names is None else method_names:
         pair = []
@@ -569,5 +598,5 @@ def calibrate_study(
             f"model (Kpt > 0), got {[m.name for m in config.models]}"
         )
     study = run_study(config, run_dir, execution=execution)
-    paths = model_paths(config, run_dir, (fb.name, ff.name))
+    paths = model_paths(config, run_dir, (fb.name, ff.name), frontier=study.identification.frontier)
     return CalibrationRun(calibrate_paths(config, run_dir, paths), study, run_dir, paths)

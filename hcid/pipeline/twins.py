@@ -4,46 +4,47 @@ the W a calibration gives (:mod:`hcid.pipeline.analyse`)."""
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import hashlib
 import math
 import re
 from collections.abc import Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from hcid import methods, tables
-from hcid.config import Config, HCModel, Loop
+from hcid.config import Config
 from hcid.errors import ConfigError, DataError
-from hcid.hcfit.determined import Simulated, group_model
+from hcid.hcfit.determined import group_model
 from hcid.io import folders
 from hcid.io.resolve import parse_config
-from hcid.loop.hcmodel import check_closed_loops
 from hcid.pipeline.execution import Execution
 from hcid.pipeline.parallel import labelled
 from hcid.pipeline.rundir import check_run_dir, using
-from hcid.pipeline.studies import (
-    calibrate_paths,
-    calibrate_study,
-    identify_study,
-    model_paths,
-    run_study,
-    simulate_study,
+from hcid.pipeline.studies import calibrate_paths, identify_studies, model_paths, simulate_studies
+from hcid.pipeline.sweep import sweep_study
+from hcid.pipeline.twin_values import (
+    PATH_PARAMETERS,
+    twin_model,
+    twin_rate,
+    twin_remnant,
+    twin_values,
 )
 from hcid.selection.calibration import calibrate
 
 __all__ = [
-    "MIN_TWIN_KPT",
-    "TWIN_RANGES",
-    "TWIN_SIM_RATE",
     "FbDraws",
     "TwinSets",
     "TwinSource",
     "Twins",
+    "calibrate_twin_sets",
     "calibrate_twins",
     "choose_w",
+    "draw_fb_twin_sets",
     "draw_fb_twins",
     "forcing_sets",
     "forcing_text",
@@ -54,14 +55,7 @@ __all__ = [
     "separates",
     "twin_config_raw",
     "twin_dir_ready",
-    "twin_model",
-    "twin_rate",
-    "twin_remnant",
-    "twin_values",
 ]
-
-#: The twins' simulation rate: the smallest multiple of the analysis rate at or above this (Hz).
-TWIN_SIM_RATE = 100.0
 
 
 def group_slug(key: tuple[str, ...]) -> str:
@@ -72,131 +66,14 @@ def group_slug(key: tuple[str, ...]) -> str:
     return f"{text}-{digest}"
 
 
-def twin_rate(rate: float) -> float:
-    return rate * max(1, math.ceil(TWIN_SIM_RATE / rate - 1e-9))
-
-
-#: The FF twin's smallest Kpt: a group whose fitted Kpt is below it (nobody uses feedforward)
-#: gets twins that nearly coincide, and the calibration says that no W separates them.
-MIN_TWIN_KPT = 1e-3
-
-
-#: What the twins' config takes of each value (:mod:`hcid.config.parse`, its ``models`` and
-#: ``loop`` sections): the lowest, the highest, and whether the lowest itself is refused (the FF
-#: twin's TI must be above 0: its Kpt is). ``kn`` is ``loop.remnant_gain``.
-TWIN_RANGES = {
-    "Kpt": (0.0, 10.0, False),
-    "TI": (0.0, 10.0, True),
-    "tau_pt": (-2.0, 2.0, False),
-    "Kpe": (0.0, 100.0, True),
-    "TL": (0.0, 10.0, False),
-    "tau_pe": (0.0, 2.0, True),
-    "w_nms": (0.0, 1e3, True),
-    "zeta_nms": (0.0, 10.0, True),
-    "kn": (0.0, 1e3, False),
-    "w_n": (0.0, 1e3, True),
-    "zeta_n": (0.0, 10.0, True),
-}
-# The HC model's path parameters (the twins' ``models`` section); delays in whole samples.
-_PATH_PARAMETERS = ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe")
-_DELAYS = ("tau_pt", "tau_pe")
-_REMNANT = ("kn", "w_n", "zeta_n")
-
-
-def _into_range(name: str, value: float, sim_rate: float) -> tuple[float, str, str]:
-    """One value as the twins simulate it: ``(value, change, problem)``, the change in words
-    where it had to be brought into :data:`TWIN_RANGES`, the problem where it cannot be.
-
-    A delay is whole samples at ``sim_rate`` (SPEC 1), and at least one where 0 is refused: a
-    delay fitted at 0 s (on its search bound) or under half a sample says only that it is shorter
-    than the fit can tell apart from the neuromuscular lag, and one sample, the shortest the
-    simulation takes, changes the loop's phase by at most ``w / sim_rate`` rad (3 deg at 5 rad/s,
-    100 Hz). A value above its range is brought to the range's top, one below a lowest that is
-    taken to that lowest; one at or below a refused lowest of 0 (no gain, no damping) has no
-    nearest value to stand for it, and is a problem.
-    """
-    lo, hi, open_lo = TWIN_RANGES[name]
-    if not math.isfinite(value):
-        return value, "", f"{name} is {value:g}"
-    if name in _DELAYS:
-        n = round(value * sim_rate)
-        shortest = 1 if open_lo else math.ceil(lo * sim_rate - 1e-9)
-        longest = math.floor(hi * sim_rate + 1e-9)
-        if shortest <= n <= longest:
-            return n / sim_rate, "", ""
-        k = min(max(n, shortest), longest)
-        to, was = k / sim_rate, f"{name} {value:.3f} s"
-        if k == 1:
-            return to, f"{was} raised to one sample of the twins' simulation, {to:g} s at {sim_rate:g} Hz", ""
-        if n < shortest:
-            return to, f"{was} raised to {to:g} s, the shortest the twins take", ""
-        return to, f"{was} lowered to {to:g} s, the longest the twins take", ""
-    if value > hi:
-        return hi, f"{name} {value:.3g} lowered to {hi:g}, the most the twins take", ""
-    if value <= lo and open_lo:
-        return value, "", f"{name} is {value:.3g}, where the twins need a value above {lo:g}"
-    if value < lo:
-        return lo, f"{name} {value:.3g} raised to {lo:g}, the least the twins take", ""
-    return value, "", ""
-
-
-def _in_range(values: dict, names: Sequence[str], sim_rate: float) -> Simulated:
-    brought = [_into_range(n, float(values[n]), sim_rate) for n in names]
-    return Simulated(
-        {n: v for n, (v, _, _) in zip(names, brought, strict=True)},
-        tuple(c for _, c, _ in brought if c),
-        "; ".join(p for _, _, p in brought if p),
-    )
-
-
-def twin_values(fitted: dict, sim_rate: float) -> dict[str, float]:
-    """The FF twin's HC parameters (its paths' and its neuromuscular pair) as simulated at
-    ``sim_rate`` (Hz): Kpt at least :data:`MIN_TWIN_KPT`, every value in :data:`TWIN_RANGES`
-    (delays in whole samples, the error delay at least one; an anticipating tau_pt, < 0, reads the
-    twins' periodic target ahead). :func:`twin_model` says what it changed."""
-    return twin_model(fitted, sim_rate).values
-
-
-def twin_model(fitted: dict, sim_rate: float, loop: Loop | None = None) -> Simulated:
-    """A group's model as its twins simulate it at ``sim_rate`` (Hz), what had to be brought into
-    the twins' ranges to make it (:data:`TWIN_RANGES`: a delay fitted at 0 s to one sample), and
-    why the twins cannot be made from it at all: a value without a nearest one the twins take,
-    or, given the study's ``loop`` (its plant), a loop with the plant or a feedforward path that
-    is unstable as simulated (:func:`hcid.loop.hcmodel.check_closed_loops`, the twins' config's
-    own check). What :func:`hcid.hcfit.determined.group_model` judges the group's candidate
-    models by."""
-    given = {**fitted, "Kpt": max(float(fitted["Kpt"]), MIN_TWIN_KPT)}
-    sim = _in_range(given, (*_PATH_PARAMETERS, "w_nms", "zeta_nms"), sim_rate)
-    if sim.problem or loop is None:
-        return sim
-    ff = HCModel("FF", **{k: sim.values[k] for k in _PATH_PARAMETERS})
-    twin_loop = replace(loop, w_nms=sim.values["w_nms"], zeta_nms=sim.values["zeta_nms"])
-    unstable = {  # the FB twin's loop is the FF twin's: checked alone first, to say which fails
-        "FB": f"the loop with the plant is unstable as the twins simulate it at {sim_rate:g} Hz",
-        "FF": "the feedforward path Ynms Kpt / Yc / (TI s + 1)^2 is unstable or improper with this plant",
-    }
-    for model in (replace(ff, name="FB", Kpt=0.0), ff):
-        try:
-            check_closed_loops((model,), twin_loop, 1.0 / sim_rate)
-        except ConfigError:
-            return Simulated(sim.values, sim.changes, unstable[model.name])
-    return sim
-
-
-def twin_remnant(remnant: tuple[float, float, float]) -> Simulated:
-    """The group's remnant filter ``(kn, w_n, zeta_n)`` as its twins take it (:data:`TWIN_RANGES`),
-    with what had to be brought into range, in words (values ``kn``, ``w_n``, ``zeta_n``)."""
-    return _in_range(dict(zip(_REMNANT, remnant, strict=True)), _REMNANT, 1.0)  # no delay: any rate
-
-
 def twin_config_raw(config: Config, fitted: dict, remnant: tuple, forcing: Path, twins: int, name: str):
     """The twins' config (as YAML would give it): the group's fitted model and its FB twin, every
-    value in :data:`TWIN_RANGES` (:func:`twin_values`)."""
+    value in :data:`hcid.pipeline.twin_values.TWIN_RANGES` (:func:`twin_values`)."""
     loop_raw = dict(config.raw.get("loop", {}))
     kn, w_n, zeta_n = remnant
     rate, window = config.timing.output_rate, config.timing.window
     simulated = twin_values(fitted, twin_rate(rate))
-    ff = {k: simulated[k] for k in _PATH_PARAMETERS}
+    ff = {k: simulated[k] for k in PATH_PARAMETERS}
     return {
         "name": name,
         "models": {"FB": {**ff, "Kpt": 0.0}, "FF": ff},
@@ -393,29 +270,57 @@ def calibrate_twins(
     not). ``fb_from``: twins of the same group and forcing set whose FB twin is this one's (the
     study twins' is the own twins': the same loop, bit for bit), so only the FF twin is
     simulated and identified here."""
-    config, model = source.config, source.model
-    slug = source.slug + ("-study" if kind == "study" else "")
+    return calibrate_twin_sets([(source, kind, fb_from)], twins, execution)[0]
 
-    def twins_raw(forcing: Path) -> dict:
-        raw = twin_config_raw(config, model, source.remnant, forcing, twins, f"{config.name}_twins_{slug}")
-        return raw if fb_from is None else {**raw, "models": {"FF": raw["models"]["FF"]}}
 
-    with (
-        _twin_folder(source, slug, kind, twins_raw) as (twin_dir, twin_config),
-        labelled(f"{kind} twins of {source.whose}: "),
-    ):
-        if fb_from is None:
-            run = calibrate_study(twin_config, twin_dir, execution=execution)
-            found, paths, fb_folder = run.calibrations, run.paths, ""
-        else:
-            run_study(twin_config, twin_dir, execution=execution)
-            ff = model_paths(twin_config, twin_dir, ("FF",))
-            paths = {m: (fb_from.paths[m][0], ff[m][0]) for m in methods.METHODS}
-            found = calibrate_paths(twin_config, twin_dir, paths)
-            fb_folder = fb_from.fb_folder or fb_from.folder
-        calibrations = {c.method: c for c in found}
-    simulated = {**model, **twin_values(model, source.kn_rate)}
-    return Twins(kind, simulated, source.remnant, f"twins/{slug}", calibrations, paths, fb_folder)
+def calibrate_twin_sets(
+    requests: Sequence[tuple[TwinSource, str, Twins | None]], twins: int, execution: Execution
+) -> list[Twins]:
+    """:func:`calibrate_twins` of every ``(source, kind, fb_from)``, their simulations and
+    identifications in one pool (:func:`hcid.pipeline.studies.identify_studies`): the workers
+    stay busy across forcing sets and groups. Each folder's tables are those it gets alone."""
+    with contextlib.ExitStack() as held:
+        made = []
+        for source, kind, fb_from in requests:
+            slug = source.slug + ("-study" if kind == "study" else "")
+            raw = functools.partial(_calibration_raw, source, twins, slug, fb_from is not None)
+            made.append(held.enter_context(_twin_folder(source, slug, kind, raw)))
+        with labelled(_batch_label(requests, lambda r: f"{r[1]} twins of {r[0].whose}")):
+            identified = identify_studies(
+                [(config, folder, None) for folder, config in made], execution=execution
+            )
+        out = []
+        for (source, kind, fb_from), (twin_dir, twin_config), run in zip(
+            requests, made, identified, strict=True
+        ):
+            slug = source.slug + ("-study" if kind == "study" else "")
+            sweep_study(twin_config, twin_dir, run.frontier)  # as run_study does
+            if fb_from is None:
+                paths = model_paths(twin_config, twin_dir, ("FB", "FF"), frontier=run.frontier)
+                fb_folder = ""
+            else:
+                ff = model_paths(twin_config, twin_dir, ("FF",), frontier=run.frontier)
+                paths = {m: (fb_from.paths[m][0], ff[m][0]) for m in methods.METHODS}
+                fb_folder = fb_from.fb_folder or fb_from.folder
+            calibrations = {c.method: c for c in calibrate_paths(twin_config, twin_dir, paths)}
+            simulated = {**source.model, **twin_values(source.model, source.kn_rate)}
+            out.append(
+                Twins(kind, simulated, source.remnant, f"twins/{slug}", calibrations, paths, fb_folder)
+            )
+    return out
+
+
+def _calibration_raw(source: TwinSource, twins: int, slug: str, ff_only: bool, forcing: Path) -> dict:
+    """The calibration twins' config (:func:`twin_config_raw`), only the FF twin where the FB
+    twin is another folder's."""
+    config = source.config
+    raw = twin_config_raw(config, source.model, source.remnant, forcing, twins, f"{config.name}_twins_{slug}")
+    return {**raw, "models": {"FF": raw["models"]["FF"]}} if ff_only else raw
+
+
+def _batch_label(requests: Sequence, one) -> str:
+    """A progress bar's prefix: the one request's own words, or how many forcing sets."""
+    return f"{one(requests[0])}: " if len(requests) == 1 else f"twins of {len(requests)} forcing sets: "
 
 
 @dataclass(frozen=True)
@@ -437,26 +342,44 @@ def draw_fb_twins(
     driven by the forcing set's functions), simulated and identified by ``method_names`` only,
     in ``RUN/twins/<group>[-f<set>]-fb<first>`` (resumed; a method asked for later is added).
     The FB twin of ``--ff-twin study`` is the same loop, so one draw serves both."""
+    return draw_fb_twin_sets([(source, first, count, tuple(method_names))], execution)[0]
+
+
+def draw_fb_twin_sets(
+    requests: Sequence[tuple[TwinSource, int, int, Sequence[str]]], execution: Execution
+) -> list[FbDraws]:
+    """:func:`draw_fb_twins` of every ``(source, first, count, method_names)``, in one pool."""
+    with contextlib.ExitStack() as held:
+        made = []
+        for source, first, count, _ in requests:
+            slug = f"{source.slug}-fb{first}"
+            raw = functools.partial(_draw_raw, source, first, count, slug)
+            made.append(held.enter_context(_twin_folder(source, slug, "FB", raw)))
+        identify = [i for i, r in enumerate(requests) if r[3]]
+        simulate = [
+            i for i, r in enumerate(requests)
+            if not r[3] and not (made[i][0] / tables.SIMULATIONS.file).exists()
+        ]  # fmt: skip
+        label = _batch_label(requests, lambda r: f"FB twins {r[1]}-{r[1] + r[2] - 1} of {r[0].whose}")
+        with labelled(label):
+            runs = identify_studies(
+                [(made[i][1], made[i][0], requests[i][3]) for i in identify], execution=execution
+            )
+            simulate_studies([(made[i][1], made[i][0]) for i in simulate], execution=execution)
+        frontiers = dict(zip(identify, (r.frontier for r in runs), strict=True))
+        out = []
+        for i, (source, first, count, names) in enumerate(requests):
+            twin_dir, twin_config = made[i]
+            found = model_paths(twin_config, twin_dir, ("FB",), names, frontier=frontiers[i]) if names else {}
+            paths = {method: fb for method, (fb,) in found.items()}
+            out.append(FbDraws(first, count, paths, f"twins/{source.slug}-fb{first}"))
+    return out
+
+
+def _draw_raw(source: TwinSource, first: int, count: int, slug: str, forcing: Path) -> dict:
     config = source.config
-    slug = f"{source.slug}-fb{first}"
-
-    def fb_raw(forcing: Path) -> dict:
-        raw = twin_config_raw(
-            config, source.model, source.remnant, forcing, count, f"{config.name}_twins_{slug}"
-        )
-        return {**raw, "models": {"FB": raw["models"]["FB"]}, "seeds": {"first": first, "count": count}}
-
-    with (
-        _twin_folder(source, slug, "FB", fb_raw) as (twin_dir, twin_config),
-        labelled(f"FB twins {first}-{first + count - 1} of {source.whose}: "),
-    ):
-        if method_names:
-            identify_study(twin_config, twin_dir, method_names, execution=execution)
-        elif not (twin_dir / tables.SIMULATIONS.file).exists():
-            simulate_study(twin_config, twin_dir, execution=execution)
-    found = model_paths(twin_config, twin_dir, ("FB",), method_names) if method_names else {}
-    paths = {method: fb for method, (fb,) in found.items()}
-    return FbDraws(first, count, paths, f"twins/{slug}")
+    raw = twin_config_raw(config, source.model, source.remnant, forcing, count, f"{config.name}_twins_{slug}")
+    return {**raw, "models": {"FB": raw["models"]["FB"]}, "seeds": {"first": first, "count": count}}
 
 
 @contextmanager
