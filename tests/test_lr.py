@@ -71,24 +71,34 @@ def test_the_one_call_jacobian_is_scipys_finite_difference(feedforward):
 def test_a_twins_start_is_as_far_from_its_truth_as_a_runs_from_its_own_fit():
     # Source: hcid.pipeline.line_statistics' rule: the deviations are the runs' determined fitted
     # feedback values minus the group model's (0 where a fit does not determine the parameter, and
-    # for the feedforward path's, whose start is the group's for runs and twins alike); twin k
-    # starts at the model minus deviation (k - 1) mod n, the FB and the FF twin of a seed alike.
+    # for the feedforward path's, whose start is the group's for runs and twins alike), each
+    # parameter's shrunk by sqrt(1 - mean(se^2) / mean(deviation^2)) over the runs that determine
+    # it (0 where the fit error is the whole spread); twin k starts at the model minus deviation
+    # (k - 1) mod n, the FB and the FF twin of a seed alike.
     from types import SimpleNamespace
 
     from hcid.pipeline.line_statistics import _offset, deviations
 
     model = {"Kpe": 2.0, "TL": 0.15, "Kpt": 0.8}
+    names = ("Kpe", "TL", "Kpt")
+
+    def fit(values, se, status):
+        return SimpleNamespace(values=dict(zip(names, values, strict=True)), names=names, se=se,
+                               status=dict(zip(names, status, strict=True)))  # fmt: skip
+
+    ok = "determined"
     fits = [
-        SimpleNamespace(values={"Kpe": 2.5, "TL": 0.9, "Kpt": 0.7},
-                        status={"Kpe": "determined", "TL": "correlated with Kpe", "Kpt": "determined"}),
-        SimpleNamespace(values={"Kpe": 1.75, "TL": 0.1, "Kpt": 0.8},
-                        status={"Kpe": "determined", "TL": "determined", "Kpt": "determined"}),
-    ]  # fmt: skip
+        fit((2.5, 0.9, 0.7), (0.3, 0.1, 0.1), (ok, "correlated with Kpe", ok)),
+        fit((1.75, 0.1, 0.8), (0.2, 0.05, 0.1), (ok, ok, ok)),
+    ]
+    # Kpe: deviations 0.5 and -0.25, mean square 0.15625, mean se^2 0.065: factor sqrt(0.584);
+    # TL: one determined run, deviation -0.05 against se 0.05: the error is all its spread, 0.
+    k = np.sqrt(1 - 0.065 / 0.15625)
     found = deviations(model, fits)
-    assert found == [pytest.approx({"Kpe": 0.5, "TL": 0.0, "Kpt": 0.0}),
-                     pytest.approx({"Kpe": -0.25, "TL": -0.05, "Kpt": 0.0})]  # fmt: skip
-    assert _offset(model, found, 1) == pytest.approx({"Kpe": 1.5, "TL": 0.15, "Kpt": 0.8})
-    assert _offset(model, found, 2) == pytest.approx({"Kpe": 2.25, "TL": 0.2, "Kpt": 0.8})
+    assert found == [pytest.approx({"Kpe": 0.5 * k, "TL": 0.0, "Kpt": 0.0}),
+                     pytest.approx({"Kpe": -0.25 * k, "TL": 0.0, "Kpt": 0.0})]  # fmt: skip
+    assert _offset(model, found, 1) == pytest.approx({"Kpe": 2.0 - 0.5 * k, "TL": 0.15, "Kpt": 0.8})
+    assert _offset(model, found, 2) == pytest.approx({"Kpe": 2.0 + 0.25 * k, "TL": 0.15, "Kpt": 0.8})
     assert _offset(model, found, 3) == _offset(model, found, 1)  # the cycle
     assert _offset(model, [], 7) == model  # no runs' deviations: the model itself
 

@@ -6,6 +6,7 @@ twin it is judged against get the same start, so their statistics are made alike
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -127,30 +128,41 @@ def _offset(start: Mapping[str, float], offsets: Sequence[Mapping[str, float]], 
 
 
 def deviations(model: Mapping[str, float], fits: Sequence) -> list[dict[str, float]]:
-    """Each run's fitted values minus the group model's, over the feedback parameters its fit
-    determines (:data:`hcid.hcfit.determined.DETERMINED`; 0 for the others: along an undetermined
-    direction the cost is flat, and a run's optimum there says nothing of how far its start is),
-    in the order given (``fits``: the runs' :class:`hcid.hcfit.fit.HCFit`): the offsets of
-    :func:`twin_statistics`.
+    """How far each twin's fits start from its truth, in the order of ``fits`` (the group's runs'
+    :class:`hcid.hcfit.fit.HCFit`): the offsets of :func:`twin_statistics`.
 
-    The feedforward path's parameters get no offset: a run's feedforward fit starts at the group
-    model's Kpt, TI and tau_pt, and so does every twin's. Under the null the FB twin's and the
-    run's feedforward truth is the same (none), so equal starts are what makes them alike; an
-    offset there pushed half the twins' Kpt starts onto its bound at 0 (a run's fitted Kpt above
-    the group's median), whose fits then more often stayed at the nested model, and the runs'
-    ratios sat above their twins' (null study, 2026-11-28: KS p 1e-15, p-values between 0.1 and 0.4
-    too many, above 0.7 too few)."""
-    out = []
-    for fit in fits:
-        values, status = fit.values, fit.status
-        out.append(
-            {
-                p: float(values[p] - v)
-                if p not in FEEDFORWARD_PARAMETERS
-                and status.get(p) == DETERMINED
-                and np.isfinite(values.get(p, np.nan) - v)
-                else 0.0
-                for p, v in model.items()
-            }
-        )
-    return out
+    A run's fits start at the group model, away from the run's truth by the run's true deviation
+    from the group; its fitted deviation (fitted value minus the group model's) is that plus the
+    fit's own error. A twin's fitted optimum already carries a fit error of its own, so a twin
+    started at its truth minus a run's *fitted* deviation would start further away than the run
+    (by the fit error twice over), and under feedback-only truth the runs' likelihood ratios sat
+    above their twins' (null study, 2026-11-28: KS p 1e-13 with these offsets unshrunk; 0.63
+    with none, but conservative at 0.05, 3.3%). Each parameter's deviations are therefore shrunk
+    towards 0 by ``sqrt(max(0, 1 - mean(se^2) / mean(deviation^2)))`` over the runs that determine
+    it: what is left estimates the spread of the true deviations (the fitted spread minus the fit
+    error's, from the runs' own standard errors).
+
+    Only the feedback parameters the run's fit determines get an offset
+    (:data:`hcid.hcfit.determined.DETERMINED`; along an undetermined direction the cost is flat);
+    the feedforward path's start is the group model's for runs and twins alike (under the null
+    their feedforward truth is the same: none)."""
+    fits = list(fits)
+    raw = [
+        {
+            p: (float(fit.values[p] - v), float(fit.se[fit.names.index(p)]))
+            for p, v in model.items()
+            if p not in FEEDFORWARD_PARAMETERS
+            and p in fit.names
+            and fit.status.get(p) == DETERMINED
+            and np.isfinite(fit.values[p] - v)
+        }
+        for fit in fits
+    ]
+    shrink = {}
+    for p in model:
+        pairs = np.array([r[p] for r in raw if p in r], dtype=float).reshape(-1, 2)
+        spread = float(np.mean(pairs[:, 0] ** 2)) if len(pairs) else 0.0
+        se = pairs[np.isfinite(pairs[:, 1]), 1]
+        error = float(np.mean(se**2)) if se.size else 0.0
+        shrink[p] = math.sqrt(max(0.0, 1.0 - error / spread)) if spread > 0 else 0.0
+    return [{p: r[p][0] * shrink[p] if p in r else 0.0 for p in model} for r in raw]
