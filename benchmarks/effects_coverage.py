@@ -30,7 +30,9 @@ the share with p <= 0.05 (the level); the runs left out, and the cost per study.
 spreads the studies over processes (each study its own spawned seed: the same figures).
 
 Run: ``.venv/bin/python benchmarks/effects_coverage.py [--studies 200] [--seed 1] [--smoke]
-[--end-to-end 0] [--jobs 1]`` (``--smoke``: 4 studies, for tests); with ``OMP_NUM_THREADS=1`` one core. The
+[--end-to-end 0] [--jobs 1] [--save FITTED.parquet]`` or ``--from-fitted FITTED.parquet`` (the
+end-to-end figures again from saved fits, the effects' statistics only) (``--smoke``: 4
+studies, for tests); with ``OMP_NUM_THREADS=1`` one core. The
 CPU time (all threads) and the wall time are printed (the wall time grows with the machine's load).
 """
 
@@ -200,11 +202,18 @@ def fitted_study(rng: np.random.Generator, config, kn: float, experiment) -> pd.
     return table
 
 
-def _e2e_study(seed: np.random.SeedSequence, config, kn: float, experiment) -> list[tuple]:
-    """One end-to-end study's rows: per quantity and test, the interval, p and left-out runs."""
-    frame = effects_frame(
-        study_effects(fitted_study(np.random.default_rng(seed), config, kn, experiment), "condition")
-    )
+def _e2e_study(
+    seed: np.random.SeedSequence, config, kn: float, experiment
+) -> tuple[list[tuple], pd.DataFrame]:
+    """One end-to-end study's rows (per quantity and test, the interval, p and left-out runs) and
+    its fitted runs (:func:`fitted_study`)."""
+    fitted = fitted_study(np.random.default_rng(seed), config, kn, experiment)
+    return _effect_rows(fitted), fitted
+
+
+def _effect_rows(fitted: pd.DataFrame) -> list[tuple]:
+    """Per quantity and test of one study's fitted runs: the interval, p and left-out runs."""
+    frame = effects_frame(study_effects(fitted, "condition"))
     return [
         (row.quantity, row.test, E2E_EFFECT.get(row.quantity, 0.0), row.low, row.high, row.p, row.estimate,
          row.left_out, row.runs)
@@ -212,9 +221,12 @@ def _e2e_study(seed: np.random.SeedSequence, config, kn: float, experiment) -> l
     ]  # fmt: skip
 
 
-def end_to_end(studies: int, seed: int, jobs: int) -> None:
+def end_to_end(studies: int, seed: int, jobs: int, save: Path | None = None) -> None:
     """Print the end-to-end variant's figures (see the module's docstring). Each study has its own
-    seed (spawned from ``seed``): the figures do not depend on ``jobs``."""
+    seed (spawned from ``seed``): the figures do not depend on ``jobs``. ``save``: every study's
+    fitted runs (:func:`fitted_study`, a ``study`` column added) written there as Parquet, so that
+    the effects' statistics can be tried again on them without simulating and fitting anew
+    (``--from-fitted``)."""
     config = load_config(ROOT / "configs" / "integrator_example.yaml")
     timing = dataclasses.replace(
         config.timing, sim_rate=300.0, output_rate=E2E_RATE, run_in=10.0, window=80.0, periods=1
@@ -227,6 +239,22 @@ def end_to_end(studies: int, seed: int, jobs: int) -> None:
         delayed(_e2e_study)(s, config, remnant_gain(config), experiment) for s in seeds
     )
     elapsed = time.perf_counter() - start
+    if save is not None:
+        fitted = pd.concat([f.assign(study=k) for k, (_, f) in enumerate(done)], ignore_index=True)
+        fitted.to_parquet(save, index=False)
+        print(f"fitted runs of {studies} studies: {save}")
+    _e2e_summary([rows for rows, _ in done], studies, jobs, elapsed)
+
+
+def from_fitted(path: Path) -> None:
+    """The end-to-end figures again from fitted runs saved by ``--save`` (the effects only)."""
+    fitted = pd.read_parquet(path)
+    start = time.perf_counter()
+    done = [_effect_rows(table.drop(columns="study")) for _, table in fitted.groupby("study", sort=True)]
+    _e2e_summary(done, fitted.study.nunique(), 1, time.perf_counter() - start)
+
+
+def _e2e_summary(done: list[list[tuple]], studies: int, jobs: int, elapsed: float) -> None:
     columns = ["quantity", "test", "true_effect", "low", "high", "p", "estimate", "left_out", "runs"]
     table = pd.DataFrame([row for rows in done for row in rows], columns=columns)
     print(
@@ -272,7 +300,12 @@ def main() -> None:
     parser.add_argument("--smoke", action="store_true", help="4 studies (a smoke run for tests)")
     parser.add_argument("--end-to-end", type=int, default=0, help="studies simulated and fitted run by run")
     parser.add_argument("--jobs", type=int, default=1, help="processes for --end-to-end (same figures)")
+    parser.add_argument("--save", type=Path, help="--end-to-end: the fitted runs to this Parquet file")
+    parser.add_argument("--from-fitted", type=Path, help="the end-to-end figures from a --save file only")
     args = parser.parse_args()
+    if args.from_fitted is not None:
+        from_fitted(args.from_fitted)
+        return
     studies = 4 if args.smoke else args.studies
     if studies < 1:
         parser.error(f"--studies: must be at least 1, got {studies}")
@@ -298,7 +331,7 @@ def main() -> None:
         f"CPU {cpu:.1f} s ({1000 * per_study:.0f} ms per simulated study, 6 quantities), wall {elapsed:.1f} s"
     )
     if args.end_to_end:
-        end_to_end(args.end_to_end, args.seed, args.jobs)
+        end_to_end(args.end_to_end, args.seed, args.jobs, args.save)
 
 
 if __name__ == "__main__":
