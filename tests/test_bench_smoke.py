@@ -19,13 +19,14 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 #: The scripts of ``make bench``, in its order, and their arguments besides ``--smoke``; then
 #: serial_part (issue 47: where ``hcid analyse``'s serial part lies) and null_study (SPEC 13's
-#: null study end to end).
+#: null study end to end) and forcing_share (issue 47 item 2: what a forcing set's twins share).
 SCRIPTS = {
     "arx_engine": [],
     "fit_hc": [],
     "cold_start": ["--json", "{tmp}/cold_start.json"],
     "serial_part": [],
     "null_study": ["--out", "{tmp}/null_study.csv"],
+    "forcing_share": [],
 }
 TIMEOUT_S = 600
 
@@ -169,3 +170,13 @@ def test_null_study_smoke(smoke_runs):
     for r in rows:
         for column in ("p_w_star", "p_fourier", "p_lr", "p_value"):
             assert 0.0 < float(r[column]) <= 1.0, (column, r)
+
+
+def test_forcing_share_smoke(smoke_runs):
+    # Both methods' identification timed, and the forcing-only part with its share, a percentage.
+    code, out, err = smoke_runs("forcing_share")
+    assert code == 0, out + err
+    assert _lines(out, r"identification: direct [0-9.]+ ms, indirect [0-9.]+ ms \(stage 1 [0-9.]+ ms\)"), out
+    (line,) = _lines(out, r"forcing-only work .*: [0-9.]+ ms, [0-9.]+% of both methods' identification")
+    share = float(re.search(r"([0-9.]+)% of both", line).group(1))
+    assert 0 < share < 100, line
