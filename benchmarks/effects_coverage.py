@@ -78,15 +78,21 @@ TRUTH = {
     "Kpt": Truth(0.8, 0.2, -0.2, 0.05, 0.3),
     "phase": Truth(175.0, 10.0, 15.0, 3.0, 15.0, angle=True),
 }
-SCENARIOS = {"se exact": 0.0, "trial spread": 1.0}
+#: Per scenario: the unreported trial-to-trial sd (a multiple of the mean se) and the sd of the
+#: subjects' own effects around the effect (a multiple of the effect).
+SCENARIOS = {"se exact": (0.0, 0.0), "trial spread": (1.0, 0.0), "effects differ": (0.0, 0.5)}
 SUBJECTS, TRIALS, CONDITIONS = 8, 3, ("A", "B")
 UNDETERMINED = 0.1
 
 
-def simulate_study(rng: np.random.Generator, with_effect: bool, trial_spread: float = 0.0) -> pd.DataFrame:
+def simulate_study(
+    rng: np.random.Generator, with_effect: bool, trial_spread: float = 0.0, effect_spread: float = 0.0
+) -> pd.DataFrame:
     """One study's long table: ``quantity, subject, condition, value, se`` (value NaN where undetermined).
 
-    ``trial_spread``: the sd of the unreported run-to-run variation as a multiple of the mean se.
+    ``trial_spread``: the sd of the unreported run-to-run variation as a multiple of the mean se;
+    ``effect_spread``: the sd of each subject's own effect around the effect, as a multiple of it
+    (where there is an effect).
     """
     subject = np.repeat(np.arange(SUBJECTS), len(CONDITIONS) * TRIALS)
     condition = np.tile(np.repeat(np.array(CONDITIONS), TRIALS), SUBJECTS)
@@ -96,7 +102,8 @@ def simulate_study(rng: np.random.Generator, with_effect: bool, trial_spread: fl
         se = rng.uniform(t.se_low, t.se_high, subject.size)
         extra = trial_spread * (t.se_low + t.se_high) / 2
         noise = rng.normal(0.0, 1.0, subject.size) * np.hypot(se, extra)
-        value = t.base + offset + with_effect * t.effect * (condition == "B") + noise
+        own = t.effect * (1.0 + effect_spread * rng.normal(0.0, 1.0, SUBJECTS))[subject]
+        value = t.base + offset + with_effect * own * (condition == "B") + noise
         if t.angle:
             value = wrap(value)
         value[rng.random(subject.size) < UNDETERMINED] = np.nan
@@ -127,12 +134,11 @@ def run(studies: int, seed: int) -> pd.DataFrame:
     """Per scenario, quantity and test: coverage and level counts over ``studies`` studies each."""
     rng = np.random.default_rng(seed)
     rows = []
-    for scenario, spread in SCENARIOS.items():
+    for scenario, (spread, differ) in SCENARIOS.items():
         for k in range(studies):
             for with_effect in (True, False):
-                frame = effects_frame(
-                    study_effects(simulate_study(rng, with_effect, spread), "condition", angles=("phase",))
-                )
+                table = simulate_study(rng, with_effect, spread, differ)
+                frame = effects_frame(study_effects(table, "condition", angles=("phase",)))
                 frame = frame[frame.effect == "condition: B - A"]
                 for row in frame.itertuples(index=False):
                     figure = covered(row) if with_effect else bool(row.p <= 0.05)

@@ -358,3 +358,29 @@ def test_superposition_is_compared_per_line_as_an_effect_of_the_trials():
     )
     # Fewer than two people with both kinds: nothing to compare.
     assert superposition_rows(pa.Table.from_pylist([r for r in rows if r["person"] in ("a", "d")])) == []
+
+
+def test_where_subjects_effects_differ_the_interval_is_the_paired_t_test_of_their_means():
+    # Slow reference: the paired t test on each subject's difference of level means. In a balanced
+    # design (3 runs per subject and level, no se) the random-intercept model's estimate is their
+    # mean, and Bell and McCaffrey's CR2 sandwich by subject with t on subjects - 1 is exactly the
+    # paired t test; here the subjects' own effects spread (sd 0.6) far beyond the runs' noise
+    # (0.05), so the model's own interval (which takes one effect for all) is far narrower and the
+    # wider, cluster-robust one is reported.
+    rng = np.random.default_rng(4)
+    n, k = 7, 3
+    subject = np.repeat(np.arange(n), 2 * k)
+    level = np.tile(np.repeat(["A", "B"], k), n)
+    own = 0.5 + rng.normal(0, 0.6, n)
+    y = 2 + rng.normal(0, 1, n)[subject] + own[subject] * (level == "B") + rng.normal(0, 0.05, subject.size)
+    (mixed,) = by_test(quantity_effects("Kpe", y, subject, level), MIXED)
+    d = np.array(
+        [
+            y[(subject == g) & (level == "B")].mean() - y[(subject == g) & (level == "A")].mean()
+            for g in range(n)
+        ]
+    )
+    half = stats.t.ppf(0.975, n - 1) * d.std(ddof=1) / math.sqrt(n)
+    assert mixed.estimate == pytest.approx(d.mean(), rel=1e-9)
+    assert (mixed.low, mixed.high) == pytest.approx((d.mean() - half, d.mean() + half), rel=1e-6)
+    assert mixed.p == pytest.approx(stats.ttest_1samp(d, 0.0).pvalue, rel=1e-6)

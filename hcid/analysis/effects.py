@@ -12,10 +12,16 @@ to subjects and to a level of the compared factor. Per level against the referen
   design and its random-effect column are multiplied by ``sqrt(w_r)``, ``w_r = 1 / (se_r**2 +
   tau2)``, lme4's weighted model (residual variance ``sigma2 / w_r``, random intercept on the data's
   scale). Weights ``1 / se_r**2`` alone would let a run with a tiny fit error outweigh the person's
-  trial-to-trial spread. Interval and p: Student's t with the between-within degrees of freedom
-  (SAS ``DDFM=BETWITHIN``): ``n_runs - n_subjects -`` the within-subject columns' rank for a factor
-  varying within subjects, else ``n_subjects -`` the between-subject columns' rank (one run per
-  subject and level: the paired t test exactly).
+  trial-to-trial spread. Interval and p: the wider of two. The model's: its covariance with
+  Student's t on the between-within degrees of freedom (SAS ``DDFM=BETWITHIN``): ``n_runs -
+  n_subjects -`` the within-subject columns' rank for a factor varying within subjects, else
+  ``n_subjects -`` the between-subject columns' rank (one run per subject and level: the paired t
+  test exactly). The cluster-robust one: Bell and McCaffrey's CR2 sandwich by subject with t on
+  ``n_subjects - 1`` (for a factor varying within subjects). A random intercept assumes every
+  subject has the same effect and the se tell each run's spread; where subjects' effects differ,
+  or a fit's se understates its trial-to-trial spread, the model's interval is too narrow (a
+  1000-study check with subjects' effects spread by half the effect: 79% coverage of TL's effect)
+  and the sandwich's is not. ``benchmarks/effects_coverage.py`` measures both.
 - ``Wilcoxon signed-rank`` on the differences of the per-level means (weighted as above) of the
   subjects with both levels: ``scipy.stats.wilcoxon``'s p, the Hodges-Lehmann estimate and its
   exact interval (Hollander and Wolfe, Nonparametric Statistical Methods, 2nd ed., 3.3: confidence
@@ -372,14 +378,26 @@ def _mixed(d: _Data, contrasts: list) -> list[Effect]:
         return effects(f"model failed: {error}")
     if result is None:
         return effects(f"model did not converge: {note}")
-    se_fe = np.sqrt(np.diag(_fe_covariance(model, result, groups))) * unit
+    model_based = np.sqrt(np.diag(_fe_covariance(model, result, groups))) * unit
+    robust = np.sqrt(np.clip(np.diag(_cluster_robust_covariance(model, result, groups)), 0.0, None)) * unit
     for j, lv in enumerate(present, start=1):
-        dof = runs - n_subj - (rank - rank_b) if j not in between else n_subj - rank_b
-        est, se = float(result.fe_params[j]) * unit, float(se_fe[j])
-        if dof < 1 or not np.isfinite(se):
-            why = "no degrees of freedom left" if dof < 1 else "no standard error"
+        est = float(result.fe_params[j]) * unit
+        # The wider of the model's interval (between-within dof) and the cluster-robust one
+        # (subjects - 1 dof): never narrower than the model says, wider where the subjects'
+        # effects spread more than it says.
+        within = j not in between
+        candidates = [
+            (float(model_based[j]), runs - n_subj - (rank - rank_b) if within else n_subj - rank_b),
+            (float(robust[j]), n_subj - 1 if within else n_subj - rank_b),
+        ]
+        usable = [(se, dof) for se, dof in candidates if dof >= 1 and np.isfinite(se)]
+        if not usable:
+            why = (
+                "no degrees of freedom left" if all(dof < 1 for _, dof in candidates) else "no standard error"
+            )
             found[lv] = d.effect(lv, MIXED, [est, None, None, None], n_subj, runs, levels, why)
             continue
+        se, dof = max(usable, key=lambda c: stats.t.ppf(1 - ALPHA / 2, c[1]) * c[0])
         half = stats.t.ppf(1 - ALPHA / 2, dof) * se
         p = 2 * stats.t.sf(abs(est) / se, dof) if se > 0 else float(est == 0)
         found[lv] = d.effect(lv, MIXED, [est, est - half, est + half, p], n_subj, runs, levels, note)
@@ -394,6 +412,35 @@ def _fe_covariance(model: MixedLM, result, groups: np.ndarray) -> np.ndarray:
     one_hot = np.eye(groups.max() + 1)[groups]
     zx, zz = one_hot.T @ (z[:, None] * x), one_hot.T @ z**2
     return result.scale * np.linalg.inv(x.T @ x - (zx.T * (psi / (1 + psi * zz))) @ zx)
+
+
+def _cluster_robust_covariance(model: MixedLM, result, groups: np.ndarray) -> np.ndarray:
+    """The fixed effects' cluster-robust covariance by subject, Bell and McCaffrey's CR2 (Survey
+    Methodology 28, 2002; Pustejovsky and Tipton, JBES 36, 2018): the sandwich of the REML fit's
+    working covariance (per subject ``V = I + psi z z'``) with each subject's whitened residuals
+    scaled by ``(I - H_gg)^(-1/2)``, ``H_gg`` the subject's block of the whitened hat matrix.
+    Valid whatever the runs' covariance within a subject (standard errors that misstate a fit's
+    spread, subjects whose effect differs), unbiased where the working model is right; read with
+    Student's t on subjects - 1 degrees of freedom. The model-based covariance
+    (:func:`_fe_covariance`) is the slow reference it equals on a balanced paired design."""
+    x, y, z = model.exog, model.endog, model.exog_re[:, 0]
+    psi = float(result.cov_re_unscaled[0, 0])
+    beta = np.asarray(result.fe_params)
+    whitened = []
+    for g in range(groups.max() + 1):
+        rows = groups == g
+        v = np.eye(rows.sum()) + psi * np.outer(z[rows], z[rows])
+        vals, vecs = np.linalg.eigh(v)
+        root_inv = (vecs / np.sqrt(vals)) @ vecs.T
+        whitened.append((root_inv @ x[rows], root_inv @ (y[rows] - x[rows] @ beta)))
+    bread = np.linalg.inv(sum(w.T @ w for w, _ in whitened))
+    meat = np.zeros_like(bread)
+    for w, u in whitened:
+        vals, vecs = np.linalg.eigh(np.eye(u.size) - w @ bread @ w.T)
+        scale = np.where(vals > 1e-10, 1 / np.sqrt(np.clip(vals, 1e-10, None)), 0.0)
+        adjusted = w.T @ ((vecs * scale) @ vecs.T @ u)
+        meat += np.outer(adjusted, adjusted)
+    return bread @ meat @ bread
 
 
 def _fit(model: MixedLM):
