@@ -71,8 +71,10 @@ if sys.argv[4] == "analyse":  # each phase of analyse_study, timed from the outs
                 phases.append((name, start, time.perf_counter()))
         return timed_phase
 
-    for name, function in (("identify", "identify_study"), ("fit runs", "_fit_runs"), ("twins", "_twins"),
-                           ("line statistics", "run_statistics"), ("more FB twins", "_more_fb_twins"),
+    # An older checkout's names too (_twins, _more_fb_twins: before analyse_twins.py).
+    for name, function in (("identify", "identify_study"), ("fit runs", "_fit_runs"), ("twins", "make_twins"),
+                           ("twins", "_twins"), ("line statistics", "run_statistics"),
+                           ("more FB twins", "more_fb_twins"), ("more FB twins", "_more_fb_twins"),
                            ("fit selected", "_select_and_fit"), ("tables", "write_tables")):
         if hasattr(analyse, function):
             setattr(analyse, function, phase(name, getattr(analyse, function)))
