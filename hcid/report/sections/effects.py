@@ -82,7 +82,8 @@ def render(data: EffectsData | None, doc: Doc) -> None:
         "Each quantity of the runs' fits at their group's W (parameters where determined, with their "
         "standard errors as weights; the loop's crossover, phase margin and the remnant's share from "
         "the data), compared between the levels of the factor with the subjects as repeated measures: "
-        "a linear mixed model (REML, a random intercept per subject), the paired Wilcoxon signed-rank "
+        "a linear mixed model (REML, a random intercept per subject; its interval the wider of the "
+        "model's and the one robust to subjects whose effects differ), the paired Wilcoxon signed-rank "
         "test of the subjects' means (Kruskal-Wallis for more than two levels), and Holm's correction "
         "over the quantities per test. Undetermined values are left out and counted."
     )
