@@ -85,9 +85,9 @@ def twin_statistics(
 
     A twin is simulated from ``start`` (the group's model), so fits started there would start at
     its truth, where a run's start lies away from its own optimum by the run's deviation from its
-    group's medians. ``offsets`` are the group's runs' deviations (each run's fitted values minus
-    the group model's): twin ``k`` (the FB and the FF twin of seed ``k`` alike) starts at ``start``
-    minus deviation ``(k - 1) mod len(offsets)``, away from its truth as a run is from its own."""
+    group's medians. ``offsets`` are the group's runs' deviations (:func:`deviations`): twin ``k``
+    (the FB and the FF twin of seed ``k`` alike) starts at ``start`` minus deviation
+    ``(k - 1) mod len(offsets)``, away from its truth as a run is from its own."""
     return twin_statistics_of([(folder, config, start, offsets)], execution)[0]
 
 
@@ -146,7 +146,6 @@ def deviations(model: Mapping[str, float], fits: Sequence) -> list[dict[str, flo
     (:data:`hcid.hcfit.determined.DETERMINED`; along an undetermined direction the cost is flat);
     the feedforward path's start is the group model's for runs and twins alike (under the null
     their feedforward truth is the same: none)."""
-    fits = list(fits)
     raw = [
         {
             p: (float(fit.values[p] - v), float(fit.se[fit.names.index(p)]))

@@ -336,28 +336,36 @@ def identify_study(
     ``runs.parquet`` keeps), beside any simulated realizations already in the tables.
     ``method_names`` defaults to every registered method.
     """
+    if data is None:
+        return identify_studies([(config, run_dir, method_names)], execution=execution, force=force)[0]
     names = _method_names(method_names)
-    if data is not None:
-        config = with_data(config)
+    config = with_data(config)
     execution.check()  # a dask scheduler without workers is refused before anything is written
-    records, keys, noise_free, simulation = _records_to_identify(config, run_dir, data, execution, force)
-    job = _prepare_identification(config, run_dir, names, records, keys, noise_free, simulation, force)
+    check_data(config, data)
+    import_data(config, run_dir, data, force)
+    records = {(config.data.name, run): rec for run, rec in data.records.items()}
+    check_run_dir(config, run_dir, "identify", force=force)
+    job = _prepare_identification(config, run_dir, names, records, list(records), {}, None, force)
     _run_identifications([job], execution)
     return _finish_identification(job, execution, data)
 
 
 def identify_studies(
-    studies: Sequence[tuple[Config, Path, Sequence[str] | None]], *, execution: Execution = Execution()
+    studies: Sequence[tuple[Config, Path, Sequence[str] | None]],
+    *,
+    execution: Execution = Execution(),
+    force: bool = False,
 ) -> list[IdentifyRun]:
     """:func:`identify_study` of several simulated studies ``(config, run_dir, method_names)`` at
     once: the ones without simulations simulated together (:func:`simulate_studies`), then every
     identification task in one pool, so that the workers stay busy across them (a group's twins
     of every forcing set, the twins of every group); each run directory's tables are those its
     own :func:`identify_study` writes, bit for bit."""
+    names = [_method_names(n) for _, _, n in studies]
     with contextlib.ExitStack() as held:
         for _, run_dir, _ in studies:
             held.enter_context(using(Path(run_dir)))
-        execution.check()
+        execution.check()  # a dask scheduler without workers is refused before anything is written
         for config, _, _ in studies:
             config.require_simulation("identify (without --data)")
         # Before the simulations: forked workers then start with this process's loops,
@@ -374,15 +382,15 @@ def identify_studies(
             )
         )
         jobs = []
-        for i, (config, run_dir, names) in enumerate(studies):
+        for i, (config, run_dir, _) in enumerate(studies):
             run_dir = Path(run_dir)
             keys = [(m.name, s) for m in config.models for s in config.seeds]
-            check_run_dir(config, run_dir, "identify")
+            check_run_dir(config, run_dir, "identify", force=force)
             simulation = made.get(i)
             records = _load_records(config, run_dir, simulation.simulations if simulation else None)
             jobs.append(
                 _prepare_identification(
-                    config, run_dir, _method_names(names), records, keys, noise_free[i], simulation, False
+                    config, run_dir, names[i], records, keys, noise_free[i], simulation, force
                 )
             )
         _run_identifications(jobs, execution)
@@ -461,28 +469,6 @@ def _finish_identification(job: _Identification, execution: Execution, data) -> 
         imported=len(job.keys) if data is not None else 0,
         set_aside=data.set_aside if data is not None else (),
     )
-
-
-def _records_to_identify(config: Config, run_dir: Path, data, execution: Execution, force: bool):
-    """The records to identify by (model, seed) and their keys in order, each simulated model's
-    noise-free record, and the simulation if it was made here (a study without one yet)."""
-    if data is not None:
-        check_data(config, data)
-        import_data(config, run_dir, data, force)
-        records = {(config.data.name, run): rec for run, rec in data.records.items()}
-        check_run_dir(config, run_dir, "identify", force=force)
-        return records, list(records), {}, None
-    config.require_simulation("identify (without --data)")
-    # Before the simulations: forked workers then start with this process's loops,
-    # forcing functions and compiled loop kernel (hcid.pipeline.parallel).
-    noise_free = noise_free_records(config)
-    simulation = None
-    if not (run_dir / tables.SIMULATIONS.file).exists():
-        simulation = simulate_study(config, run_dir, execution=execution)
-    keys = [(m.name, s) for m in config.models for s in config.seeds]
-    check_run_dir(config, run_dir, "identify", force=force)
-    made = simulation.simulations if simulation is not None else None
-    return _load_records(config, run_dir, made), keys, noise_free, simulation
 
 
 def _with_worker(log: pa.Table) -> pa.Table:

@@ -280,9 +280,11 @@ def calibrate_twin_sets(
     identifications in one pool (:func:`hcid.pipeline.studies.identify_studies`): the workers
     stay busy across forcing sets and groups. Each folder's tables are those it gets alone."""
     with contextlib.ExitStack() as held:
-        made = []
-        for source, kind, fb_from in requests:
-            slug = source.slug + ("-study" if kind == "study" else "")
+        made, slugs = (
+            [],
+            [source.slug + ("-study" if kind == "study" else "") for source, kind, _ in requests],
+        )
+        for (source, kind, fb_from), slug in zip(requests, slugs, strict=True):
             raw = functools.partial(_calibration_raw, source, twins, slug, fb_from is not None)
             made.append(held.enter_context(_twin_folder(source, slug, kind, raw)))
         with labelled(_batch_label(requests, lambda r: f"{r[1]} twins of {r[0].whose}")):
@@ -290,10 +292,9 @@ def calibrate_twin_sets(
                 [(config, folder, None) for folder, config in made], execution=execution
             )
         out = []
-        for (source, kind, fb_from), (twin_dir, twin_config), run in zip(
-            requests, made, identified, strict=True
+        for (source, kind, fb_from), slug, (twin_dir, twin_config), run in zip(
+            requests, slugs, made, identified, strict=True
         ):
-            slug = source.slug + ("-study" if kind == "study" else "")
             sweep_study(twin_config, twin_dir, run.frontier)  # as run_study does
             if fb_from is None:
                 paths = model_paths(twin_config, twin_dir, ("FB", "FF"), frontier=run.frontier)
