@@ -717,56 +717,52 @@ def test_a_group_whose_remnant_fits_are_all_on_their_bounds_still_gets_twins(fo_
     # Before: "no run's remnant could be fitted; cannot build its twins" stopped the study. The
     # medians over the fits on their bounds are used (their level still measures the remnant), and
     # source says so; only a group without any remnant fit has no twins.
-    from types import SimpleNamespace
 
     from hcid.analysis.descriptors import RemnantFit
     from hcid.errors import DataError
-    from hcid.pipeline.analyse_state import Found
+    from hcid.pipeline.fit import RunFits
     from hcid.pipeline.twins import group_models
 
     config, _ = fo_study
     spectrum = np.zeros(1)  # not read
     remnants = {5: RemnantFit(2.0, 0.5, 1.0, 100.0, True, spectrum, spectrum, spectrum),
                 6: RemnantFit(4.0, 12.0, 5.0, 100.0, True, spectrum, spectrum, spectrum)}  # fmt: skip
-    study = SimpleNamespace(config=config, groups={("4",): [5, 6]})
-    found = Found()
-    found.fitted = {s: ({True: _a4_fit(s)}, remnants[s]) for s in (5, 6)}
-    found.models, found.remnants = group_models(study.config, study.groups, found.fitted)
-    assert found.models[("4",)].source == A4_SOURCE + "; its remnant filter from fits on their search bounds)"
-    assert found.remnants[("4",)] == (3.0, 6.25, 3.0)  # medians of the two
-    found.fitted = {s: ({True: _a4_fit(s)}, None) for s in (5, 6)}
+    groups = {("4",): [5, 6]}
+    fitted = {s: RunFits(s, _a4_fit(s), None, remnants[s]) for s in (5, 6)}
+    models, remnant = group_models(config, groups, fitted)
+    assert models[("4",)].source == A4_SOURCE + "; its remnant filter from fits on their search bounds)"
+    assert remnant[("4",)] == (3.0, 6.25, 3.0)  # medians of the two
+    assert remnant[("4",)].w_n == 6.25
+    fitted = {s: RunFits(s, _a4_fit(s), None, None) for s in (5, 6)}
     with pytest.raises(DataError, match="group 4-.*: no run's remnant could be fitted"):
-        found.models, found.remnants = group_models(study.config, study.groups, found.fitted)
+        group_models(config, groups, fitted)
     # With another group whose runs can: the study goes on, this group's twins with its own model
     # and the remnant filter of every run of the study (said so), the other group's its own.
-    study = SimpleNamespace(config=config, groups={("4",): [5], ("5",): [6]})
-    found.fitted = {5: ({True: _a4_fit(5)}, None), 6: ({True: _a4_fit(6)}, remnants[6])}
-    found.models, found.remnants = group_models(study.config, study.groups, found.fitted)
-    assert found.models[("4",)].source.endswith(
+    groups = {("4",): [5], ("5",): [6]}
+    fitted = {5: RunFits(5, _a4_fit(5), None, None), 6: RunFits(6, _a4_fit(6), None, remnants[6])}
+    models, remnant = group_models(config, groups, fitted)
+    assert models[("4",)].source.endswith(
         "its own runs cannot make twins (no run's remnant could be fitted): the study's remnant filter)"
     )
-    assert found.remnants[("4",)] == found.remnants[("5",)] == (4.0, 12.0, 5.0)
+    assert remnant[("4",)] == remnant[("5",)] == (4.0, 12.0, 5.0)
 
 
 def test_the_issues_group_gets_twins_their_config_takes(fo_study):
     # The issue's failure, through the same calls as hcid analyse: the group's model, then its
     # twins' config parsed ("models.FB.tau_pe: must be a number in (0, 2], got 0.0" before).
-    from types import SimpleNamespace
 
     from hcid.analysis.descriptors import RemnantFit
-    from hcid.pipeline.analyse_state import Found
+    from hcid.pipeline.fit import RunFits
     from hcid.pipeline.twins import group_models
 
     config, record = fo_study
     spectrum = np.zeros(1)  # not read
-    study = SimpleNamespace(config=config, groups={("4",): [5, 6]})
-    found = Found()
-    found.fitted = {
-        s: ({True: _a4_fit(s)}, RemnantFit(3.0, 8.0, 2.0, 100.0, False, spectrum, spectrum, spectrum))
+    fitted = {
+        s: RunFits(s, _a4_fit(s), None, RemnantFit(3.0, 8.0, 2.0, 100.0, False, spectrum, spectrum, spectrum))
         for s in (5, 6)
     }
-    found.models, found.remnants = group_models(study.config, study.groups, found.fitted)
-    model = found.models[("4",)]
-    twins = _twins_config(config, record, model.values, found.remnants[("4",)])
+    models, remnants = group_models(config, {("4",): [5, 6]}, fitted)
+    model = models[("4",)]
+    twins = _twins_config(config, record, model.values, remnants[("4",)])
     assert {m.tau_pe for m in twins.models} == {0.01}
     assert model.source == A4_SOURCE + ")"

@@ -54,7 +54,7 @@ from hcid.io import datasets, results
 from hcid.io.datasets import DataSet
 from hcid.io.resolve import read_study, with_data
 from hcid.pipeline import effects, sessions
-from hcid.pipeline.analyse_state import Found, Study
+from hcid.pipeline.analyse_state import Group, GroupTwins, RunOutcome, RunPath, Selected, Study, Tested
 from hcid.pipeline.analyse_twins import make_twins, more_fb_twins
 from hcid.pipeline.analysis_tables import write_tables
 from hcid.pipeline.evidence import (
@@ -64,7 +64,7 @@ from hcid.pipeline.evidence import (
     group_name,
 )
 from hcid.pipeline.execution import Execution
-from hcid.pipeline.fit import _choices, _stage_choices, fit_run, fit_windows
+from hcid.pipeline.fit import RunFits, _choices, _stage_choices, fit_run, fit_windows
 from hcid.pipeline.line_statistics import deviations, run_statistics
 from hcid.pipeline.measured_data import check_plant, write_skipped
 from hcid.pipeline.options import AnalysisOptions
@@ -74,12 +74,9 @@ from hcid.pipeline.rundir import holds_run_dir
 from hcid.pipeline.sessions import Session
 from hcid.pipeline.studies import identify_study
 from hcid.pipeline.twin_values import twin_rate
-from hcid.pipeline.twins import (
-    choose_w,
-    forget_twins,
-)
+from hcid.pipeline.twins import forget_twins
 from hcid.selection import over_w
-from hcid.selection.calibration import benjamini_hochberg
+from hcid.selection.calibration import benjamini_hochberg, choose_w
 
 __all__ = ["AnalysisOptions", "AnalysisRun", "analyse", "analyse_study"]
 
@@ -126,13 +123,13 @@ def _final_task(config, seed, record, method_name, sel, choices, fit):
     return seed, method_name, analysis
 
 
-def _same_fit(config: Config, sel: SelectedModel, fits: dict):
+def _same_fit(config: Config, sel: SelectedModel, fits: RunFits):
     """The run's own fit (step 2) of the selected structure when it is the one
     :func:`hcid.analysis.selected.fit_selected` would make (same windows: the direct method's final
     stage's), else None (fitted again)."""
     if (sel.estimation.rows(), sel.validation.rows()) != fit_windows(config):
         return None
-    return fits[bool(sel.has_feedforward)]
+    return fits.of(bool(sel.has_feedforward))
 
 
 def _factors_and_groups(data: DataSet, by: Sequence[str] | None) -> tuple[str, ...]:
@@ -169,72 +166,78 @@ def _check_config(config: Config) -> None:
         )
 
 
-def _fit_runs(study: Study, found: Found) -> None:
-    """Phase 2: every run fitted with and without feedforward."""
+def _fit_runs(study: Study) -> dict[int, RunFits]:
+    """Step 2: every run fitted with and without feedforward."""
     tasks = [(study.plants.of_run(s), s, study.records[s], study.kn_rate) for s in sorted(study.records)]
-    found.fitted = {
-        seed: (fits, remnant) for seed, fits, remnant in study.execution.map(fit_run, tasks, "fit runs")
-    }
+    return {fits.run: fits for fits in study.execution.map(fit_run, tasks, "fit runs")}
 
 
-def _selection_paths(study: Study, found: Found, frontier: pa.Table) -> None:
-    """Every run's frontier (of the run's ``frontier`` table) and selection path over W, per method."""
+def _selection_paths(study: Study, frontier: pa.Table) -> dict[tuple[int, str], RunPath]:
+    """Every run's frontier (of the study's ``frontier`` table) and selection path over W, per method."""
     name = study.config.data.name
     by_key = results.split_by_key(frontier, tables.FRONTIER.key)
+    out = {}
     for seed in study.records:
         for method_name in methods.METHODS:
             t = by_key[(name, seed, method_name)]
-            path = over_w.frontier_path(t)
-            found.paths[(seed, method_name)] = (t, path, t.column("nb_ft").to_numpy())
+            out[(seed, method_name)] = RunPath(t, over_w.frontier_path(t), t.column("nb_ft").to_numpy())
+    return out
 
 
-def _select_and_fit(study: Study, found: Found, judge: Evidence, run_lines: dict) -> None:
-    """Phase 5: every run's evidence, its selection at its group's W, and the selected
+def _select_and_fit(
+    study: Study,
+    fitted: Mapping[int, RunFits],
+    twins: Mapping[Group, GroupTwins],
+    tested: Mapping[Group, Tested],
+    paths: Mapping[tuple[int, str], RunPath],
+    judge: Evidence,
+    run_lines: dict,
+) -> Selected:
+    """Step 5: every run's evidence, its selection at its group's W, and the selected
     structure's parametric fit."""
     config, run_dir = study.config, study.run_dir
     data_name = config.data.name
     stored = _choices(run_dir)
-    tasks = []
+    tasks, chosen, evidence = [], {}, {}
     for key, seeds in study.groups.items():
         for method_name in methods.METHODS:
-            pair = found.used[(key, method_name)]
-            w, rule, uncertain = choose_w(pair.calibrations[method_name])
-            found.chosen[(key, method_name)] = (w, rule, uncertain)
+            used = twins[key].used[method_name]
+            choice = chosen[(key, method_name)] = choose_w(used.calibrations[method_name])
             stage = config.identify.stage(methods.get(method_name).final_stage.name)
-            deciding = found.deciding[key][method_name]
+            deciding = tested[key].deciding[method_name]
             for seed in seeds:
-                t, path, nb_ft = found.paths[(seed, method_name)]
-                found.evidence[(seed, method_name)] = judge.run(
+                run = paths[(seed, method_name)]
+                evidence[(seed, method_name)] = judge.run(
                     group_name(study.by, key),
-                    judge.w_star(path, nb_ft),
-                    pair,
+                    judge.w_star(run.path, run.nb_ft),
+                    used,
                     seed,
                     method_name,
                     run_lines.get(seed),
                     deciding,
                 )
-                row = int(path.at(np.array([w]))[0])
+                row = int(run.path.at(np.array([choice.w]))[0])
                 shift = config.identify.target_shift
+                rate = config.timing.output_rate
                 sel = SelectedModel.from_frontier(
-                    t, row, w, rate=config.timing.output_rate, target_shift=shift, stage=stage
+                    run.frontier, row, choice.w, rate=rate, target_shift=shift, stage=stage
                 )
                 choices = _stage_choices(run_dir, stored, method_name, data_name, seed)
-                own = _same_fit(config, sel, found.fitted[seed][0])  # shared, not fitted twice
+                own = _same_fit(config, sel, fitted[seed])  # shared, not fitted twice
                 mine = study.plants.of_run(seed)  # the run's own plant
                 tasks.append((mine, seed, study.records[seed], method_name, sel, choices, own))
-            decide([found.evidence[(seed, method_name)] for seed in seeds], study.options.alpha, deciding)
-    found.finals = {
+            decide([evidence[(seed, method_name)] for seed in seeds], study.options.alpha, deciding)
+    finals = {
         (seed, method_name): analysis
         for seed, method_name, analysis in study.execution.map(_final_task, tasks, "fit selected")
     }
     if study.options.fdr:  # Benjamini-Hochberg over the study's runs, per method
         for method_name in methods.METHODS:
-            keys = [k for k in found.evidence if k[1] == method_name]
-            hits = benjamini_hochberg(
-                np.array([found.evidence[k]["p_value"] for k in keys]), study.options.alpha
-            )
+            keys = [k for k in evidence if k[1] == method_name]
+            hits = benjamini_hochberg(np.array([evidence[k]["p_value"] for k in keys]), study.options.alpha)
             for k, hit in zip(keys, hits, strict=True):
-                found.evidence[k] = {**found.evidence[k], "evidence": "feedforward" if hit else "none shown"}
+                evidence[k] = {**evidence[k], "evidence": "feedforward" if hit else "none shown"}
+    return Selected(chosen, {k: RunOutcome(evidence[k], finals[k]) for k in evidence})
 
 
 @holds_run_dir(create=True)
@@ -314,17 +317,16 @@ def analyse_study(
         twin_rate(config.timing.output_rate),
         plants,
     )
-    found = Found()
-    _fit_runs(study, found)
+    fitted = _fit_runs(study)
     lap_done("fit runs")
-    make_twins(study, found)
+    twins = make_twins(study, fitted)
     lap_done("twins")
-    _selection_paths(study, found, identified.frontier)
+    paths = _selection_paths(study, identified.frontier)
     # Each run over the analysis window, as long as its twins (a file may run on beyond it).
     n = config.timing.record_samples
     windowed = {s: {k: np.asarray(v)[:n] for k, v in r.items()} for s, r in data.records.items()}
     checks = Checks(config, windowed, {s: plants.of_run(s).loop for s in data.records})
-    starts = {key: found.models[key].values for key in study.groups}  # each group's model
+    starts = {key: twins[key].model.values for key in study.groups}  # each group's model
     with labelled("runs: "):
         run_lines = run_statistics(
             windowed,
@@ -341,7 +343,7 @@ def analyse_study(
             group_name(by, key): (
                 plants.of_runs(seeds),
                 starts[key],
-                deviations(starts[key], [found.fitted[s][0][True] for s in sorted(seeds)]),
+                deviations(starts[key], [fitted[s].with_ff for s in sorted(seeds)]),
             )
             for key, seeds in study.groups.items()
         },
@@ -350,16 +352,16 @@ def analyse_study(
         # go down to alpha / (runs): there more twins can still change a decision.
         None if options.fdr else options.alpha / 10,
     )
-    more_fb_twins(study, found, judge, run_lines)
+    tested = more_fb_twins(study, twins, paths, judge, run_lines)
     lap_done("more FB twins")
-    _select_and_fit(study, found, judge, run_lines)
+    selected = _select_and_fit(study, fitted, twins, tested, paths, judge, run_lines)
     lap_done("fit selected")
     session = None
     if whole_experiment:
         with labelled("conditions: "):
             session = sessions.combine_session(config, whole, trials, person, execution)
         lap_done("combine conditions")
-    group_table, run_table = write_tables(study, found, checks, judge, data.set_aside)
+    group_table, run_table = write_tables(study, twins, tested, selected, checks, judge, data.set_aside)
     write_skipped(run_dir, whole)
     if session is not None:
         sessions.write_session(run_dir, session)

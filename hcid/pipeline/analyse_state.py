@@ -1,24 +1,48 @@
-"""What ``hcid analyse`` holds between its phases (:mod:`hcid.pipeline.analyse`): the study as
-given (:class:`Study`) and what the phases found (:class:`Found`, filled phase by phase)."""
+"""What ``hcid analyse``'s steps take and return (:mod:`hcid.pipeline.analyse`): the study as given
+(:class:`Study`), then one frozen result per step, passed on in memory:
+
+=================  ============================================  ==========================
+step               returns                                        module
+=================  ============================================  ==========================
+fit runs           ``{run: RunFits}``                             :mod:`hcid.pipeline.fit`
+twins              ``{group: GroupTwins}``                        :mod:`.analyse_twins`
+selection paths    ``{(run, method): RunPath}``                   :mod:`.analyse`
+more FB twins      ``{group: Tested}``                            :mod:`.analyse_twins`
+fit selected       :class:`Selected`                              :mod:`.analyse`
+tables             the analysis tables, written                   :mod:`.analysis_tables`
+=================  ============================================  ==========================
+
+A run is named by its id (the ``seed`` column of ``runs.parquet``), a group by its factor
+values (a tuple of str), a method by its registered name."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
+import numpy as np
 import pyarrow as pa
 
+from hcid.analysis.selected import SelectedAnalysis
 from hcid.config import Config
+from hcid.hcfit.determined import GroupModel
 from hcid.pipeline.execution import Execution
 from hcid.pipeline.options import AnalysisOptions
 from hcid.pipeline.plants import RunPlants
+from hcid.pipeline.twin_values import Remnant
+from hcid.pipeline.twins import TwinSets
+from hcid.selection.calibration import WChoice
+from hcid.selection.over_w import SelectionPath
 
-__all__ = ["Found", "Study"]
+__all__ = ["Group", "GroupTwins", "RunOutcome", "RunPath", "Selected", "Study", "Tested"]
+
+Group = tuple[str, ...]
 
 
 @dataclass(frozen=True)
 class Study:
-    """A study being analysed: what every phase reads."""
+    """A study being analysed: what every step reads."""
 
     config: Config
     run_dir: Path
@@ -27,23 +51,51 @@ class Study:
     by: tuple[str, ...]
     runs: pa.Table
     records: dict[int, dict]
-    groups: dict[tuple[str, ...], list[int]]
+    groups: dict[Group, list[int]]
     kn_rate: float
     plants: RunPlants  # each run's config, with its own plant
 
 
-@dataclass
-class Found:
-    """What the phases found: each run's fits; per group its model, twins (per method) and their
-    remnant; per run and method its frontier and selection path, evidence and final analysis."""
+@dataclass(frozen=True)
+class GroupTwins:
+    """A group's model (medians of what its runs determine), its twins' remnant, and per method
+    the twins it uses (its own, or with the study's feedforward: ``--ff-twin``)."""
 
-    fitted: dict = field(default_factory=dict)  # seed -> ({ff: HCFit}, remnant fit or None)
-    models: dict = field(default_factory=dict)  # group -> GroupModel
-    remnants: dict = field(default_factory=dict)  # group -> (kn, w_n, zeta_n)
-    used: dict = field(default_factory=dict)  # (group, method) -> TwinSets
-    paths: dict = field(default_factory=dict)  # (seed, method) -> (frontier, selection path, nb_ft)
-    deciding: dict = field(default_factory=dict)  # group -> {method: statistic}
-    fb_drawn: dict = field(default_factory=dict)  # (group, method) -> FB twins the p-values used
-    chosen: dict = field(default_factory=dict)  # (group, method) -> (w, rule, uncertain)
-    evidence: dict = field(default_factory=dict)  # (seed, method) -> evidence columns
-    finals: dict = field(default_factory=dict)  # (seed, method) -> SelectedAnalysis
+    model: GroupModel
+    remnant: Remnant
+    used: dict[str, TwinSets]
+
+
+class RunPath(NamedTuple):
+    """A run's frontier (its rows of ``frontier.parquet``) for one method, its selection path over
+    W and the nb_ft of every frontier row."""
+
+    frontier: pa.Table
+    path: SelectionPath
+    nb_ft: np.ndarray
+
+
+@dataclass(frozen=True)
+class Tested:
+    """A group's test of feedforward: per method the statistic that decides (the one whose twins
+    show the most power) and how many FB twins its runs' p-values used."""
+
+    deciding: dict[str, str]
+    fb_drawn: dict[str, int]
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    """One run and method: its evidence columns (p-value, statistic, power, verdict) and the
+    analysis of its model selected at the group's W."""
+
+    evidence: dict
+    final: SelectedAnalysis
+
+
+@dataclass(frozen=True)
+class Selected:
+    """Every group's W per method, and every run's outcome per method."""
+
+    chosen: dict[tuple[Group, str], WChoice]
+    runs: dict[tuple[int, str], RunOutcome]

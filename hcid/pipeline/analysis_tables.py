@@ -18,6 +18,7 @@ from hcid.errors import DataError
 from hcid.hcfit.determined import parameter_status
 from hcid.io import folders, results
 from hcid.loop.hcmodel import plant
+from hcid.pipeline.analyse_state import Group, GroupTwins, Selected, Study, Tested
 from hcid.pipeline.evidence import (
     MIN_POWER,
     Checks,
@@ -26,27 +27,34 @@ from hcid.pipeline.evidence import (
     group_name,
     group_verdict,
 )
-from hcid.pipeline.twins import separates
-from hcid.selection.calibration import rates_at
+from hcid.selection.calibration import rates_at, separates
 
 __all__ = ["write_tables"]
 
 
-def write_tables(study, found, checks: Checks, judge: Evidence, set_aside) -> tuple:
-    """Phase 6 of an analysis (``study``, ``found``: its state and findings,
-    :mod:`hcid.pipeline.analyse`): the analysis tables, the groups' Fourier-coefficient
-    estimates, the evidence's twins and the files set aside, each written atomically; returns
-    (groups, runs)."""
+def write_tables(
+    study: Study,
+    twins: dict[Group, GroupTwins],
+    tested: dict[Group, Tested],
+    selected: Selected,
+    checks: Checks,
+    judge: Evidence,
+    set_aside,
+) -> tuple[pa.Table, pa.Table]:
+    """The last step of an analysis (:mod:`hcid.pipeline.analyse`): the analysis tables, the
+    groups' Fourier-coefficient estimates, the evidence's twins and the files set aside, each
+    written atomically; returns (groups, runs)."""
     run_dir = study.run_dir
-    group_table, run_table = _tables(study, found, checks)
+    group_table, run_table = _tables(_Rows(study, twins, tested, selected, checks))
     fc_rows = []
     for key, seeds in study.groups.items():
         config = study.plants.of_runs(seeds)  # the group's plant
-        fc_rows += _fc_rows(config, group_name(study.by, key), seeds, study.records, found.models[key].values)
+        fc_rows += _fc_rows(config, group_name(study.by, key), seeds, study.records, twins[key].model.values)
     results.write(
         tables.FC_ESTIMATES, pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow), run_dir
     )
-    results.write(tables.EVIDENCE_TWINS, judge.twins_table(study.groups, study.by, found.evidence), run_dir)
+    evidence = {k: outcome.evidence for k, outcome in selected.runs.items()}
+    results.write(tables.EVIDENCE_TWINS, judge.twins_table(study.groups, study.by, evidence), run_dir)
     aside = [{"file": f, "reason": why} for f, why in set_aside]
     results.write(tables.SET_ASIDE, pa.Table.from_pylist(aside, schema=tables.SET_ASIDE.arrow), run_dir)
     results.write(tables.ANALYSIS_GROUPS, group_table, run_dir)
@@ -58,13 +66,21 @@ def write_tables(study, found, checks: Checks, judge: Evidence, set_aside) -> tu
 class _Rows:
     """The analysis tables' rows: one per run and method, one per group and method."""
 
-    def __init__(self, study, found, checks: Checks):
-        self.study, self.found, self.checks = study, found, checks
+    def __init__(
+        self,
+        study: Study,
+        twins: dict[Group, GroupTwins],
+        tested: dict[Group, Tested],
+        selected: Selected,
+        checks: Checks,
+    ):
+        self.study, self.twins, self.tested = study, twins, tested
+        self.selected, self.checks = selected, checks
         self.factors = [c for c in study.runs.column_names if c not in tables.RUNS.names]
         self.factor_of = {int(r["seed"]): r for r in study.runs.to_pylist()}
         # Every group's check first: a group whose test fails names its problem for its runs too.
         self.group_checks = {
-            key: checks.group(seeds, found.models[key].values) for key, seeds in study.groups.items()
+            key: checks.group(seeds, twins[key].model.values) for key, seeds in study.groups.items()
         }
         # Each run's remnant share from the data alone (the same for both methods), over the
         # window as the FC estimates.
@@ -76,28 +92,29 @@ class _Rows:
 
     def choice(self, key, method_name: str) -> dict:
         """The group's W for a method, how it was chosen, and its twins' rates there."""
-        pair = self.found.used[(key, method_name)]
-        cal = pair.calibrations[method_name]
-        w, rule, uncertain = self.found.chosen[(key, method_name)]
+        used = self.twins[key].used[method_name]
+        cal = used.calibrations[method_name]
+        chosen = self.selected.chosen[(key, method_name)]
         return {
             "group": group_name(self.study.by, key),
             "method": method_name,
-            "w": w,
-            "w_rule": rule,
-            "uncertain": uncertain,
-            "ff_twin": pair.kind,
+            "w": chosen.w,
+            "w_rule": str(chosen.rule),
+            "uncertain": chosen.uncertain,
+            "ff_twin": used.kind,
             # The safe interval, NaN where there is none (the calibration's backward pair, false
             # positives up to safe_low and negatives from safe_high, would read as an interval).
             "safe_low": float(cal.safe_low) if separates(cal) else math.nan,
             "safe_high": float(cal.safe_high) if separates(cal) else math.nan,
             # Exactly at W, from the twins' selection paths (W need not be on the grid).
-            **rates_at(*pair.paths[method_name], w),
+            **rates_at(*used.paths[method_name], chosen.w),
         }
 
     def run(self, seed: int, method_name: str, choice: dict) -> tuple[dict, bool]:
         """A run's row, and whether the data contradict its own fit at W."""
         config, factor_of = self.study.config, self.factor_of
-        a = self.found.finals[(seed, method_name)]
+        outcome = self.selected.runs[(seed, method_name)]
+        a = outcome.final
         sel, fit = a.model, a.fit
         values = dict(zip(fit.names, fit.estimates, strict=True)) if fit else {}
         ses = dict(zip(fit.names, fit.se, strict=True)) if fit else {}
@@ -124,7 +141,7 @@ class _Rows:
         row["phase_margin"] = fitted_loop.phase_margin if fitted_loop else math.nan
         row["share_remnant"] = fitted_loop.shares["remnant"] if fitted_loop else math.nan
         row["remnant_share_data"] = self.remnant_share[seed]
-        row.update(self.found.evidence[(seed, method_name)])
+        row.update(outcome.evidence)
         row["evidence_uncertain"] = bool(row["power"] < MIN_POWER)
         check = self.checks.run(seed, fit) if fit else None
         row.update(consistency_columns(check, self.checks.problem([seed]) if fit else "not fitted"))
@@ -134,24 +151,24 @@ class _Rows:
 
     def group(self, key, method_name: str, choice: dict, runs: list[dict], n_contradicted: int) -> dict:
         """A group's row from its choice of W and its runs' rows."""
-        found, seeds = self.found, self.study.groups[key]
-        pair, model = found.used[(key, method_name)], found.models[key]
-        mine = [found.evidence[(seed, method_name)] for seed in seeds]
+        seeds = self.study.groups[key]
+        used, model = self.twins[key].used[method_name], self.twins[key].model
+        mine = [self.selected.runs[(seed, method_name)].evidence for seed in seeds]
         return {
             **choice,
             "n_runs": len(seeds),
             "n_feedforward_at_w": int(sum(r["feedforward_at_w"] for r in runs)),
             **group_verdict(mine, self.study.options.alpha),
-            "forcing_sets": len(pair.sets),
+            "forcing_sets": len(used.sets),
             "decided_by": mine[0]["decided_by"],
-            **{f"twin_{p}": pair.model[p] for p in tables.HC_PARAMETER_NAMES},
+            **{f"twin_{p}": used.model[p] for p in tables.HC_PARAMETER_NAMES},
             **{f"fitted_{p}": model.values[p] for p in tables.HC_PARAMETER_NAMES},
-            "twin_kn": pair.remnant[0],
-            "twin_w_n": pair.remnant[1],
-            "twin_zeta_n": pair.remnant[2],
+            "twin_kn": used.remnant.kn,
+            "twin_w_n": used.remnant.w_n,
+            "twin_zeta_n": used.remnant.zeta_n,
             "twins": self.study.options.twins,
-            "fb_twins": found.fb_drawn[(key, method_name)],
-            "twins_folder": pair.folder,
+            "fb_twins": self.tested[key].fb_drawn[method_name],
+            "twins_folder": used.folder,
             "twin_source": model.source,
             "twin_undetermined": ", ".join(model.undetermined),
             "n_contradicted": int(n_contradicted),
@@ -159,9 +176,9 @@ class _Rows:
         }
 
 
-def _tables(study, found, checks: Checks) -> tuple[pa.Table, pa.Table]:
+def _tables(rows: _Rows) -> tuple[pa.Table, pa.Table]:
     """The groups' and the runs' analysis tables (one row per group or run, and method)."""
-    rows = _Rows(study, found, checks)
+    study = rows.study
     group_rows, run_rows = [], []
     for key, seeds in study.groups.items():
         for method_name in methods.METHODS:

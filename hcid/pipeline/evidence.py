@@ -8,6 +8,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pyarrow as pa
@@ -28,6 +29,9 @@ from hcid.selection.calibration import (
     run_p_value,
     sequential_settled,
 )
+
+if TYPE_CHECKING:  # the type only: the report reads this module without the twins' machinery
+    from hcid.pipeline.twins import TwinSets
 
 __all__ = [
     "EXCEEDANCES",
@@ -189,8 +193,8 @@ class Evidence:
         key = (twin.folder, method)
         if key not in self._thresholds:
             self._thresholds[key] = {
-                name: np.array([self.w_star(p, n) for p, n in zip(paths, nb_ft, strict=True)])
-                for name, (paths, nb_ft) in zip(("FB", "FF"), twin.paths[method], strict=True)
+                name: np.array([self.w_star(p, n) for p, n in zip(twins.paths, twins.nb_ft, strict=True)])
+                for name, twins in zip(("FB", "FF"), twin.paths[method], strict=True)
             }
         return self._thresholds[key]
 
@@ -209,10 +213,10 @@ class Evidence:
         for pair, lines in zip(missing, twin_statistics_of(items, self.execution), strict=True):
             self._lines[pair] = lines
 
-    def prefetch(self, twins: Sequence[tuple[str, object]]) -> None:
+    def prefetch(self, twins: Sequence[tuple[str, TwinSets]]) -> None:
         """The line statistics of every forcing set's calibration twins of ``(group, TwinSets)``."""
         self.prefetch_folders(
-            [(g, f) for g, pair in twins for t in pair.sets for f in (t.folder, t.fb_folder) if f]
+            [(g, f) for g, used in twins for t in used.sets for f in (t.folder, t.fb_folder) if f]
         )
 
     def prefetch_draws(self, sets: Sequence[tuple[str, int]]) -> None:
@@ -232,15 +236,15 @@ class Evidence:
         """More FB twins of a group's forcing set (:class:`hcid.pipeline.twins.FbDraws`), in order;
         their W* computed once, here."""
         w = {
-            m: np.array([self.w_star(p, n) for p, n in zip(*pair, strict=True)])
-            for m, pair in draws.paths.items()
+            m: np.array([self.w_star(p, n) for p, n in zip(fb.paths, fb.nb_ft, strict=True)])
+            for m, fb in draws.paths.items()
         }
         self._more.setdefault((group, forcing_set), []).append((draws.count, w, draws.folder))
 
     def drawn(self, group: str, forcing_set: int, twin) -> int:
         """FB twins simulated so far for a group's forcing set (the next draw's first seed - 1)."""
         more = self._more.get((group, forcing_set), [])
-        return len(twin.paths[next(iter(twin.paths))][0][0]) + sum(count for count, _, _ in more)
+        return len(next(iter(twin.paths.values())).fb.paths) + sum(count for count, _, _ in more)
 
     def fb_thresholds(self, group: str, forcing_set: int, twin, method: str) -> np.ndarray:
         """Every FB twin's W* under ``method`` in the order drawn: the calibration's, then the
@@ -279,14 +283,14 @@ class Evidence:
             lines = {name: v if name == deciding else v[:base] for name, v in lines.items()}
         return w, lines
 
-    def statistic(self, group: str, pair, method: str) -> str:
+    def statistic(self, group: str, used: TwinSets, method: str) -> str:
         """Which statistic decides for a group and method (a name of :data:`STATISTICS`): the one
         whose calibration twins give the highest median power over the group's runs (each run its
         forcing set's); on a tie the first of :data:`STATISTICS` (W* where the forcing has no
         lines). From the twins alone, before any run's value is read and before more FB twins are
         drawn (only its p-values are drawn for)."""
         powers: dict[str, list[float]] = {name: [] for name in STATISTICS}
-        for twin, runs in zip(pair.sets, pair.runs, strict=True):
+        for twin, runs in zip(used.sets, used.runs, strict=True):
             w, lines = self.thresholds(twin, method), self.lines(group, twin)
             powers["W*"] += [evidence_power(w["FF"], w["FB"], self.alpha)] * len(runs)
             for name in LINE_STATISTICS:
@@ -329,7 +333,14 @@ class Evidence:
         return methods_open, lines_open
 
     def run(
-        self, group: str, w_star: float, pair, seed: int, method: str, run_lines: dict | None, deciding: str
+        self,
+        group: str,
+        w_star: float,
+        used: TwinSets,
+        seed: int,
+        method: str,
+        run_lines: dict | None,
+        deciding: str,
     ) -> dict:
         """The run's evidence columns from its W* (:meth:`w_star`) and its line statistics
         (``run_lines``, :func:`hcid.pipeline.line_statistics.record_statistics`; ``decide`` adds
@@ -340,8 +351,8 @@ class Evidence:
         the deciding one's then estimates the power of the test actually made (p <= alpha against
         up to all the draws) more precisely than the calibration's 20 can (the largest of 20 FB
         twins stands for their 95% quantile)."""
-        own = pair.of_run(seed)
-        forcing_set = pair.sets.index(own) + 1
+        own = used.of_run(seed)
+        forcing_set = used.sets.index(own) + 1
         self._judged[(group, method, forcing_set)] = own
         fb, fb_lines = self.used(group, forcing_set, own, method, deciding)
         p_w, n_w, how_w = run_p_value(w_star, fb, EXCEEDANCES)

@@ -32,7 +32,7 @@ import pyarrow as pa
 import pyarrow.compute  # noqa: F401  (pa.compute)
 
 from hcid import hcfit, methods, tables
-from hcid.analysis.descriptors import fit_remnant
+from hcid.analysis.descriptors import RemnantFit, fit_remnant
 from hcid.analysis.selected import (
     RESIDUAL_CONFIDENCE,
     RESIDUAL_MAX_LAG,
@@ -51,7 +51,7 @@ from hcid.pipeline.execution import Execution
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
 from hcid.selection import criteria, over_w
 
-__all__ = ["OUTPUTS", "HCFitRun", "fit_hc_study", "requested_w"]
+__all__ = ["OUTPUTS", "HCFitRun", "RunFits", "fit_hc_study", "fit_run", "requested_w"]
 
 PARTS = Path(".parts") / "fit_hc"
 _KEY = ("model", "seed", "method", "w")
@@ -557,20 +557,34 @@ def tracking_record(record: dict, config: Config) -> hcfit.TrackingRecord:
     )
 
 
-def fit_run(config: Config, seed: int, record: dict, kn_rate: float):
-    """A measured run's FF and FB fits (``hcid analyse``) and the remnant its FF fit leaves:
-    ``(seed, {feedforward: HCFit}, remnant fit or None)``."""
+@dataclass(frozen=True)
+class RunFits:
+    """A measured run's parametric fits with and without its feedforward path (``hcid analyse``)
+    and the remnant filter its feedforward fit leaves (None where that could not be fitted)."""
+
+    run: int
+    with_ff: hcfit.HCFit
+    without_ff: hcfit.HCFit
+    remnant: RemnantFit | None
+
+    def of(self, feedforward: bool) -> hcfit.HCFit:
+        """The fit with or without the feedforward path."""
+        return self.with_ff if feedforward else self.without_ff
+
+
+def fit_run(config: Config, run: int, record: dict, kn_rate: float) -> RunFits:
+    """A measured run's FF and FB fits and the remnant its FF fit leaves."""
     yc = plant(config.loop)
     tracking = tracking_record(record, config)
     settings = config.fit_hc
-    fits = {
-        ff: hcfit.fit_parametric(settings, yc, ff, record=tracking, disturbance_at=config.loop.disturbance_at)
+    with_ff, without_ff = (
+        hcfit.fit_parametric(settings, yc, ff, record=tracking, disturbance_at=config.loop.disturbance_at)
         for ff in (True, False)
-    }
+    )
     rows = slice(tracking.estimation.start, tracking.validation.stop)
-    n = record["u"] - hcfit.simulate_hc(fits[True].values, yc, tracking, settings.oversample)
+    n = record["u"] - hcfit.simulate_hc(with_ff.values, yc, tracking, settings.oversample)
     try:
         remnant = fit_remnant(n[rows], config.timing.output_rate, kn_rate)
     except IdentificationError:
         remnant = None
-    return seed, fits, remnant
+    return RunFits(run, with_ff, without_ff, remnant)

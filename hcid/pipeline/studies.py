@@ -30,7 +30,7 @@ from hcid.pipeline.measured_data import check_data, import_data, write_skipped
 from hcid.pipeline.parallel import compile_before_fork
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config, using
 from hcid.pipeline.sweep import SweepRun, selections, sweep_study
-from hcid.selection.calibration import calibrate
+from hcid.selection.calibration import Selections, calibrate
 
 __all__ = [
     "CalibrationRun",
@@ -536,7 +536,7 @@ def model_paths(
     models: Sequence[str],
     method_names: Sequence[str] | None = None,
     frontier: pa.Table | None = None,
-) -> dict[str, tuple]:
+) -> dict[str, tuple[Selections, ...]]:
     """Per method (``method_names``, default every registered one), each of ``models``' seeds'
     selection paths and nb_ft, in the order of ``models``: what rates at any W are taken from.
     ``frontier``: the run's, where the caller has just made it (not read back)."""
@@ -545,15 +545,15 @@ def model_paths(
     chosen = selections(frontier, run_dir)
     out = {}
     for method in methods.METHODS if method_names is None else method_names:
-        pair = []
+        per_model = []
         for model in models:
-            keys = [(model, s, method) for s in config.seeds]
-            pair.append(([chosen[k][0] for k in keys], [chosen[k][1]["nb_ft"] for k in keys]))
-        out[method] = tuple(pair)
+            mine = [chosen[(model, s, method)] for s in config.seeds]
+            per_model.append(Selections([c.path for c in mine], [c.columns["nb_ft"] for c in mine]))
+        out[method] = tuple(per_model)
     return out
 
 
-def calibrate_paths(config: Config, run_dir: Path, paths: dict[str, tuple]) -> list:
+def calibrate_paths(config: Config, run_dir: Path, paths: dict[str, tuple[Selections, Selections]]) -> list:
     """Per method, W calibrated on its (FB, FF) twins' selection ``paths`` over the config's W
     grid; written to ``calibration.parquet``."""
     w = np.asarray(config.selection.w_grid)

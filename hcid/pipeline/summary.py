@@ -14,7 +14,7 @@ import numpy as np
 import pyarrow as pa
 
 from hcid.pipeline.evidence import ParameterSummary, group_verdict, summarise_parameters
-from hcid.selection.calibration import binomial_summary
+from hcid.selection.calibration import WRule, binomial_summary
 
 __all__ = ["GroupSummary", "ParameterFits", "rate_interval", "summarise_fits", "summarise_groups"]
 
@@ -98,7 +98,7 @@ def _median(values: list[float]) -> float:
 def has_safe_interval(group: dict) -> bool:
     """Whether a group's W came from a safe interval of its twins (an ``analysis_groups`` row;
     tables before NaN marked a missing interval hold a backward pair there)."""
-    return group["w_rule"] == "safe interval"
+    return group["w_rule"] == WRule.SAFE_INTERVAL
 
 
 def rate_interval(rate: float, low: float, high: float, *, long: bool = True) -> str:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pyarrow as pa
@@ -82,15 +83,24 @@ def sweep_study(config: Config, run_dir: Path, frontier: pa.Table | None = None)
     return SweepRun(selection_table, breakpoints_table, thresholds, chosen, run_dir, rates)
 
 
-def selections(frontier: pa.Table, run_dir: Path) -> dict[tuple[str, int, str], tuple]:
-    """Per realization and method: its selection over W and its frontier columns."""
+class RealizationSelection(NamedTuple):
+    """A realization's selection over W and its frontier's columns (:data:`tables.SELECTED_COLUMNS`)."""
+
+    path: over_w.SelectionPath
+    columns: dict[str, np.ndarray]
+
+
+def selections(frontier: pa.Table, run_dir: Path) -> dict[tuple[str, int, str], RealizationSelection]:
+    """Per realization and method (model, seed, method): its selection over W and frontier columns."""
     path = run_dir / tables.FRONTIER.file
     out = {}
     for (model, seed, method), t in results.split_by_key(frontier, tables.FRONTIER.key).items():
         cols = {c: t.column(c).to_numpy() for c in tables.SELECTED_COLUMNS}
         orders = np.column_stack([cols[c] for c in tables.ORDER_COLUMNS])
         try:
-            out[(model, seed, method)] = (over_w.breakpoints(cols["d"], cols["v"], orders), cols)
+            out[(model, seed, method)] = RealizationSelection(
+                over_w.breakpoints(cols["d"], cols["v"], orders), cols
+            )
         except IdentificationError as exc:
             raise DataError(f"{path}: model {model}, seed {seed}, {method}: {exc}") from exc
     return out

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import replace
+from typing import NamedTuple
 
 from hcid.config import HCModel, Loop
 from hcid.errors import ConfigError
@@ -139,6 +140,14 @@ def twin_model(fitted: dict, sim_rate: float, loop: Loop | None = None) -> Simul
         except ConfigError:
             return Simulated(sim.values, sim.changes, unstable[model.name])
     return sim
+
+
+class Remnant(NamedTuple):
+    """The twins' remnant filter (SPEC 1): gain at the twins' rate, break frequency, damping."""
+
+    kn: float
+    w_n: float
+    zeta_n: float
 
 
 def twin_remnant(remnant: tuple[float, float, float]) -> Simulated:

@@ -7,11 +7,11 @@ from __future__ import annotations
 import contextlib
 import functools
 import hashlib
-import math
 import re
 from collections.abc import Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
@@ -19,31 +19,33 @@ import numpy as np
 from hcid import methods, tables
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError
-from hcid.hcfit.determined import group_model
+from hcid.hcfit.determined import GroupModel, group_model
 from hcid.io import folders
 from hcid.io.resolve import parse_config
 from hcid.pipeline.execution import Execution
+from hcid.pipeline.fit import RunFits
 from hcid.pipeline.parallel import labelled
 from hcid.pipeline.rundir import check_run_dir, using
 from hcid.pipeline.studies import calibrate_paths, identify_studies, model_paths, simulate_studies
 from hcid.pipeline.sweep import sweep_study
 from hcid.pipeline.twin_values import (
     PATH_PARAMETERS,
+    Remnant,
     twin_model,
     twin_rate,
     twin_remnant,
     twin_values,
 )
-from hcid.selection.calibration import calibrate
+from hcid.selection.calibration import Calibration, Selections, TwinPaths, calibrate
 
 __all__ = [
+    "FfTwin",
     "FbDraws",
     "TwinSets",
     "TwinSource",
     "Twins",
     "calibrate_twin_sets",
     "calibrate_twins",
-    "choose_w",
     "draw_fb_twin_sets",
     "draw_fb_twins",
     "forcing_sets",
@@ -52,7 +54,6 @@ __all__ = [
     "group_models",
     "group_slug",
     "pool_twins",
-    "separates",
     "twin_config_raw",
     "twin_dir_ready",
 ]
@@ -138,23 +139,31 @@ def forcing_sets(seeds: list[int], records: dict, config: Config) -> list[list[i
     return sets
 
 
+class FfTwin(StrEnum):
+    """Whose feedforward a group's FF twin has (``--ff-twin``; ``analysis_groups.ff_twin``): the
+    group's own fitted one, or the study's strongest."""
+
+    OWN = "own"
+    STUDY = "study"
+
+
 @dataclass(frozen=True)
 class TwinSets:
     """A group's twins for every forcing set of its runs, and their calibration pooled over the
     sets (one set: exactly that set's). ``runs[i]`` are the runs driven like ``sets[i]``."""
 
-    kind: str
+    kind: FfTwin
     sets: tuple
     runs: tuple
-    calibrations: dict  # method -> Calibration over all sets' twins
-    paths: dict  # method -> ((fb paths, fb nb_ft), (ff paths, ff nb_ft)) over all sets
+    calibrations: dict[str, Calibration]  # per method, over all sets' twins
+    paths: dict[str, TwinPaths]  # per method, over all sets
 
     @property
     def model(self) -> dict:
         return self.sets[0].model
 
     @property
-    def remnant(self) -> tuple:
+    def remnant(self) -> Remnant:
         return self.sets[0].remnant
 
     @property
@@ -166,7 +175,7 @@ class TwinSets:
         return next(t for t, runs in zip(self.sets, self.runs, strict=True) if seed in runs)
 
 
-def pool_twins(kind: str, sets: list, runs: list[list[int]], config: Config) -> TwinSets:
+def pool_twins(kind: FfTwin, sets: list, runs: list[list[int]], config: Config) -> TwinSets:
     """:class:`TwinSets` of the sets' twins; several sets are calibrated together (their FB twins'
     and FF twins' selection paths pooled, :func:`hcid.selection.calibration.calibrate`)."""
     if len(sets) == 1:
@@ -175,15 +184,14 @@ def pool_twins(kind: str, sets: list, runs: list[list[int]], config: Config) -> 
     w = np.asarray(config.selection.w_grid, dtype=np.float64)
     calibrations, paths = {}, {}
     for method in methods.METHODS:
-        fb = (
-            [p for t in sets for p in t.paths[method][0][0]],
-            [n for t in sets for n in t.paths[method][0][1]],
+        fb, ff = (
+            Selections(
+                [p for t in sets for p in getattr(t.paths[method], twin).paths],
+                [n for t in sets for n in getattr(t.paths[method], twin).nb_ft],
+            )
+            for twin in ("fb", "ff")
         )
-        ff = (
-            [p for t in sets for p in t.paths[method][1][0]],
-            [n for t in sets for n in t.paths[method][1][1]],
-        )
-        paths[method] = (fb, ff)
+        paths[method] = TwinPaths(fb, ff)
         calibrations[method] = calibrate(method, fb, ff, w, config.selection.target_rate)
     return TwinSets(kind, tuple(sets), tuple(tuple(r) for r in runs), calibrations, paths)
 
@@ -196,44 +204,17 @@ def forcing_text(record: dict, n: int) -> str:
     return "\n".join(lines) + "\n"
 
 
-def choose_w(cal) -> tuple[float, str, bool]:
-    """The group's W and whether its decisions are uncertain.
-
-    The recommended W of a safe interval; else the grid's least total error (FP + FN), the
-    geometric middle of the range of grid points that tie for it (twins that nearly coincide
-    tie almost everywhere: the smallest W would call everything feedforward). Uncertain when
-    either twin's rate there exceeds the target rate.
-    """
-    if separates(cal):
-        return float(cal.recommended), "safe interval", False
-    total = cal.fp_rate + cal.fn_rate
-    tied = np.flatnonzero(total <= total.min() + 1e-12)
-    i = int(tied[len(tied) // 2])
-    uncertain = max(cal.fp_rate[i], cal.fn_rate[i]) > cal.target_rate
-    rule = (
-        "least total error (no safe interval)"
-        if uncertain
-        else "least total error (no contiguous safe interval)"
-    )
-    return float(cal.w[i]), rule, uncertain
-
-
 @dataclass(frozen=True)
 class Twins:
-    """One calibration of a group: its twins (``kind`` own or study), per method."""
+    """One calibration of a group: its twins (whose FF twin: ``kind``), per method."""
 
-    kind: str
+    kind: FfTwin
     model: dict  # the FF twin's parameters as simulated (the FB twin: Kpt = 0)
-    remnant: tuple  # kn, w_n, zeta_n
+    remnant: Remnant
     folder: str  # under the run directory
-    calibrations: dict  # method -> Calibration
-    paths: dict  # method -> the twins' selection paths and nb_ft (studies.model_paths)
+    calibrations: dict[str, Calibration]  # per method
+    paths: dict[str, TwinPaths]  # per method (studies.model_paths)
     fb_folder: str = ""  # where the FB twin was simulated when not in ``folder`` (shared)
-
-
-def separates(cal) -> bool:
-    """Whether a calibration has a safe interval (a W that tells its twins apart)."""
-    return bool(cal.has_safe_interval and math.isfinite(cal.recommended))
 
 
 @dataclass(frozen=True)
@@ -263,7 +244,7 @@ class TwinSource:
 
 
 def calibrate_twins(
-    source: TwinSource, twins: int, kind: str, execution: Execution, fb_from: Twins | None = None
+    source: TwinSource, twins: int, kind: FfTwin, execution: Execution, fb_from: Twins | None = None
 ) -> Twins:
     """Simulate, identify and calibrate one pair of ``twins`` realizations each of a group in
     ``RUN/twins/<group>[-f<set>][-study]`` (resumed when its inputs are the same, made anew when
@@ -282,11 +263,11 @@ def calibrate_twin_sets(
     with contextlib.ExitStack() as held:
         made, slugs = (
             [],
-            [source.slug + ("-study" if kind == "study" else "") for source, kind, _ in requests],
+            [source.slug + ("-study" if kind is FfTwin.STUDY else "") for source, kind, _ in requests],
         )
         for (source, kind, fb_from), slug in zip(requests, slugs, strict=True):
             raw = functools.partial(_calibration_raw, source, twins, slug, fb_from is not None)
-            made.append(held.enter_context(_twin_folder(source, slug, kind, raw)))
+            made.append(held.enter_context(_twin_folder(source, slug, str(kind), raw)))
         with labelled(_batch_label(requests, lambda r: f"{r[1]} twins of {r[0].whose}")):
             identified = identify_studies(
                 [(config, folder, None) for folder, config in made], execution=execution
@@ -297,11 +278,12 @@ def calibrate_twin_sets(
         ):
             sweep_study(twin_config, twin_dir, run.frontier)  # as run_study does
             if fb_from is None:
-                paths = model_paths(twin_config, twin_dir, ("FB", "FF"), frontier=run.frontier)
+                both = model_paths(twin_config, twin_dir, ("FB", "FF"), frontier=run.frontier)
+                paths = {m: TwinPaths(*both[m]) for m in methods.METHODS}
                 fb_folder = ""
             else:
                 ff = model_paths(twin_config, twin_dir, ("FF",), frontier=run.frontier)
-                paths = {m: (fb_from.paths[m][0], ff[m][0]) for m in methods.METHODS}
+                paths = {m: TwinPaths(fb_from.paths[m].fb, *ff[m]) for m in methods.METHODS}
                 fb_folder = fb_from.fb_folder or fb_from.folder
             calibrations = {c.method: c for c in calibrate_paths(twin_config, twin_dir, paths)}
             simulated = {**source.model, **twin_values(source.model, source.kn_rate)}
@@ -332,7 +314,7 @@ class FbDraws:
 
     first: int
     count: int
-    paths: dict  # method -> (paths, nb_ft)
+    paths: dict[str, Selections]  # per identified method
     folder: str
 
 
@@ -384,7 +366,7 @@ def _draw_raw(source: TwinSource, first: int, count: int, slug: str, forcing: Pa
 
 
 @contextmanager
-def _twin_folder(source: TwinSource, slug: str, kind: str, make_raw):
+def _twin_folder(source: TwinSource, slug: str, which: str, make_raw):
     """``RUN/twins/<slug>`` held and ready: the forcing set's functions in ``forcing.csv`` (earlier
     results of other forcing functions removed), the twins' config from ``make_raw(forcing path)``
     parsed, and earlier results of another config removed; yields ``(folder, config)``."""
@@ -402,8 +384,8 @@ def _twin_folder(source: TwinSource, slug: str, kind: str, make_raw):
             twin_config = parse_config(raw, raw["name"], forcing=given)
         except ConfigError as exc:  # e.g. a median model that is unstable with the plant
             raise DataError(
-                f"group {', '.join(key) or 'all runs'}: its twins ({kind}: the group's fitted model, "
-                f"medians over its runs{', with the study feedforward' if kind == 'study' else ''}) "
+                f"group {', '.join(key) or 'all runs'}: its twins ({which}: the group's fitted model, "
+                f"medians over its runs{', with the study feedforward' if which == FfTwin.STUDY else ''}) "
                 f"cannot be simulated: {exc}; look at its runs' fits, or group them otherwise (--by)"
             ) from None
         try:
@@ -424,7 +406,9 @@ def twin_dir_ready(twin_dir: Path, text: str) -> None:
         folders.remove_owned(twin_dir)
 
 
-def group_models(config: Config, groups: dict, fitted: dict) -> tuple[dict, dict]:
+def group_models(
+    config: Config, groups: dict[tuple[str, ...], list[int]], fitted: dict[int, RunFits]
+) -> tuple[dict[tuple[str, ...], GroupModel], dict[tuple[str, ...], Remnant]]:
     """Per group: its model from what its runs determine, of those its twins can be made from
     (:func:`group_model` judged by :func:`twin_model`: a value brought into the twins' range, or
     the nearest run's own model), and its twins' remnant filter: the medians over the runs whose
@@ -432,9 +416,7 @@ def group_models(config: Config, groups: dict, fitted: dict) -> tuple[dict, dict
     shape means little, its level still measures the remnant); where its runs make no such model,
     the model of every run of the study; each fallback in ``source``.
 
-    ``groups`` maps a group to its runs (ids), ``fitted`` a run to ``({feedforward: HCFit},
-    remnant fit or None)``; returns the groups' models (:class:`GroupModel`) and remnants
-    ``(kn, w_n, zeta_n)``."""
+    ``groups`` maps a group to its runs (ids), ``fitted`` a run to its fits."""
     num_c, den_c = np.array(config.loop.plant.num), np.array(config.loop.plant.den)
     sim_rate = twin_rate(config.timing.output_rate)
     remnant_names = ("kn", "w_n", "zeta_n")
@@ -443,11 +425,11 @@ def group_models(config: Config, groups: dict, fitted: dict) -> tuple[dict, dict
         return twin_model(values, sim_rate, config.loop)
 
     def model_of(seeds: list[int]):
-        fits = [fitted[s][0][True] for s in seeds]
+        fits = [fitted[s].with_ff for s in seeds]
         return group_model(fits, [f"run {s}" for s in seeds], num_c, den_c, simulated)
 
     def remnant_of(seeds: list[int]):
-        remnant_fits = [fitted[s][1] for s in seeds if fitted[s][1] is not None]
+        remnant_fits = [fitted[s].remnant for s in seeds if fitted[s].remnant is not None]
         if not remnant_fits:
             raise DataError("no run's remnant could be fitted")
         off_bounds = [r for r in remnant_fits if not r.at_bound]
@@ -458,7 +440,7 @@ def group_models(config: Config, groups: dict, fitted: dict) -> tuple[dict, dict
         if remnant.problem:
             raise DataError(f"its remnant cannot make twins: {remnant.problem}")
         on_bounds = () if off_bounds else ("its remnant filter from fits on their search bounds",)
-        return (*on_bounds, *remnant.changes), tuple(remnant.values[a] for a in remnant_names)
+        return (*on_bounds, *remnant.changes), Remnant(*(remnant.values[a] for a in remnant_names))
 
     every = sorted({s for seeds in groups.values() for s in seeds})
 

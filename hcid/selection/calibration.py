@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import StrEnum
+from typing import NamedTuple
 
 import numpy as np
 import pyarrow as pa
@@ -28,9 +30,14 @@ __all__ = [
     "ERRORS",
     "Calibration",
     "RateCurve",
+    "Selections",
+    "TwinPaths",
+    "WChoice",
+    "WRule",
     "benjamini_hochberg",
     "binomial_summary",
     "calibrate",
+    "choose_w",
     "clopper_pearson",
     "error_rates",
     "evidence_p_value",
@@ -38,6 +45,7 @@ __all__ = [
     "feedforward_threshold",
     "rates_at",
     "run_p_value",
+    "separates",
     "sequential_p_value",
     "sequential_settled",
 ]
@@ -48,6 +56,21 @@ ERRORS = {
     "false_positive": lambda nb: nb > 0,
     "false_negative": lambda nb: nb < 2,
 }
+
+
+class Selections(NamedTuple):
+    """Realizations' selections over W: each one's selection path and the nb_ft of every row of
+    its frontier (which the path's segments index)."""
+
+    paths: list[SelectionPath]
+    nb_ft: list[np.ndarray]
+
+
+class TwinPaths(NamedTuple):
+    """The FB and the FF twins' selections (:func:`calibrate`'s ``fb`` and ``ff``)."""
+
+    fb: Selections
+    ff: Selections
 
 
 def clopper_pearson(k: np.ndarray, n: int, level: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
@@ -66,8 +89,8 @@ def _counts(segments: list[SelectionPath], nb_ft: list[np.ndarray], w: np.ndarra
 
 
 def rates_at(
-    fb: tuple[list[SelectionPath], list[np.ndarray]],
-    ff: tuple[list[SelectionPath], list[np.ndarray]],
+    fb: Selections,
+    ff: Selections,
     w: float,
 ) -> dict[str, float]:
     """The twins' false-positive and false-negative rates at one W, exactly (from their
@@ -197,8 +220,8 @@ class Calibration:
 
 def calibrate(
     method: str,
-    fb: tuple[list[SelectionPath], list[np.ndarray]],
-    ff: tuple[list[SelectionPath], list[np.ndarray]],
+    fb: Selections,
+    ff: Selections,
     w: np.ndarray,
     target_rate: float = 0.0,
 ) -> Calibration:
@@ -264,6 +287,45 @@ def calibrate(
 
 
 # --------------------------------------------------------------------------- per-run evidence (SPEC 11)
+
+
+class WRule(StrEnum):
+    """How a group's W was chosen (:func:`choose_w`; ``analysis_groups.w_rule``)."""
+
+    SAFE_INTERVAL = "safe interval"
+    LEAST_ERROR = "least total error (no safe interval)"
+    LEAST_ERROR_SPLIT = "least total error (no contiguous safe interval)"
+
+
+class WChoice(NamedTuple):
+    """A group's W, how it was chosen, and whether decisions there are uncertain."""
+
+    w: float
+    rule: WRule
+    uncertain: bool
+
+
+def separates(cal: Calibration) -> bool:
+    """Whether a calibration has a safe interval (a W that tells its twins apart)."""
+    return bool(cal.has_safe_interval and math.isfinite(cal.recommended))
+
+
+def choose_w(cal: Calibration) -> WChoice:
+    """The group's W and whether its decisions are uncertain.
+
+    The recommended W of a safe interval; else the grid's least total error (FP + FN), the
+    geometric middle of the range of grid points that tie for it (twins that nearly coincide
+    tie almost everywhere: the smallest W would call everything feedforward). Uncertain when
+    either twin's rate there exceeds the target rate (:attr:`WRule.LEAST_ERROR`; else the rates
+    are within it, yet no interval is: :attr:`WRule.LEAST_ERROR_SPLIT`).
+    """
+    if separates(cal):
+        return WChoice(float(cal.recommended), WRule.SAFE_INTERVAL, False)
+    total = cal.fp_rate + cal.fn_rate
+    tied = np.flatnonzero(total <= total.min() + 1e-12)
+    i = int(tied[len(tied) // 2])
+    uncertain = bool(max(cal.fp_rate[i], cal.fn_rate[i]) > cal.target_rate)
+    return WChoice(float(cal.w[i]), WRule.LEAST_ERROR if uncertain else WRule.LEAST_ERROR_SPLIT, uncertain)
 
 
 def feedforward_threshold(path: SelectionPath, nb_ft: np.ndarray, w_min: float, w_max: float) -> float:

@@ -242,7 +242,7 @@ def _calibrations(run, group_rows: list[dict]) -> list[tuple]:
     for name, folder in folders:
         table = results.read_optional(tables.CALIBRATION, run.run_dir / folder)
         mine = [g for g in group_rows if g["group"] == name and g["twins_folder"] == folder]
-        used = {g["method"]: g["w"] for g in mine if g["w_rule"] != "safe interval"}
+        used = {g["method"]: g["w"] for g in mine if not has_safe_interval(g)}
         if folder.endswith("-study"):
             kpt = next((g["twin_Kpt"] for g in mine), math.nan)
             title = f"{name}, study's FF"
