@@ -20,7 +20,7 @@ def paper_record(model: str = "FF", seed: int = 1) -> dict[str, np.ndarray]:
 
     ``ft_s(k) = ft(k + 25)``, zeros after the record (SPEC section 3).
     """
-    from hcid.io.resolve import load_config
+    from hcid.assembly.resolve import load_config
     from hcid.loop.simulate import remnant_gain, simulate_realization
     from hcid.methods import shift_forward
 

@@ -36,8 +36,8 @@ import yaml  # noqa: E402
 
 from hcid import tables  # noqa: E402
 from hcid.arx import fit_grid  # noqa: E402
+from hcid.assembly.resolve import parse_config  # noqa: E402
 from hcid.io import results  # noqa: E402
-from hcid.io.resolve import parse_config  # noqa: E402
 from hcid.methods import shift_forward  # noqa: E402
 from hcid.pipeline.twins import group_slug  # noqa: E402
 from hcid.selection.calibration import evidence_p_value, feedforward_threshold  # noqa: E402

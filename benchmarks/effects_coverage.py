@@ -52,8 +52,8 @@ from scipy import stats
 
 import hcid
 from hcid.analysis.effects import CIRCULAR, effects_frame, study_effects, wrap
+from hcid.assembly.resolve import load_config
 from hcid.config import HCModel
-from hcid.io.resolve import load_config
 from hcid.loop.simulate import remnant_gain, simulate_realization
 
 ROOT = Path(__file__).resolve().parents[1]

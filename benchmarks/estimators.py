@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 
+from hcid.assembly.resolve import load_config
 from hcid.hcfit import parse_fit_settings
-from hcid.io.resolve import load_config
 from hcid.pipeline import Execution, fit_hc_study
 from hcid.pipeline.summary import summarise_fits
 

@@ -7,9 +7,9 @@ multisines over whole periods (forcing lines on disjoint bins). For 3 seeds of
 each model (FB, FF) and each method, the record is identified on the config's
 grids (not timed) and the model selected at W_BIC. Then, for each estimator
 (:data:`hcid.hcfit.TARGETS`), side by side on the same selected models: the
-parametric fit alone (:func:`hcid.analysis.selected.fit_selected`) and the
+parametric fit alone (:func:`hcid.hcfit.selected.fit_selected`) and the
 whole task, fit plus loop descriptors plus residual analysis
-(:func:`hcid.analysis.selected.analyse_selected`, what one fit-hc task does per
+(:func:`hcid.hcfit.selected.analyse_selected`, what one fit-hc task does per
 W). An estimator is timed only on the records it applies to (``lines``: those
 with forcing lines); the records it skips are counted, with hcid's reason.
 Prints the median wall times per estimator, and per model and method for the
@@ -39,11 +39,11 @@ from _paper_record import PAPER_CONFIG, ROOT  # noqa: E402
 
 import hcid  # noqa: E402
 from hcid import methods  # noqa: E402
-from hcid.analysis.selected import analyse_selected, fit_selected  # noqa: E402
+from hcid.assembly.resolve import load_config  # noqa: E402
 from hcid.errors import DataError  # noqa: E402
 from hcid.hcfit import TARGETS, TrackingRecord, resolve_target  # noqa: E402
 from hcid.hcfit.lines import line_data  # noqa: E402
-from hcid.io.resolve import load_config  # noqa: E402
+from hcid.hcfit.selected import analyse_selected, fit_selected  # noqa: E402
 from hcid.loop.hcmodel import plant  # noqa: E402
 from hcid.loop.simulate import remnant_gain, simulate_realization  # noqa: E402
 from hcid.selection.criteria import w_bic  # noqa: E402

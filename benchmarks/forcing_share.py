@@ -28,7 +28,7 @@ import hcid
 from hcid.arx.engine import _record_factor, _tap_vectors, fit_grid
 from hcid.arx.grid import max_lag
 from hcid.arx.simulation import padded
-from hcid.io.resolve import load_config
+from hcid.assembly.resolve import load_config
 from hcid.loop.simulate import remnant_gain, simulate_realization
 from hcid.methods.indirect import _stage1_rows
 

@@ -29,7 +29,7 @@ from hcid.analysis.residuals import analyse_residuals  # noqa: E402
 from hcid.arx import Grid, fit_grid  # noqa: E402
 from hcid.arx.response import path_response  # noqa: E402
 from hcid.arx.simulation import simulate  # noqa: E402
-from hcid.io.resolve import load_config  # noqa: E402
+from hcid.assembly.resolve import load_config  # noqa: E402
 from hcid.loop.hcmodel import plant, true_response  # noqa: E402
 from hcid.loop.simulate import simulate_realization  # noqa: E402
 from hcid.selection.criteria import w_bic  # noqa: E402

@@ -49,8 +49,8 @@ def _margins_ok(p: dict) -> bool:
     gain crossover, phase margin at least 30 deg (the ranges also hold loops that the
     neuromuscular peak makes unstable near 10 rad/s)."""
     from hcid.analysis.descriptors import loop_margins
+    from hcid.assembly.resolve import load_config
     from hcid.hcfit import hc_response
-    from hcid.io.resolve import load_config
     from hcid.loop.hcmodel import plant
 
     yc = plant(load_config(ROOT / "configs" / "lab_example.yaml").loop)
@@ -102,8 +102,8 @@ def findings(spec: dict, run: Path, config: Path) -> dict[str, str]:
     checks them): the calibration's and the runs' own evidence's tables, the 95% intervals that
     hold the truth, and the model-free estimates' errors."""
     from hcid.analysis.fourier import fc_estimate
+    from hcid.assembly.resolve import load_config
     from hcid.hcfit import hc_response
-    from hcid.io.resolve import load_config
     from hcid.loop.hcmodel import plant
     from hcid.pipeline.fit import _records
 

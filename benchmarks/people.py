@@ -71,6 +71,7 @@ from joblib import Parallel, delayed
 
 import hcid
 from hcid.analysis.fourier import fc_estimate, forcing_lines
+from hcid.assembly.resolve import parse_config
 from hcid.config import Timing
 from hcid.config.parse import data_identify_defaults
 from hcid.hcfit import (
@@ -86,7 +87,6 @@ from hcid.hcfit import (
 from hcid.hcfit.consistency import consistency
 from hcid.hcfit.determined import DETERMINED, is_undetermined, parameter_status
 from hcid.hcfit.lines import line_data
-from hcid.io.resolve import parse_config
 from hcid.loop.simulate import remnant_gain, simulate_realization
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -5,8 +5,10 @@ Two kinds of count, printed as one table:
 - **Measured on a run** of ``hcid analyse CONFIG --data DATA`` in this process (``--jobs 1``:
   every step in this process, where the counters see it): the Parquet and Arrow tables the
   command reads back after writing them itself (a path read after this process wrote it; the
-  byte comparison of an unchanged table before a write is not a read), and how often a YAML file
-  is read and a config parsed (``read_yaml``, ``describe_config``).
+  byte comparison of an unchanged table before a write is not a read; a run log read to append
+  its line is counted apart, and so is the report's reading of the tables after the analysis),
+  and how often a YAML file is read and a config parsed (``read_yaml``, ``describe_config``:
+  the study's, and each twins folder's config built from it).
 - **Read from the source** with ``ast`` (``hcid/pipeline``, ``hcid/api.py``, ``hcid/report``):
   positional accesses into results (a subscript by an integer or a bool literal: ``x[0]``,
   ``fits[True]``; arrays' own indexing is among them, so the count is an upper bound and its
@@ -52,13 +54,15 @@ def run_counts(config: str, data: list[str], twins: int, most_fb: int) -> dict[s
     import pyarrow.parquet as pq
 
     import hcid.report
+    from hcid.assembly import resolve
     from hcid.cli import app
     from hcid.config import parse
-    from hcid.io import resolve, results
+    from hcid.io import results
 
     written: set[str] = set()
     counts = {
         "tables read back by the analysis": 0,
+        "run logs read to append a line": 0,
         "tables read back by its report": 0,
         "YAML files read": 0,
         "configs parsed": 0,
@@ -77,7 +81,9 @@ def run_counts(config: str, data: list[str], twins: int, most_fb: int) -> dict[s
     def counted_read(original, counter=None):
         def read(where, *args, **kwargs):
             key = str(Path(str(where)))
-            if key in written:
+            if key in written and phase[0] == "analysis" and Path(key).name == "run_log.parquet":
+                counts["run logs read to append a line"] += 1
+            elif key in written:
                 counts[f"tables read back by {'its report' if phase[0] == 'report' else 'the analysis'}"] += 1
                 read_back.append(f"{Path(key).name} ({phase[0]})")
             return original(where, *args, **kwargs)

@@ -38,7 +38,7 @@ _EXPORTS = {
     "Plant": "hcid.config",
     "Multisine": "hcid.config",
     "Segments": "hcid.config",
-    "SelectedModel": "hcid.analysis.selected",
+    "SelectedModel": "hcid.hcfit.selected",
     "SelectionPath": "hcid.selection.over_w",
     "HCFit": "hcid.hcfit",
     "HcidError": "hcid.errors",

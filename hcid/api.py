@@ -29,14 +29,14 @@ import pyarrow as pa
 
 from hcid import hcfit, methods, tables
 from hcid.analysis.fourier import forcing_lines, is_other_plant, plant_mismatch
-from hcid.analysis.selected import SelectedModel, fit_selected
+from hcid.assembly.resolve import resolve_identify
 from hcid.config import Config, DataConfig, Forcing, IdentifyConfig, Plant
 from hcid.config.parse import data_identify_defaults, default_data
 from hcid.config.stages import record_timing
 from hcid.errors import ConfigError, DataError, IdentificationError, checked_rate
+from hcid.hcfit.selected import SelectedModel, fit_selected
 from hcid.io import results
 from hcid.io.measured import TIME_JITTER, check_signal, read_runs, time_rate
-from hcid.io.resolve import resolve_identify
 from hcid.loop.hcmodel import transfer_function
 from hcid.selection import criteria, over_w
 from hcid.selection.over_w import SelectionPath

@@ -613,8 +613,8 @@ def fo_study():
     of its records, whose ft and fd drive the twins."""
     from dataclasses import replace
 
+    from hcid.assembly.resolve import read_study, with_data
     from hcid.config import Plant
-    from hcid.io.resolve import read_study, with_data
 
     config, data = read_study(CONFIG, [str(LAB / "S1_pursuit_trial1.csv")])
     config = with_data(config)
@@ -628,7 +628,7 @@ def fo_study():
 def _twins_config(config, record, values, remnant=(3.0, 8.0, 2.0)):
     """The twins' config of a model, parsed as hcid analyse parses it (ranges, whole samples,
     stable loops: hcid.pipeline.twins._twin_folder)."""
-    from hcid.io.resolve import parse_config
+    from hcid.assembly.resolve import parse_config
     from hcid.pipeline.twins import twin_config_raw
 
     n = round(config.timing.window * config.timing.output_rate)

@@ -133,9 +133,9 @@ def test_api_result_equals_the_cli_tables(tmp_path, ci_config):
 
 
 def test_fit_hc_through_the_api_equals_the_pipelines(record, direct):
-    # The same function (hcid.analysis.selected.fit_selected) as `hcid fit-hc`, with the config's band.
-    from hcid.analysis.selected import fit_selected
+    # The same function (hcid.hcfit.selected.fit_selected) as `hcid fit-hc`, with the config's band.
     from hcid.hcfit import parse_fit_settings
+    from hcid.hcfit.selected import fit_selected
     from hcid.loop.hcmodel import transfer_function
 
     model = direct.select(direct.w_bic)
@@ -218,9 +218,9 @@ def test_default_settings_are_analyses_for_the_records_rate_and_length(record):
     # Source: SPEC 3 exactly at 25 Hz and 2048 samples (the config parser's sample defaults), and
     # for a shorter record the measured-data defaults `hcid analyse` resolves for a study without an
     # identify section (hcid.config.parse.data_identify_defaults, in seconds).
+    from hcid.assembly.resolve import resolve_identify
     from hcid.config import Timing
     from hcid.config.parse import data_identify_defaults
-    from hcid.io.resolve import resolve_identify
 
     assert hcid.identification_settings(25.0, 2048) == resolve_identify(None, 25.0, 2048)
     shorter = data_identify_defaults(Timing(25.0, 25.0, 0.0, 40.0, 1))
@@ -235,8 +235,8 @@ def test_fit_hc_defaults_to_the_estimator_hcid_analyse_uses(lab_record):
     # Source: a config without a fit section (hcid.hcfit.parse_fit_settings({})) is what
     # `hcid analyse` and `hcid fit-hc` fit with: target auto, the lines estimator on a lab example
     # run (multisines over its 40 s window; configs/lab_example.yaml's columns, rate and lead-in).
-    from hcid.analysis.selected import fit_selected
     from hcid.hcfit import parse_fit_settings
+    from hcid.hcfit.selected import fit_selected
     from hcid.loop.hcmodel import transfer_function
 
     columns = {"time": "time", "ft": "target", "fd": "disturbance", "e": "error", "u": "stick"}

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import yaml
 
+from hcid.assembly.resolve import load_config, parse_config
 from hcid.errors import ConfigError
-from hcid.io.resolve import load_config, parse_config
 
-from .conftest import PAPER_CONFIG
+from .conftest import PAPER_CONFIG, ROOT
 
 
 @pytest.fixture(scope="module")
@@ -398,6 +398,23 @@ def test_bad_windows_in_seconds(paper_raw, window, message):
     with pytest.raises(ConfigError) as info:
         parse_config(data, "paper")
     assert message in str(info.value) and "\n" not in str(info.value)
+
+
+def test_a_default_window_beyond_a_short_record_is_named_as_the_methods_default():
+    # Issue 48: the lab example (40 s at 20 Hz: 800 samples) with an identify section that gives
+    # one stage's window only: the direct method's default, SPEC 3's samples 129..1088, was
+    # refused as though the user had given it ("must be ... <= 800, got [129, 1088]").
+    from hcid.assembly.resolve import read_study
+
+    raw = yaml.safe_load((ROOT / "configs" / "lab_example.yaml").read_text())
+    raw["identify"] = {"stage1": {"estimation": [4, 42.5]}}
+    with pytest.raises(ConfigError) as info:
+        read_study(raw, [str(ROOT / "configs" / "lab_example" / "S1_pursuit_trial1.csv")])
+    assert str(info.value) == (
+        "identify.direct.estimation: the method's default window [129, 1088] (samples) does not fit "
+        "this record of 800 samples (40 s); give identify.direct.estimation (in seconds with "
+        "identify.windows_in: seconds), or leave the identify section out for windows scaled to the record"
+    )
 
 
 # ---------------------------------------------------------------------- no silent wrong answers (issue 24)

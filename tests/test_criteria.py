@@ -5,9 +5,9 @@ import math
 import pytest
 from typer.testing import CliRunner
 
+from hcid.assembly.resolve import parse_config
 from hcid.cli import app
 from hcid.errors import ConfigError
-from hcid.io.resolve import parse_config
 from hcid.selection import criteria
 
 

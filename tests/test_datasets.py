@@ -12,11 +12,11 @@ import yaml
 from typer.testing import CliRunner
 
 from hcid import tables
+from hcid.assembly.resolve import parse_config
 from hcid.cli import app
 from hcid.errors import DataError
 from hcid.io import datasets
 from hcid.io.measured import samples_needed
-from hcid.io.resolve import parse_config
 
 from .conftest import CI_CONFIG, load_data
 from .test_measured import COLUMNS, EXAMPLE
@@ -398,8 +398,8 @@ def test_a_config_given_as_a_mapping_reads_as_its_yaml_file(monkeypatch):
     # hcid.analyse(config=dict): the mapping a YAML file holds gives that file's study (the same
     # resolved config and records; relative paths from the working folder), and a value no YAML
     # file could hold is refused naming its key.
+    from hcid.assembly.resolve import read_study
     from hcid.errors import ConfigError
-    from hcid.io.resolve import read_study
 
     root = Path(__file__).resolve().parents[1]
     monkeypatch.chdir(root)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from hcid.analysis.fourier import fc_estimate, forcing_lines, off_line_share, plant_mismatch
+from hcid.assembly.resolve import load_config
 from hcid.errors import DataError
-from hcid.io.resolve import load_config
 from hcid.loop.hcmodel import DiscreteLoop
 from hcid.loop.simulate import remnant_gain, simulate_realization
 
@@ -171,7 +171,7 @@ def test_the_lab_examples_are_their_plant():
     """Measured 2026-11-27 on the shipped example (hcid's simulator at 60 Hz, resampled to 20 Hz):
     0.4% to 6.1% of theta at the lines is resampling error; twice the gain leaves theta - 2 theta
     = -theta, 100% up to that same error."""
-    from hcid.io.resolve import read_study
+    from hcid.assembly.resolve import read_study
 
     config, data = read_study(
         ROOT / "configs" / "lab_example.yaml", [str(ROOT / "configs" / "lab_example")], None

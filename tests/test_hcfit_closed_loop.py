@@ -54,7 +54,7 @@ def test_closed_loop_fit_recovers_the_noise_free_loop(paper_config, fine_noise_f
 def test_closed_loop_fit_with_an_input_disturbance_and_an_integrator(ci_config):
     # SPEC 7: the integrator example's experiment (Yc = 1.5/s, fd at the plant's input,
     # multisine target, 20 Hz analysis rate). Source: hcid.loop.simulate at 400 Hz, no remnant.
-    from hcid.io.resolve import load_config
+    from hcid.assembly.resolve import load_config
 
     config = _fine(load_config("configs/integrator_example.yaml"))
     model = config.model("FF")

@@ -94,8 +94,8 @@ def _loops():
     """Every config's loop and models, and 40 random ones over the plants hcid knows."""
     from pathlib import Path
 
+    from hcid.assembly.resolve import load_config
     from hcid.config.types import HCModel, Loop, Plant
-    from hcid.io.resolve import load_config
 
     root = Path(__file__).resolve().parent.parent / "configs"
     for path in sorted(root.glob("*.yaml")):

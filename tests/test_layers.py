@@ -6,28 +6,31 @@ layers), must point to the same or a lower layer, and the module graph has no cy
 """
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "hcid"
 
-#: Layers, lowest first (STYLE 1), one folder each (docs/contributing.md draws the tree): a module
-#: may import from its own layer and the ones before. ``errors`` and ``tables`` (the column names
-#: and schemas every layer shares) import nothing of hcid; ``api`` is the public API's one module.
+DOCS = PACKAGE.parent / "docs" / "contributing.md"
+
+
+def documented_layers(text: str) -> list[tuple[int, str]]:
+    """The numbered entries of docs/contributing.md's tree (``  config/   1 what ...``): each
+    package folder and the public API's module with its layer's number, in the tree's order."""
+    pattern = re.compile(r"^  ([a-z_]+/|api\.py)\s+(\d+) ", flags=re.M)
+    return [(int(m[2]), m[1].rstrip("/").removesuffix(".py")) for m in pattern.finditer(text)]
+
+
+#: Layers, lowest first (STYLE 1), derived from the package's folders as docs/contributing.md's
+#: tree numbers them: each folder is one layer of its own, and a module may import from its own
+#: layer and the ones before. ``errors`` and ``tables`` (the column names and schemas every layer
+#: shares) come first and import nothing of hcid; ``api`` is the public API's one module.
 LAYERS = (
     ("vocabulary", ("hcid.errors", "hcid.tables")),
-    ("config", ("hcid.config",)),
-    ("loop", ("hcid.loop",)),
-    ("arx", ("hcid.arx",)),
-    ("methods", ("hcid.methods",)),
-    ("selection", ("hcid.selection",)),
-    ("analyses", ("hcid.analysis", "hcid.hcfit")),
-    ("io", ("hcid.io",)),
-    ("api", ("hcid.api",)),
-    ("pipeline", ("hcid.pipeline",)),
-    ("report", ("hcid.report",)),
-    ("cli", ("hcid.cli", "hcid.__main__")),
+    *((name, (f"hcid.{name}",)) for _, name in documented_layers(DOCS.read_text())),
+    ("entry", ("hcid.__main__",)),
 )
 #: The only modules outside a layer's folder: the package itself, its entry point, the shared
 #: vocabulary, the public API, and what the package sets before numpy loads (hcid/_blas.py).
@@ -118,11 +121,14 @@ def _package_imports(edges):
 
 
 def test_every_module_sits_in_its_layers_folder():
-    # The tree shows the layers: each folder is (part of) one layer, nothing else lies flat.
+    # The tree shows the layers: each folder is one layer (none shared, none missing from
+    # docs/contributing.md's tree), nothing else lies flat, and the tree numbers them in order.
     assert sorted(p.name for p in PACKAGE.glob("*.py")) == sorted(TOP_LEVEL)
     folders = {p.name for p in PACKAGE.iterdir() if (p / "__init__.py").exists()}
-    named = {prefix.split(".")[1] for _, prefixes in LAYERS for prefix in prefixes}
-    assert folders <= named, f"folders in no layer: {sorted(folders - named)}"
+    numbered = documented_layers(DOCS.read_text())
+    names = [name for _, name in numbered]
+    assert sorted(names) == sorted(folders | {"api"}), "docs/contributing.md's tree numbers other layers"
+    assert [n for n, _ in numbered] == list(range(1, len(numbered) + 1)), numbered
 
 
 def test_every_import_points_down_the_layers():
@@ -150,7 +156,7 @@ def test_the_checks_catch_a_cycle_and_an_upward_import(tmp_path):
     "module", ["hcid.config.parse", "hcid.config.types", "hcid.loop.signals", "hcid.arx.engine"]
 )
 def test_the_core_reads_no_files(module):
-    # STYLE 2: no file I/O below results: the config layer describes, hcid.io.resolve reads.
+    # STYLE 2: no file I/O below results: the config layer describes, hcid.assembly.resolve reads.
     path = PACKAGE / (module.replace("hcid.", "").replace(".", "/") + ".py")
     text = path.read_text()
     assert "open(" not in text and "read_signal" not in text and "read_text" not in text

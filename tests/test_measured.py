@@ -14,9 +14,9 @@ import scipy.io
 import yaml
 from typer.testing import CliRunner
 
+from hcid.assembly.resolve import parse_config
 from hcid.cli import app
 from hcid.errors import ConfigError, DataError
-from hcid.io.resolve import parse_config
 
 from .conftest import CI_CONFIG, ROOT, load_data, report_without_figures
 
@@ -409,7 +409,7 @@ def test_default_grids_refuse_an_analysis_rate_above_60_hz():
 def test_an_analysis_rate_whose_probe_window_is_no_whole_samples_reads():
     # The data section is described at a placeholder timing to read the files: at 12.5 Hz its 1 s
     # was no whole number of samples, and a valid config was refused naming data.window.
-    from hcid.io.resolve import read_study
+    from hcid.assembly.resolve import read_study
 
     root = Path(__file__).resolve().parents[1]
     raw = yaml.safe_load((root / "configs" / "lab_example.yaml").read_text())
@@ -768,7 +768,7 @@ def test_data_of_another_loop_is_refused_in_one_line(tmp_path, old, new):
 def test_a_run_longer_than_the_window_is_checked_over_the_window(tmp_path):
     """The multisines have whole periods over the window only: a run that goes on after it (10 s
     more here) is checked over the window, not skipped for having no lines (a review's find)."""
-    from hcid.io.resolve import read_study
+    from hcid.assembly.resolve import read_study
     from hcid.pipeline.measured_data import check_plant
 
     longer = tmp_path / "longer"
@@ -821,7 +821,7 @@ def test_recordings_of_both_plants_under_one_plant_are_refused(tmp_path):
     the second-order plant's six runs as the integrator and reversed their verdicts."""
     import glob
 
-    from hcid.io.resolve import read_study
+    from hcid.assembly.resolve import read_study
     from hcid.pipeline.measured_data import check_plant
 
     run = tmp_path / "mixed"

@@ -10,8 +10,8 @@ import yaml
 from scipy import signal as sps
 
 from hcid import methods
+from hcid.assembly.resolve import parse_config
 from hcid.errors import IdentificationError
-from hcid.io.resolve import parse_config
 from hcid.methods import Method, StageSpec, identify, registered, shift_forward
 from hcid.pipeline import Execution
 from hcid.selection import over_w

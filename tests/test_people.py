@@ -9,8 +9,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from hcid import tables
+from hcid.assembly.resolve import read_study
 from hcid.hcfit.determined import is_undetermined
-from hcid.io.resolve import read_study
 from hcid.pipeline import Execution
 from hcid.pipeline.analyse import AnalysisOptions, analyse_study
 

@@ -11,10 +11,10 @@ import yaml
 from typer.testing import CliRunner
 
 from hcid import tables
+from hcid.assembly.resolve import read_study
 from hcid.cli import app
 from hcid.config import Plant
 from hcid.errors import ConfigError, DataError
-from hcid.io.resolve import read_study
 from hcid.pipeline import Execution, effects
 from hcid.pipeline.analyse import AnalysisOptions, analyse_study
 from hcid.pipeline.plants import run_plants

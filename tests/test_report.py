@@ -481,7 +481,7 @@ def test_a_variant_is_summarised_from_its_own_tables(ci_run):
     # is thresholds.parquet's indirect FB row, no block of 50 realizations is complete, the most
     # frequent stage-1 structure among the FB realizations is counted, and the rates are the FB
     # twin's under the indirect method.
-    from hcid.io.resolve import load_config
+    from hcid.assembly.resolve import load_config
     from hcid.report.variants import compute_variant
 
     variant = compute_variant(load_config(CI_CONFIG), ci_run)

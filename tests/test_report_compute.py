@@ -86,7 +86,7 @@ def test_no_model_feedforward_is_drawn_for_a_group_answered_without_it():
     import pyarrow as pa
 
     from hcid import tables
-    from hcid.io.resolve import load_config
+    from hcid.assembly.resolve import load_config
     from hcid.report.sections.study import _fourier
 
     from .conftest import ROOT

@@ -289,7 +289,7 @@ def test_a_file_is_listed_before_it_appears(tmp_path, monkeypatch):
 def test_the_record_keeps_earlier_stages_only_beside_their_results(small_run, tmp_path):
     # config.yaml holds the stages of the methods whose results the directory holds: after a
     # --force removed the tables, a command resolved for one method records that method only.
-    from hcid.io.resolve import load_config
+    from hcid.assembly.resolve import load_config
 
     config, run = _copy(small_run, tmp_path)
     direct_only = load_config(config, ("direct",))
@@ -337,7 +337,7 @@ def test_a_folder_not_hcids_given_as_a_run_directory_is_named_as_such(tmp_path):
 
 def test_a_changed_analysis_rate_is_named_not_the_grid_it_moved(tmp_path):
     """The identify grids follow from data.analysis_rate: the refusal names what the user changed."""
-    from hcid.io.resolve import read_study
+    from hcid.assembly.resolve import read_study
 
     lab, data = ROOT / "configs" / "lab_example.yaml", [str(ROOT / "configs" / "lab_example")]
     other = tmp_path / "lab.yaml"

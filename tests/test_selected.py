@@ -7,9 +7,9 @@ import pytest
 
 from hcid import methods
 from hcid.analysis.residuals import RESIDUAL
-from hcid.analysis.selected import SelectedModel, analyse_selected, true_parameters
 from hcid.arx.simulation import simulate
 from hcid.config import Window
+from hcid.hcfit.selected import SelectedModel, analyse_selected, true_parameters
 
 FAST = {"starts": 1, "popsize": 4, "maxiter": 8}
 

@@ -16,7 +16,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from hcid.io.resolve import read_study, with_data
+from hcid.assembly.resolve import read_study, with_data
 from hcid.pipeline import sessions
 
 from .conftest import ROOT

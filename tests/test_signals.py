@@ -133,7 +133,7 @@ def test_forcing_functions_from_the_example_data_file():
     # them): calibrate-w can simulate with the measured file's own forcing functions.
     import dataclasses
 
-    from hcid.io.resolve import load_config, parse_config, read_yaml
+    from hcid.assembly.resolve import load_config, parse_config, read_yaml
 
     from .conftest import ROOT
 

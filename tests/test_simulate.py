@@ -260,8 +260,8 @@ def test_a_remnant_ratio_the_loop_cannot_show_is_refused_in_one_line():
     # frequency integrals; before, remnant_gain returned NaN with a RuntimeWarning).
     import yaml
 
+    from hcid.assembly.resolve import parse_config
     from hcid.errors import ConfigError
-    from hcid.io.resolve import parse_config
 
     raw = yaml.safe_load(
         (Path(__file__).resolve().parents[1] / "configs/integrator_example.yaml").read_text()

@@ -99,7 +99,7 @@ def _execution(
 
 def _run_dir(config: Path, run: Path | None) -> Path:
     """--run, else runs/<the study's name> (read first from the YAML itself)."""
-    from hcid.io.resolve import described_name
+    from hcid.assembly.resolve import described_name
 
     return run if run is not None else Path("runs") / described_name(config)
 
@@ -112,7 +112,7 @@ def _load(
     ``reopen``: a command that reads a run's results resolves the methods the run
     recorded (a method registered since changes nothing).
     """
-    from hcid.io.resolve import describe_file, methods_of_run, resolve_config
+    from hcid.assembly.resolve import describe_file, methods_of_run, resolve_config
 
     run_dir = _run_dir(config, run)
     described = describe_file(config, run_dir)
@@ -125,7 +125,7 @@ def _load_data(config: Path, run: Path | None, data: list[str], execution, metho
     """A measured study's config, completed from its data where it leaves the analysis rate or
     window out, its run directory and its data set, each file found and read once; a dask
     scheduler without workers is refused before anything is read."""
-    from hcid.io.resolve import read_study
+    from hcid.assembly.resolve import read_study
 
     execution.check()
     run_dir = _run_dir(config, run)

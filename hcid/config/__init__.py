@@ -4,7 +4,7 @@ A config names the HC models, the loop and remnant parameters, the forcing
 functions, the timing, the realization seeds, the identification stages of
 the registered methods, the selection settings and optionally how to read
 measured data. :func:`describe_config` checks every value and reads nothing;
-:func:`hcid.io.resolve.load_config` reads the file, and what it names, and
+:func:`hcid.assembly.resolve.load_config` reads the file, and what it names, and
 resolves what needs other layers. The numerical core only ever sees the
 dataclasses of :mod:`hcid.config.types`.
 

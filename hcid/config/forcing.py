@@ -1,6 +1,6 @@
 """The ``signals`` and ``timing`` sections: forcing functions (SPEC 2 and 7) and the simulation's timing.
 
-A forcing function of kind ``file`` is described here and read by :mod:`hcid.io.resolve`;
+A forcing function of kind ``file`` is described here and read by :mod:`hcid.assembly.resolve`;
 :func:`check_forcing_values` checks its values once read.
 """
 
@@ -70,7 +70,7 @@ def _segments(s: Section) -> Segments:
 
 def _file_signal(s: Section, base: Path | None) -> FileSignal:
     # A forcing function recorded in a data file: described here, read by the resolution
-    # step (hcid.io.resolve), which owns file access.
+    # step (hcid.assembly.resolve), which owns file access.
     raw_path = s.get("path")
     column = s.get("column")
     for key, value in (("path", raw_path), ("column", column)):

@@ -5,7 +5,7 @@ dataclass; :func:`describe_config` runs them in order and checks what spans
 sections (timing against the target, delays against the simulation rate).
 The forcing functions and timing are parsed in :mod:`hcid.config.forcing`, the
 ``identify`` section in :mod:`hcid.config.stages`, ``loop.plant`` in :mod:`hcid.config.plant`.
-Nothing is read from disk: :mod:`hcid.io.resolve` reads what a config names and builds the
+Nothing is read from disk: :mod:`hcid.assembly.resolve` reads what a config names and builds the
 methods' stages.
 """
 
@@ -463,7 +463,7 @@ def _study_name(value: Any) -> str:
 def describe_config(data: Any, name: str, base: Path | None = None) -> Config:
     """Check a parsed YAML document and describe it as a :class:`Config`, reading nothing.
 
-    What needs other layers is left for :func:`hcid.io.resolve.resolve_config`: the
+    What needs other layers is left for :func:`hcid.assembly.resolve.resolve_config`: the
     columns of forcing files (``FileSignal.values`` is None), the stages of the
     methods (``identify.stages`` is empty; each section is kept as given), the
     criteria's registry and the closed loops' stability.

@@ -2,7 +2,7 @@
 
 :func:`identify_section` keeps each stage's section as given; :func:`build_stages`
 builds the stages of the methods a command uses from their stage specs (passed
-in by :mod:`hcid.io.resolve`, which knows the method registry).
+in by :mod:`hcid.assembly.resolve`, which knows the method registry).
 """
 
 from __future__ import annotations
@@ -56,7 +56,10 @@ def _seconds_window(key: str, value: Any, rate: float, n_record: int) -> list[in
     return [first, last]
 
 
-def _window(section: Section, name: str, n_record: int, auto_first: int, rate: float, unit: str) -> Window:
+def _window(
+    section: Section, name: str, n_record: int, auto_first: int, rate: float, unit: str, given: bool
+) -> Window:
+    """A stage's window in samples; ``given``: the config gives it (else the method's default)."""
     value = section.get(name)
     key = section.key(name)
     if value == "auto":
@@ -69,6 +72,13 @@ def _window(section: Section, name: str, n_record: int, auto_first: int, rate: f
         and all(isinstance(v, int) and not isinstance(v, bool) for v in value)
         and 1 <= value[0] <= value[1] <= n_record
     )
+    if not ok and not given:  # the method's default (in samples) does not fit this record
+        raise ConfigError(
+            f"{key}: the method's default window {fmt(value)} (samples) does not fit this record of "
+            f"{n_record} samples ({n_record / rate:g} s); give {key} (in seconds with "
+            "identify.windows_in: seconds), or leave the identify section out for windows scaled "
+            "to the record"
+        )
     if not ok:
         seconds = isinstance(value, list) and any(isinstance(v, float) and not v.is_integer() for v in value)
         hint = (
@@ -104,8 +114,8 @@ def _stage(data: Any, path: str, defaults: dict, timing: Timing, unit: str, give
     # A method's default window (its StageSpec) is in samples; one the config gives is in `unit`.
     est_unit = unit if "estimation" in given else "samples"
     val_unit = unit if "validation" in given else "samples"
-    estimation = _window(s, "estimation", n_record, max_lag, rate, est_unit)
-    validation = _window(s, "validation", n_record, max_lag, rate, val_unit)
+    estimation = _window(s, "estimation", n_record, max_lag, rate, est_unit, "estimation" in given)
+    validation = _window(s, "validation", n_record, max_lag, rate, val_unit, "validation" in given)
     s.done()
     if estimation.first - 1 < max_lag:
         raise ConfigError(

@@ -133,7 +133,7 @@ class FileSignal:
 
     ``values`` (rad) are the column's samples at ``rate`` Hz (of run ``run`` when
     given, told apart by ``run_column``), None until the file is read
-    (:func:`hcid.io.resolve.resolve_config`); the measurement window starts ``start``
+    (:func:`hcid.assembly.resolve.resolve_config`); the measurement window starts ``start``
     s into them and is taken as one period of the signal.
     """
 
@@ -286,7 +286,7 @@ class IdentifyConfig:
     ``sections`` are the config's stage sections as given and ``windows_in`` the
     unit of their windows; ``stages`` are the built stages of the methods a
     command uses (:func:`hcid.config.stages.build_stages`, through
-    :func:`hcid.io.resolve.resolve_config`): ``direct``, ``stage1`` and ``stage2`` for
+    :func:`hcid.assembly.resolve.resolve_config`): ``direct``, ``stage1`` and ``stage2`` for
     the paper's two methods. A stage not built is not in ``stages``.
     """
 

@@ -14,7 +14,7 @@
    rate and window (SPEC 10). ``calibrate-w`` on them (``RUN/twins/<group>/``) gives
    the safe interval and the recommended W per method.
 4. Every run is selected at its group's W; the selected structure's parametric model
-   is fitted (:func:`hcid.analysis.selected.analyse_selected`).
+   is fitted (:func:`hcid.hcfit.selected.analyse_selected`).
 
 Where no W separates a group's own twins and another group's fitted feedforward is stronger
 (``--ff-twin auto``, the default: a group where nobody uses feedforward has twins that nearly
@@ -47,12 +47,12 @@ import pyarrow as pa
 
 from hcid import methods, tables
 from hcid.analysis.conditions import Kind
-from hcid.analysis.selected import SelectedModel, analyse_selected
+from hcid.assembly.resolve import read_study, with_data
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError
+from hcid.hcfit.selected import SelectedModel, analyse_selected
 from hcid.io import datasets, results
 from hcid.io.datasets import DataSet
-from hcid.io.resolve import read_study, with_data
 from hcid.pipeline import effects, sessions
 from hcid.pipeline.analyse_state import Group, GroupTwins, RunOutcome, RunPath, Selected, Study, Tested
 from hcid.pipeline.analyse_twins import make_twins, more_fb_twins
@@ -64,7 +64,7 @@ from hcid.pipeline.evidence import (
     group_name,
 )
 from hcid.pipeline.execution import Execution
-from hcid.pipeline.fit import RunFits, _choices, _stage_choices, fit_run, fit_windows
+from hcid.pipeline.fit import RunFits, fit_run, fit_windows, stage_choices, stored_choices
 from hcid.pipeline.line_statistics import deviations, run_statistics
 from hcid.pipeline.measured_data import check_plant, write_skipped
 from hcid.pipeline.options import AnalysisOptions
@@ -72,7 +72,7 @@ from hcid.pipeline.parallel import labelled
 from hcid.pipeline.plants import run_plants
 from hcid.pipeline.rundir import holds_run_dir
 from hcid.pipeline.sessions import Session
-from hcid.pipeline.studies import identify_study
+from hcid.pipeline.studies import IdentifyRun, identify_study
 from hcid.pipeline.twin_values import twin_rate
 from hcid.pipeline.twins import forget_twins
 from hcid.selection import over_w
@@ -125,7 +125,7 @@ def _final_task(config, seed, record, method_name, sel, choices, fit):
 
 def _same_fit(config: Config, sel: SelectedModel, fits: RunFits):
     """The run's own fit (step 2) of the selected structure when it is the one
-    :func:`hcid.analysis.selected.fit_selected` would make (same windows: the direct method's final
+    :func:`hcid.hcfit.selected.fit_selected` would make (same windows: the direct method's final
     stage's), else None (fitted again)."""
     if (sel.estimation.rows(), sel.validation.rows()) != fit_windows(config):
         return None
@@ -172,15 +172,20 @@ def _fit_runs(study: Study) -> dict[int, RunFits]:
     return {fits.run: fits for fits in study.execution.map(fit_run, tasks, "fit runs")}
 
 
-def _selection_paths(study: Study, frontier: pa.Table) -> dict[tuple[int, str], RunPath]:
-    """Every run's frontier (of the study's ``frontier`` table) and selection path over W, per method."""
+def _selection_paths(study: Study, identified: IdentifyRun) -> dict[tuple[int, str], RunPath]:
+    """Every run's frontier, selection path over W and earlier stages' choices, per method, from
+    its identification (held in memory, not read back)."""
     name = study.config.data.name
-    by_key = results.split_by_key(frontier, tables.FRONTIER.key)
+    by_key = results.split_by_key(identified.frontier, tables.FRONTIER.key)
+    stored = stored_choices(study.run_dir, identified.choices)
     out = {}
     for seed in study.records:
         for method_name in methods.METHODS:
             t = by_key[(name, seed, method_name)]
-            out[(seed, method_name)] = RunPath(t, over_w.frontier_path(t), t.column("nb_ft").to_numpy())
+            choices = stage_choices(study.run_dir, stored, method_name, name, seed)
+            out[(seed, method_name)] = RunPath(
+                t, over_w.frontier_path(t), t.column("nb_ft").to_numpy(), choices
+            )
     return out
 
 
@@ -195,9 +200,7 @@ def _select_and_fit(
 ) -> Selected:
     """Step 5: every run's evidence, its selection at its group's W, and the selected
     structure's parametric fit."""
-    config, run_dir = study.config, study.run_dir
-    data_name = config.data.name
-    stored = _choices(run_dir)
+    config = study.config
     tasks, chosen, evidence = [], {}, {}
     for key, seeds in study.groups.items():
         for method_name in methods.METHODS:
@@ -222,10 +225,9 @@ def _select_and_fit(
                 sel = SelectedModel.from_frontier(
                     run.frontier, row, choice.w, rate=rate, target_shift=shift, stage=stage
                 )
-                choices = _stage_choices(run_dir, stored, method_name, data_name, seed)
                 own = _same_fit(config, sel, fitted[seed])  # shared, not fitted twice
                 mine = study.plants.of_run(seed)  # the run's own plant
-                tasks.append((mine, seed, study.records[seed], method_name, sel, choices, own))
+                tasks.append((mine, seed, study.records[seed], method_name, sel, run.choices, own))
             decide([evidence[(seed, method_name)] for seed in seeds], study.options.alpha, deciding)
     finals = {
         (seed, method_name): analysis
@@ -253,7 +255,7 @@ def analyse_study(
     """Analyse a measured study with W calibrated on twins of each group's fitted model (module
     notes), in its phases: identify, fit runs, twins, more FB twins, fit selected, tables.
 
-    ``data``: the study's data set, read once (:func:`hcid.io.resolve.read_study`); the files it
+    ``data``: the study's data set, read once (:func:`hcid.assembly.resolve.read_study`); the files it
     set aside (``--skip-unreadable``) are written to ``set_aside.parquet`` so that the answer and
     the report list them.
 
@@ -321,7 +323,7 @@ def analyse_study(
     lap_done("fit runs")
     twins = make_twins(study, fitted)
     lap_done("twins")
-    paths = _selection_paths(study, identified.frontier)
+    paths = _selection_paths(study, identified)
     # Each run over the analysis window, as long as its twins (a file may run on beyond it).
     n = config.timing.record_samples
     windowed = {s: {k: np.asarray(v)[:n] for k, v in r.items()} for s, r in data.records.items()}

@@ -24,9 +24,10 @@ from typing import NamedTuple
 import numpy as np
 import pyarrow as pa
 
-from hcid.analysis.selected import SelectedAnalysis
 from hcid.config import Config
 from hcid.hcfit.determined import GroupModel
+from hcid.hcfit.selected import SelectedAnalysis
+from hcid.methods import StageChoice
 from hcid.pipeline.execution import Execution
 from hcid.pipeline.options import AnalysisOptions
 from hcid.pipeline.plants import RunPlants
@@ -67,12 +68,14 @@ class GroupTwins:
 
 
 class RunPath(NamedTuple):
-    """A run's frontier (its rows of ``frontier.parquet``) for one method, its selection path over
-    W and the nb_ft of every frontier row."""
+    """A run's identification by one method: its frontier (its rows of ``frontier.parquet``), its
+    selection path over W, the nb_ft of every frontier row, and the choices of the method's
+    earlier stages (what its final stage and the selected model's fit build on)."""
 
     frontier: pa.Table
     path: SelectionPath
     nb_ft: np.ndarray
+    choices: tuple[StageChoice, ...]
 
 
 @dataclass(frozen=True)

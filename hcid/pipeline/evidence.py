@@ -8,7 +8,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import pyarrow as pa
@@ -149,6 +149,16 @@ def consistency_columns(check, problem: str) -> dict:
 # --------------------------------------------------------------------------- each run's evidence
 
 
+class _Draw(NamedTuple):
+    """One draw of more FB twins of a group's forcing set: how many, their W* per identified
+    method, their folder, and its simulations where this command made them."""
+
+    count: int
+    w_star: dict[str, np.ndarray]
+    folder: str
+    simulations: pa.Table | None
+
+
 class Evidence:
     """Each run's statistics against its own forcing set's twins (SPEC 11): its W* and its line
     statistics (:data:`LINE_STATISTICS`), each with its sequential p-value (:data:`EXCEEDANCES`,
@@ -181,8 +191,8 @@ class Evidence:
         self._thresholds: dict[tuple[str, str], dict[str, np.ndarray]] = {}
         # (group, folder) -> model -> statistic -> values (a group's start makes them)
         self._lines: dict[tuple[str, str], dict[str, dict[str, np.ndarray]]] = {}
-        # (group, forcing set) -> per draw: its count, its W* by identified method, its folder
-        self._more: dict[tuple[str, int], list[tuple[int, dict, str]]] = {}
+        # (group, forcing set) -> its draws of more FB twins, in order
+        self._more: dict[tuple[str, int], list[_Draw]] = {}
         self._judged: dict[tuple[str, str, int], str] = {}  # (group, method, forcing set) -> folder
 
     def w_star(self, path, nb_ft) -> float:
@@ -199,29 +209,41 @@ class Evidence:
         return self._thresholds[key]
 
     def _folder_lines(self, group: str, folder: str) -> dict[str, dict[str, np.ndarray]]:
-        self.prefetch_folders([(group, folder)])
+        self.prefetch_folders([(group, folder, None)])
         return self._lines[(group, folder)]
 
-    def prefetch_folders(self, pairs: Sequence[tuple[str, str]]) -> None:
-        """The line statistics of every ``(group, twin folder)`` not yet computed, in one pool
-        (:func:`hcid.pipeline.line_statistics.twin_statistics_of`)."""
-        missing = list(dict.fromkeys(p for p in pairs if p not in self._lines))
+    def prefetch_folders(self, folders: Sequence[tuple[str, str, pa.Table | None]]) -> None:
+        """The line statistics of every ``(group, twin folder, its simulations or None)`` not yet
+        computed, in one pool (:func:`hcid.pipeline.line_statistics.twin_statistics_of`): from the
+        simulations held where this command made them, else read from the folder."""
+        missing = {}
+        for group, folder, held in folders:
+            if (group, folder) not in self._lines and (group, folder) not in missing:
+                missing[(group, folder)] = held
         items = []
-        for group, folder in missing:
+        for (group, folder), held in missing.items():
             config, start, offsets = self.starts[group]
-            items.append((self.run_dir / folder, config, start, offsets))
-        for pair, lines in zip(missing, twin_statistics_of(items, self.execution), strict=True):
-            self._lines[pair] = lines
+            items.append((self.run_dir / folder, config, start, offsets, held))
+        for key, lines in zip(missing, twin_statistics_of(items, self.execution), strict=True):
+            self._lines[key] = lines
 
     def prefetch(self, twins: Sequence[tuple[str, TwinSets]]) -> None:
         """The line statistics of every forcing set's calibration twins of ``(group, TwinSets)``."""
         self.prefetch_folders(
-            [(g, f) for g, used in twins for t in used.sets for f in (t.folder, t.fb_folder) if f]
+            [
+                (g, folder, held)
+                for g, used in twins
+                for t in used.sets
+                for folder, held in ((t.folder, t.simulations), (t.fb_folder, t.fb_simulations))
+                if folder
+            ]
         )
 
     def prefetch_draws(self, sets: Sequence[tuple[str, int]]) -> None:
         """The line statistics of every draw of ``(group, forcing set)`` not yet computed."""
-        self.prefetch_folders([(g, folder) for g, i in sets for _, _, folder in self._more.get((g, i), [])])
+        self.prefetch_folders(
+            [(g, d.folder, d.simulations) for g, i in sets for d in self._more.get((g, i), [])]
+        )
 
     def lines(self, group: str, twin) -> dict[str, dict[str, np.ndarray]] | None:
         """The calibration twins' line statistics: statistic -> ``FB`` / ``FF`` -> values; None
@@ -239,21 +261,23 @@ class Evidence:
             m: np.array([self.w_star(p, n) for p, n in zip(fb.paths, fb.nb_ft, strict=True)])
             for m, fb in draws.paths.items()
         }
-        self._more.setdefault((group, forcing_set), []).append((draws.count, w, draws.folder))
+        self._more.setdefault((group, forcing_set), []).append(
+            _Draw(draws.count, w, draws.folder, draws.simulations)
+        )
 
     def drawn(self, group: str, forcing_set: int, twin) -> int:
         """FB twins simulated so far for a group's forcing set (the next draw's first seed - 1)."""
         more = self._more.get((group, forcing_set), [])
-        return len(next(iter(twin.paths.values())).fb.paths) + sum(count for count, _, _ in more)
+        return len(next(iter(twin.paths.values())).fb.paths) + sum(d.count for d in more)
 
     def fb_thresholds(self, group: str, forcing_set: int, twin, method: str) -> np.ndarray:
         """Every FB twin's W* under ``method`` in the order drawn: the calibration's, then the
         draws that identified ``method`` (up to the first that did not: it was settled there)."""
         out = [self.thresholds(twin, method)["FB"]]
-        for _, w, _ in self._more.get((group, forcing_set), []):
-            if method not in w:
+        for draw in self._more.get((group, forcing_set), []):
+            if method not in draw.w_star:
                 break
-            out.append(w[method])
+            out.append(draw.w_star[method])
         return np.concatenate(out)
 
     def fb_lines(
@@ -265,7 +289,7 @@ class Evidence:
         if base is None:
             return None
         draws = self._more.get((group, forcing_set), []) if drawn else []
-        more = [self._folder_lines(group, folder) for _, _, folder in draws]
+        more = [self._folder_lines(group, d.folder) for d in draws]
         return {
             name: np.concatenate([base[name]["FB"], *(m["FB"][name] for m in more if "FB" in m)])
             for name in LINE_STATISTICS

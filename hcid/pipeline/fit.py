@@ -2,7 +2,7 @@
 
 For every record (simulated realization or measured run) and method in
 ``frontier.parquet``, the model selected at each requested W is analysed by
-:func:`hcid.analysis.selected.analyse_selected` on the worker pool
+:func:`hcid.hcfit.selected.analyse_selected` on the worker pool
 (an :class:`~hcid.pipeline.execution.Execution`), one task per record and method.
 Writes ``hc_parameters.parquet``, ``residuals.parquet``, ``hc_loop.parquet`` and
 ``remnant_spectrum.parquet`` (:data:`OUTPUTS`).
@@ -23,7 +23,7 @@ import hashlib
 import math
 import shutil
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,7 +33,11 @@ import pyarrow.compute  # noqa: F401  (pa.compute)
 
 from hcid import hcfit, methods, tables
 from hcid.analysis.descriptors import RemnantFit, fit_remnant
-from hcid.analysis.selected import (
+from hcid.config import Config
+from hcid.errors import ConfigError, DataError, HcidError, IdentificationError
+from hcid.hcfit import FEEDBACK_PARAMETERS, TARGETS, UNITS, parse_fit_settings
+from hcid.hcfit.determined import parameter_status
+from hcid.hcfit.selected import (
     RESIDUAL_CONFIDENCE,
     RESIDUAL_MAX_LAG,
     SelectedModel,
@@ -41,10 +45,6 @@ from hcid.analysis.selected import (
     true_loop,
     true_parameters,
 )
-from hcid.config import Config
-from hcid.errors import ConfigError, DataError, HcidError, IdentificationError
-from hcid.hcfit import FEEDBACK_PARAMETERS, TARGETS, UNITS, parse_fit_settings
-from hcid.hcfit.determined import parameter_status
 from hcid.io import results
 from hcid.loop.hcmodel import plant
 from hcid.pipeline.execution import Execution
@@ -135,13 +135,17 @@ def _records(run_dir: Path) -> dict[tuple[str, int], dict[str, np.ndarray]]:
     return out
 
 
-def _choices(run_dir: Path) -> dict[str, dict[tuple[str, int], methods.StageChoice]]:
-    """Per choosing stage, its stored choice per (model, seed)."""
+def stored_choices(
+    run_dir: Path, held: Mapping[str, pa.Table] | None = None
+) -> dict[str, dict[tuple[str, int], methods.StageChoice]]:
+    """Per choosing stage, its stored choice per (model, seed): from ``held`` (each stage's table,
+    as :class:`hcid.pipeline.studies.IdentifyRun` holds them just written), else read from
+    ``run_dir``."""
     out: dict[str, dict] = {}
     for method in methods.METHODS.values():
         for stage in method.choice_stages:
             schema = tables.stage_choice(stage.name, stage.inputs)
-            table = results.read_optional(schema, run_dir)
+            table = held.get(stage.name) if held is not None else results.read_optional(schema, run_dir)
             if table is None:
                 continue
             i1, i2 = stage.inputs[0], stage.inputs[1]
@@ -376,7 +380,7 @@ def _plan(config, run_dir: Path, by_key: dict, w_of: dict, names: list[str], exi
     """``(tasks, kept, reused)``: the fits to run, the valid rows kept, the record-methods reused."""
     tasks, kept, reused = [], {}, 0
     records = _records(run_dir)
-    choices = _choices(run_dir)
+    choices = stored_choices(run_dir)
     for key, t in by_key.items():
         model, seed, method_name = key
         # Methods not asked for keep their valid rows (below) and get no new ones.
@@ -402,16 +406,16 @@ def _plan(config, run_dir: Path, by_key: dict, w_of: dict, names: list[str], exi
         record = records.get((model, seed))
         if record is None:
             raise DataError(f"{run_dir}: no record of {model}, seed {seed} (simulations or measured data)")
-        stage_choices = _stage_choices(run_dir, choices, method_name, model, seed)
+        earlier = stage_choices(run_dir, choices, method_name, model, seed)
         truths, true_margins = {}, (math.nan, math.nan)
         if model in {m.name for m in config.models}:
             truths, true_margins = true_parameters(config, model), true_loop(config, model)
-        tasks.append((config, key, record, list(todo), stage_choices, (truths, true_margins), digest))
+        tasks.append((config, key, record, list(todo), earlier, (truths, true_margins), digest))
 
     return tasks, kept, reused
 
 
-def _stage_choices(run_dir: Path, choices: dict, method_name: str, model: str, seed: int) -> tuple:
+def stage_choices(run_dir: Path, choices: dict, method_name: str, model: str, seed: int) -> tuple:
     """The earlier stages' stored choices a method's final stage needs on one record."""
     out = []
     for stage in methods.get(method_name).choice_stages:
@@ -477,7 +481,7 @@ def fit_hc_study(
 
     For every record and method of ``frontier.parquet`` (``method_names``
     default: every registered method present), the models selected at
-    :func:`requested_w` are analysed by :func:`hcid.analysis.selected.analyse_selected`.
+    :func:`requested_w` are analysed by :func:`hcid.hcfit.selected.analyse_selected`.
     Writes the tables of :data:`OUTPUTS` atomically;
     reuses valid rows unless ``force``. ``target`` overrides the config's
     ``fit_hc.target``.

@@ -11,6 +11,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 
 from hcid import tables
 from hcid.config import Config, Loop
@@ -88,17 +89,21 @@ def twin_statistics(
     group's medians. ``offsets`` are the group's runs' deviations (:func:`deviations`): twin ``k``
     (the FB and the FF twin of seed ``k`` alike) starts at ``start`` minus deviation
     ``(k - 1) mod len(offsets)``, away from its truth as a run is from its own."""
-    return twin_statistics_of([(folder, config, start, offsets)], execution)[0]
+    return twin_statistics_of([(folder, config, start, offsets, None)], execution)[0]
 
 
 def twin_statistics_of(
-    folders: Sequence[tuple[Path, Config, Mapping[str, float], Sequence[Mapping[str, float]]]],
+    folders: Sequence[
+        tuple[Path, Config, Mapping[str, float], Sequence[Mapping[str, float]], pa.Table | None]
+    ],
     execution: Execution,
 ) -> list[dict[str, dict[str, np.ndarray]]]:
-    """:func:`twin_statistics` of every ``(folder, config, start, offsets)``, in one pool."""
+    """:func:`twin_statistics` of every ``(folder, config, start, offsets, simulations)``, in one
+    pool; ``simulations``: the folder's table where the caller holds it (made by this command),
+    else None (read from the folder)."""
     keys, tasks = [], []
-    for folder, config, start, offsets in folders:
-        table = results.read(tables.SIMULATIONS, folder)
+    for folder, config, start, offsets, held in folders:
+        table = held if held is not None else results.read(tables.SIMULATIONS, folder)
         records = results.records(table, folder / tables.SIMULATIONS.file)
         keys.append(sorted(records))
         tasks += [

@@ -42,19 +42,19 @@ def import_data(config: Config, run_dir: Path, data_set: datasets.DataSet, force
 
 def check_data(config: Config, data: datasets.DataSet) -> None:
     """A data set made for this config: at its analysis rate, every run as long as its windows
-    need (what :func:`hcid.io.resolve.read_study` gives; a data set read otherwise may not be)."""
+    need (what :func:`hcid.assembly.resolve.read_study` gives; a data set read otherwise may not be)."""
     rate = config.timing.output_rate
     if not np.isclose(data.rate, rate, rtol=1e-9):
         raise DataError(
             f"data: the data set is at {data.rate:g} Hz, the config analyses at {rate:g} Hz; read it "
-            "for this config (hcid.io.resolve.read_study)"
+            "for this config (hcid.assembly.resolve.read_study)"
         )
     need = measured.samples_needed(config)
     short = next((run for run, rec in data.records.items() if rec["u"].size < need), None)
     if short is not None:
         raise DataError(
             f"data: run {short} holds {data.records[short]['u'].size} samples, the config's windows "
-            f"need {need}; read it for this config (hcid.io.resolve.read_study)"
+            f"need {need}; read it for this config (hcid.assembly.resolve.read_study)"
         )
     check_plant(config, data)
 

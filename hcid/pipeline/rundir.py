@@ -27,10 +27,10 @@ from typing import Any
 import yaml
 
 from hcid import tables
+from hcid.assembly.resolve import read_yaml
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError, HcidError
 from hcid.io import folders, results
-from hcid.io.resolve import read_yaml
 from hcid.methods import METHODS
 
 __all__ = [

@@ -20,10 +20,10 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import methods, tables
+from hcid.assembly.resolve import with_data
 from hcid.config import Config, IdentifyConfig
 from hcid.errors import ConfigError, DataError
 from hcid.io import datasets, results
-from hcid.io.resolve import with_data
 from hcid.loop.simulate import remnant_gain, simulate_realization
 from hcid.pipeline.execution import Execution
 from hcid.pipeline.measured_data import check_data, import_data, write_skipped
@@ -330,7 +330,7 @@ def identify_study(
     (``stage1.parquet``) and ``identify_log.parquet``; the first two are
     identical whatever ``execution`` (jobs, backend) or interruptions.
 
-    With ``data`` (a measured data set, read once: :func:`hcid.io.resolve.read_study`), its
+    With ``data`` (a measured data set, read once: :func:`hcid.assembly.resolve.read_study`), its
     runs are identified instead, under model name ``config.data.name`` and seed = run id (the
     file's own for one file; 1, 2, ... over a set of files, whose files and factors
     ``runs.parquet`` keeps), beside any simulated realizations already in the tables.

@@ -10,18 +10,19 @@ import hashlib
 import re
 from collections.abc import Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 
 from hcid import methods, tables
+from hcid.assembly.resolve import parse_config
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError
 from hcid.hcfit.determined import GroupModel, group_model
 from hcid.io import folders
-from hcid.io.resolve import parse_config
 from hcid.pipeline.execution import Execution
 from hcid.pipeline.fit import RunFits
 from hcid.pipeline.parallel import labelled
@@ -215,6 +216,10 @@ class Twins:
     calibrations: dict[str, Calibration]  # per method
     paths: dict[str, TwinPaths]  # per method (studies.model_paths)
     fb_folder: str = ""  # where the FB twin was simulated when not in ``folder`` (shared)
+    #: ``simulations.parquet`` of ``folder`` and of ``fb_folder`` where this command made them
+    #: (held for the line statistics, not read back); None where an earlier command did.
+    simulations: pa.Table | None = field(default=None, compare=False, repr=False)
+    fb_simulations: pa.Table | None = field(default=None, compare=False, repr=False)
 
 
 @dataclass(frozen=True)
@@ -280,15 +285,28 @@ def calibrate_twin_sets(
             if fb_from is None:
                 both = model_paths(twin_config, twin_dir, ("FB", "FF"), frontier=run.frontier)
                 paths = {m: TwinPaths(*both[m]) for m in methods.METHODS}
-                fb_folder = ""
+                fb_folder, fb_simulations = "", None
             else:
                 ff = model_paths(twin_config, twin_dir, ("FF",), frontier=run.frontier)
                 paths = {m: TwinPaths(fb_from.paths[m].fb, *ff[m]) for m in methods.METHODS}
                 fb_folder = fb_from.fb_folder or fb_from.folder
+                fb_simulations = fb_from.fb_simulations if fb_from.fb_folder else fb_from.simulations
             calibrations = {c.method: c for c in calibrate_paths(twin_config, twin_dir, paths)}
             simulated = {**source.model, **twin_values(source.model, source.kn_rate)}
+            folder = f"twins/{slug}"
+            made_now = run.simulation.simulations if run.simulation is not None else None
             out.append(
-                Twins(kind, simulated, source.remnant, f"twins/{slug}", calibrations, paths, fb_folder)
+                Twins(
+                    kind,
+                    simulated,
+                    source.remnant,
+                    folder,
+                    calibrations,
+                    paths,
+                    fb_folder,
+                    made_now,
+                    fb_simulations,
+                )
             )
     return out
 
@@ -316,6 +334,8 @@ class FbDraws:
     count: int
     paths: dict[str, Selections]  # per identified method
     folder: str
+    #: Their ``simulations.parquet`` where this command made it (None: an earlier command's).
+    simulations: pa.Table | None = field(default=None, compare=False, repr=False)
 
 
 def draw_fb_twins(
@@ -348,14 +368,17 @@ def draw_fb_twin_sets(
             runs = identify_studies(
                 [(made[i][1], made[i][0], requests[i][3]) for i in identify], execution=execution
             )
-            simulate_studies([(made[i][1], made[i][0]) for i in simulate], execution=execution)
+            simulated = simulate_studies([(made[i][1], made[i][0]) for i in simulate], execution=execution)
         frontiers = dict(zip(identify, (r.frontier for r in runs), strict=True))
+        # The simulations made now, held for the line statistics (not read back).
+        held = {i: r.simulation.simulations for i, r in zip(identify, runs, strict=True) if r.simulation}
+        held.update({i: r.simulations for i, r in zip(simulate, simulated, strict=True)})
         out = []
         for i, (source, first, count, names) in enumerate(requests):
             twin_dir, twin_config = made[i]
             found = model_paths(twin_config, twin_dir, ("FB",), names, frontier=frontiers[i]) if names else {}
             paths = {method: fb for method, (fb,) in found.items()}
-            out.append(FbDraws(first, count, paths, f"twins/{source.slug}-fb{first}"))
+            out.append(FbDraws(first, count, paths, f"twins/{source.slug}-fb{first}", held.get(i)))
     return out
 
 

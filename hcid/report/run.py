@@ -8,10 +8,10 @@ from pathlib import Path
 import pyarrow as pa
 
 from hcid import methods, tables
+from hcid.assembly.resolve import parse_config, read_yaml, recorded_methods
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError
 from hcid.io import results
-from hcid.io.resolve import parse_config, read_yaml, recorded_methods
 from hcid.selection import criteria
 
 __all__ = ["RunTables", "marks_for_plot", "read_run"]

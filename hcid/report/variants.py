@@ -18,10 +18,10 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import tables
+from hcid.assembly.resolve import load_config
 from hcid.config import Config, paper
 from hcid.errors import DataError, HcidError
 from hcid.io import folders, results
-from hcid.io.resolve import load_config
 from hcid.report import figures
 from hcid.report.document import Doc, to_html, to_markdown
 from hcid.report.sections.handoff import stage_options, summarize
