@@ -20,6 +20,7 @@ lines below 10 rad/s.
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib.util
 import os
 import sys
@@ -49,13 +50,20 @@ def _margins_ok(p: dict) -> bool:
     gain crossover, phase margin at least 30 deg (the ranges also hold loops that the
     neuromuscular peak makes unstable near 10 rad/s)."""
     from hcid.analysis.descriptors import loop_margins
-    from hcid.assembly.resolve import load_config
     from hcid.hcfit import hc_response
-    from hcid.loop.hcmodel import plant
 
-    yc = plant(load_config(ROOT / "configs" / "lab_example.yaml").loop)
+    yc = _example_plant()
     m = loop_margins(lambda w: hc_response({**p, **NMS}, yc, w)[1] * np.asarray(yc(1j * w)).ravel())
     return m.n_crossovers == 1 and m.phase_margin >= 30.0
+
+
+@functools.cache
+def _example_plant():
+    """The lab example's plant (1.5/s), as python-control's system (read once)."""
+    from hcid.assembly.resolve import load_config
+    from hcid.loop.hcmodel import plant
+
+    return plant(load_config(ROOT / "configs" / "lab_example.yaml").loop)
 
 
 def large_spec(subjects: int = 20, trials: int = 5, seed: int = 7) -> dict:

@@ -384,3 +384,27 @@ def test_where_subjects_effects_differ_the_interval_is_the_paired_t_test_of_thei
     assert mixed.estimate == pytest.approx(d.mean(), rel=1e-9)
     assert (mixed.low, mixed.high) == pytest.approx((d.mean() - half, d.mean() + half), rel=1e-6)
     assert mixed.p == pytest.approx(stats.ttest_1samp(d, 0.0).pvalue, rel=1e-6)
+
+
+def test_runs_left_out_by_subject_leave_the_within_subject_effect():
+    # Issue 49: the subjects with the largest values lose their runs at level B (undetermined), so
+    # a random intercept alone would also compare the remaining B runs (low subjects) with every
+    # subject's A runs and shrink the effect. With each subject's weighted share of B as a column
+    # (Mundlak) the estimate is the within-subject one: least squares with a fixed effect per
+    # subject and the runs' weights.
+    rng = np.random.default_rng(49)
+    n, k = 8, 3
+    subject = np.repeat(np.arange(n), 2 * k)
+    level = np.tile(np.repeat(["A", "B"], k), n)
+    base = np.linspace(0.10, 0.18, n)[subject]
+    se = rng.uniform(0.01, 0.04, subject.size)
+    y = base + 0.03 * (level == "B") + rng.normal(0, 1, subject.size) * se
+    lost = (level == "B") & ((base > 0.15) | (subject == 0) & (np.arange(subject.size) % 2 == 0))
+    (mixed,) = by_test(quantity_effects("TL", y, subject, level, se=se, undetermined=lost), MIXED)
+    keep = ~lost
+    w = effects._weights(y[keep], se[keep], [subject[keep], level[keep]])
+    x = np.column_stack([(level[keep] == "B").astype(float), np.eye(n)[subject[keep]]])
+    root = np.sqrt(w)
+    within = np.linalg.lstsq(x * root[:, None], y[keep] * root, rcond=None)[0][0]
+    assert mixed.estimate == pytest.approx(within, rel=1e-8)
+    assert mixed.left_out == int(lost.sum()) and mixed.subjects == n

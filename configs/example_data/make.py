@@ -15,7 +15,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 
-from hcid.io.resolve import load_config
+from hcid.assembly.resolve import load_config
 from hcid.loop.simulate import remnant_gain, simulate_realization
 
 HERE = Path(__file__).resolve().parent

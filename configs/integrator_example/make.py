@@ -13,8 +13,8 @@ the error. Run from the project root:
 import dataclasses
 from pathlib import Path
 
+from hcid.assembly.resolve import load_config
 from hcid.config import HCModel
-from hcid.io.resolve import load_config
 from hcid.loop.simulate import remnant_gain, simulate_realization
 
 HERE = Path(__file__).resolve().parent

@@ -4,24 +4,30 @@ A quantity (a parameter, a response at a line, a loop figure) is observed once p
 to subjects and to a level of the compared factor. Per level against the reference:
 
 - ``mixed model (REML)``: statsmodels ``MixedLM``, fixed effects for the compared factor and any
-  other factors, a random intercept per subject, REML. With known standard errors run ``r`` has
-  the residual variance ``sigma2 (se_r**2 + tau2)``: ``tau2`` the trial-to-trial variance the se
-  leave out, by DerSimonian and Laird's moment estimator (Cochran's Q summed over the cells of runs
+  other factors, a random intercept per subject, REML. With known standard errors run ``r`` has the
+  residual variance ``sigma2 (se_r**2 + tau2)``: ``tau2`` the trial-to-trial variance the se leave
+  out, by DerSimonian and Laird's moment estimator (Cochran's Q summed over the cells of runs
   sharing a subject and every factor's level; 0 where Q is below its degrees of freedom); the free
   scale ``sigma2`` absorbs a common misstatement of the se. MixedLM has no weights: every row, its
   design and its random-effect column are multiplied by ``sqrt(w_r)``, ``w_r = 1 / (se_r**2 +
-  tau2)``, lme4's weighted model (residual variance ``sigma2 / w_r``, random intercept on the data's
-  scale). Weights ``1 / se_r**2`` alone would let a run with a tiny fit error outweigh the person's
-  trial-to-trial spread. Interval and p: the wider of two. The model's: its covariance with
-  Student's t on the between-within degrees of freedom (SAS ``DDFM=BETWITHIN``): ``n_runs -
-  n_subjects -`` the within-subject columns' rank for a factor varying within subjects, else
-  ``n_subjects -`` the between-subject columns' rank (one run per subject and level: the paired t
-  test exactly). The cluster-robust one: Bell and McCaffrey's CR2 sandwich by subject with t on
-  ``n_subjects - 1`` (for a factor varying within subjects). A random intercept assumes every
-  subject has the same effect and the se tell each run's spread; where subjects' effects differ,
-  or a fit's se understates its trial-to-trial spread, the model's interval is too narrow (a
-  1000-study check with subjects' effects spread by half the effect: 79% coverage of TL's effect)
-  and the sandwich's is not. ``benchmarks/effects_coverage.py`` measures both.
+  tau2)``, lme4's weighted model (residual variance ``sigma2 / w_r``, random intercept on the
+  data's scale). Weights ``1 / se_r**2`` alone would let a run with a tiny fit error outweigh the
+  person's trial-to-trial spread. Where the compared factor varies within subjects, each subject's
+  weighted share of each level is a further (between-subject) column (Mundlak 1978): the effect is
+  the within-subject one, as with a fixed effect per subject, unbiased where which runs are left
+  out depends on the subject (issue 49: end to end the subjects with the largest Kpe and TL lost
+  their condition B runs, and the random intercept alone, comparing their A runs with the others' B
+  runs, took TL's median effect from 0.021 to 0.016). Interval and p: the wider of two. The
+  model's: its covariance with Student's t on the between-within degrees of freedom (SAS
+  ``DDFM=BETWITHIN``): ``n_runs - n_subjects -`` the within-subject columns' rank for a factor
+  varying within subjects, else ``n_subjects -`` the between-subject columns' rank (one run per
+  subject and level: the paired t test exactly). The cluster-robust one: Bell and McCaffrey's CR2
+  sandwich by subject with t on ``n_subjects - 1`` (for a factor varying within subjects). A random
+  intercept assumes every subject has the same effect and the se tell each run's spread; where
+  subjects' effects differ, or a fit's se understates its trial-to-trial spread, the model's
+  interval is too narrow (a 1000-study check with subjects' effects spread by half the effect: 79%
+  coverage of TL's effect) and the sandwich's is not. ``benchmarks/effects_coverage.py`` measures
+  both.
 - ``Wilcoxon signed-rank`` on the differences of the per-level means (weighted as above) of the
   subjects with both levels: ``scipy.stats.wilcoxon``'s p, the Hodges-Lehmann estimate and its
   exact interval (Hollander and Wolfe, Nonparametric Statistical Methods, 2nd ed., 3.3: confidence
@@ -365,6 +371,8 @@ def _mixed(d: _Data, contrasts: list) -> list[Effect]:
     if rank < design.shape[1]:
         return effects("not fitted: the factors are confounded")
     groups = pd.factorize(d.subject)[0]
+    design = _with_subject_means(design, range(1, 1 + len(present)), groups, d.w)
+    rank = np.linalg.matrix_rank(design)
     spread = pd.DataFrame(design).groupby(groups).nunique().max(axis=0).to_numpy()
     between = [j for j in range(design.shape[1]) if spread[j] == 1]  # columns constant within subjects
     rank_b = np.linalg.matrix_rank(design[:, between]) if between else 0
@@ -402,6 +410,24 @@ def _mixed(d: _Data, contrasts: list) -> list[Effect]:
         p = 2 * stats.t.sf(abs(est) / se, dof) if se > 0 else float(est == 0)
         found[lv] = d.effect(lv, MIXED, [est, est - half, est + half, p], n_subj, runs, levels, note)
     return effects("not fitted: no determined runs at the level")
+
+
+def _with_subject_means(design: np.ndarray, columns, groups: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """The design with, for each of ``columns`` that varies within subjects, each run's subject's
+    ``w``-weighted mean of it (Mundlak, Econometrica 46, 1978): the column's effect is then the
+    within-subject one, as with a fixed effect per subject, and the random intercept keeps the
+    subjects' spread. Without it, REML's random intercept also compares subjects with each other,
+    biased where the runs left out depend on the subject (a subject's runs at a level all
+    undetermined: only its reference runs stay). A mean that adds no rank (every subject with the
+    same weighted share of the level, as in a complete balanced design without se) is not added:
+    there the random intercept's estimate already is the within-subject one."""
+    sw = np.bincount(groups, w)
+    for j in columns:
+        mean = (np.bincount(groups, w * design[:, j]) / sw)[groups]
+        widened = np.column_stack([design, mean])  # a column constant within subjects adds no rank
+        if np.linalg.matrix_rank(widened) > np.linalg.matrix_rank(design):
+            design = widened
+    return design
 
 
 def _fe_covariance(model: MixedLM, result, groups: np.ndarray) -> np.ndarray:
