@@ -113,7 +113,7 @@ def findings(spec: dict, run: Path, config: Path) -> dict[str, str]:
     from hcid.assembly.resolve import load_config
     from hcid.hcfit import hc_response
     from hcid.loop.hcmodel import plant
-    from hcid.pipeline.fit import _records
+    from hcid.pipeline.fit_hc import _records
 
     rows = pq.read_table(run / "analysis.parquet").to_pylist()
 

@@ -51,9 +51,11 @@ def timed(original):
 # Every module that calls the pool by name (this code's Execution, or an older checkout's stages).
 # fit-hc's module only where the code imported it already: importing it here would add
 # python-control's import to a run that does not need it.
-for name in ("hcid.pipeline.execution", "hcid.pipeline.studies", "hcid.pipeline.fit"):
+# (hcid.pipeline.fit: an older checkout's name of fit_hc.)
+fit_modules = ("hcid.pipeline.fit_hc", "hcid.pipeline.fit")
+for name in ("hcid.pipeline.execution", "hcid.pipeline.studies", *fit_modules):
     try:
-        module = sys.modules.get(name) or (name != "hcid.pipeline.fit" and importlib.import_module(name))
+        module = sys.modules.get(name) or (name not in fit_modules and importlib.import_module(name))
     except ImportError:
         continue
     if module and hasattr(module, "parallel_map"):

@@ -351,7 +351,7 @@ RESIDUALS = _schema(
 
 #: The parametric model's parameters (SPEC 8), as the analysis tables name their columns.
 HC_PARAMETER_NAMES = ("Kpe", "TL", "tau_pe", "w_nms", "zeta_nms", "Kpt", "TI", "tau_pt")
-#: Each parameter's unit ("-": none); hcid.config.fit.UNITS is this.
+#: Each parameter's unit ("-": none); hcid.config.fit_settings.UNITS is this.
 PARAMETER_UNITS = {
     "Kpe": "-",
     "TL": "s",

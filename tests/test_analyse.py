@@ -720,7 +720,7 @@ def test_a_group_whose_remnant_fits_are_all_on_their_bounds_still_gets_twins(fo_
 
     from hcid.analysis.descriptors import RemnantFit
     from hcid.errors import DataError
-    from hcid.pipeline.fit import RunFits
+    from hcid.pipeline.fit_hc import RunFits
     from hcid.pipeline.twins import group_models
 
     config, _ = fo_study
@@ -752,7 +752,7 @@ def test_the_issues_group_gets_twins_their_config_takes(fo_study):
     # twins' config parsed ("models.FB.tau_pe: must be a number in (0, 2], got 0.0" before).
 
     from hcid.analysis.descriptors import RemnantFit
-    from hcid.pipeline.fit import RunFits
+    from hcid.pipeline.fit_hc import RunFits
     from hcid.pipeline.twins import group_models
 
     config, record = fo_study

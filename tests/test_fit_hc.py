@@ -244,7 +244,7 @@ def test_report_shows_the_section(fitted, tmp_path):
 def test_interrupted_fit_resumes_from_its_parts(fitted, tmp_path, monkeypatch):
     # Parts (Arrow IPC, RUN/.parts/fit_hc/) keep the finished record-methods of an
     # interrupted run; the resumed run fits only the rest and ends with the same bytes.
-    from hcid.pipeline import fit
+    from hcid.pipeline import fit_hc as fit
 
     from .conftest import interrupt_after
 

@@ -7,7 +7,7 @@ import math
 
 import typer
 
-from hcid.config.fit import FEEDFORWARD_PARAMETERS
+from hcid.config.fit_settings import FEEDFORWARD_PARAMETERS
 from hcid.tables import PARAMETER_UNITS
 
 
@@ -476,7 +476,7 @@ def _feedback_line(feedback) -> str:
     those runs) and each method's ARX selection at W_BIC."""
     import numpy as np
 
-    from hcid.config.fit import FEEDBACK_PARAMETERS
+    from hcid.config.fit_settings import FEEDBACK_PARAMETERS
     from hcid.hcfit.determined import DETERMINED
 
     rows = feedback.to_pylist()

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from hcid.config._checks import LIMITS, RESERVED_FACTORS, Section, fmt, integer
-from hcid.config.fit import FitSettings, parse_fit_settings
+from hcid.config.fit_settings import FitSettings, parse_fit_settings
 from hcid.config.forcing import check_against_timing, signals_section, timing_section
 from hcid.config.plant import PLANTS, plant_section
 from hcid.config.stages import MOST_LAGS, identify_section

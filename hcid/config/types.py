@@ -16,7 +16,7 @@ import numpy as np
 import yaml
 
 from hcid.config._checks import GRID_LOWEST, checked_grid_range
-from hcid.config.fit import FitSettings
+from hcid.config.fit_settings import FitSettings
 from hcid.config.plant import Plant, PlantByFactor
 from hcid.errors import ConfigError
 

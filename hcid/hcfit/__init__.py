@@ -43,7 +43,7 @@ carries a standard error (:mod:`hcid.hcfit.uncertainty`: a lag-window sandwich
 by default, right for the coloured residuals a remnant leaves).
 """
 
-from hcid.config.fit import (
+from hcid.config.fit_settings import (
     DEFAULT_BOUNDS,
     FEEDBACK_PARAMETERS,
     FEEDFORWARD_PARAMETERS,

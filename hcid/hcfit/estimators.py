@@ -12,7 +12,7 @@ import control
 import numpy as np
 from scipy import stats
 
-from hcid.config.fit import FEEDBACK_PARAMETERS, FitSettings
+from hcid.config.fit_settings import FEEDBACK_PARAMETERS, FitSettings
 from hcid.errors import DataError, IdentificationError
 from hcid.hcfit.consistency import CONTRADICTED
 from hcid.hcfit.determined import LITERATURE_NMS, nms_undetermined

@@ -13,7 +13,7 @@ import numpy as np
 import pyarrow as pa
 from scipy import optimize
 
-from hcid.config.fit import UNITS, FitSettings
+from hcid.config.fit_settings import UNITS, FitSettings
 from hcid.errors import DataError, IdentificationError
 from hcid.hcfit.determined import parameter_status
 from hcid.hcfit.lines import LineData, LinesProblem, line_data

@@ -31,7 +31,7 @@ import control
 import numpy as np
 from scipy import optimize
 
-from hcid.config.fit import FEEDFORWARD_PARAMETERS, FitSettings
+from hcid.config.fit_settings import FEEDFORWARD_PARAMETERS, FitSettings
 from hcid.hcfit.lines import LineData, LinesProblem
 
 __all__ = ["feedforward_lr", "nested_slope"]

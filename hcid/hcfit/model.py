@@ -22,7 +22,7 @@ from scipy import signal as sps
 
 from hcid.arx.simulation import checked_rows
 from hcid.config._checks import integer
-from hcid.config.fit import FEEDBACK_PARAMETERS, PARAMETERS
+from hcid.config.fit_settings import FEEDBACK_PARAMETERS, PARAMETERS
 from hcid.config.plant import MAX_INVERTIBLE_DEGREE, relative_degree
 from hcid.errors import ConfigError, DataError, checked_rate
 

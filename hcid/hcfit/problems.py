@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hcid.config.fit import FitSettings
+from hcid.config.fit_settings import FitSettings
 from hcid.hcfit.closed_loop import _ClosedLoop
 from hcid.hcfit.model import TrackingRecord, _names, _plant_polynomials, _responses, _Simulator
 

@@ -3,7 +3,7 @@
 - :mod:`hcid.pipeline.studies`: the stages simulate, identify and calibrate W,
   and :func:`run_study`, which chains them with the sweep.
 - :mod:`hcid.pipeline.sweep`: ``sweep-w``, the selection over the W grid and its thresholds.
-- :mod:`hcid.pipeline.fit`: ``fit-hc``, the parametric HC fit and residual
+- :mod:`hcid.pipeline.fit_hc`: ``fit-hc``, the parametric HC fit and residual
   analysis of every selected model.
 - :mod:`hcid.pipeline.analyse`: ``hcid analyse``, a measured study end to end, in its phases
   (its twins in :mod:`hcid.pipeline.twins`, each run's evidence in :mod:`hcid.pipeline.evidence`).
@@ -32,7 +32,7 @@ def __getattr__(name: str):
     """``fit_hc_study`` and ``HCFitRun`` on first use: fit-hc's modules import python-control and
     scipy.stats (about 1 s), which simulating and identifying never need."""
     if name in ("HCFitRun", "fit_hc_study"):
-        from hcid.pipeline import fit
+        from hcid.pipeline import fit_hc as fit
 
         return getattr(fit, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -64,7 +64,7 @@ from hcid.pipeline.evidence import (
     group_name,
 )
 from hcid.pipeline.execution import Execution
-from hcid.pipeline.fit import RunFits, fit_run, fit_windows, stage_choices, stored_choices
+from hcid.pipeline.fit_hc import RunFits, fit_run, fit_windows, stage_choices, stored_choices
 from hcid.pipeline.line_statistics import deviations, run_statistics
 from hcid.pipeline.measured_data import check_plant, write_skipped
 from hcid.pipeline.options import AnalysisOptions
@@ -118,9 +118,9 @@ def _groups(runs: pa.Table, by: Sequence[str]) -> dict[tuple[str, ...], list[int
     return out
 
 
-def _final_task(config, seed, record, method_name, sel, choices, fit):
+def _final_task(config, run, record, method_name, sel, choices, fit):
     analysis = analyse_selected(sel, record, config, methods.get(method_name), choices, fit=fit)
-    return seed, method_name, analysis
+    return run, method_name, analysis
 
 
 def _same_fit(config: Config, sel: SelectedModel, fits: RunFits):
@@ -179,11 +179,11 @@ def _selection_paths(study: Study, identified: IdentifyRun) -> dict[tuple[int, s
     by_key = results.split_by_key(identified.frontier, tables.FRONTIER.key)
     stored = stored_choices(study.run_dir, identified.choices)
     out = {}
-    for seed in study.records:
+    for run in study.records:
         for method_name in methods.METHODS:
-            t = by_key[(name, seed, method_name)]
-            choices = stage_choices(study.run_dir, stored, method_name, name, seed)
-            out[(seed, method_name)] = RunPath(
+            t = by_key[(name, run, method_name)]
+            choices = stage_choices(study.run_dir, stored, method_name, name, run)
+            out[(run, method_name)] = RunPath(
                 t, over_w.frontier_path(t), t.column("nb_ft").to_numpy(), choices
             )
     return out
@@ -202,36 +202,36 @@ def _select_and_fit(
     structure's parametric fit."""
     config = study.config
     tasks, chosen, evidence = [], {}, {}
-    for key, seeds in study.groups.items():
+    for key, members in study.groups.items():
         for method_name in methods.METHODS:
             used = twins[key].used[method_name]
             choice = chosen[(key, method_name)] = choose_w(used.calibrations[method_name])
             stage = config.identify.stage(methods.get(method_name).final_stage.name)
             deciding = tested[key].deciding[method_name]
-            for seed in seeds:
-                run = paths[(seed, method_name)]
-                evidence[(seed, method_name)] = judge.run(
+            for run in members:
+                identified = paths[(run, method_name)]
+                evidence[(run, method_name)] = judge.run(
                     group_name(study.by, key),
-                    judge.w_star(run.path, run.nb_ft),
+                    judge.w_star(identified.path, identified.nb_ft),
                     used,
-                    seed,
+                    run,
                     method_name,
-                    run_lines.get(seed),
+                    run_lines.get(run),
                     deciding,
                 )
-                row = int(run.path.at(np.array([choice.w]))[0])
+                row = int(identified.path.at(np.array([choice.w]))[0])
                 shift = config.identify.target_shift
                 rate = config.timing.output_rate
                 sel = SelectedModel.from_frontier(
-                    run.frontier, row, choice.w, rate=rate, target_shift=shift, stage=stage
+                    identified.frontier, row, choice.w, rate=rate, target_shift=shift, stage=stage
                 )
-                own = _same_fit(config, sel, fitted[seed])  # shared, not fitted twice
-                mine = study.plants.of_run(seed)  # the run's own plant
-                tasks.append((mine, seed, study.records[seed], method_name, sel, run.choices, own))
-            decide([evidence[(seed, method_name)] for seed in seeds], study.options.alpha, deciding)
+                own = _same_fit(config, sel, fitted[run])  # shared, not fitted twice
+                mine = study.plants.of_run(run)  # the run's own plant
+                tasks.append((mine, run, study.records[run], method_name, sel, identified.choices, own))
+            decide([evidence[(run, method_name)] for run in members], study.options.alpha, deciding)
     finals = {
-        (seed, method_name): analysis
-        for seed, method_name, analysis in study.execution.map(_final_task, tasks, "fit selected")
+        (run, method_name): analysis
+        for run, method_name, analysis in study.execution.map(_final_task, tasks, "fit selected")
     }
     if study.options.fdr:  # Benjamini-Hochberg over the study's runs, per method
         for method_name in methods.METHODS:
@@ -278,7 +278,7 @@ def analyse_study(
         sessions.check_factors(data.factors, person)
         config.require_one_plant("a whole experiment, its conditions combined per person,")
     whole = data
-    two_input = [seed for seed, t in trials.items() if t.kind is Kind.TWO_INPUT]
+    two_input = [run for run, t in trials.items() if t.kind is Kind.TWO_INPUT]
     if len(two_input) < len(trials):  # single-input runs: combined per person, not tested for feedforward
         data = sessions.subset(data, two_input)
     by = plants.grouping(_factors_and_groups(data, options.by))  # a group never mixes plants
@@ -333,7 +333,7 @@ def analyse_study(
         run_lines = run_statistics(
             windowed,
             {s: plants.of_run(s) for s in data.records},
-            {s: starts[key] for key, seeds in study.groups.items() for s in seeds},
+            {s: starts[key] for key, members in study.groups.items() for s in members},
             execution,
         )
     judge = Evidence(
@@ -343,11 +343,11 @@ def analyse_study(
         options.most_fb_twins,
         {
             group_name(by, key): (
-                plants.of_runs(seeds),
+                plants.of_runs(members),
                 starts[key],
-                deviations(starts[key], [fitted[s].with_ff for s in sorted(seeds)]),
+                deviations(starts[key], [fitted[s].with_ff for s in sorted(members)]),
             )
-            for key, seeds in study.groups.items()
+            for key, members in study.groups.items()
         },
         execution,
         # Beyond every twin, settled at a tail p of alpha / 10; not under --fdr, whose thresholds

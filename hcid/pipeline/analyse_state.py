@@ -4,7 +4,7 @@
 =================  ============================================  ==========================
 step               returns                                        module
 =================  ============================================  ==========================
-fit runs           ``{run: RunFits}``                             :mod:`hcid.pipeline.fit`
+fit runs           ``{run: RunFits}``                             :mod:`hcid.pipeline.fit_hc`
 twins              ``{group: GroupTwins}``                        :mod:`.analyse_twins`
 selection paths    ``{(run, method): RunPath}``                   :mod:`.analyse`
 more FB twins      ``{group: Tested}``                            :mod:`.analyse_twins`

@@ -8,10 +8,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from hcid import methods
-from hcid.config.fit import FEEDFORWARD_PARAMETERS
+from hcid.config.fit_settings import FEEDFORWARD_PARAMETERS
 from hcid.pipeline.analyse_state import Group, GroupTwins, RunPath, Study, Tested
 from hcid.pipeline.evidence import Evidence, group_name
-from hcid.pipeline.fit import RunFits
+from hcid.pipeline.fit_hc import RunFits
 from hcid.pipeline.line_statistics import LINE_STATISTICS
 from hcid.pipeline.twin_values import Remnant
 from hcid.pipeline.twins import (

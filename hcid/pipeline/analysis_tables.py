@@ -47,9 +47,10 @@ def write_tables(
     run_dir = study.run_dir
     group_table, run_table = _tables(_Rows(study, twins, tested, selected, checks))
     fc_rows = []
-    for key, seeds in study.groups.items():
-        config = study.plants.of_runs(seeds)  # the group's plant
-        fc_rows += _fc_rows(config, group_name(study.by, key), seeds, study.records, twins[key].model.values)
+    for key, members in study.groups.items():
+        config = study.plants.of_runs(members)  # the group's plant
+        name, model = group_name(study.by, key), twins[key].model.values
+        fc_rows += _fc_rows(config, name, members, study.records, model)
     results.write(
         tables.FC_ESTIMATES, pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow), run_dir
     )
@@ -80,14 +81,14 @@ class _Rows:
         self.factor_of = {int(r["seed"]): r for r in study.runs.to_pylist()}
         # Every group's check first: a group whose test fails names its problem for its runs too.
         self.group_checks = {
-            key: checks.group(seeds, twins[key].model.values) for key, seeds in study.groups.items()
+            key: checks.group(members, twins[key].model.values) for key, members in study.groups.items()
         }
         # Each run's remnant share from the data alone (the same for both methods), over the
         # window as the FC estimates.
         rate, n = study.config.timing.output_rate, study.config.timing.record_samples
         self.remnant_share = {
-            seed: off_line_share(r["u"][:n], r["ft"][:n], r["fd"][:n], rate)
-            for seed, r in study.records.items()
+            run: off_line_share(r["u"][:n], r["ft"][:n], r["fd"][:n], rate)
+            for run, r in study.records.items()
         }
 
     def choice(self, key, method_name: str) -> dict:
@@ -110,10 +111,10 @@ class _Rows:
             **rates_at(*used.paths[method_name], chosen.w),
         }
 
-    def run(self, seed: int, method_name: str, choice: dict) -> tuple[dict, bool]:
+    def run(self, run: int, method_name: str, choice: dict) -> tuple[dict, bool]:
         """A run's row, and whether the data contradict its own fit at W."""
         config, factor_of = self.study.config, self.factor_of
-        outcome = self.selected.runs[(seed, method_name)]
+        outcome = self.selected.runs[(run, method_name)]
         a = outcome.final
         sel, fit = a.model, a.fit
         values = dict(zip(fit.names, fit.estimates, strict=True)) if fit else {}
@@ -121,9 +122,9 @@ class _Rows:
         fitted_loop = next((d for d in a.loop if d.source == "fitted"), None)
         row = {
             "data_set": config.data.name,
-            "run_id": seed,
-            "file": str(factor_of[seed]["file"]),
-            "file_run": int(factor_of[seed]["file_run"]),
+            "run_id": run,
+            "file": str(factor_of[run]["file"]),
+            "file_run": int(factor_of[run]["file_run"]),
             **choice,
             **dict(zip(tables.ORDER_COLUMNS, sel.orders, strict=True)),
             "feedforward_at_w": bool(sel.nb_ft > 0),
@@ -140,23 +141,23 @@ class _Rows:
         row["crossover"] = fitted_loop.crossover if fitted_loop else math.nan
         row["phase_margin"] = fitted_loop.phase_margin if fitted_loop else math.nan
         row["share_remnant"] = fitted_loop.shares["remnant"] if fitted_loop else math.nan
-        row["remnant_share_data"] = self.remnant_share[seed]
+        row["remnant_share_data"] = self.remnant_share[run]
         row.update(outcome.evidence)
         row["evidence_uncertain"] = bool(row["power"] < MIN_POWER)
-        check = self.checks.run(seed, fit) if fit else None
-        row.update(consistency_columns(check, self.checks.problem([seed]) if fit else "not fitted"))
+        check = self.checks.run(run, fit) if fit else None
+        row.update(consistency_columns(check, self.checks.problem([run]) if fit else "not fitted"))
         for f in self.factors:
-            row[f] = str(factor_of[seed][f])
+            row[f] = str(factor_of[run][f])
         return row, bool(check is not None and check.contradicted)
 
     def group(self, key, method_name: str, choice: dict, runs: list[dict], n_contradicted: int) -> dict:
         """A group's row from its choice of W and its runs' rows."""
-        seeds = self.study.groups[key]
+        members = self.study.groups[key]
         used, model = self.twins[key].used[method_name], self.twins[key].model
-        mine = [self.selected.runs[(seed, method_name)].evidence for seed in seeds]
+        mine = [self.selected.runs[(run, method_name)].evidence for run in members]
         return {
             **choice,
-            "n_runs": len(seeds),
+            "n_runs": len(members),
             "n_feedforward_at_w": int(sum(r["feedforward_at_w"] for r in runs)),
             **group_verdict(mine, self.study.options.alpha),
             "forcing_sets": len(used.sets),
@@ -172,7 +173,7 @@ class _Rows:
             "twin_source": model.source,
             "twin_undetermined": ", ".join(model.undetermined),
             "n_contradicted": int(n_contradicted),
-            **consistency_columns(self.group_checks[key], self.checks.problem(seeds)),
+            **consistency_columns(self.group_checks[key], self.checks.problem(members)),
         }
 
 
@@ -180,12 +181,12 @@ def _tables(rows: _Rows) -> tuple[pa.Table, pa.Table]:
     """The groups' and the runs' analysis tables (one row per group or run, and method)."""
     study = rows.study
     group_rows, run_rows = [], []
-    for key, seeds in study.groups.items():
+    for key, members in study.groups.items():
         for method_name in methods.METHODS:
             choice = rows.choice(key, method_name)
             mine, n_contradicted = [], 0
-            for seed in seeds:
-                row, contradicted = rows.run(seed, method_name, choice)
+            for run in members:
+                row, contradicted = rows.run(run, method_name, choice)
                 mine.append(row)
                 n_contradicted += contradicted
             run_rows += mine
@@ -199,12 +200,12 @@ def _tables(rows: _Rows) -> tuple[pa.Table, pa.Table]:
     )
 
 
-def _fc_rows(config: Config, name: str, seeds: list[int], records: dict, median: dict) -> list[dict]:
+def _fc_rows(config: Config, name: str, members: list[int], records: dict, median: dict) -> list[dict]:
     """The group's Fourier-coefficient estimates and its fitted model at the same lines."""
     rows = slice(0, config.timing.record_samples)
-    base = {"group": name, "n_runs": len(seeds)}
+    base = {"group": name, "n_runs": len(members)}
     try:
-        fc = fc_estimate([records[s] for s in seeds], config.timing.output_rate, rows)
+        fc = fc_estimate([records[s] for s in members], config.timing.output_rate, rows)
     except DataError as exc:  # one row saying why, NaN in every number
         numbers = {name: math.nan for name, kind in tables.FC_ESTIMATES.fields if pa.types.is_floating(kind)}
         return [{**base, **numbers, "path": "", "extrapolated": False, "problem": str(exc)}]

@@ -15,7 +15,7 @@ import pyarrow as pa
 
 from hcid import tables
 from hcid.config import Config, Loop
-from hcid.config.fit import FEEDFORWARD_PARAMETERS, FitSettings
+from hcid.config.fit_settings import FEEDFORWARD_PARAMETERS, FitSettings
 from hcid.errors import DataError
 from hcid.hcfit.determined import DETERMINED
 from hcid.hcfit.lines import feedforward_size, record_lines

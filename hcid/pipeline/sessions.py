@@ -23,12 +23,12 @@ from hcid.analysis import conditions
 from hcid.analysis.conditions import Kind, PersonLines, TrialLines
 from hcid.analysis.descriptors import loop_margins
 from hcid.config import Config, IdentifyConfig
-from hcid.config.fit import FEEDBACK_PARAMETERS
+from hcid.config.fit_settings import FEEDBACK_PARAMETERS
 from hcid.errors import ConfigError, DataError, HcidError
 from hcid.io import folders, results
 from hcid.io.datasets import DataSet
 from hcid.loop.hcmodel import plant
-from hcid.pipeline.fit import tracking_record
+from hcid.pipeline.fit_hc import tracking_record
 
 __all__ = [
     "BANDS",

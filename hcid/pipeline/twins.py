@@ -24,7 +24,7 @@ from hcid.errors import ConfigError, DataError
 from hcid.hcfit.determined import GroupModel, group_model
 from hcid.io import folders
 from hcid.pipeline.execution import Execution
-from hcid.pipeline.fit import RunFits
+from hcid.pipeline.fit_hc import RunFits
 from hcid.pipeline.parallel import labelled
 from hcid.pipeline.rundir import check_run_dir, using
 from hcid.pipeline.studies import calibrate_paths, identify_studies, model_paths, simulate_studies

@@ -11,7 +11,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from hcid.analysis.conditions import ANSWERS, SOURCES, Kind
-from hcid.config.fit import FEEDBACK_PARAMETERS
+from hcid.config.fit_settings import FEEDBACK_PARAMETERS
 from hcid.hcfit.determined import DETERMINED
 from hcid.io.datasets import skipped_by_reason
 from hcid.pipeline.sessions import ALL_PEOPLE, BANDS
