@@ -7,8 +7,9 @@ Two kinds of count, printed as one table:
   command reads back after writing them itself (a path read after this process wrote it; the
   byte comparison of an unchanged table before a write is not a read; a run log read to append
   its line is counted apart, and so is the report's reading of the tables after the analysis),
-  and how often a YAML file is read and a config parsed (``read_yaml``, ``describe_config``:
-  the study's, and each twins folder's config built from it).
+  how often the study's config file is read, how often a run directory's ``config.yaml`` is read
+  (is the folder the same study? the run directory's and each twins folder's), and how often a
+  config is parsed (``describe_config``: the study's, and each twins folder's config built from it).
 - **Read from the source** with ``ast`` (``hcid/pipeline``, ``hcid/api.py``, ``hcid/report``):
   positional accesses into results (a subscript by an integer or a bool literal: ``x[0]``,
   ``fits[True]``; arrays' own indexing is among them, so the count is an upper bound and its
@@ -16,7 +17,8 @@ Two kinds of count, printed as one table:
   ``found`` parameter).
 
 usage: python benchmarks/structure_counts.py [CONFIG DATA] [--twins N] [--max-fb-twins N]
-       (default: configs/lab_example.yaml on two subjects' first two trials, 4 twins, 12 FB)
+       (default: configs/lab_example.yaml on two subjects' first two trials, 4 twins, 12 FB;
+       ``PYTHONPATH=CHECKOUT`` counts another checkout's code, an older one's too)
 """
 
 from __future__ import annotations
@@ -32,8 +34,13 @@ ROOT = Path(__file__).resolve().parents[1]
 SOURCES = ("hcid/pipeline", "hcid/api.py", "hcid/report")
 
 
-def static_counts(root: Path = ROOT) -> dict[str, int]:
-    """Positional subscripts and ``(study, found)`` functions in :data:`SOURCES`."""
+def static_counts(root: Path | None = None) -> dict[str, int]:
+    """Positional subscripts and ``(study, found)`` functions in :data:`SOURCES` of ``root`` (default:
+    the checkout whose ``hcid`` is imported, ``PYTHONPATH``'s where given)."""
+    if root is None:
+        import hcid
+
+        root = Path(hcid.__file__).resolve().parents[1]
     positional = bags = 0
     for source in SOURCES:
         base = root / source
@@ -48,37 +55,53 @@ def static_counts(root: Path = ROOT) -> dict[str, int]:
     return {"positional accesses (x[0], x[True])": positional, "functions taking (study, found)": bags}
 
 
+def _patch_everywhere(name: str, wrap) -> None:
+    """Replace the function ``name`` of hcid's modules wherever a module holds it (a module that
+    imported it by name holds its own reference), by ``wrap(original)``."""
+    import sys
+
+    originals = {}
+    for module in list(sys.modules.values()):
+        if getattr(module, "__name__", "").startswith("hcid") and callable(getattr(module, name, None)):
+            original = getattr(module, name)
+            if original not in originals:
+                originals[original] = wrap(original)
+            setattr(module, name, originals[original])
+
+
 def run_counts(config: str, data: list[str], twins: int, most_fb: int) -> dict[str, int]:
-    """Run ``hcid analyse`` here, with the readers and writers counted."""
-    import pyarrow as pa
+    """Run ``hcid analyse`` here, as a user would (no ``--run``: the default run directory, in a
+    temporary working folder), with the readers and writers counted."""
+    import contextlib
+    import importlib
+    import os
+    from collections import Counter
+
     import pyarrow.parquet as pq
 
     import hcid.report
-    from hcid.assembly import resolve
     from hcid.cli import app
-    from hcid.config import parse
     from hcid.io import results
 
+    for name in ("hcid.assembly.resolve", "hcid.io.resolve", "hcid.report.run", "hcid.pipeline.twins"):
+        with contextlib.suppress(ImportError):  # this checkout's, or an older one's modules
+            importlib.import_module(name)
+
+    study_file = Path(config).resolve()
     written: set[str] = set()
     counts = {
         "tables read back by the analysis": 0,
         "run logs read to append a line": 0,
         "tables read back by its report": 0,
-        "YAML files read": 0,
+        "study config file reads": 0,
+        "run directories' config.yaml reads": 0,
         "configs parsed": 0,
     }
     read_back: list[str] = []
     phase = ["analysis"]
     yamls: list[str] = []
 
-    def counted_write(original):
-        def write(table, where, *args, **kwargs):
-            written.add(str(Path(str(where))).removesuffix(".tmp"))
-            return original(table, where, *args, **kwargs)
-
-        return write
-
-    def counted_read(original, counter=None):
+    def counted_read(original):
         def read(where, *args, **kwargs):
             key = str(Path(str(where)))
             if key in written and phase[0] == "analysis" and Path(key).name == "run_log.parquet":
@@ -90,14 +113,21 @@ def run_counts(config: str, data: list[str], twins: int, most_fb: int) -> dict[s
 
         return read
 
-    def counted(original, name):
-        def call(*args, **kwargs):
-            counts[name] += 1
-            if name == "YAML files read":
-                yamls.append(Path(str(args[0])).name)
-            return original(*args, **kwargs)
+    def counted(name):
+        def wrap(original):
+            def call(*args, **kwargs):
+                if name == "YAML":
+                    file = Path(str(args[0]))
+                    study = file.resolve() == study_file
+                    counts["study config file reads" if study else "run directories' config.yaml reads"] += 1
+                    yamls.append(f"{file.name} ({phase[0]})")
+                else:
+                    counts[name] += 1
+                return original(*args, **kwargs)
 
-        return call
+            return call
+
+        return wrap
 
     def reporting(original):
         def call(*args, **kwargs):
@@ -113,29 +143,28 @@ def run_counts(config: str, data: list[str], twins: int, most_fb: int) -> dict[s
 
         return write
 
-    results.atomic_write = atomic(results.atomic_write)
+    _patch_everywhere("atomic_write", atomic)
     pq.read_table = counted_read(pq.read_table)
-    original_ipc = results.read_part_table
-    results.read_part_table = counted_read(original_ipc)
-    resolve.read_yaml = counted(resolve.read_yaml, "YAML files read")
-    parse.describe_config = counted(parse.describe_config, "configs parsed")
-    resolve.describe_config = parse.describe_config
+    _patch_everywhere("read_part_table", counted_read)
+    _patch_everywhere("read_yaml", counted("YAML"))
+    _patch_everywhere("describe_config", counted("configs parsed"))
     hcid.report.build_report = reporting(hcid.report.build_report)
-    del pa
+    del results
 
-    run = Path(tempfile.mkdtemp(prefix="hcid-counts-")) / "run"
-    args = ["analyse", config, "--run", str(run), "--twins", str(twins), "--max-fb-twins", str(most_fb)]
+    here = Path.cwd()
+    work = Path(tempfile.mkdtemp(prefix="hcid-counts-"))
+    args = ["analyse", str(Path(config).resolve()), "--twins", str(twins), "--max-fb-twins", str(most_fb)]
     args += ["--jobs", "1", "--quiet"]
     for d in data:
-        args += ["--data", d]
+        args += ["--data", str(Path(d).resolve())]
+    os.chdir(work)  # the default run directory, runs/<name>, lands here
     try:
         app(args, standalone_mode=False)
     finally:
-        shutil.rmtree(run.parent, ignore_errors=True)
-    from collections import Counter
-
+        os.chdir(here)
+        shutil.rmtree(work, ignore_errors=True)
     print("read back:", ", ".join(f"{k} x{n}" for k, n in sorted(Counter(read_back).items())) or "none")
-    print("YAML read:", ", ".join(yamls))
+    print("YAML read:", ", ".join(f"{k} x{n}" for k, n in sorted(Counter(yamls).items())))
     return counts
 
 
@@ -145,6 +174,7 @@ def main() -> None:
     parser.add_argument("data", nargs="*")
     parser.add_argument("--twins", type=int, default=4)
     parser.add_argument("--max-fb-twins", type=int, default=12)
+    parser.add_argument("--smoke", action="store_true", help="the default run (already small); for make test")
     args = parser.parse_args()
     data = args.data
     slice_dir = None

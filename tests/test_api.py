@@ -195,7 +195,7 @@ def test_fit_hc_through_the_api_equals_the_pipelines(record, direct):
             lambda r, d: hcid.analyse(42, [EXAMPLE], "unused"),
             "config: must be a YAML file's path or the mapping",
         ),
-        (lambda r, d: hcid.analyse(CI_CONFIG, [EXAMPLE], None), "run: must be the run directory's path"),
+        (lambda r, d: hcid.analyse(CI_CONFIG, [EXAMPLE], 42), "run: must be the run directory's path"),
         (lambda r, d: hcid.Execution(jobs="2"), r"jobs \(--jobs\): must be an integer >= 1, got '2'"),
         (lambda r, d: hcid.AnalysisOptions(twins="4"), "twins \\(--twins\\): must be an integer"),
     ],

@@ -19,7 +19,8 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 #: The scripts of ``make bench``, in its order, and their arguments besides ``--smoke``; then
 #: serial_part (issue 47: where ``hcid analyse``'s serial part lies) and null_study (SPEC 13's
-#: null study end to end) and forcing_share (issue 47 item 2: what a forcing set's twins share).
+#: null study end to end) and forcing_share (issue 47 item 2: what a forcing set's twins share)
+#: and structure_counts (issue 48: how hcid analyse passes results between its steps).
 SCRIPTS = {
     "arx_engine": [],
     "fit_hc": [],
@@ -27,6 +28,7 @@ SCRIPTS = {
     "serial_part": [],
     "null_study": ["--out", "{tmp}/null_study.csv"],
     "forcing_share": [],
+    "structure_counts": [],
 }
 TIMEOUT_S = 600
 
@@ -180,3 +182,14 @@ def test_forcing_share_smoke(smoke_runs):
     (line,) = _lines(out, r"forcing-only work .*: [0-9.]+ ms, [0-9.]+% of both methods' identification")
     share = float(re.search(r"([0-9.]+)% of both", line).group(1))
     assert 0 < share < 100, line
+
+
+def test_structure_counts_smoke(smoke_runs):
+    # Issue 48's refactor, pinned (docs/contributing.md, "One hcid analyse run"; before it, at
+    # e68c3ba: 10 functions took (study, found), 4 tables were read back by the analysis that had
+    # written them, the study's config file was read twice).
+    code, out, err = smoke_runs("structure_counts")
+    assert code == 0, out + err
+    assert _lines(out, r"functions taking \(study, found\) +0$"), out
+    assert _lines(out, r"tables read back by the analysis +0$"), out
+    assert _lines(out, r"study config file reads +1$"), out

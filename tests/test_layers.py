@@ -1,4 +1,5 @@
-"""The package's imports point one way, in the layer order of ../shared/STYLE.md (item 1).
+"""The package's imports point one way (../shared/STYLE.md, item 1), in the layers' order that
+docs/contributing.md's tree numbers (each folder of the package one layer).
 
 Read from the source with ``ast``: every ``import hcid...`` and ``from hcid... import``,
 at module level or inside a function (a function-level import still couples the
@@ -17,10 +18,13 @@ DOCS = PACKAGE.parent / "docs" / "contributing.md"
 
 
 def documented_layers(text: str) -> list[tuple[int, str]]:
-    """The numbered entries of docs/contributing.md's tree (``  config/   1 what ...``): each
-    package folder and the public API's module with its layer's number, in the tree's order."""
+    """The numbered entries of docs/contributing.md's tree (the first fenced block under "## The
+    code": ``  config/   1 what ...``): each package folder and the public API's module with its
+    layer's number, in the tree's order."""
+    section = text.split("## The code", 1)[1]
+    tree = section.split("```", 2)[1]
     pattern = re.compile(r"^  ([a-z_]+/|api\.py)\s+(\d+) ", flags=re.M)
-    return [(int(m[2]), m[1].rstrip("/").removesuffix(".py")) for m in pattern.finditer(text)]
+    return [(int(m[2]), m[1].rstrip("/").removesuffix(".py")) for m in pattern.finditer(tree)]
 
 
 #: Layers, lowest first (STYLE 1), derived from the package's folders as docs/contributing.md's
@@ -46,7 +50,7 @@ def layer_of(module: str) -> int:
     for i, (_, prefixes) in enumerate(LAYERS):
         if any(module == p or module.startswith(p + ".") for p in prefixes):
             return i
-    raise AssertionError(f"{module}: in no layer; add it to tests/test_layers.py LAYERS")
+    raise AssertionError(f"{module}: in no layer; number its folder in docs/contributing.md's tree")
 
 
 def imports(path: Path, modules: set[str]) -> list[tuple[str, int]]:

@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -32,6 +33,8 @@ __all__ = [
     "NEIGHBOURS",
     "PLANT_MISMATCH_LIMIT",
     "FCEstimate",
+    "Inversion",
+    "InversionRuns",
     "absent_inputs",
     "ForcingLines",
     "fc_estimate",
@@ -287,6 +290,24 @@ def plant_mismatch(
     return float(np.sqrt(np.sum(np.abs(missed) ** 2) / np.sum(np.abs(theta) ** 2)))
 
 
+class Inversion(NamedTuple):
+    """``Ht Yc`` at the target lines (:meth:`FCEstimate.inversion`): the runs' average's magnitude
+    (linear) and phase (deg), and their sd across runs."""
+
+    magnitude: np.ndarray
+    phase_deg: np.ndarray
+    sd: np.ndarray
+    sd_deg: np.ndarray
+
+
+class InversionRuns(NamedTuple):
+    """The runs' own ``|Ht Yc|`` at the target lines (:meth:`FCEstimate.inversion_runs`)."""
+
+    median: np.ndarray
+    q25: np.ndarray
+    q75: np.ndarray
+
+
 @dataclass(frozen=True)
 class FCEstimate:
     """Fourier-coefficient estimates of He (at the disturbance lines) and Ht (at the target lines).
@@ -325,7 +346,7 @@ class FCEstimate:
         phase = np.degrees(np.angle(runs / mean))
         return np.std(db, axis=0, ddof=1), np.std(phase, axis=0, ddof=1)
 
-    def inversion(self, yc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def inversion(self, yc: np.ndarray) -> Inversion:
         """Model inversion ``Ht Yc`` at the target lines (SPEC 11; 1 is the plant's exact inverse),
         with ``yc`` the plant's response there: magnitude (linear) and phase (deg) of the runs'
         average, and their sd across runs (phase unwrapped about the average; NaN for one run)."""
@@ -333,15 +354,15 @@ class FCEstimate:
         runs = self.ht_runs * yc
         if runs.shape[0] < 2:
             nan = np.full(mean.size, np.nan)
-            return np.abs(mean), np.degrees(np.angle(mean)), nan, nan
-        return (
+            return Inversion(np.abs(mean), np.degrees(np.angle(mean)), nan, nan)
+        return Inversion(
             np.abs(mean),
             np.degrees(np.angle(mean)),
             np.std(np.abs(runs), axis=0, ddof=1),
             np.std(np.degrees(np.angle(runs / mean)), axis=0, ddof=1),
         )
 
-    def inversion_runs(self, yc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def inversion_runs(self, yc: np.ndarray) -> InversionRuns:
         """The runs' own ``|Ht Yc|`` at the target lines: their median and quartiles (25%, 75%).
 
         Beside :meth:`inversion`'s coefficient average: where the runs' phases scatter (large
@@ -349,7 +370,7 @@ class FCEstimate:
         are in turn biased upward by the remnant in each run's coefficients; both are shown."""
         runs = np.abs(self.ht_runs * yc)
         q25, median, q75 = np.percentile(runs, [25.0, 50.0, 75.0], axis=0)
-        return median, q25, q75
+        return InversionRuns(median, q25, q75)
 
 
 def interpolate(omega_from: np.ndarray, h: np.ndarray, omega_to: np.ndarray) -> np.ndarray:

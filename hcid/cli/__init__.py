@@ -370,7 +370,7 @@ def analyse(
 
     execution = _execution(jobs, backend, scheduler, worker_timeout, quiet)
     options = AnalysisOptions(by, twins, max_fb_twins, ff_twin, alpha, fdr, person, compare)
-    result = analyse_(config, data, _run_dir(config, run), options, execution=execution,
+    result = analyse_(config, data, run, options, execution=execution,
                       skip_unreadable=skip_unreadable, force=force)  # fmt: skip
     answers.print_analysis(result)
     from hcid.report import build_report

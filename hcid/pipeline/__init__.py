@@ -5,7 +5,7 @@
 - :mod:`hcid.pipeline.sweep`: ``sweep-w``, the selection over the W grid and its thresholds.
 - :mod:`hcid.pipeline.fit_hc`: ``fit-hc``, the parametric HC fit and residual
   analysis of every selected model.
-- :mod:`hcid.pipeline.analyse`: ``hcid analyse``, a measured study end to end, in its phases
+- :mod:`hcid.pipeline.analyse`: ``hcid analyse``, a measured study end to end, in its steps
   (its twins in :mod:`hcid.pipeline.twins`, each run's evidence in :mod:`hcid.pipeline.evidence`).
 - :mod:`hcid.pipeline.execution`: :class:`Execution`, how a command's work runs (workers,
   backend, progress, BLAS single-threaded); :mod:`hcid.pipeline.parallel` its worker pool.

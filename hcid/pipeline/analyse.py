@@ -13,8 +13,13 @@
    and remnant, driven by the group's first run's recorded ft and fd at the data's
    rate and window (SPEC 10). ``calibrate-w`` on them (``RUN/twins/<group>/``) gives
    the safe interval and the recommended W per method.
-4. Every run is selected at its group's W; the selected structure's parametric model
-   is fitted (:func:`hcid.hcfit.selected.analyse_selected`).
+4. Per group and method the statistic that decides (W*, the Fourier size or the likelihood
+   ratio: the one whose twins show the most power), and more FB twins wherever a run's p-value
+   is not settled (:mod:`hcid.pipeline.analyse_twins`, :class:`hcid.pipeline.evidence.Evidence`).
+5. Every run's evidence (its p-value against its forcing set's FB twins), its model selected at
+   its group's W, and the selected structure's parametric fit
+   (:func:`hcid.hcfit.selected.analyse_selected`).
+6. The tables (:mod:`hcid.pipeline.analysis_tables`).
 
 Where no W separates a group's own twins and another group's fitted feedforward is stronger
 (``--ff-twin auto``, the default: a group where nobody uses feedforward has twins that nearly
@@ -90,7 +95,8 @@ class AnalysisRun:
     runs: pa.Table
     seconds: float
     run_dir: Path
-    #: Wall seconds per stage: identify, fit runs, twins, more FB twins, fit selected, tables.
+    #: Wall seconds per step: identify, fit runs, twins, more FB twins, fit selected, combine
+    #: conditions (a whole experiment only), tables.
     stages: dict[str, float] = field(default_factory=dict)
     #: The files left out because they could not be read: (path, reason).
     set_aside: tuple[tuple[str, str], ...] = ()
@@ -102,12 +108,6 @@ class AnalysisRun:
     session: Session | None = None
     #: ``study_effects.parquet`` (``compare``; None without a comparison).
     effects: pa.Table | None = None
-
-
-# --------------------------------------------------------------------------- per-run fits
-
-
-# --------------------------------------------------------------------------- the study
 
 
 def _groups(runs: pa.Table, by: Sequence[str]) -> dict[tuple[str, ...], list[int]]:
@@ -253,7 +253,9 @@ def analyse_study(
     force: bool = False,
 ) -> AnalysisRun:
     """Analyse a measured study with W calibrated on twins of each group's fitted model (module
-    notes), in its phases: identify, fit runs, twins, more FB twins, fit selected, tables.
+    notes), in its steps (1-6 of the module's notes, each returning a frozen result of
+    :mod:`hcid.pipeline.analyse_state`): identify, fit runs, twins, more FB twins, fit selected,
+    tables.
 
     ``data``: the study's data set, read once (:func:`hcid.assembly.resolve.read_study`); the files it
     set aside (``--skip-unreadable``) are written to ``set_aside.parquet`` so that the answer and
@@ -401,7 +403,7 @@ def analyse_study(
 def analyse(
     config: str | Path | Mapping[str, Any],
     data: str | Path | Sequence[str | Path],
-    run: str | Path,
+    run: str | Path | None = None,
     options: AnalysisOptions | None = None,
     *,
     execution: Execution | None = None,
@@ -422,9 +424,10 @@ def analyse(
         mapping such a file holds (its relative paths then from the working folder).
     data : str, Path or a sequence of them
         Files, quoted globs (``"trials/*.csv"``), folders or a manifest CSV.
-    run : str or Path
+    run : str or Path, optional
         The run directory: the tables, the twins and ``report/``; a second call with the same
-        inputs reuses what is there (``force`` starts again).
+        inputs reuses what is there (``force`` starts again). Default: ``runs/<the study's
+        name>`` (the config's ``name``, else its file's stem), as ``hcid analyse`` without ``--run``.
     options : AnalysisOptions, optional
         Grouping (``by="subject,condition"``), twins, the test's level (``hcid analyse``'s
         options); default: ``AnalysisOptions()``.
@@ -460,7 +463,7 @@ def analyse(
         raise ConfigError(
             f"config: must be a YAML file's path or the mapping it holds, got {type(config).__name__}"
         )
-    if not isinstance(run, str | Path):
+    if run is not None and not isinstance(run, str | Path):
         raise ConfigError(f"run: must be the run directory's path (str or Path), got {type(run).__name__}")
     sources = [data] if isinstance(data, str | Path) else list(data) if isinstance(data, Sequence) else []
     if not sources or not all(isinstance(x, str | Path) for x in sources):
@@ -468,5 +471,6 @@ def analyse(
             f"data: must be files, globs or folders (str or Path, or a list of them), got {data!r}"
         )
     execution.check()
-    study, data_set = read_study(config, sources, skip_unreadable=skip_unreadable, single_input=True)
-    return analyse_study(study, Path(run), data_set, options, execution=execution, force=force)
+    study_config, data_set = read_study(config, sources, skip_unreadable=skip_unreadable, single_input=True)
+    run_dir = Path(run) if run is not None else Path("runs") / study_config.name  # the config read once
+    return analyse_study(study_config, run_dir, data_set, options, execution=execution, force=force)

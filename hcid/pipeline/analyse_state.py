@@ -4,13 +4,20 @@
 =================  ============================================  ==========================
 step               returns                                        module
 =================  ============================================  ==========================
-fit runs           ``{run: RunFits}``                             :mod:`hcid.pipeline.fit_hc`
-twins              ``{group: GroupTwins}``                        :mod:`.analyse_twins`
+1 identify         :class:`hcid.pipeline.studies.IdentifyRun`     :mod:`.studies`
+2 fit runs         ``{run: RunFits}``                             :mod:`.fit_hc`
+3 twins            ``{group: GroupTwins}``                        :mod:`.analyse_twins`
 selection paths    ``{(run, method): RunPath}``                   :mod:`.analyse`
-more FB twins      ``{group: Tested}``                            :mod:`.analyse_twins`
-fit selected       :class:`Selected`                              :mod:`.analyse`
-tables             the analysis tables, written                   :mod:`.analysis_tables`
+line statistics    ``{run: {statistic: value} or None}``          :mod:`.line_statistics`
+4 more FB twins    ``{group: Tested}``                            :mod:`.analyse_twins`
+5 fit selected     :class:`Selected`                              :mod:`.analyse`
+6 tables           the analysis tables, written                   :mod:`.analysis_tables`
 =================  ============================================  ==========================
+
+Steps 4 to 6 share one :class:`hcid.pipeline.evidence.Evidence`: the twins' W* and line
+statistics computed once, the FB twins drawn so far per forcing set (step 4 adds them) and the
+twins each run was judged against (step 5), which ``evidence_twins.parquet`` lists (step 6). It
+is the one mutable object passed between steps, a cache of what the twins say.
 
 A run is named by its id (the ``seed`` column of ``runs.parquet``), a group by its factor
 values (a tuple of str), a method by its registered name."""

@@ -1,10 +1,11 @@
 """Steps 3 and 4 of ``hcid analyse`` (:mod:`hcid.pipeline.analyse`): every group's twins and
-their calibration, and more FB twins wherever a run's p-value is not settled. Each phase makes
+their calibration, and more FB twins wherever a run's p-value is not settled. Each step makes
 the twins of every forcing set of every group in one pool (:func:`hcid.pipeline.twins.calibrate_twin_sets`,
 :func:`hcid.pipeline.twins.draw_fb_twin_sets`), so that the workers stay busy until its end."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 
 from hcid import methods
@@ -13,6 +14,7 @@ from hcid.pipeline.analyse_state import Group, GroupTwins, RunPath, Study, Teste
 from hcid.pipeline.evidence import Evidence, group_name
 from hcid.pipeline.fit_hc import RunFits
 from hcid.pipeline.line_statistics import LINE_STATISTICS
+from hcid.pipeline.options import FfTwinChoice
 from hcid.pipeline.twin_values import Remnant
 from hcid.pipeline.twins import (
     FfTwin,
@@ -76,7 +78,7 @@ def make_twins(study: Study, fitted: Mapping[int, RunFits]) -> dict[Group, Group
     def study_model(key) -> dict:
         return {**medians[key], **{p: medians[strongest[key]][p] for p in FEEDFORWARD_PARAMETERS}}
 
-    study_first = ff_twin == FfTwin.STUDY
+    study_first = ff_twin == FfTwinChoice.STUDY
     first = {
         key: FfTwin.STUDY if study_first and key != strongest[key] else FfTwin.OWN for key in study.groups
     }
@@ -89,7 +91,7 @@ def make_twins(study: Study, fitted: Mapping[int, RunFits]) -> dict[Group, Group
     again = {
         key: (FfTwin.STUDY, study_model(key), earlier[key])
         for key in study.groups
-        if ff_twin == "auto"
+        if ff_twin == FfTwinChoice.AUTO
         and key != strongest[key]
         and not all(separates(c) for c in earlier[key].calibrations.values())
     }
@@ -148,10 +150,12 @@ def more_fb_twins(
                 )
         waiting = [k for k, _ in requests]
         made = draw_fb_twin_sets([r for _, r in requests], study.execution) if requests else []
-        for (key, i), draws in zip(waiting, made, strict=True):
-            judge.add(open_sets[(key, i)][0], i + 1, draws)
-        # The draws' line statistics, where one decides: every open set's in one pool.
+        # The draws' line statistics, where one decides: every open set's in one pool (elsewhere
+        # their simulations are not kept).
         lines = [(key, i) for key, i in waiting if set(deciding[key].values()) & set(LINE_STATISTICS)]
+        for (key, i), draws in zip(waiting, made, strict=True):
+            kept = draws if (key, i) in lines else dataclasses.replace(draws, simulations=None)
+            judge.add(open_sets[(key, i)][0], i + 1, kept)
         judge.prefetch_draws([(open_sets[(key, i)][0], i + 1) for key, i in lines])
     fb_drawn: dict[Group, dict[str, int]] = {key: {} for key in study.groups}
     for (key, i), (name, twin_of, _, _) in open_sets.items():

@@ -1,4 +1,4 @@
-"""The tables ``hcid analyse`` writes (:mod:`hcid.pipeline.analyse`, its last phase): one row per
+"""The tables ``hcid analyse`` writes (:mod:`hcid.pipeline.analyse`, its last step): one row per
 run and method (``analysis.parquet``, ``analysis.csv``), per group and method
 (``analysis_groups.parquet``), each group's Fourier-coefficient estimates beside its fitted
 model (``fc_estimates.parquet``), the FB twins each run's p-value used (``evidence_twins``)
@@ -12,7 +12,7 @@ import numpy as np
 import pyarrow as pa
 
 from hcid import hcfit, methods, tables
-from hcid.analysis.fourier import fc_estimate, off_line_share
+from hcid.analysis.fourier import Inversion, InversionRuns, fc_estimate, off_line_share
 from hcid.config import Config
 from hcid.errors import DataError
 from hcid.hcfit.determined import parameter_status
@@ -212,7 +212,7 @@ def _fc_rows(config: Config, name: str, members: list[int], records: dict, media
     yc = plant(config.loop)
     out = []
     yc_t = np.asarray(yc(1j * fc.omega_t), dtype=complex)
-    inversion = fc.inversion(yc_t) + fc.inversion_runs(yc_t)
+    inversion, spread = fc.inversion(yc_t), fc.inversion_runs(yc_t)
     for path, omega, h, extrapolated in (
         ("e", fc.omega_e, fc.he, np.zeros(fc.omega_e.size, dtype=bool)),
         ("ft", fc.omega_t, fc.ht, fc.extrapolated),
@@ -220,7 +220,11 @@ def _fc_rows(config: Config, name: str, members: list[int], records: dict, media
         sd_db, sd_deg = fc.spread(path)
         hft, he = hcfit.hc_response(median, yc, omega)
         model = he if path == "e" else hft
-        inv = inversion if path == "ft" else tuple(np.full(omega.size, math.nan) for _ in range(7))
+        if path == "e":  # Ht Yc only at the target lines
+            nan = np.full(omega.size, math.nan)
+            inv, runs = Inversion(nan, nan, nan, nan), InversionRuns(nan, nan, nan)
+        else:
+            inv, runs = inversion, spread
         for i in range(omega.size):
             out.append(
                 {
@@ -234,13 +238,13 @@ def _fc_rows(config: Config, name: str, members: list[int], records: dict, media
                     "extrapolated": bool(extrapolated[i]),
                     "model_db": float(20 * np.log10(abs(model[i]))),
                     "model_deg": float(np.degrees(np.angle(model[i] / h[i])) + np.degrees(np.angle(h[i]))),
-                    "inversion": float(inv[0][i]),
-                    "inversion_deg": float(inv[1][i]),
-                    "inversion_sd": float(inv[2][i]),
-                    "inversion_sd_deg": float(inv[3][i]),
-                    "inversion_median": float(inv[4][i]),
-                    "inversion_q25": float(inv[5][i]),
-                    "inversion_q75": float(inv[6][i]),
+                    "inversion": float(inv.magnitude[i]),
+                    "inversion_deg": float(inv.phase_deg[i]),
+                    "inversion_sd": float(inv.sd[i]),
+                    "inversion_sd_deg": float(inv.sd_deg[i]),
+                    "inversion_median": float(runs.median[i]),
+                    "inversion_q25": float(runs.q25[i]),
+                    "inversion_q75": float(runs.q75[i]),
                     "problem": "",
                 }
             )

@@ -31,7 +31,7 @@ from hcid.selection.calibration import (
 )
 
 if TYPE_CHECKING:  # the type only: the report reads this module without the twins' machinery
-    from hcid.pipeline.twins import TwinSets
+    from hcid.pipeline.twins import Twins, TwinSets
 
 __all__ = [
     "EXCEEDANCES",
@@ -193,7 +193,8 @@ class Evidence:
         self._lines: dict[tuple[str, str], dict[str, dict[str, np.ndarray]]] = {}
         # (group, forcing set) -> its draws of more FB twins, in order
         self._more: dict[tuple[str, int], list[_Draw]] = {}
-        self._judged: dict[tuple[str, str, int], str] = {}  # (group, method, forcing set) -> folder
+        # (group, method, forcing set) -> the twins its runs were judged against (step 5)
+        self._judged: dict[tuple[str, str, int], Twins] = {}
 
     def w_star(self, path, nb_ft) -> float:
         return feedforward_threshold(path, nb_ft, self.lo, self.hi)
@@ -240,10 +241,14 @@ class Evidence:
         )
 
     def prefetch_draws(self, sets: Sequence[tuple[str, int]]) -> None:
-        """The line statistics of every draw of ``(group, forcing set)`` not yet computed."""
+        """The line statistics of every draw of ``(group, forcing set)`` not yet computed; the
+        draws' simulations are let go once their statistics are in (a study's rounds of draws
+        would otherwise hold every one until the command ends)."""
         self.prefetch_folders(
             [(g, d.folder, d.simulations) for g, i in sets for d in self._more.get((g, i), [])]
         )
+        for g, i in sets:
+            self._more[(g, i)] = [d._replace(simulations=None) for d in self._more.get((g, i), [])]
 
     def lines(self, group: str, twin) -> dict[str, dict[str, np.ndarray]] | None:
         """The calibration twins' line statistics: statistic -> ``FB`` / ``FF`` -> values; None

@@ -5,19 +5,30 @@ from __future__ import annotations
 
 import numbers
 from dataclasses import dataclass
+from enum import StrEnum
 
 from hcid.errors import ConfigError
 from hcid.pipeline.evidence import MAX_FB_TWINS
 
-__all__ = ["FF_TWINS", "TWINS", "AnalysisOptions"]
+__all__ = ["FF_TWINS", "TWINS", "AnalysisOptions", "FfTwinChoice"]
 
 #: Realizations of each twin (FB and FF) per group.
 TWINS = 20
+
+
 #: Where the FF twin's feedforward path comes from: ``own`` (the group's fitted model, SPEC 10),
 #: ``study`` (the group with the largest fitted Kpt: a power question for a group whose own
 #: fitted feedforward is too weak to tell its twins apart) or ``auto`` (own; study for a group
 #: whose own twins no W separates, for each method without a safe interval on its own twins).
-FF_TWINS = ("auto", "own", "study")
+class FfTwinChoice(StrEnum):
+    """``--ff-twin``'s values (:data:`FF_TWINS`)."""
+
+    AUTO = "auto"
+    OWN = "own"
+    STUDY = "study"
+
+
+FF_TWINS = tuple(c.value for c in FfTwinChoice)
 
 
 @dataclass(frozen=True)
