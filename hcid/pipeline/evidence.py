@@ -78,42 +78,42 @@ def group_name(by: Sequence[str], key: tuple[str, ...]) -> str:
 
 class Checks:
     """Every run at its forcing lines, read once, for the consistency of any model with it (SPEC
-    11); ``problem(seeds)`` says why some run (or the group) has no test. ``loops``: each run's
+    11); ``problem(members)`` says why some run (or the group) has no test. ``loops``: each run's
     loop where the runs' plants differ (:mod:`hcid.pipeline.plants`; a group's runs share one),
     else the config's."""
 
     def __init__(self, config: Config, records: dict, loops: Mapping[int, Loop] | None = None):
         loops = dict.fromkeys(records, config.loop) if loops is None else loops
-        self.yc_of = {seed: plant(loops[seed]) for seed in records}
+        self.yc_of = {run: plant(loops[run]) for run in records}
         self.rate = config.timing.output_rate
         self.records = records
         self.lines, self.problems = {}, {}
-        for seed, record in records.items():
+        for run, record in records.items():
             try:
-                self.lines[seed] = record_lines(record, self.rate)
+                self.lines[run] = record_lines(record, self.rate)
             except DataError as exc:
-                self.problems[seed] = f"no test: {exc}"
+                self.problems[run] = f"no test: {exc}"
 
-    def problem(self, seeds) -> str:
-        return next((self.problems[s] for s in seeds if s in self.problems), "")
+    def problem(self, members) -> str:
+        return next((self.problems[s] for s in members if s in self.problems), "")
 
-    def run(self, seed: int, fit):
+    def run(self, run: int, fit):
         """The run's own fit against its data; the lines estimator's free parameters, fitted to
         these lines, are taken off the degrees of freedom."""
-        if seed not in self.lines:
+        if run not in self.lines:
             return None
         fitted = len(fit.names) - len(fit.fixed) if fit.target == "lines" else 0
-        yc = self.yc_of[seed]
-        return consistency(fit.values, yc, self.lines[seed], self.records[seed], self.rate, fitted)
+        yc = self.yc_of[run]
+        return consistency(fit.values, yc, self.lines[run], self.records[run], self.rate, fitted)
 
-    def group(self, seeds: list[int], values: dict):
-        if not all(s in self.lines for s in seeds):
+    def group(self, members: list[int], values: dict):
+        if not all(s in self.lines for s in members):
             return None
         try:
-            lines, records = [self.lines[s] for s in seeds], [self.records[s] for s in seeds]
-            return group_consistency(values, self.yc_of[seeds[0]], lines, records, self.rate)
+            lines, records = [self.lines[s] for s in members], [self.records[s] for s in members]
+            return group_consistency(values, self.yc_of[members[0]], lines, records, self.rate)
         except DataError as exc:
-            self.problems[seeds[0]] = f"no test: {exc}"
+            self.problems[members[0]] = f"no test: {exc}"
             return None
 
 
@@ -366,7 +366,7 @@ class Evidence:
         group: str,
         w_star: float,
         used: TwinSets,
-        seed: int,
+        run: int,
         method: str,
         run_lines: dict | None,
         deciding: str,
@@ -380,7 +380,7 @@ class Evidence:
         the deciding one's then estimates the power of the test actually made (p <= alpha against
         up to all the draws) more precisely than the calibration's 20 can (the largest of 20 FB
         twins stands for their 95% quantile)."""
-        own = used.of_run(seed)
+        own = used.of_run(run)
         forcing_set = used.sets.index(own) + 1
         self._judged[(group, method, forcing_set)] = own
         fb, fb_lines = self.used(group, forcing_set, own, method, deciding)
@@ -419,11 +419,11 @@ class Evidence:
         line statistics, as the p-values used them), once per group, method and forcing set (in
         the order of the groups and their runs)."""
         rows, done = [], set()
-        for key, seeds in groups.items():
+        for key, members in groups.items():
             name = group_name(by, key)
-            for (seed, method), e in sorted(evidence.items()):
+            for (run, method), e in sorted(evidence.items()):
                 judged = (name, method, e["forcing_set"])
-                if seed not in seeds or judged in done:
+                if run not in members or judged in done:
                     continue
                 done.add(judged)
                 twin, forcing_set = self._judged[judged], e["forcing_set"]

@@ -68,7 +68,9 @@ def group_slug(key: tuple[str, ...]) -> str:
     return f"{text}-{digest}"
 
 
-def twin_config_raw(config: Config, fitted: dict, remnant: tuple, forcing: Path, twins: int, name: str):
+def twin_config_raw(
+    config: Config, fitted: dict, remnant: Remnant, forcing: Path, twins: int, name: str
+) -> dict:
     """The twins' config (as YAML would give it): the group's fitted model and its FB twin, every
     value in :data:`hcid.pipeline.twin_values.TWIN_RANGES` (:func:`twin_values`)."""
     loop_raw = dict(config.raw.get("loop", {}))
@@ -154,8 +156,8 @@ class TwinSets:
     sets (one set: exactly that set's). ``runs[i]`` are the runs driven like ``sets[i]``."""
 
     kind: FfTwin
-    sets: tuple
-    runs: tuple
+    sets: tuple[Twins, ...]
+    runs: tuple[tuple[int, ...], ...]
     calibrations: dict[str, Calibration]  # per method, over all sets' twins
     paths: dict[str, TwinPaths]  # per method, over all sets
 
@@ -171,12 +173,12 @@ class TwinSets:
     def folder(self) -> str:
         return self.sets[0].folder
 
-    def of_run(self, seed: int):
+    def of_run(self, run: int) -> Twins:
         """The twins driven by the run's own forcing functions."""
-        return next(t for t, runs in zip(self.sets, self.runs, strict=True) if seed in runs)
+        return next(t for t, members in zip(self.sets, self.runs, strict=True) if run in members)
 
 
-def pool_twins(kind: FfTwin, sets: list, runs: list[list[int]], config: Config) -> TwinSets:
+def pool_twins(kind: FfTwin, sets: list[Twins], runs: list[list[int]], config: Config) -> TwinSets:
     """:class:`TwinSets` of the sets' twins; several sets are calibrated together (their FB twins'
     and FF twins' selection paths pooled, :func:`hcid.selection.calibration.calibrate`)."""
     if len(sets) == 1:
@@ -235,7 +237,7 @@ class TwinSource:
     key: tuple[str, ...]
     record: dict
     model: dict
-    remnant: tuple[float, float, float]
+    remnant: Remnant
     kn_rate: float
     forcing_set: int = 0
 
@@ -260,7 +262,7 @@ def calibrate_twins(
 
 
 def calibrate_twin_sets(
-    requests: Sequence[tuple[TwinSource, str, Twins | None]], twins: int, execution: Execution
+    requests: Sequence[tuple[TwinSource, FfTwin, Twins | None]], twins: int, execution: Execution
 ) -> list[Twins]:
     """:func:`calibrate_twins` of every ``(source, kind, fb_from)``, their simulations and
     identifications in one pool (:func:`hcid.pipeline.studies.identify_studies`): the workers
