@@ -77,7 +77,8 @@ if sys.argv[4] == "analyse":  # each phase of analyse_study, timed from the outs
     for name, function in (("identify", "identify_study"), ("fit runs", "_fit_runs"), ("twins", "make_twins"),
                            ("twins", "_twins"), ("line statistics", "run_statistics"),
                            ("more FB twins", "more_fb_twins"), ("more FB twins", "_more_fb_twins"),
-                           ("fit selected", "_select_and_fit"), ("tables", "write_tables")):
+                           ("fit selected", "_select_and_fit"), ("tables", "write_tables"),
+                           ("tables", "build_tables"), ("tables", "write_analysis")):
         if hasattr(analyse, function):
             setattr(analyse, function, phase(name, getattr(analyse, function)))
     analyse.read_study = phase("read the data", analyse.read_study)

@@ -41,6 +41,7 @@ group's model-free estimates of both paths, SPEC 10, beside its fitted model), `
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -61,7 +62,7 @@ from hcid.io.datasets import DataSet
 from hcid.pipeline import effects, sessions
 from hcid.pipeline.analyse_state import Group, GroupTwins, RunOutcome, RunPath, Selected, Study, Tested
 from hcid.pipeline.analyse_twins import make_twins, more_fb_twins
-from hcid.pipeline.analysis_tables import write_tables
+from hcid.pipeline.analysis_tables import build_tables, write_analysis
 from hcid.pipeline.evidence import (
     Checks,
     Evidence,
@@ -71,7 +72,7 @@ from hcid.pipeline.evidence import (
 from hcid.pipeline.execution import Execution
 from hcid.pipeline.fit_hc import RunFits, fit_run, fit_windows, stage_choices, stored_choices
 from hcid.pipeline.line_statistics import deviations, run_statistics
-from hcid.pipeline.measured_data import check_plant, write_skipped
+from hcid.pipeline.measured_data import check_plant
 from hcid.pipeline.options import AnalysisOptions
 from hcid.pipeline.parallel import labelled
 from hcid.pipeline.plants import run_plants
@@ -365,30 +366,23 @@ def analyse_study(
         with labelled("conditions: "):
             session = sessions.combine_session(config, whole, trials, person, execution)
         lap_done("combine conditions")
-    group_table, run_table = write_tables(study, twins, tested, selected, checks, judge, data.set_aside)
-    write_skipped(run_dir, whole)
-    if session is not None:
-        sessions.write_session(run_dir, session)
-    else:
-        sessions.forget_session(run_dir)
-    compared, rows = None, []
+    built = build_tables(study, twins, tested, selected, checks, judge, data.set_aside, whole.skipped)
+    rows = []
     if options.compare is not None:
         timing = config.timing
         # |Ht Yc| at the lines too where the runs' plants differ (each run's own plant).
         own = {s: plants.plant_of(s) for s in data.records} if plants.several else None
         lines = effects.line_values(data.records, timing.output_rate, timing.record_samples, own)
-        rows = effects.effects_rows(run_table.to_pylist(), options.compare, person, lines)
+        rows = effects.effects_rows(built.runs.to_pylist(), options.compare, person, lines)
     if session is not None:
         rows += effects.superposition_rows(session.lines)
-    if rows:
-        compared = effects.write_effects(run_dir, rows)
-    else:
-        effects.forget_effects(run_dir)
+    built = dataclasses.replace(built, session=session, effects=effects.effects_table(rows) if rows else None)
+    write_analysis(run_dir, built)
     lap_done("tables")
     aside = tuple((str(f), str(why)) for f, why in data.set_aside)
     return AnalysisRun(
-        group_table,
-        run_table,
+        built.groups,
+        built.runs,
         time.perf_counter() - start,
         run_dir,
         stages,
@@ -396,7 +390,7 @@ def analyse_study(
         tuple(whole.skipped),
         kinds,
         session,
-        compared,
+        built.effects,
     )
 
 

@@ -11,7 +11,7 @@ selection paths    ``{(run, method): RunPath}``                   :mod:`.analyse
 line statistics    ``{run: {statistic: value} or None}``          :mod:`.line_statistics`
 4 more FB twins    ``{group: Tested}``                            :mod:`.analyse_twins`
 5 fit selected     :class:`Selected`                              :mod:`.analyse`
-6 tables           the analysis tables, written                   :mod:`.analysis_tables`
+6 tables           ``AnalysisTables``, written by one writer      :mod:`.analysis_tables`
 =================  ============================================  ==========================
 
 Steps 4 to 6 share one :class:`hcid.pipeline.evidence.Evidence`: the twins' W* and line

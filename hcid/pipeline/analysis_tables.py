@@ -7,6 +7,9 @@ and the files set aside (``set_aside.parquet``)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -18,6 +21,7 @@ from hcid.errors import DataError
 from hcid.hcfit.determined import parameter_status
 from hcid.io import folders, results
 from hcid.loop.hcmodel import plant
+from hcid.pipeline import effects, sessions
 from hcid.pipeline.analyse_state import Group, GroupTwins, Selected, Study, Tested
 from hcid.pipeline.evidence import (
     MIN_POWER,
@@ -27,41 +31,78 @@ from hcid.pipeline.evidence import (
     group_name,
     group_verdict,
 )
+from hcid.pipeline.sessions import Session
 from hcid.selection.calibration import rates_at, separates
 
-__all__ = ["write_tables"]
+__all__ = ["AnalysisTables", "build_tables", "write_analysis"]
 
 
-def write_tables(
+@dataclass(frozen=True)
+class AnalysisTables:
+    """Everything ``hcid analyse`` writes into its run directory beside the identification and
+    the twins folders (step 6), as tables: :func:`build_tables` makes them, :func:`write_analysis`
+    writes them, each atomically (the analysis's one writer)."""
+
+    groups: pa.Table  # analysis_groups.parquet
+    runs: pa.Table  # analysis.parquet and analysis.csv
+    fc_estimates: pa.Table
+    evidence_twins: pa.Table
+    set_aside: pa.Table
+    skipped: pa.Table
+    session: Session | None = None  # a whole experiment's session tables
+    effects: pa.Table | None = None  # study_effects.parquet and .csv (--compare, a whole experiment)
+
+
+def build_tables(
     study: Study,
     twins: dict[Group, GroupTwins],
     tested: dict[Group, Tested],
     selected: Selected,
     checks: Checks,
     judge: Evidence,
-    set_aside,
-) -> tuple[pa.Table, pa.Table]:
-    """The last step of an analysis (:mod:`hcid.pipeline.analyse`): the analysis tables, the
-    groups' Fourier-coefficient estimates, the evidence's twins and the files set aside, each
-    written atomically; returns (groups, runs)."""
-    run_dir = study.run_dir
+    set_aside: Sequence[tuple[str, str]],
+    skipped: Sequence[tuple[str, str]],
+) -> AnalysisTables:
+    """The analysis tables (a row per run and method, per group and method), the groups'
+    Fourier-coefficient estimates, the evidence's twins, and the data set's files set aside and
+    skipped (each ``(path, reason)``); nothing written."""
     group_table, run_table = _tables(_Rows(study, twins, tested, selected, checks))
     fc_rows = []
     for key, members in study.groups.items():
         config = study.plants.of_runs(members)  # the group's plant
         name, model = group_name(study.by, key), twins[key].model.values
         fc_rows += _fc_rows(config, name, members, study.records, model)
-    results.write(
-        tables.FC_ESTIMATES, pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow), run_dir
-    )
     evidence = {k: outcome.evidence for k, outcome in selected.runs.items()}
-    results.write(tables.EVIDENCE_TWINS, judge.twins_table(study.groups, study.by, evidence), run_dir)
     aside = [{"file": f, "reason": why} for f, why in set_aside]
-    results.write(tables.SET_ASIDE, pa.Table.from_pylist(aside, schema=tables.SET_ASIDE.arrow), run_dir)
-    results.write(tables.ANALYSIS_GROUPS, group_table, run_dir)
-    results.write(tables.ANALYSIS, run_table, run_dir)
-    folders.atomic_write(run_dir / "analysis.csv", lambda tmp: _write_csv(run_table, tmp))
-    return group_table, run_table
+    left_out = [{"file": f, "reason": why} for f, why in skipped]
+    return AnalysisTables(
+        group_table,
+        run_table,
+        pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow),
+        judge.twins_table(study.groups, study.by, evidence),
+        pa.Table.from_pylist(aside, schema=tables.SET_ASIDE.arrow),
+        pa.Table.from_pylist(left_out, schema=tables.SKIPPED.arrow),
+    )
+
+
+def write_analysis(run_dir: Path, out: AnalysisTables) -> None:
+    """Write an analysis's tables, each atomically; an earlier analysis's session or comparison
+    tables that this one does not make are removed (the report shows only this one's)."""
+    results.write(tables.FC_ESTIMATES, out.fc_estimates, run_dir)
+    results.write(tables.EVIDENCE_TWINS, out.evidence_twins, run_dir)
+    results.write(tables.SET_ASIDE, out.set_aside, run_dir)
+    results.write(tables.ANALYSIS_GROUPS, out.groups, run_dir)
+    results.write(tables.ANALYSIS, out.runs, run_dir)
+    folders.atomic_write(run_dir / "analysis.csv", lambda tmp: _write_csv(out.runs, tmp))
+    results.write(tables.SKIPPED, out.skipped, run_dir)
+    if out.session is not None:
+        sessions.write_session(run_dir, out.session)
+    else:
+        sessions.forget_session(run_dir)
+    if out.effects is not None:
+        effects.write_effects(run_dir, out.effects)
+    else:
+        effects.forget_effects(run_dir)
 
 
 class _Rows:

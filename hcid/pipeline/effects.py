@@ -24,7 +24,7 @@ from hcid.io import folders, results
 
 __all__ = [
     "LOOP_FIGURES", "MODEL_FREE", "SUPERPOSITION", "compare_levels", "effects_rows", "forget_effects",
-    "line_values", "long_table", "superposition_rows", "write_effects",
+    "effects_table", "line_values", "long_table", "superposition_rows", "write_effects",
 ]  # fmt: skip
 
 #: The source of the effects on the runs' Fourier-coefficient responses (no model behind them).
@@ -213,9 +213,13 @@ def superposition_rows(lines: pa.Table) -> list[dict]:
     return [{"source": SUPERPOSITION, **e.__dict__} for e in effects]
 
 
-def write_effects(run_dir: Path, rows: list[dict]) -> pa.Table:
-    """``study_effects.parquet`` and ``.csv``, each written atomically; returns the table."""
-    table = pa.Table.from_pylist(rows, schema=tables.STUDY_EFFECTS.arrow)
+def effects_table(rows: list[dict]) -> pa.Table:
+    """``study_effects``' table of :func:`effects_rows` and :func:`superposition_rows`."""
+    return pa.Table.from_pylist(rows, schema=tables.STUDY_EFFECTS.arrow)
+
+
+def write_effects(run_dir: Path, table: pa.Table) -> pa.Table:
+    """``study_effects.parquet`` and ``.csv`` (:func:`effects_table`), each written atomically."""
     results.write(tables.STUDY_EFFECTS, table, run_dir)
     frame = table.to_pandas()
     folders.atomic_write(Path(run_dir) / "study_effects.csv", lambda tmp: frame.to_csv(tmp, index=False))
