@@ -119,8 +119,13 @@ def run(config: str, jobs: int, analyse: list[str] | None = None) -> dict:
 
 def phase_lines(found: dict) -> list[str]:
     """Per phase: its wall, the pool's time within it and the rest (the serial part)."""
-    lines = []
-    for name, start, stop in found["phases"]:
+    lines, merged = [], []
+    for name, start, stop in found["phases"]:  # one span from a phase's first function to its last
+        if merged and merged[-1][0] == name:  # (tables: build_tables, then write_analysis)
+            merged[-1][2] = stop
+        else:
+            merged.append([name, start, stop])
+    for name, start, stop in merged:
         inside = sum(
             min(stop, s0 + span) - max(start, s0)
             for _, span, s0 in found["spans"]
