@@ -422,11 +422,12 @@ def _with_subject_means(design: np.ndarray, columns, groups: np.ndarray, w: np.n
     same weighted share of the level, as in a complete balanced design without se) is not added:
     there the random intercept's estimate already is the within-subject one."""
     sw = np.bincount(groups, w)
+    rank = np.linalg.matrix_rank(design)
     for j in columns:
         mean = (np.bincount(groups, w * design[:, j]) / sw)[groups]
-        widened = np.column_stack([design, mean])  # a column constant within subjects adds no rank
-        if np.linalg.matrix_rank(widened) > np.linalg.matrix_rank(design):
-            design = widened
+        widened = np.column_stack([design, mean])
+        if np.linalg.matrix_rank(widened) > rank:
+            design, rank = widened, rank + 1
     return design
 
 

@@ -5,7 +5,6 @@ the twins of every forcing set of every group in one pool (:func:`hcid.pipeline.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 
 from hcid import methods
@@ -150,13 +149,18 @@ def more_fb_twins(
                 )
         waiting = [k for k, _ in requests]
         made = draw_fb_twin_sets([r for _, r in requests], study.execution) if requests else []
-        # The draws' line statistics, where one decides: every open set's in one pool (elsewhere
-        # their simulations are not kept).
-        lines = [(key, i) for key, i in waiting if set(deciding[key].values()) & set(LINE_STATISTICS)]
-        for (key, i), draws in zip(waiting, made, strict=True):
-            kept = draws if (key, i) in lines else dataclasses.replace(draws, simulations=None)
-            judge.add(open_sets[(key, i)][0], i + 1, kept)
-        judge.prefetch_draws([(open_sets[(key, i)][0], i + 1) for key, i in lines])
+        # The draws' line statistics where one decides: every open set's in one pool.
+        judge.add(
+            [
+                (
+                    open_sets[(key, i)][0],
+                    i + 1,
+                    draws,
+                    bool(set(deciding[key].values()) & set(LINE_STATISTICS)),
+                )
+                for (key, i), draws in zip(waiting, made, strict=True)
+            ]
+        )
     fb_drawn: dict[Group, dict[str, int]] = {key: {} for key in study.groups}
     for (key, i), (name, twin_of, _, _) in open_sets.items():
         for m in names:

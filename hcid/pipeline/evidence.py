@@ -31,7 +31,7 @@ from hcid.selection.calibration import (
 )
 
 if TYPE_CHECKING:  # the type only: the report reads this module without the twins' machinery
-    from hcid.pipeline.twins import Twins, TwinSets
+    from hcid.pipeline.twins import FbDraws, Twins, TwinSets
 
 __all__ = [
     "EXCEEDANCES",
@@ -151,12 +151,11 @@ def consistency_columns(check, problem: str) -> dict:
 
 class _Draw(NamedTuple):
     """One draw of more FB twins of a group's forcing set: how many, their W* per identified
-    method, their folder, and its simulations where this command made them."""
+    method, and their folder."""
 
     count: int
     w_star: dict[str, np.ndarray]
     folder: str
-    simulations: pa.Table | None
 
 
 class Evidence:
@@ -240,16 +239,6 @@ class Evidence:
             ]
         )
 
-    def prefetch_draws(self, sets: Sequence[tuple[str, int]]) -> None:
-        """The line statistics of every draw of ``(group, forcing set)`` not yet computed; the
-        draws' simulations are let go once their statistics are in (a study's rounds of draws
-        would otherwise hold every one until the command ends)."""
-        self.prefetch_folders(
-            [(g, d.folder, d.simulations) for g, i in sets for d in self._more.get((g, i), [])]
-        )
-        for g, i in sets:
-            self._more[(g, i)] = [d._replace(simulations=None) for d in self._more.get((g, i), [])]
-
     def lines(self, group: str, twin) -> dict[str, dict[str, np.ndarray]] | None:
         """The calibration twins' line statistics: statistic -> ``FB`` / ``FF`` -> values; None
         where the forcing has no lines."""
@@ -259,16 +248,18 @@ class Evidence:
             return None
         return {name: {"FB": fb["FB"][name], "FF": own["FF"][name]} for name in LINE_STATISTICS}
 
-    def add(self, group: str, forcing_set: int, draws) -> None:
-        """More FB twins of a group's forcing set (:class:`hcid.pipeline.twins.FbDraws`), in order;
-        their W* computed once, here."""
-        w = {
-            m: np.array([self.w_star(p, n) for p, n in zip(fb.paths, fb.nb_ft, strict=True)])
-            for m, fb in draws.paths.items()
-        }
-        self._more.setdefault((group, forcing_set), []).append(
-            _Draw(draws.count, w, draws.folder, draws.simulations)
-        )
+    def add(self, drawn: Sequence[tuple[str, int, FbDraws, bool]]) -> None:
+        """One round of more FB twins, each ``(group, forcing set, its draws, whether a line
+        statistic decides there)``, in order: their W* computed once, here, and where asked their
+        line statistics, every set's in one pool, from the simulations just made (which are not
+        kept)."""
+        for group, forcing_set, draws, _ in drawn:
+            w = {
+                m: np.array([self.w_star(p, n) for p, n in zip(fb.paths, fb.nb_ft, strict=True)])
+                for m, fb in draws.paths.items()
+            }
+            self._more.setdefault((group, forcing_set), []).append(_Draw(draws.count, w, draws.folder))
+        self.prefetch_folders([(g, d.folder, d.simulations) for g, _, d, lines in drawn if lines])
 
     def drawn(self, group: str, forcing_set: int, twin) -> int:
         """FB twins simulated so far for a group's forcing set (the next draw's first seed - 1)."""
