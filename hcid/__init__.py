@@ -40,6 +40,7 @@ _EXPORTS = {
     "Segments": "hcid.config",
     "SelectedModel": "hcid.hcfit.selected",
     "SelectionPath": "hcid.selection.over_w",
+    "Frontier": "hcid.selection.frontier",
     "HCFit": "hcid.hcfit",
     "HcidError": "hcid.errors",
     "ConfigError": "hcid.errors",

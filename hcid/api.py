@@ -38,7 +38,8 @@ from hcid.hcfit.selected import SelectedModel, fit_selected
 from hcid.io import results
 from hcid.io.measured import TIME_JITTER, check_signal, read_runs, time_rate
 from hcid.loop.hcmodel import transfer_function
-from hcid.selection import criteria, over_w
+from hcid.selection import criteria
+from hcid.selection.frontier import Frontier
 from hcid.selection.over_w import SelectionPath
 
 __all__ = [
@@ -243,9 +244,10 @@ class IdentificationResult:
         The record's sample rate (Hz).
     settings : IdentifyConfig
         The stages and target shift used.
-    frontier : pyarrow.Table
-        One row per order triple (``frontier.parquet``'s columns without model and
-        seed): na, nb_ft, nb_e, nk_ft, nk_e, d, v, VAFs, unstable counts, coefficients.
+    frontier : Frontier
+        One row per order triple, as arrays: na, nb_ft, nb_e, nk_ft, nk_e, d, v, VAFs,
+        unstable counts, coefficients (:meth:`to_arrow` gives ``frontier.parquet``'s
+        columns without model and seed).
     choices : tuple of StageChoice
         The earlier stages' chosen models (the indirect method's stage 1).
     seconds : float
@@ -255,7 +257,7 @@ class IdentificationResult:
     method: str
     rate: float
     settings: IdentifyConfig
-    frontier: pa.Table = field(repr=False)
+    frontier: Frontier = field(repr=False)
     choices: tuple[methods.StageChoice, ...] = field(repr=False)
     seconds: float = 0.0
 
@@ -276,7 +278,7 @@ class IdentificationResult:
 
     def selection_path(self) -> SelectionPath:
         """The exact selection over W: ``frontier`` row ``index[i]`` for ``w_from[i] <= W < w_to[i]``."""
-        return over_w.frontier_path(self.frontier)
+        return self.frontier.path()
 
     def select(self, w: float) -> SelectedModel:
         """The model ``MSC = log V + W d`` selects at ``w`` (ties: SPEC 4's rule).
@@ -295,8 +297,8 @@ class IdentificationResult:
         )
 
     def to_arrow(self) -> pa.Table:
-        """The frontier (the :attr:`frontier` table)."""
-        return self.frontier
+        """The frontier as a table: ``frontier.parquet``'s columns without model and seed."""
+        return self.frontier.to_arrow()
 
 
 def identify(
@@ -334,7 +336,7 @@ def identify(
         )
     found = methods.identify(record.signals, settings, method, rate=record.rate, threads=threads)
     parts = results.frontier_part("record", record.run, found, methods.get(method).choice_stages)
-    frontier = parts["frontier"].drop_columns(["model", "seed"])
+    frontier = Frontier.from_table(parts["frontier"])
     return IdentificationResult(method, record.rate, settings, frontier, found.choices, found.seconds)
 
 

@@ -80,8 +80,8 @@ def test_records_are_the_pipelines(record):
 def test_identification_equals_the_engine_and_selection(record, direct):
     # Source: methods.identify and over_w.select_at, which the CLI's tables are made of.
     found = methods.identify(record.signals, direct.settings, "direct", rate=25.0)
-    assert direct.frontier.column("v").to_numpy().tolist() == found.fit.v.tolist()
-    assert direct.frontier.num_rows == 448 and direct.nf == 960
+    assert direct.frontier.v.tolist() == found.fit.v.tolist()
+    assert direct.frontier.n_rows == 448 and direct.nf == 960
     orders = np.column_stack([found.fit.na, found.fit.nb1, found.fit.nb2, found.fit.nk1, found.fit.nk2])
     for w in (0.0, direct.w_aic, direct.w_bic, 0.1, 0.5):
         model = direct.select(w)
@@ -129,7 +129,7 @@ def test_api_result_equals_the_cli_tables(tmp_path, ci_config):
     keys = zip(table.column("model").to_pylist(), table.column("seed").to_pylist(), strict=True)
     mask = [m == "FF" and s == 1 for m, s in keys]
     cli = table.filter(mask).drop_columns(["model", "seed"])
-    assert api.frontier.select(cli.column_names).equals(cli)
+    assert api.to_arrow().select(cli.column_names).equals(cli)
 
 
 def test_fit_hc_through_the_api_equals_the_pipelines(record, direct):

@@ -39,6 +39,7 @@ from hcid.config import Config, StageConfig, Window
 from hcid.errors import IdentificationError
 from hcid.loop.hcmodel import plant, true_response
 from hcid.methods import Method, StageChoice, shift_forward
+from hcid.selection.frontier import Frontier
 from hcid.tables import ORDER_COLUMNS
 
 __all__ = [
@@ -120,20 +121,16 @@ class SelectedModel:
 
     @classmethod
     def from_frontier(
-        cls, frontier: pa.Table, row: int, w: float, *, rate: float, target_shift: float, stage: StageConfig
+        cls, frontier: Frontier, row: int, w: float, *, rate: float, target_shift: float, stage: StageConfig
     ) -> SelectedModel:
-        """Row ``row`` of a frontier table (``frontier.parquet``'s columns) as the model selected at ``w``."""
-        get = {c: frontier.column(c)[row].as_py() for c in (*ORDER_COLUMNS, "v", "vaf_validation", "method")}
-        coefficients = {
-            c: np.asarray(frontier.column(c)[row].as_py(), dtype=np.float64) for c in ("a", "b_ft", "b_e")
-        }
+        """Row ``row`` of a frontier as the model selected at ``w``."""
         return cls(
             w=float(w),
-            **{c: int(get[c]) for c in ORDER_COLUMNS},
-            v=float(get["v"]),
-            vaf_validation=float(get["vaf_validation"]),
-            **coefficients,
-            method=get["method"],
+            **{c: int(getattr(frontier, c)[row]) for c in ORDER_COLUMNS},
+            v=float(frontier.v[row]),
+            vaf_validation=float(frontier.vaf_validation[row]),
+            **frontier.row_coefficients(row),
+            method=frontier.method,
             rate=float(rate),
             target_shift=float(target_shift),
             estimation=stage.estimation,

@@ -26,12 +26,14 @@ from hcid.errors import DataError
 from hcid.io.folders import atomic_write
 from hcid.loop.simulate import Realization
 from hcid.methods import METHODS
+from hcid.selection.frontier import Frontier
 from hcid.tables import CHANNELS, Schema
 
 __all__ = [
     "append_run_log",
     "clear_parts",
     "frontier_part",
+    "frontiers",
     "read",
     "read_optional",
     "read_part_table",
@@ -264,6 +266,11 @@ def split_by_key(table: pa.Table, keys: Sequence[str]) -> dict[tuple, pa.Table]:
         out[key] = taken.slice(start, ends[g] - start)
     assert len(out) == order.size, "split_by_key: two groups with equal keys"
     return out
+
+
+def frontiers(table: pa.Table) -> dict[tuple[str, int, str], Frontier]:
+    """A frontier table's (``frontier.parquet``'s columns) frontiers by (model, seed, method)."""
+    return {k: Frontier.from_table(t) for k, t in split_by_key(table, tables.FRONTIER.key).items()}
 
 
 def concat(parts: Sequence[pa.Table]) -> pa.Table:

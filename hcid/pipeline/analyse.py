@@ -57,7 +57,7 @@ from hcid.assembly.resolve import read_study, with_data
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError
 from hcid.hcfit.selected import SelectedModel, analyse_selected
-from hcid.io import datasets, results
+from hcid.io import datasets
 from hcid.io.datasets import DataSet
 from hcid.pipeline import effects, sessions
 from hcid.pipeline.analyse_state import Group, GroupTwins, RunOutcome, RunPath, Selected, Study, Tested
@@ -81,7 +81,6 @@ from hcid.pipeline.sessions import Session
 from hcid.pipeline.studies import IdentifyRun, identify_study
 from hcid.pipeline.twin_values import twin_rate
 from hcid.pipeline.twins import forget_twins
-from hcid.selection import over_w
 from hcid.selection.calibration import benjamini_hochberg, choose_w
 
 __all__ = ["AnalysisOptions", "AnalysisRun", "analyse", "analyse_study"]
@@ -177,16 +176,13 @@ def _selection_paths(study: Study, identified: IdentifyRun) -> dict[tuple[int, s
     """Every run's frontier, selection path over W and earlier stages' choices, per method, from
     its identification (held in memory, not read back)."""
     name = study.config.data.name
-    by_key = results.split_by_key(identified.frontier, tables.FRONTIER.key)
     stored = stored_choices(study.run_dir, identified.choices)
     out = {}
     for run in study.records:
         for method_name in methods.METHODS:
-            t = by_key[(name, run, method_name)]
+            frontier = identified.frontiers[(name, run, method_name)]
             choices = stage_choices(study.run_dir, stored, method_name, name, run)
-            out[(run, method_name)] = RunPath(
-                t, over_w.frontier_path(t), t.column("nb_ft").to_numpy(), choices
-            )
+            out[(run, method_name)] = RunPath(frontier, frontier.path(), choices)
     return out
 
 
@@ -213,7 +209,7 @@ def _select_and_fit(
                 identified = paths[(run, method_name)]
                 evidence[(run, method_name)] = judge.run(
                     group_name(study.by, key),
-                    judge.w_star(identified.path, identified.nb_ft),
+                    judge.w_star(identified.path, identified.frontier.nb_ft),
                     used,
                     run,
                     method_name,

@@ -28,7 +28,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
-import numpy as np
 import pyarrow as pa
 
 from hcid.config import Config
@@ -41,6 +40,7 @@ from hcid.pipeline.plants import RunPlants
 from hcid.pipeline.twin_values import Remnant
 from hcid.pipeline.twins import TwinSets
 from hcid.selection.calibration import WChoice
+from hcid.selection.frontier import Frontier
 from hcid.selection.over_w import SelectionPath
 
 __all__ = ["Group", "GroupTwins", "RunOutcome", "RunPath", "Selected", "Study", "Tested"]
@@ -75,13 +75,12 @@ class GroupTwins:
 
 
 class RunPath(NamedTuple):
-    """A run's identification by one method: its frontier (its rows of ``frontier.parquet``), its
-    selection path over W, the nb_ft of every frontier row, and the choices of the method's
-    earlier stages (what its final stage and the selected model's fit build on)."""
+    """A run's identification by one method: its frontier, its selection path over W, and the
+    choices of the method's earlier stages (what its final stage and the selected model's fit
+    build on)."""
 
-    frontier: pa.Table
+    frontier: Frontier
     path: SelectionPath
-    nb_ft: np.ndarray
     choices: tuple[StageChoice, ...]
 
 

@@ -129,7 +129,10 @@ def more_fb_twins(
         deciding[key] = {m: judge.statistic(name, used[m], m) for m in names}
         for i, members in enumerate(sets):
             values = [
-                ({m: judge.w_star(paths[(s, m)].path, paths[(s, m)].nb_ft) for m in names}, run_lines.get(s))
+                (
+                    {m: judge.w_star(paths[(s, m)].path, paths[(s, m)].frontier.nb_ft) for m in names},
+                    run_lines.get(s),
+                )
                 for s in members
             ]
             source = _twin_source(study, twins[key].remnant, key, sets, i, twins[key].model.values)

@@ -49,7 +49,8 @@ from hcid.io import results
 from hcid.loop.hcmodel import plant
 from hcid.pipeline.execution import Execution
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
-from hcid.selection import criteria, over_w
+from hcid.selection import criteria
+from hcid.selection.frontier import Frontier
 
 __all__ = ["OUTPUTS", "HCFitRun", "RunFits", "fit_hc_study", "fit_run", "requested_w"]
 
@@ -167,12 +168,12 @@ def stored_choices(
     return out
 
 
-def _selected(t: pa.Table, ws: list[float], config, method: str) -> list[SelectedModel]:
-    rows = over_w.frontier_select(t, ws)
+def _selected(frontier: Frontier, ws: list[float], config, method: str) -> list[SelectedModel]:
+    rows = frontier.select(ws)
     stage = config.identify.stage(methods.get(method).final_stage.name)
     return [
         SelectedModel.from_frontier(
-            t,
+            frontier,
             int(row),
             w,
             rate=config.timing.output_rate,
@@ -381,13 +382,15 @@ def _plan(config, run_dir: Path, by_key: dict, w_of: dict, names: list[str], exi
     tasks, kept, reused = [], {}, 0
     records = _records(run_dir)
     choices = stored_choices(run_dir)
-    for key, t in by_key.items():
+    for key, frontier in by_key.items():
         model, seed, method_name = key
         # Methods not asked for keep their valid rows (below) and get no new ones.
         pairs = w_of.get(method_name, [])
         todo = []
         for sel, (_, source) in zip(
-            _selected(t, [w for w, _ in pairs], config, method_name) if pairs else [], pairs, strict=True
+            _selected(frontier, [w for w, _ in pairs], config, method_name) if pairs else [],
+            pairs,
+            strict=True,
         ):
             group = existing.get((*key, sel.w))
             if group is not None and _valid(group, sel, source):
@@ -397,7 +400,7 @@ def _plan(config, run_dir: Path, by_key: dict, w_of: dict, names: list[str], exi
         # Rows at other W of this record and method stay while their selection still holds.
         requested = {w for w, _ in pairs}
         others = sorted(k[3] for k in existing if k[:3] == key and k[3] not in requested)
-        for sel in _selected(t, others, config, method_name) if others else []:
+        for sel in _selected(frontier, others, config, method_name) if others else []:
             if _valid(existing[(*key, sel.w)], sel, None):
                 kept[(*key, sel.w)] = existing[(*key, sel.w)]
         if not todo:
@@ -506,7 +509,7 @@ def fit_hc_study(
     config = dataclasses.replace(config, fit_hc=_fit_settings(config, target))
     frontier = results.read(tables.FRONTIER, run_dir, hint="run `hcid identify` first")
     results.check_against_config(frontier, config, run_dir / tables.FRONTIER.file)
-    by_key = results.split_by_key(frontier, tables.FRONTIER.key)
+    by_key = results.frontiers(frontier)
     present = list(dict.fromkeys(k[2] for k in by_key))
     names = [m for m in (method_names or methods.METHODS) if m in present]
     for m in names:

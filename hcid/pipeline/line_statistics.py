@@ -69,9 +69,9 @@ def run_statistics(
 ) -> dict[int, dict[str, float] | None]:
     """:func:`record_statistics` of every run (``configs``: each run's, with its own plant;
     ``starts``: each run's group model), by run."""
-    seeds = sorted(starts)
-    tasks = [(records[s], configs[s].timing.output_rate, configs[s].loop, dict(starts[s])) for s in seeds]
-    return dict(zip(seeds, execution.map(record_statistics, tasks, "line statistics"), strict=True))
+    runs = sorted(starts)
+    tasks = [(records[r], configs[r].timing.output_rate, configs[r].loop, dict(starts[r])) for r in runs]
+    return dict(zip(runs, execution.map(record_statistics, tasks, "line statistics"), strict=True))
 
 
 def twin_statistics(

@@ -36,11 +36,11 @@ class RunPlants:
     level_of: Mapping[int, str]
     configs: Mapping[str, Config]
 
-    def of_run(self, seed: int) -> Config:
+    def of_run(self, run: int) -> Config:
         """The config a run is analysed with: its own plant."""
-        return self.configs[self.level_of[seed]]
+        return self.configs[self.level_of[run]]
 
-    def of_runs(self, seeds: Iterable[int]) -> Config:
+    def of_runs(self, runs: Iterable[int]) -> Config:
         """The config of runs of one plant (a group's: :meth:`grouping` keeps each group to one).
 
         Raises
@@ -48,13 +48,13 @@ class RunPlants:
         DataError
             For runs of several plants.
         """
-        levels = sorted({self.level_of[s] for s in seeds})
+        levels = sorted({self.level_of[s] for s in runs})
         if len(levels) != 1:
             raise DataError(f"runs of {len(levels)} plants ({', '.join(levels)}) in one group")
         return self.configs[levels[0]]
 
-    def plant_of(self, seed: int) -> Plant:
-        return self.of_run(seed).loop.plant
+    def plant_of(self, run: int) -> Plant:
+        return self.of_run(run).loop.plant
 
     def grouping(self, by: Sequence[str]) -> tuple[str, ...]:
         """The factors the runs are grouped by: ``by``, and the plant factor after them where
@@ -74,8 +74,8 @@ class RunPlants:
     def split(self, groups: Mapping[tuple, list[int]]) -> dict[str, dict[tuple, list[int]]]:
         """The groups of each level (each group of one plant), in the groups' order."""
         out: dict[str, dict[tuple, list[int]]] = {}
-        for key, seeds in groups.items():
-            out.setdefault(self.level_of[seeds[0]], {})[key] = seeds
+        for key, runs in groups.items():
+            out.setdefault(self.level_of[runs[0]], {})[key] = runs
         return out
 
     @property
@@ -106,13 +106,13 @@ def run_plants(config: Config, data: DataSet) -> RunPlants:
     given = config.loop.plant.names
     rows = {int(r["run"]): r for r in data.runs}
     level_of = {}
-    for seed in data.records:
-        level = str(rows[seed][factor])
+    for run in data.records:
+        level = str(rows[run][factor])
         if level not in given:
             raise DataError(
-                f"{rows[seed]['file']}: run {seed} has {factor} {level!r}, for which loop.plant.levels "
+                f"{rows[run]['file']}: run {run} has {factor} {level!r}, for which loop.plant.levels "
                 f"gives no plant (it has {', '.join(given)})"
             )
-        level_of[seed] = level
+        level_of[run] = level
     held = set(level_of.values())
     return RunPlants(factor, level_of, {lv: config.with_plant(lv) for lv in given if lv in held})

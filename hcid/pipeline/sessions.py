@@ -69,11 +69,11 @@ def classify(data: DataSet, config: Config) -> dict[int, TrialLines]:
     rate, n = config.timing.output_rate, config.timing.record_samples
     files = {int(r["run"]): r["file"] for r in data.runs}
     out = {}
-    for seed, record in data.records.items():
+    for run_id, record in data.records.items():
         trial = conditions.trial_lines(record, rate, n)
         if trial.kind is None:
-            raise DataError(f"{files.get(seed, 'data')}: run {seed}: {trial.problem}: nothing to analyse")
-        out[seed] = trial
+            raise DataError(f"{files.get(run_id, 'data')}: run {run_id}: {trial.problem}: nothing to analyse")
+        out[run_id] = trial
     return out
 
 
@@ -107,9 +107,9 @@ def person_factor(data: DataSet, person: str | None) -> str | None:
     return person
 
 
-def subset(data: DataSet, seeds: Sequence[int]) -> DataSet:
-    """The data set's runs ``seeds``, their ids and factors kept."""
-    keep = set(seeds)
+def subset(data: DataSet, run_ids: Sequence[int]) -> DataSet:
+    """The data set's runs ``run_ids``, their ids and factors kept."""
+    keep = set(run_ids)
     return replace(
         data,
         records={s: r for s, r in data.records.items() if s in keep},
@@ -390,7 +390,7 @@ def combine_session(
         return np.polyval(num, s) / np.polyval(den, s)
 
     runs = {int(r["run"]): r for r in data.runs}
-    who = {seed: str(runs[seed][person]) if person else ONE_PERSON for seed in trials}
+    who = {run_id: str(runs[run_id][person]) if person else ONE_PERSON for run_id in trials}
     combined: dict[str, dict[str, PersonLines]] = {}
     people = sorted(set(who.values()))
     # Every person on the study's lines (NaN where a person's trials did not measure one), so that
@@ -411,13 +411,13 @@ def combine_session(
                 combined.setdefault(source, {})[name] = found
     trial_rows = []
     factors = [f for f in data.factors]
-    for seed in sorted(trials):
-        t = trials[seed]
+    for run_id in sorted(trials):
+        t = trials[run_id]
         row = {
             "data_set": config.data.name,
-            "run_id": seed,
-            "file": str(runs[seed]["file"]),
-            "person": who[seed],
+            "run_id": run_id,
+            "file": str(runs[run_id]["file"]),
+            "person": who[run_id],
             "kind": t.kind.value,
             "target_lines": _lines_text(t, t.target),
             "disturbance_lines": _lines_text(t, t.disturbance),
@@ -428,7 +428,7 @@ def combine_session(
             "lines_error_fb": math.nan,
             "lines_error_ff": math.nan,
         }
-        model = combined.get(_PREDICTIONS[t.kind], {}).get(who[seed])
+        model = combined.get(_PREDICTIONS[t.kind], {}).get(who[run_id])
         if t.problem is None and model is not None:
             index = {b: i for i, b in enumerate(bins.tolist())}
             unknown = [b for b in t.target.tolist() if not np.isfinite(model.ht[index[b]])]
@@ -446,7 +446,7 @@ def combine_session(
                     lines_error_fb=found.lines_fb,
                     lines_error_ff=found.lines_ff,
                 )
-        trial_rows.append({**{f: str(runs[seed][f]) for f in factors}, **row})
+        trial_rows.append({**{f: str(runs[run_id][f]) for f in factors}, **row})
     line_rows = []
     for source, by_person in combined.items():
         for name, p in by_person.items():

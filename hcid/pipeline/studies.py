@@ -31,6 +31,7 @@ from hcid.pipeline.parallel import compile_before_fork
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config, using
 from hcid.pipeline.sweep import SweepRun, selections, sweep_study
 from hcid.selection.calibration import Selections, calibrate
+from hcid.selection.frontier import Frontier
 
 __all__ = [
     "CalibrationRun",
@@ -191,7 +192,7 @@ class IdentifyRun:
     first; ``imported`` counts the measured runs read from a data file.
     """
 
-    frontier: pa.Table
+    frontiers: dict[tuple[str, int, str], Frontier]
     choices: dict[str, pa.Table]
     log: pa.Table
     computed: int
@@ -292,8 +293,9 @@ def _done(run_dir: Path, keys: list, names: tuple[str, ...], force: bool) -> dic
         return {}  # damaged tables: --force recomputes from the records
 
 
-def _write_identification(config: Config, run_dir: Path, done: dict) -> tuple[pa.Table, dict, pa.Table]:
-    """Write frontier, identify_log, each choosing stage's table and the handoff; drop the parts."""
+def _write_identification(config: Config, run_dir: Path, done: dict) -> tuple[dict, dict, pa.Table]:
+    """Write frontier, identify_log, each choosing stage's table and the handoff; drop the parts.
+    Returns the frontiers by (model, seed, method), the choosing stages' tables and the log."""
     order = _canonical_order(config, done)
     frontier = results.concat([done[k]["frontier"] for k in order])
     log = results.concat([_with_worker(done[k]["log"]) for k in order])
@@ -309,7 +311,7 @@ def _write_identification(config: Config, run_dir: Path, done: dict) -> tuple[pa
     if handoff:
         results.write(tables.HANDOFF, results.concat(handoff), run_dir)
     results.clear_parts(run_dir)
-    return frontier, choices, log
+    return {k: Frontier.from_table(done[k]["frontier"]) for k in order}, choices, log
 
 
 @holds_run_dir(create=True)
@@ -451,7 +453,7 @@ def _run_identifications(jobs: Sequence[_Identification], execution: Execution) 
 
 
 def _finish_identification(job: _Identification, execution: Execution, data) -> IdentifyRun:
-    frontier, choices, log = _write_identification(job.config, job.run_dir, job.done)
+    frontiers, choices, log = _write_identification(job.config, job.run_dir, job.done)
     if data is not None:
         write_skipped(job.run_dir, data)
     if job.tasks:
@@ -459,7 +461,7 @@ def _finish_identification(job: _Identification, execution: Execution, data) -> 
             job.run_dir, f"identify ({len(job.tasks)} tasks)", time.perf_counter() - job.start, execution.jobs
         )
     return IdentifyRun(
-        frontier=frontier,
+        frontiers=frontiers,
         choices=choices,
         log=log,
         computed=len(job.tasks),
@@ -512,7 +514,7 @@ def run_study(
     config.require_simulation("run")
     start = time.perf_counter()
     identification = identify_study(config, run_dir, execution=execution)
-    sweep = sweep_study(config, run_dir, identification.frontier)
+    sweep = sweep_study(config, run_dir, identification.frontiers)
     return StudyRun(identification, sweep, time.perf_counter() - start)
 
 
@@ -535,20 +537,20 @@ def model_paths(
     run_dir: Path,
     models: Sequence[str],
     method_names: Sequence[str] | None = None,
-    frontier: pa.Table | None = None,
+    frontiers: dict[tuple[str, int, str], Frontier] | None = None,
 ) -> dict[str, tuple[Selections, ...]]:
     """Per method (``method_names``, default every registered one), each of ``models``' seeds'
     selection paths and nb_ft, in the order of ``models``: what rates at any W are taken from.
-    ``frontier``: the run's, where the caller has just made it (not read back)."""
-    if frontier is None:
-        frontier = results.read(tables.FRONTIER, run_dir)
-    chosen = selections(frontier, run_dir)
+    ``frontiers``: the run's, where the caller has just made them (not read back)."""
+    if frontiers is None:
+        frontiers = results.frontiers(results.read(tables.FRONTIER, run_dir))
+    chosen = selections(frontiers, run_dir)
     out = {}
     for method in methods.METHODS if method_names is None else method_names:
         per_model = []
         for model in models:
             mine = [chosen[(model, s, method)] for s in config.seeds]
-            per_model.append(Selections([c.path for c in mine], [c.columns["nb_ft"] for c in mine]))
+            per_model.append(Selections([c.path for c in mine], [c.frontier.nb_ft for c in mine]))
         out[method] = tuple(per_model)
     return out
 
@@ -584,5 +586,5 @@ def calibrate_study(
             f"model (Kpt > 0), got {[m.name for m in config.models]}"
         )
     study = run_study(config, run_dir, execution=execution)
-    paths = model_paths(config, run_dir, (fb.name, ff.name), frontier=study.identification.frontier)
+    paths = model_paths(config, run_dir, (fb.name, ff.name), frontiers=study.identification.frontiers)
     return CalibrationRun(calibrate_paths(config, run_dir, paths), study, run_dir, paths)

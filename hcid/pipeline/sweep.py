@@ -20,6 +20,7 @@ from hcid.errors import DataError, IdentificationError
 from hcid.io import results
 from hcid.pipeline.rundir import check_run_dir, holds_run_dir, record_config
 from hcid.selection import calibration, criteria, over_w
+from hcid.selection.frontier import Frontier
 
 __all__ = ["SweepRun", "selections", "sweep_study"]
 
@@ -37,7 +38,9 @@ class SweepRun:
 
 
 @holds_run_dir(create=False)
-def sweep_study(config: Config, run_dir: Path, frontier: pa.Table | None = None) -> SweepRun:
+def sweep_study(
+    config: Config, run_dir: Path, frontiers: dict[tuple[str, int, str], Frontier] | None = None
+) -> SweepRun:
     """Select by ``MSC = log V + W d`` for every realization, method and W of the grid.
 
     Writes ``selection.parquet`` (one row per model, seed, method and W),
@@ -47,28 +50,24 @@ def sweep_study(config: Config, run_dir: Path, frontier: pa.Table | None = None)
     the error rate at each criterion's W, computed from the breakpoints) and
     ``rates.parquet`` (the false-positive rate of a model without feedforward,
     the false-negative rate of one with it, over the W grid with exact 95% bands).
-    ``frontier`` is the run's frontier table where the caller holds it (``run_study``, which
-    has just written it); otherwise it is read from ``run_dir``.
+    ``frontiers`` are the run's by (model, seed, method) where the caller holds them
+    (``run_study``, which has just made them); otherwise they are read from ``run_dir``.
     """
     check_run_dir(config, run_dir, "select")
-    if frontier is None:  # given by a caller that has just written it (run_study): not read again
-        frontier = results.read(
-            tables.FRONTIER,
-            run_dir,
-            (*tables.FRONTIER.key, *tables.SELECTED_COLUMNS),
-            hint="run `hcid identify` first",
-        )
-    results.check_against_config(frontier, config, run_dir / tables.FRONTIER.file)
+    if frontiers is None:  # given by a caller that has just made them (run_study): not read again
+        frontier = results.read(tables.FRONTIER, run_dir, hint="run `hcid identify` first")
+        results.check_against_config(frontier, config, run_dir / tables.FRONTIER.file)
+        frontiers = results.frontiers(frontier)
     w = np.asarray(config.selection.w_grid)
     sel_parts, bp_parts = [], []
     segments: dict[tuple[str, str], list] = {}
     nb_ft: dict[tuple[str, str], list] = {}
-    for (model, seed, method), (seg, cols) in selections(frontier, run_dir).items():
+    for (model, seed, method), (seg, frontier) in selections(frontiers, run_dir).items():
         segments.setdefault((model, method), []).append(seg)
-        nb_ft.setdefault((model, method), []).append(cols["nb_ft"])
-        sel_parts.append(_rows_table(model, seed, method, {"w": w}, cols, seg.at(w)))
+        nb_ft.setdefault((model, method), []).append(frontier.nb_ft)
+        sel_parts.append(_rows_table(model, seed, method, {"w": w}, frontier, seg.at(w)))
         bp_parts.append(
-            _rows_table(model, seed, method, {"w_from": seg.w_from, "w_to": seg.w_to}, cols, seg.index)
+            _rows_table(model, seed, method, {"w_from": seg.w_from, "w_to": seg.w_to}, frontier, seg.index)
         )
     selection_table = results.concat(sel_parts)
     breakpoints_table = results.concat(bp_parts)
@@ -84,29 +83,27 @@ def sweep_study(config: Config, run_dir: Path, frontier: pa.Table | None = None)
 
 
 class RealizationSelection(NamedTuple):
-    """A realization's selection over W and its frontier's columns (:data:`tables.SELECTED_COLUMNS`)."""
+    """A realization's selection over W and its frontier."""
 
     path: over_w.SelectionPath
-    columns: dict[str, np.ndarray]
+    frontier: Frontier
 
 
-def selections(frontier: pa.Table, run_dir: Path) -> dict[tuple[str, int, str], RealizationSelection]:
-    """Per realization and method (model, seed, method): its selection over W and frontier columns."""
+def selections(
+    frontiers: dict[tuple[str, int, str], Frontier], run_dir: Path
+) -> dict[tuple[str, int, str], RealizationSelection]:
+    """Per realization and method (model, seed, method): its selection over W and its frontier."""
     path = run_dir / tables.FRONTIER.file
     out = {}
-    for (model, seed, method), t in results.split_by_key(frontier, tables.FRONTIER.key).items():
-        cols = {c: t.column(c).to_numpy() for c in tables.SELECTED_COLUMNS}
-        orders = np.column_stack([cols[c] for c in tables.ORDER_COLUMNS])
+    for (model, seed, method), frontier in frontiers.items():
         try:
-            out[(model, seed, method)] = RealizationSelection(
-                over_w.breakpoints(cols["d"], cols["v"], orders), cols
-            )
+            out[(model, seed, method)] = RealizationSelection(frontier.path(), frontier)
         except IdentificationError as exc:
             raise DataError(f"{path}: model {model}, seed {seed}, {method}: {exc}") from exc
     return out
 
 
-def _rows_table(model, seed, method, w_columns: dict, cols: dict, rows: np.ndarray) -> pa.Table:
+def _rows_table(model, seed, method, w_columns: dict, frontier: Frontier, rows: np.ndarray) -> pa.Table:
     n = rows.size
     data = {
         "model": pa.array([model] * n, pa.string()),
@@ -114,7 +111,7 @@ def _rows_table(model, seed, method, w_columns: dict, cols: dict, rows: np.ndarr
         "method": pa.array([method] * n, pa.string()),
     }
     data.update({k: pa.array(v, pa.float64()) for k, v in w_columns.items()})
-    data.update({c: pa.array(cols[c][rows]) for c in tables.SELECTED_COLUMNS})
+    data.update({c: pa.array(getattr(frontier, c)[rows]) for c in tables.SELECTED_COLUMNS})
     return pa.table(data)
 
 

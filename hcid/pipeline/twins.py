@@ -110,7 +110,7 @@ def twin_config_raw(
     }
 
 
-def forcing_sets(seeds: list[int], records: dict, config: Config) -> list[list[int]]:
+def forcing_sets(runs: list[int], records: dict, config: Config) -> list[list[int]]:
     """The group's runs by their forcing functions (SPEC 11): runs whose ft and fd both agree
     within 0.1% RMS over the window share a set (each set gets twins of its own), in the order of
     their first run; so do runs whose ft and fd agree with the set's with both signs flipped.
@@ -131,14 +131,14 @@ def forcing_sets(seeds: list[int], records: dict, config: Config) -> list[list[i
         )
 
     sets: list[list[int]] = []
-    for seed in seeds:
+    for run in runs:
         for members in sets:
             first = records[members[0]]
-            if agree(first, records[seed], 1.0) or agree(first, records[seed], -1.0):
-                members.append(seed)
+            if agree(first, records[run], 1.0) or agree(first, records[run], -1.0):
+                members.append(run)
                 break
         else:
-            sets.append([seed])
+            sets.append([run])
     return sets
 
 
@@ -283,13 +283,13 @@ def calibrate_twin_sets(
         for (source, kind, fb_from), slug, (twin_dir, twin_config), run in zip(
             requests, slugs, made, identified, strict=True
         ):
-            sweep_study(twin_config, twin_dir, run.frontier)  # as run_study does
+            sweep_study(twin_config, twin_dir, run.frontiers)  # as run_study does
             if fb_from is None:
-                both = model_paths(twin_config, twin_dir, ("FB", "FF"), frontier=run.frontier)
+                both = model_paths(twin_config, twin_dir, ("FB", "FF"), frontiers=run.frontiers)
                 paths = {m: TwinPaths(*both[m]) for m in methods.METHODS}
                 fb_folder, fb_simulations = "", None
             else:
-                ff = model_paths(twin_config, twin_dir, ("FF",), frontier=run.frontier)
+                ff = model_paths(twin_config, twin_dir, ("FF",), frontiers=run.frontiers)
                 paths = {m: TwinPaths(fb_from.paths[m].fb, *ff[m]) for m in methods.METHODS}
                 fb_folder = fb_from.fb_folder or fb_from.folder
                 fb_simulations = fb_from.fb_simulations if fb_from.fb_folder else fb_from.simulations
@@ -371,14 +371,16 @@ def draw_fb_twin_sets(
                 [(made[i][1], made[i][0], requests[i][3]) for i in identify], execution=execution
             )
             simulated = simulate_studies([(made[i][1], made[i][0]) for i in simulate], execution=execution)
-        frontiers = dict(zip(identify, (r.frontier for r in runs), strict=True))
+        frontiers = dict(zip(identify, (r.frontiers for r in runs), strict=True))
         # The simulations made now, held for the line statistics (not read back).
         held = {i: r.simulation.simulations for i, r in zip(identify, runs, strict=True) if r.simulation}
         held.update({i: r.simulations for i, r in zip(simulate, simulated, strict=True)})
         out = []
         for i, (source, first, count, names) in enumerate(requests):
             twin_dir, twin_config = made[i]
-            found = model_paths(twin_config, twin_dir, ("FB",), names, frontier=frontiers[i]) if names else {}
+            found = (
+                model_paths(twin_config, twin_dir, ("FB",), names, frontiers=frontiers[i]) if names else {}
+            )
             paths = {method: fb for method, (fb,) in found.items()}
             out.append(FbDraws(first, count, paths, f"twins/{source.slug}-fb{first}", held.get(i)))
     return out
@@ -449,12 +451,12 @@ def group_models(
     def simulated(values: dict):
         return twin_model(values, sim_rate, config.loop)
 
-    def model_of(seeds: list[int]):
-        fits = [fitted[s].with_ff for s in seeds]
-        return group_model(fits, [f"run {s}" for s in seeds], num_c, den_c, simulated)
+    def model_of(runs: list[int]):
+        fits = [fitted[r].with_ff for r in runs]
+        return group_model(fits, [f"run {r}" for r in runs], num_c, den_c, simulated)
 
-    def remnant_of(seeds: list[int]):
-        remnant_fits = [fitted[s].remnant for s in seeds if fitted[s].remnant is not None]
+    def remnant_of(runs: list[int]):
+        remnant_fits = [fitted[r].remnant for r in runs if fitted[r].remnant is not None]
         if not remnant_fits:
             raise DataError("no run's remnant could be fitted")
         off_bounds = [r for r in remnant_fits if not r.at_bound]
@@ -467,15 +469,15 @@ def group_models(
         on_bounds = () if off_bounds else ("its remnant filter from fits on their search bounds",)
         return (*on_bounds, *remnant.changes), Remnant(*(remnant.values[a] for a in remnant_names))
 
-    every = sorted({s for seeds in groups.values() for s in seeds})
+    every = sorted({r for members in groups.values() for r in members})
 
-    def own_or_study(key, seeds, make, what: str):
+    def own_or_study(key, members, make, what: str):
         """The group's own, else the study's (all its runs), said so; only a study whose runs
         together cannot make it stops."""
         try:
-            return make(seeds), ()
+            return make(members), ()
         except DataError as exc:
-            if sorted(seeds) == every:
+            if sorted(members) == every:
                 raise DataError(
                     f"group {group_slug(key)}: {exc}; look at its runs' fits or group them otherwise (--by)"
                 ) from None
@@ -487,9 +489,9 @@ def group_models(
                 ) from None
 
     models, remnants = {}, {}
-    for key, seeds in groups.items():
-        model, model_note = own_or_study(key, seeds, model_of, "model")
-        (remnant_notes, remnant), remnant_note = own_or_study(key, seeds, remnant_of, "remnant filter")
+    for key, members in groups.items():
+        model, model_note = own_or_study(key, members, model_of, "model")
+        (remnant_notes, remnant), remnant_note = own_or_study(key, members, remnant_of, "remnant filter")
         models[key] = model.noting(*model_note, *remnant_notes, *remnant_note)
         remnants[key] = remnant
     return models, remnants

@@ -16,12 +16,10 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute  # noqa: F401  (pa.compute)
 
-from hcid import tables
 from hcid.arx.response import path_response
 from hcid.config import Config, paper
-from hcid.io.results import split_by_key
+from hcid.io.results import frontiers, split_by_key
 from hcid.loop.hcmodel import true_response
-from hcid.selection import over_w
 from hcid.tables import ORDER_COLUMNS
 
 __all__ = [
@@ -114,18 +112,17 @@ def compute_responses(
     hft: dict = {}
     he: dict = {}
     nb: dict = {}
-    for (model, _seed, method), t in split_by_key(frontier, tables.FRONTIER.key).items():
+    for (model, _seed, method), one in frontiers(frontier).items():
         if method not in w_of:
             continue
-        row = int(over_w.frontier_select(t, w_of[method])[0])
-        a = t.column("a")[row].as_py()
-        b_ft = t.column("b_ft")[row].as_py()
-        orders = over_w.frontier_orders(t)
-        b_e = t.column("b_e")[row].as_py()
+        row = int(one.select(w_of[method])[0])
+        c = one.row_coefficients(row)
         key = (model, method)
-        hft.setdefault(key, []).append(path_response(a, b_ft, int(orders[row, 3]), omega, dt, advance=shift))
-        he.setdefault(key, []).append(path_response(a, b_e, int(orders[row, 4]), omega, dt))
-        nb.setdefault(key, []).append(int(orders[row, 1]))
+        hft.setdefault(key, []).append(
+            path_response(c["a"], c["b_ft"], int(one.nk_ft[row]), omega, dt, advance=shift)
+        )
+        he.setdefault(key, []).append(path_response(c["a"], c["b_e"], int(one.nk_e[row]), omega, dt))
+        nb.setdefault(key, []).append(int(one.nb_ft[row]))
     return Responses(
         omega=omega,
         band=disturbance_band(config),
@@ -191,10 +188,10 @@ def data_summary_rows(frontier: pa.Table, name: str, w_values: list[float]) -> l
     """One row per run, method and W: the selected orders, delays (true ft delay in samples) and VAF."""
     mask = pa.compute.equal(frontier.column("model"), name)
     out = []
-    for (_m, seed, method), t in split_by_key(frontier.filter(mask), tables.FRONTIER.key).items():
-        orders = over_w.frontier_orders(t)
+    for (_m, seed, method), one in frontiers(frontier.filter(mask)).items():
+        orders = one.orders
         for w in w_values:
-            row = int(over_w.frontier_select(t, w)[0])
+            row = int(one.select(w)[0])
             na, nbf, nbe, nkf, nke = (int(x) for x in orders[row])
             out.append(
                 [
@@ -206,8 +203,8 @@ def data_summary_rows(frontier: pa.Table, name: str, w_values: list[float]) -> l
                     str(nbe),
                     f"{nkf}" if nbf else "-",
                     f"{nke}" if nbe else "-",
-                    f"{t.column('vaf_estimation')[row].as_py():.1f}",
-                    f"{t.column('vaf_validation')[row].as_py():.1f}",
+                    f"{one.vaf_estimation[row]:.1f}",
+                    f"{one.vaf_validation[row]:.1f}",
                 ]
             )
     return out

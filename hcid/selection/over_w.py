@@ -1,8 +1,8 @@
 """Model selection by ``MSC = log V + W d`` over W (SPEC section 4).
 
 Only the best candidate per (na, nb_ft, nb_e) can be selected, so selection
-works on a realization's frontier. As a function of W the selection is
-piecewise constant; it changes at the vertices of the lower convex hull of the
+works on a realization's frontier (:class:`hcid.selection.frontier.Frontier`). As a
+function of W the selection is piecewise constant; it changes at the vertices of the lower convex hull of the
 points (d, log V), and those breakpoints are computed exactly here.
 
 Ties follow SPEC: equal MSC -> smaller d, then smaller
@@ -19,15 +19,11 @@ import numpy as np
 import pyarrow as pa
 
 from hcid.errors import IdentificationError
-from hcid.tables import ORDER_COLUMNS
 
 __all__ = [
     "Bootstrap",
     "SelectionPath",
     "breakpoints",
-    "frontier_orders",
-    "frontier_path",
-    "frontier_select",
     "select_at",
     "false_negative_bootstrap",
     "false_negative_threshold",
@@ -35,23 +31,6 @@ __all__ = [
     "false_positive_threshold",
     "threshold_exceedance",
 ]
-
-
-def frontier_orders(frontier: pa.Table) -> np.ndarray:
-    """A frontier table's orders and delays (na, nb_ft, nb_e, nk_ft, nk_e) per row (the last tie rule)."""
-    return np.column_stack([frontier.column(c).to_numpy() for c in ORDER_COLUMNS])
-
-
-def frontier_select(frontier: pa.Table, w) -> np.ndarray:
-    """:func:`select_at` of one record's frontier table: the row selected at each ``w``."""
-    d, v = frontier.column("d").to_numpy(), frontier.column("v").to_numpy()
-    return select_at(d, v, frontier_orders(frontier), np.asarray(w, dtype=float).reshape(-1))
-
-
-def frontier_path(frontier: pa.Table) -> SelectionPath:
-    """:func:`breakpoints` of one record's frontier table: its exact selection over W."""
-    d, v = frontier.column("d").to_numpy(), frontier.column("v").to_numpy()
-    return breakpoints(d, v, frontier_orders(frontier))
 
 
 def _order_key(orders: np.ndarray) -> np.ndarray:
