@@ -353,7 +353,7 @@ def analyse_study(
         # go down to alpha / (runs): there more twins can still change a decision.
         None if options.fdr else options.alpha / 10,
     )
-    tested = more_fb_twins(study, twins, paths, judge, run_lines)
+    tested, judge = more_fb_twins(study, twins, paths, judge, run_lines)
     lap_done("more FB twins")
     selected = _select_and_fit(study, fitted, twins, tested, paths, judge, run_lines)
     lap_done("fit selected")

@@ -9,15 +9,14 @@ step               returns                                        module
 3 twins            ``{group: GroupTwins}``                        :mod:`.analyse_twins`
 selection paths    ``{(run, method): RunPath}``                   :mod:`.analyse`
 line statistics    ``{run: {statistic: value} or None}``          :mod:`.line_statistics`
-4 more FB twins    ``{group: Tested}``                            :mod:`.analyse_twins`
+4 more FB twins    ``{group: Tested}``, ``Evidence``              :mod:`.analyse_twins`
 5 fit selected     :class:`Selected`                              :mod:`.analyse`
 6 tables           ``AnalysisTables``, written by one writer      :mod:`.analysis_tables`
 =================  ============================================  ==========================
 
-Steps 4 to 6 share one :class:`hcid.pipeline.evidence.Evidence`: the twins' W* and line
-statistics computed once, the FB twins drawn so far per forcing set (step 4 adds them) and the
-twins each run was judged against (step 5), which ``evidence_twins.parquet`` lists (step 6). It
-is the one mutable object passed between steps, a cache of what the twins say.
+Step 4 also returns the :class:`hcid.pipeline.evidence.Evidence` that steps 5 and 6 read: the
+twins' line statistics computed once and the FB twins drawn per forcing set (a frozen value,
+built round by round in step 4).
 
 A run is named by its id (the ``seed`` column of ``runs.parquet``), a group by its factor
 values (a tuple of str), a method by its registered name."""

@@ -115,13 +115,16 @@ def more_fb_twins(
     paths: Mapping[tuple[int, str], RunPath],
     judge: Evidence,
     run_lines: dict,
-) -> dict[Group, Tested]:
+) -> tuple[dict[Group, Tested], Evidence]:
     """Step 4: per group, the statistic that decides, and more FB twins wherever a run's p-value
     is not settled (sequential, Besag and Clifford), in batches of ``twins``, up to
     ``max_fb_twins`` per forcing set; each round draws for every open forcing set of every group
-    in one pool."""
+    in one pool. Returns each group's :class:`Tested` and ``judge`` with the calibration twins'
+    line statistics and every round's draws (the evidence steps 5 and 6 read)."""
     names, most, batch = tuple(methods.METHODS), study.options.most_fb_twins, study.options.twins
-    judge.prefetch([(group_name(study.by, key), twins[key].used[m]) for key in study.groups for m in names])
+    judge = judge.with_calibration_lines(
+        [(group_name(study.by, key), twins[key].used[m]) for key in study.groups for m in names]
+    )
     open_sets, deciding = {}, {}
     for key in study.groups:
         used = twins[key].used
@@ -153,7 +156,7 @@ def more_fb_twins(
         waiting = [k for k, _ in requests]
         made = draw_fb_twin_sets([r for _, r in requests], study.execution) if requests else []
         # The draws' line statistics where one decides: every open set's in one pool.
-        judge.add(
+        judge = judge.with_draws(
             [
                 (
                     open_sets[(key, i)][0],
@@ -172,4 +175,4 @@ def more_fb_twins(
             else:
                 n = judge.drawn(name, i + 1, twin_of[m])
             fb_drawn[key][m] = max(fb_drawn[key].get(m, 0), n)
-    return {key: Tested(deciding[key], fb_drawn[key]) for key in study.groups}
+    return {key: Tested(deciding[key], fb_drawn[key]) for key in study.groups}, judge

@@ -79,7 +79,7 @@ def build_tables(
         group_table,
         run_table,
         pa.Table.from_pylist(fc_rows, schema=tables.FC_ESTIMATES.arrow),
-        judge.twins_table(study.groups, study.by, evidence),
+        judge.twins_table(study.groups, study.by, evidence, {key: twins[key].used for key in study.groups}),
         pa.Table.from_pylist(aside, schema=tables.SET_ASIDE.arrow),
         pa.Table.from_pylist(left_out, schema=tables.SKIPPED.arrow),
     )

@@ -4,6 +4,7 @@ the group's verdict, and the group's parameters from the runs that determine the
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -31,7 +32,7 @@ from hcid.selection.calibration import (
 )
 
 if TYPE_CHECKING:  # the type only: the report reads this module without the twins' machinery
-    from hcid.pipeline.twins import FbDraws, Twins, TwinSets
+    from hcid.pipeline.twins import FbDraws, TwinSets
 
 __all__ = [
     "EXCEEDANCES",
@@ -158,86 +159,82 @@ class _Draw(NamedTuple):
     folder: str
 
 
+@dataclass(frozen=True, eq=False)
 class Evidence:
     """Each run's statistics against its own forcing set's twins (SPEC 11): its W* and its line
     statistics (:data:`LINE_STATISTICS`), each with its sequential p-value (:data:`EXCEEDANCES`,
-    at most ``max_fb`` FB twins) and its twins' power. The twins' values are computed once per
-    twin folder (and method) whatever the number of runs they judge, the line statistics from
-    the group's model in the group's plant's loop (``starts``: group name -> (the group's config,
-    its model values, its runs' deviations from them: each twin's start is as far from its truth
-    as a run's from its own optimum, :func:`hcid.pipeline.line_statistics.twin_statistics`), as
-    the runs' own); FB twins drawn
-    beyond the calibration's (:meth:`add`) are kept per group and forcing set, shared by the
-    group's own and study twins (whose FB twin is the same loop). ``tail_below``: a run beyond
-    every FB twin is settled once their tail puts its p this low
+    at most ``max_fb`` FB twins) and its twins' power.
+
+    A frozen value: :meth:`with_calibration_lines` and :meth:`with_draws` return a new one with
+    more of the twins' statistics (step 4 builds it so, round by round); steps 5 and 6 only read
+    it. The twins' line statistics are computed once per twin folder whatever the number of runs
+    they judge, from the group's model in the group's plant's loop (``starts``: group name ->
+    (the group's config, its model values, its runs' deviations from them: each twin's start is
+    as far from its truth as a run's from its own optimum,
+    :func:`hcid.pipeline.line_statistics.twin_statistics`), as the runs' own); FB twins drawn
+    beyond the calibration's are kept per group and forcing set, shared by the group's own and
+    study twins (whose FB twin is the same loop). ``tail_below``: a run beyond every FB twin is
+    settled once their tail puts its p this low
     (:func:`hcid.selection.calibration.sequential_settled`); None draws on to ``max_fb``."""
 
-    def __init__(
-        self,
-        config: Config,
-        run_dir: Path,
-        alpha: float,
-        max_fb: int,
-        starts: Mapping[str, tuple[Config, dict, list]],
-        execution: Execution,
-        tail_below: float | None = None,
-    ):
-        grid = config.selection.w_grid
-        self.lo, self.hi = float(min(grid)), float(max(grid))
-        self.config, self.run_dir, self.alpha, self.max_fb = config, run_dir, alpha, max_fb
-        self.starts, self.execution = starts, execution
-        self.tail_below = tail_below  # a run beyond every twin settled at this tail p (sequential_settled)
-        self._thresholds: dict[tuple[str, str], dict[str, np.ndarray]] = {}
-        # (group, folder) -> model -> statistic -> values (a group's start makes them)
-        self._lines: dict[tuple[str, str], dict[str, dict[str, np.ndarray]]] = {}
-        # (group, forcing set) -> its draws of more FB twins, in order
-        self._more: dict[tuple[str, int], list[_Draw]] = {}
-        # (group, method, forcing set) -> the twins its runs were judged against (step 5)
-        self._judged: dict[tuple[str, str, int], Twins] = {}
+    config: Config
+    run_dir: Path
+    alpha: float
+    max_fb: int
+    starts: Mapping[str, tuple[Config, dict, list]]
+    execution: Execution
+    tail_below: float | None = None
+    #: (group, twin folder) -> model -> statistic -> values (a group's start makes them).
+    folder_lines: Mapping[tuple[str, str], dict[str, dict[str, np.ndarray]]] = field(default_factory=dict)
+    #: (group, forcing set) -> its draws of more FB twins, in order.
+    more: Mapping[tuple[str, int], tuple[_Draw, ...]] = field(default_factory=dict)
+
+    @property
+    def lo(self) -> float:
+        return float(min(self.config.selection.w_grid))
+
+    @property
+    def hi(self) -> float:
+        return float(max(self.config.selection.w_grid))
 
     def w_star(self, path, nb_ft) -> float:
         return feedforward_threshold(path, nb_ft, self.lo, self.hi)
 
     def thresholds(self, twin, method: str) -> dict[str, np.ndarray]:
         """The FB and FF twins' W* of one twin folder under one method."""
-        key = (twin.folder, method)
-        if key not in self._thresholds:
-            self._thresholds[key] = {
-                name: np.array([self.w_star(p, n) for p, n in zip(twins.paths, twins.nb_ft, strict=True)])
-                for name, twins in zip(("FB", "FF"), twin.paths[method], strict=True)
-            }
-        return self._thresholds[key]
+        return {
+            name: np.array([self.w_star(p, n) for p, n in zip(twins.paths, twins.nb_ft, strict=True)])
+            for name, twins in zip(("FB", "FF"), twin.paths[method], strict=True)
+        }
 
     def _folder_lines(self, group: str, folder: str) -> dict[str, dict[str, np.ndarray]]:
-        self.prefetch_folders([(group, folder, None)])
-        return self._lines[(group, folder)]
+        return self.folder_lines[(group, folder)]
 
-    def prefetch_folders(self, folders: Sequence[tuple[str, str, pa.Table | None]]) -> None:
-        """The line statistics of every ``(group, twin folder, its simulations or None)`` not yet
-        computed, in one pool (:func:`hcid.pipeline.line_statistics.twin_statistics_of`): from the
-        simulations held where this command made them, else read from the folder."""
+    def _with_folders(self, folders: Sequence[tuple[str, str, pa.Table | None]]) -> dict:
+        """:attr:`folder_lines` with those of every ``(group, twin folder, its simulations or
+        None)`` not yet computed, in one pool (:func:`hcid.pipeline.line_statistics.twin_statistics_of`):
+        from the simulations held where this command made them, else read from the folder."""
         missing = {}
         for group, folder, held in folders:
-            if (group, folder) not in self._lines and (group, folder) not in missing:
+            if (group, folder) not in self.folder_lines and (group, folder) not in missing:
                 missing[(group, folder)] = held
         items = []
         for (group, folder), held in missing.items():
             config, start, offsets = self.starts[group]
             items.append((self.run_dir / folder, config, start, offsets, held))
-        for key, lines in zip(missing, twin_statistics_of(items, self.execution), strict=True):
-            self._lines[key] = lines
+        found = twin_statistics_of(items, self.execution) if items else []
+        return {**self.folder_lines, **dict(zip(missing, found, strict=True))}
 
-    def prefetch(self, twins: Sequence[tuple[str, TwinSets]]) -> None:
-        """The line statistics of every forcing set's calibration twins of ``(group, TwinSets)``."""
-        self.prefetch_folders(
-            [
-                (g, folder, held)
-                for g, used in twins
-                for t in used.sets
-                for folder, held in ((t.folder, t.simulations), (t.fb_folder, t.fb_simulations))
-                if folder
-            ]
-        )
+    def with_calibration_lines(self, twins: Sequence[tuple[str, TwinSets]]) -> Evidence:
+        """With the line statistics of every forcing set's calibration twins of ``(group, TwinSets)``."""
+        folders = [
+            (g, folder, held)
+            for g, used in twins
+            for t in used.sets
+            for folder, held in ((t.folder, t.simulations), (t.fb_folder, t.fb_simulations))
+            if folder
+        ]
+        return dataclasses.replace(self, folder_lines=self._with_folders(folders))
 
     def lines(self, group: str, twin) -> dict[str, dict[str, np.ndarray]] | None:
         """The calibration twins' line statistics: statistic -> ``FB`` / ``FF`` -> values; None
@@ -248,29 +245,34 @@ class Evidence:
             return None
         return {name: {"FB": fb["FB"][name], "FF": own["FF"][name]} for name in LINE_STATISTICS}
 
-    def add(self, drawn: Sequence[tuple[str, int, FbDraws, bool]]) -> None:
-        """One round of more FB twins, each ``(group, forcing set, its draws, whether a line
+    def with_draws(self, drawn: Sequence[tuple[str, int, FbDraws, bool]]) -> Evidence:
+        """With one round of more FB twins, each ``(group, forcing set, its draws, whether a line
         statistic decides there)``, in order: their W* computed once, here, and where asked their
         line statistics, every set's in one pool, from the simulations just made (which are not
         kept)."""
+        more = dict(self.more)
         for group, forcing_set, draws, _ in drawn:
             w = {
                 m: np.array([self.w_star(p, n) for p, n in zip(fb.paths, fb.nb_ft, strict=True)])
                 for m, fb in draws.paths.items()
             }
-            self._more.setdefault((group, forcing_set), []).append(_Draw(draws.count, w, draws.folder))
-        self.prefetch_folders([(g, d.folder, d.simulations) for g, _, d, lines in drawn if lines])
+            more[(group, forcing_set)] = (
+                *more.get((group, forcing_set), ()),
+                _Draw(draws.count, w, draws.folder),
+            )
+        lines = self._with_folders([(g, d.folder, d.simulations) for g, _, d, lines in drawn if lines])
+        return dataclasses.replace(self, folder_lines=lines, more=more)
 
     def drawn(self, group: str, forcing_set: int, twin) -> int:
         """FB twins simulated so far for a group's forcing set (the next draw's first seed - 1)."""
-        more = self._more.get((group, forcing_set), [])
+        more = self.more.get((group, forcing_set), ())
         return len(next(iter(twin.paths.values())).fb.paths) + sum(d.count for d in more)
 
     def fb_thresholds(self, group: str, forcing_set: int, twin, method: str) -> np.ndarray:
         """Every FB twin's W* under ``method`` in the order drawn: the calibration's, then the
         draws that identified ``method`` (up to the first that did not: it was settled there)."""
         out = [self.thresholds(twin, method)["FB"]]
-        for draw in self._more.get((group, forcing_set), []):
+        for draw in self.more.get((group, forcing_set), ()):
             if method not in draw.w_star:
                 break
             out.append(draw.w_star[method])
@@ -284,7 +286,7 @@ class Evidence:
         base = self.lines(group, twin)
         if base is None:
             return None
-        draws = self._more.get((group, forcing_set), []) if drawn else []
+        draws = self.more.get((group, forcing_set), ()) if drawn else ()
         more = [self._folder_lines(group, d.folder) for d in draws]
         return {
             name: np.concatenate([base[name]["FB"], *(m["FB"][name] for m in more if "FB" in m)])
@@ -373,7 +375,6 @@ class Evidence:
         twins stands for their 95% quantile)."""
         own = used.of_run(run)
         forcing_set = used.sets.index(own) + 1
-        self._judged[(group, method, forcing_set)] = own
         fb, fb_lines = self.used(group, forcing_set, own, method, deciding)
         p_w, n_w, how_w = run_p_value(w_star, fb, EXCEEDANCES)
         out = {
@@ -405,10 +406,12 @@ class Evidence:
             )
         return out
 
-    def twins_table(self, groups: dict, by: Sequence[str], evidence: dict) -> pa.Table:
+    def twins_table(
+        self, groups: dict, by: Sequence[str], evidence: dict, used: Mapping[tuple, Mapping[str, TwinSets]]
+    ) -> pa.Table:
         """``evidence_twins.parquet``: the twins each group's runs were judged against (their W* and
         line statistics, as the p-values used them), once per group, method and forcing set (in
-        the order of the groups and their runs)."""
+        the order of the groups and their runs); ``used``: each group's twins per method."""
         rows, done = [], set()
         for key, members in groups.items():
             name = group_name(by, key)
@@ -417,7 +420,8 @@ class Evidence:
                 if run not in members or judged in done:
                     continue
                 done.add(judged)
-                twin, forcing_set = self._judged[judged], e["forcing_set"]
+                forcing_set = e["forcing_set"]
+                twin = used[key][method].sets[forcing_set - 1]  # the run's own (Evidence.run)
                 lines = self.lines(name, twin)
                 fb_w, fb_lines = self.used(name, forcing_set, twin, method, e["decided_by"])
                 drawn = {
