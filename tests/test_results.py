@@ -246,3 +246,38 @@ def test_a_table_an_earlier_hcid_wrote_is_not_rewritten(tmp_path):
     pq.write_table(t, path)
     assert results._same_table(path, t, ("v",))
     assert not results._same_table(path, pa.table({"v": [0.5, 0.3], "a": [[1.0, 2.0], [3.0]]}), ("v",))
+
+
+def _realization(model: str, seed: int, n: int, step: int = 1):
+    from hcid.loop.simulate import Realization
+
+    rng = np.random.default_rng(seed)
+    wide = rng.standard_normal((6, n * step))
+    # every other sample of a longer array: views that are not contiguous, as decimation makes
+    return Realization(model, seed, np.arange(n) * 0.05, *(wide[i, ::step] for i in range(6)), kn=0.1)
+
+
+def test_records_of_realizations_equal_their_tables_records():
+    # Source: records(realizations_table(r)) is what a written and read simulations.parquet gives.
+    made = [_realization("FB", 1, 40, step=2), _realization("FF", 1, 40), _realization("FB", 2, 40, step=3)]
+    from_table = results.records(results.realizations_table(made), "simulations.parquet")
+    direct = results.records_of(made, "simulations.parquet")
+    assert list(direct) == list(from_table) == [("FB", 1), ("FF", 1), ("FB", 2)]
+    for key, record in from_table.items():
+        assert list(direct[key]) == list(record)
+        for name, values in record.items():
+            assert direct[key][name].flags.c_contiguous and direct[key][name].dtype == np.float64
+            np.testing.assert_array_equal(direct[key][name], values)
+
+
+def test_records_of_refuses_a_sample_that_is_not_finite():
+    bad = _realization("FB", 3, 10)
+    bad.u[4] = np.nan
+    with pytest.raises(
+        DataError, match=r"simulations.parquet: column 'u' holds nan at model FB, seed 3, k 4"
+    ):
+        results.records_of([bad], "simulations.parquet")
+    with pytest.raises(
+        DataError, match=r"simulations.parquet: column 'u' holds nan at model FB, seed 3, k 4"
+    ):
+        results.records(results.realizations_table([bad]), "simulations.parquet")

@@ -40,6 +40,7 @@ __all__ = [
     "read_parts",
     "realizations_table",
     "records",
+    "records_of",
     "summary_table",
     "write",
     "write_part",
@@ -209,10 +210,7 @@ def records(table: pa.Table, path: str | Path) -> dict[tuple[str, int], dict[str
         bad = ~np.isfinite(values)
         if bad.any():
             i = int(np.argmax(bad))
-            raise DataError(
-                f"{path}: column {name!r} holds {values[i]} at model {names[model_code[i]]}, seed {seed[i]}, "
-                f"k {k[i]}"
-            )
+            raise _not_finite(path, name, values[i], names[model_code[i]], seed[i], k[i])
     out: dict[tuple[str, int], dict[str, np.ndarray]] = {}
     _, seed_code = np.unique(seed, return_inverse=True)
     key = model_code.astype(np.int64) * (int(seed_code.max(initial=0)) + 1) + seed_code
@@ -227,6 +225,27 @@ def records(table: pa.Table, path: str | Path) -> dict[tuple[str, int], dict[str
             raise DataError(f"{path}: samples of model {m}, seed {s} are not k = 0..{rows.size - 1} in order")
         out[(m, s)] = {name: values[rows] for name, values in data.items()}
     return out
+
+
+def records_of(
+    realizations: Sequence[Realization], path: str | Path
+) -> dict[tuple[str, int], dict[str, np.ndarray]]:
+    """:func:`records` of the realizations :func:`realizations_table` stacks into ``path``, from
+    the realizations themselves (the same arrays, without the table)."""
+    out: dict[tuple[str, int], dict[str, np.ndarray]] = {}
+    for r in realizations:
+        record = {name: np.ascontiguousarray(getattr(r, name), dtype=np.float64) for name in ("t", *CHANNELS)}
+        for name, values in record.items():
+            bad = ~np.isfinite(values)
+            if bad.any():
+                i = int(np.argmax(bad))
+                raise _not_finite(path, name, values[i], r.model, r.seed, i)
+        out[(r.model, int(r.seed))] = record
+    return out
+
+
+def _not_finite(path, name: str, value, model: str, seed, k) -> DataError:
+    return DataError(f"{path}: column {name!r} holds {value} at model {model}, seed {seed}, k {k}")
 
 
 # --------------------------------------------------------------------------- grouping and joining tables

@@ -57,7 +57,6 @@ from hcid.assembly.resolve import read_study, with_data
 from hcid.config import Config
 from hcid.errors import ConfigError, DataError
 from hcid.hcfit.selected import SelectedModel, analyse_selected
-from hcid.io import datasets
 from hcid.io.datasets import DataSet
 from hcid.pipeline import effects, sessions
 from hcid.pipeline.analyse_state import Group, GroupTwins, RunOutcome, RunPath, Selected, Study, Tested
@@ -110,11 +109,11 @@ class AnalysisRun:
     effects: pa.Table | None = None
 
 
-def _groups(runs: pa.Table, by: Sequence[str]) -> dict[tuple[str, ...], list[int]]:
+def _groups(runs: Sequence[Mapping], by: Sequence[str]) -> dict[tuple[str, ...], list[int]]:
     """The runs (ids) of each group: the values of the ``by`` factors (checked by the caller)."""
     out: dict[tuple[str, ...], list[int]] = {}
-    for row in runs.to_pylist():
-        out.setdefault(tuple(str(row[f]) for f in by), []).append(int(row["seed"]))
+    for row in runs:
+        out.setdefault(tuple(str(row[f]) for f in by), []).append(int(row["run"]))
     return out
 
 
@@ -281,9 +280,8 @@ def analyse_study(
     if len(two_input) < len(trials):  # single-input runs: combined per person, not tested for feedforward
         data = sessions.subset(data, two_input)
     by = plants.grouping(_factors_and_groups(data, options.by))  # a group never mixes plants
-    runs = datasets.runs_table(config.data.name, data)
     if options.compare is not None:  # refused before anything is written
-        effects.compare_levels(runs.to_pylist(), options.compare, person)
+        effects.compare_levels(data.runs, options.compare, person)
     start = time.perf_counter()
     stages, lap = {}, [start]
 
@@ -312,9 +310,10 @@ def analyse_study(
         options,
         execution,
         by,
-        runs,
+        {int(r["run"]): r for r in data.runs},
+        data.factors,
         data.records,
-        _groups(runs, by),
+        _groups(data.runs, by),
         twin_rate(config.timing.output_rate),
         plants,
     )

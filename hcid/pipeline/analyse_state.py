@@ -23,11 +23,10 @@ values (a tuple of str), a method by its registered name."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
-
-import pyarrow as pa
 
 from hcid.config import Config
 from hcid.hcfit.determined import GroupModel
@@ -56,7 +55,8 @@ class Study:
     options: AnalysisOptions
     execution: Execution
     by: tuple[str, ...]
-    runs: pa.Table
+    runs: dict[int, Mapping]  # run id -> its file, file_run and factors (DataSet.runs)
+    factors: tuple[str, ...]
     records: dict[int, dict]
     groups: dict[Group, list[int]]
     kn_rate: float

@@ -118,8 +118,8 @@ class _Rows:
     ):
         self.study, self.twins, self.tested = study, twins, tested
         self.selected, self.checks = selected, checks
-        self.factors = [c for c in study.runs.column_names if c not in tables.RUNS.names]
-        self.factor_of = {int(r["seed"]): r for r in study.runs.to_pylist()}
+        self.factors = list(study.factors)
+        self.factor_of = study.runs
         # Every group's check first: a group whose test fails names its problem for its runs too.
         self.group_checks = {
             key: checks.group(members, twins[key].model.values) for key, members in study.groups.items()

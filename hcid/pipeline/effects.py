@@ -46,7 +46,7 @@ def compare_levels(rows: Sequence[dict], compare: str, person: str | None) -> li
     if not rows:
         return []
     if compare not in rows[0]:
-        ours = {*tables.ANALYSIS.names, *tables.RUNS.names}
+        ours = {*tables.ANALYSIS.names, *tables.RUNS.names, "run"}  # "run": a data set's row
         factors = [c for c in rows[0] if c not in ours]
         raise ConfigError(f"compare (--compare): the data have no factor {compare!r}; they have {factors}")
     if person is None:

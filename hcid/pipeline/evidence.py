@@ -210,10 +210,10 @@ class Evidence:
     def _folder_lines(self, group: str, folder: str) -> dict[str, dict[str, np.ndarray]]:
         return self.folder_lines[(group, folder)]
 
-    def _with_folders(self, folders: Sequence[tuple[str, str, pa.Table | None]]) -> dict:
-        """:attr:`folder_lines` with those of every ``(group, twin folder, its simulations or
-        None)`` not yet computed, in one pool (:func:`hcid.pipeline.line_statistics.twin_statistics_of`):
-        from the simulations held where this command made them, else read from the folder."""
+    def _with_folders(self, folders: Sequence[tuple[str, str, dict | None]]) -> dict:
+        """:attr:`folder_lines` with those of every ``(group, twin folder, its records or None)``
+        not yet computed, in one pool (:func:`hcid.pipeline.line_statistics.twin_statistics_of`):
+        from the records held where this command simulated them, else read from the folder."""
         missing = {}
         for group, folder, held in folders:
             if (group, folder) not in self.folder_lines and (group, folder) not in missing:

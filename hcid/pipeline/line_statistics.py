@@ -11,7 +11,6 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
 
 from hcid import tables
 from hcid.config import Config, Loop
@@ -93,18 +92,17 @@ def twin_statistics(
 
 
 def twin_statistics_of(
-    folders: Sequence[
-        tuple[Path, Config, Mapping[str, float], Sequence[Mapping[str, float]], pa.Table | None]
-    ],
+    folders: Sequence[tuple[Path, Config, Mapping[str, float], Sequence[Mapping[str, float]], dict | None]],
     execution: Execution,
 ) -> list[dict[str, dict[str, np.ndarray]]]:
     """:func:`twin_statistics` of every ``(folder, config, start, offsets, simulations)``, in one
-    pool; ``simulations``: the folder's table where the caller holds it (made by this command),
-    else None (read from the folder)."""
+    pool; ``simulations``: the folder's records by (model, seed) where the caller holds them (made
+    by this command), else None (read from the folder)."""
     keys, tasks = [], []
-    for folder, config, start, offsets, held in folders:
-        table = held if held is not None else results.read(tables.SIMULATIONS, folder)
-        records = results.records(table, folder / tables.SIMULATIONS.file)
+    for folder, config, start, offsets, records in folders:
+        if records is None:
+            path = folder / tables.SIMULATIONS.file
+            records = results.records(results.read(tables.SIMULATIONS, folder), path)
         keys.append(sorted(records))
         tasks += [
             (records[k], config.timing.output_rate, config.loop, _offset(start, offsets, k[1]), config.fit_hc)

@@ -60,9 +60,10 @@ def _simulate_task(config: Config, model_name: str, seed: int, kn: float):
 
 @dataclass(frozen=True)
 class SimulationRun:
-    """Tables of one simulation run and where they were written."""
+    """One simulation run: its records by (model, seed) as written to ``simulations.parquet``
+    (:func:`hcid.io.results.records`' arrays), its summary table and where they were written."""
 
-    simulations: pa.Table
+    records: dict[tuple[str, int], dict[str, np.ndarray]]
     summary: pa.Table
     kn: float
     run_dir: Path
@@ -109,7 +110,8 @@ def simulate_studies(
             results.write(tables.SIMULATIONS, simulations, Path(run_dir))
             results.write(tables.SIMULATION_SUMMARY, summary, Path(run_dir))
             results.append_run_log(Path(run_dir), "simulate", seconds, execution.jobs)
-            out.append(SimulationRun(simulations=simulations, summary=summary, kn=kn, run_dir=Path(run_dir)))
+            records = results.records_of(realizations, Path(run_dir) / tables.SIMULATIONS.file)
+            out.append(SimulationRun(records=records, summary=summary, kn=kn, run_dir=Path(run_dir)))
     return out
 
 
@@ -256,14 +258,15 @@ def _existing(run_dir: Path) -> dict[tuple[str, int, str], dict[str, pa.Table]]:
 
 
 def _load_records(
-    config: Config, run_dir: Path, table: pa.Table | None = None
+    config: Config, run_dir: Path, made: dict | None = None
 ) -> dict[tuple[str, int], dict[str, np.ndarray]]:
-    """Each simulated record by (model, seed): from ``table`` where the caller has just made the
+    """Each simulated record by (model, seed): ``made`` where the caller has just made the
     simulations (not read back), else from the run's ``simulations.parquet``."""
-    if table is None:
-        table = results.read(tables.SIMULATIONS, run_dir, hint="run `hcid simulate` first")
     path = run_dir / tables.SIMULATIONS.file
-    recs = results.records(table, path)
+    if made is None:
+        table = results.read(tables.SIMULATIONS, run_dir, hint="run `hcid simulate` first")
+        made = results.records(table, path)
+    recs = made
     n = config.timing.record_samples
     for m in config.models:
         for seed in config.seeds:
@@ -389,7 +392,7 @@ def identify_studies(
             keys = [(m.name, s) for m in config.models for s in config.seeds]
             check_run_dir(config, run_dir, "identify", force=force)
             simulation = made.get(i)
-            records = _load_records(config, run_dir, simulation.simulations if simulation else None)
+            records = _load_records(config, run_dir, simulation.records if simulation else None)
             jobs.append(
                 _prepare_identification(
                     config, run_dir, names[i], records, keys, noise_free[i], simulation, force

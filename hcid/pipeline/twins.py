@@ -15,7 +15,6 @@ from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
 
 from hcid import methods, tables
 from hcid.assembly.resolve import parse_config
@@ -218,10 +217,10 @@ class Twins:
     calibrations: dict[str, Calibration]  # per method
     paths: dict[str, TwinPaths]  # per method (studies.model_paths)
     fb_folder: str = ""  # where the FB twin was simulated when not in ``folder`` (shared)
-    #: ``simulations.parquet`` of ``folder`` and of ``fb_folder`` where this command made them
-    #: (held for the line statistics, not read back); None where an earlier command did.
-    simulations: pa.Table | None = field(default=None, compare=False, repr=False)
-    fb_simulations: pa.Table | None = field(default=None, compare=False, repr=False)
+    #: The records of ``folder`` and of ``fb_folder`` by (model, seed) where this command
+    #: simulated them (held for the line statistics, not read back); None where an earlier did.
+    simulations: dict | None = field(default=None, compare=False, repr=False)
+    fb_simulations: dict | None = field(default=None, compare=False, repr=False)
 
 
 @dataclass(frozen=True)
@@ -296,7 +295,7 @@ def calibrate_twin_sets(
             calibrations = {c.method: c for c in calibrate_paths(twin_config, twin_dir, paths)}
             simulated = {**source.model, **twin_values(source.model, source.kn_rate)}
             folder = f"twins/{slug}"
-            made_now = run.simulation.simulations if run.simulation is not None else None
+            made_now = run.simulation.records if run.simulation is not None else None
             out.append(
                 Twins(
                     kind,
@@ -336,8 +335,8 @@ class FbDraws:
     count: int
     paths: dict[str, Selections]  # per identified method
     folder: str
-    #: Their ``simulations.parquet`` where this command made it (None: an earlier command's).
-    simulations: pa.Table | None = field(default=None, compare=False, repr=False)
+    #: Their records by (model, seed) where this command simulated them (None: an earlier command's).
+    simulations: dict | None = field(default=None, compare=False, repr=False)
 
 
 def draw_fb_twins(
@@ -373,8 +372,8 @@ def draw_fb_twin_sets(
             simulated = simulate_studies([(made[i][1], made[i][0]) for i in simulate], execution=execution)
         frontiers = dict(zip(identify, (r.frontiers for r in runs), strict=True))
         # The simulations made now, held for the line statistics (not read back).
-        held = {i: r.simulation.simulations for i, r in zip(identify, runs, strict=True) if r.simulation}
-        held.update({i: r.simulations for i, r in zip(simulate, simulated, strict=True)})
+        held = {i: r.simulation.records for i, r in zip(identify, runs, strict=True) if r.simulation}
+        held.update({i: r.records for i, r in zip(simulate, simulated, strict=True)})
         out = []
         for i, (source, first, count, names) in enumerate(requests):
             twin_dir, twin_config = made[i]
