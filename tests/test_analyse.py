@@ -367,7 +367,13 @@ def test_compare_gives_each_quantitys_effect_across_subjects(analysed):
 
 @pytest.mark.parametrize(
     ("compare", "said"),
-    [("subject", "names the people"), ("session", "no factor 'session'"), ("trial x", "must be a factor")],
+    [
+        ("subject", "names the people"),
+        ("session", "no factor 'session'"),
+        ("trial x", "must be a factor"),
+        ("run", "no factor 'run'"),  # a data set's row names its run: not a factor
+        ("file", "no factor 'file'"),
+    ],
 )
 def test_a_comparison_that_cannot_be_made_is_refused_before_anything_is_written(
     analysed, tmp_path, compare, said

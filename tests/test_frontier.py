@@ -60,5 +60,28 @@ def test_selection_is_breakpoints_of_the_rows():
 
 
 def test_one_record_only():
-    with pytest.raises(ValueError, match="one method"):
-        Frontier.from_table(_table().set_column(2, "method", pa.array(["direct"] * 3 + ["indirect"] * 3)))
+    one = _table().slice(0, 3)
+    with pytest.raises(ValueError, match="got method"):
+        Frontier.from_table(one.set_column(2, "method", pa.array(["direct", "direct", "indirect"])))
+    with pytest.raises(ValueError, match="got model"):
+        Frontier.from_table(_table())  # two records of one method
+
+
+def test_a_rows_coefficients_are_its_own():
+    ff = results.frontiers(_table())[("FF", 2, "direct")]
+    mine = ff.row_coefficients(1)
+    mine["a"][1] = 99.0
+    assert ff.row_coefficients(1)["a"].tolist() == [1.0, -0.6]
+
+
+def test_chunked_columns():
+    # Source: the same rows in three record batches (as concatenated parts are) read as one table.
+    table = _table()
+    chunked = pa.Table.from_batches(table.to_batches(max_chunksize=2))
+    assert chunked.column("a").num_chunks == 3
+    for key, one in results.frontiers(chunked).items():
+        ref = results.frontiers(table)[key]
+        assert one.to_arrow().equals(ref.to_arrow())
+        for row in range(one.n_rows):
+            for c, v in one.row_coefficients(row).items():
+                np.testing.assert_array_equal(v, ref.row_coefficients(row)[c])

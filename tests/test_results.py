@@ -261,7 +261,7 @@ def test_records_of_realizations_equal_their_tables_records():
     # Source: records(realizations_table(r)) is what a written and read simulations.parquet gives.
     made = [_realization("FB", 1, 40, step=2), _realization("FF", 1, 40), _realization("FB", 2, 40, step=3)]
     from_table = results.records(results.realizations_table(made), "simulations.parquet")
-    direct = results.records_of(made, "simulations.parquet")
+    direct = results.records_of(made)
     assert list(direct) == list(from_table) == [("FB", 1), ("FF", 1), ("FB", 2)]
     for key, record in from_table.items():
         assert list(direct[key]) == list(record)
@@ -273,11 +273,8 @@ def test_records_of_realizations_equal_their_tables_records():
 def test_records_of_refuses_a_sample_that_is_not_finite():
     bad = _realization("FB", 3, 10)
     bad.u[4] = np.nan
-    with pytest.raises(
-        DataError, match=r"simulations.parquet: column 'u' holds nan at model FB, seed 3, k 4"
-    ):
-        results.records_of([bad], "simulations.parquet")
-    with pytest.raises(
-        DataError, match=r"simulations.parquet: column 'u' holds nan at model FB, seed 3, k 4"
-    ):
+    said = r"simulations.parquet: column 'u' holds nan at model FB, seed 3, k 4"
+    with pytest.raises(DataError, match=said):
+        results.check_records(results.records_of([bad]), "simulations.parquet")
+    with pytest.raises(DataError, match=said):
         results.records(results.realizations_table([bad]), "simulations.parquet")

@@ -25,7 +25,7 @@ from hcid import tables
 from hcid.errors import DataError
 from hcid.io.folders import atomic_write
 from hcid.loop.simulate import Realization
-from hcid.methods import METHODS
+from hcid.methods import METHODS, StageChoice
 from hcid.selection.frontier import Frontier
 from hcid.tables import CHANNELS, Schema
 
@@ -41,6 +41,8 @@ __all__ = [
     "realizations_table",
     "records",
     "records_of",
+    "check_records",
+    "stage_choices_of",
     "summary_table",
     "write",
     "write_part",
@@ -227,21 +229,26 @@ def records(table: pa.Table, path: str | Path) -> dict[tuple[str, int], dict[str
     return out
 
 
-def records_of(
-    realizations: Sequence[Realization], path: str | Path
-) -> dict[tuple[str, int], dict[str, np.ndarray]]:
-    """:func:`records` of the realizations :func:`realizations_table` stacks into ``path``, from
-    the realizations themselves (the same arrays, without the table)."""
-    out: dict[tuple[str, int], dict[str, np.ndarray]] = {}
-    for r in realizations:
-        record = {name: np.ascontiguousarray(getattr(r, name), dtype=np.float64) for name in ("t", *CHANNELS)}
-        for name, values in record.items():
-            bad = ~np.isfinite(values)
+def records_of(realizations: Sequence[Realization]) -> dict[tuple[str, int], dict[str, np.ndarray]]:
+    """The arrays :func:`records` gives of the table :func:`realizations_table` stacks, from the
+    realizations themselves (without the table; :func:`check_records` refuses what it refuses)."""
+    return {
+        (r.model, int(r.seed)): {
+            name: np.ascontiguousarray(getattr(r, name), dtype=np.float64) for name in ("t", *CHANNELS)
+        }
+        for r in realizations
+    }
+
+
+def check_records(records: dict[tuple[str, int], dict[str, np.ndarray]], path: str | Path) -> None:
+    """Refuse records (:func:`records_of`) with a sample that is not finite, as :func:`records`
+    refuses their table (there: the first in the table's column order; here: in each record's)."""
+    for (model, seed), record in records.items():
+        for name in ("t", *CHANNELS):
+            bad = ~np.isfinite(record[name])
             if bad.any():
                 i = int(np.argmax(bad))
-                raise _not_finite(path, name, values[i], r.model, r.seed, i)
-        out[(r.model, int(r.seed))] = record
-    return out
+                raise _not_finite(path, name, record[name][i], model, seed, i)
 
 
 def _not_finite(path, name: str, value, model: str, seed, k) -> DataError:
@@ -393,6 +400,27 @@ def frontier_part(model: str, seed: int, result, stages, worker: str = "") -> di
         schema=tables.IDENTIFY_LOG.arrow,
     )
     return out
+
+
+def stage_choices_of(table: pa.Table, stage) -> dict[tuple[str, int], StageChoice]:
+    """A choosing stage's table (``stage1.parquet``'s columns) as its choice per (model, seed);
+    ``stage`` the method's :class:`hcid.methods.StageSpec` (its name and inputs)."""
+    i1, i2 = stage.inputs[0], stage.inputs[1]
+    return {
+        (row["model"], row["seed"]): StageChoice(
+            stage=stage.name,
+            na=row["na"],
+            nb1=row[f"nb_{i1}"],
+            nb2=row[f"nb_{i2}"],
+            nk1=row[f"nk_{i1}"],
+            nk2=row[f"nk_{i2}"],
+            v=row["v"],
+            n_candidates=row["n_candidates"],
+            n_unstable=row["n_unstable"],
+            seconds=0.0,
+        )
+        for row in table.to_pylist()
+    }
 
 
 def write_part(run_dir: Path, model: str, seed: int, method: str, parts: dict[str, pa.Table]) -> None:

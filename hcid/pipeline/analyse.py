@@ -69,7 +69,7 @@ from hcid.pipeline.evidence import (
     group_name,
 )
 from hcid.pipeline.execution import Execution
-from hcid.pipeline.fit_hc import RunFits, fit_run, fit_windows, stage_choices, stored_choices
+from hcid.pipeline.fit_hc import RunFits, fit_run, fit_windows, stage_choices
 from hcid.pipeline.line_statistics import deviations, run_statistics
 from hcid.pipeline.measured_data import check_plant
 from hcid.pipeline.options import AnalysisOptions
@@ -175,12 +175,11 @@ def _selection_paths(study: Study, identified: IdentifyRun) -> dict[tuple[int, s
     """Every run's frontier, selection path over W and earlier stages' choices, per method, from
     its identification (held in memory, not read back)."""
     name = study.config.data.name
-    stored = stored_choices(study.run_dir, identified.choices)
     out = {}
     for run in study.records:
         for method_name in methods.METHODS:
             frontier = identified.frontiers[(name, run, method_name)]
-            choices = stage_choices(study.run_dir, stored, method_name, name, run)
+            choices = stage_choices(study.run_dir, identified.choices, method_name, name, run)
             out[(run, method_name)] = RunPath(frontier, frontier.path(), choices)
     return out
 
@@ -281,7 +280,8 @@ def analyse_study(
         data = sessions.subset(data, two_input)
     by = plants.grouping(_factors_and_groups(data, options.by))  # a group never mixes plants
     if options.compare is not None:  # refused before anything is written
-        effects.compare_levels(data.runs, options.compare, person)
+        # the data set's factors only (its rows also name the run and its file)
+        effects.compare_levels([{f: r[f] for f in data.factors} for r in data.runs], options.compare, person)
     start = time.perf_counter()
     stages, lap = {}, [start]
 

@@ -120,7 +120,7 @@ class _Rows:
         self.selected, self.checks = selected, checks
         self.factors = list(study.factors)
         self.factor_of = study.runs
-        # Every group's check first: a group whose test fails names its problem for its runs too.
+        # Each group's check and, where it has none, why.
         self.group_checks = {
             key: checks.group(members, twins[key].model.values) for key, members in study.groups.items()
         }
@@ -214,7 +214,7 @@ class _Rows:
             "twin_source": model.source,
             "twin_undetermined": ", ".join(model.undetermined),
             "n_contradicted": int(n_contradicted),
-            **consistency_columns(self.group_checks[key], self.checks.problem(members)),
+            **consistency_columns(*self.group_checks[key]),
         }
 
 

@@ -46,7 +46,7 @@ def compare_levels(rows: Sequence[dict], compare: str, person: str | None) -> li
     if not rows:
         return []
     if compare not in rows[0]:
-        ours = {*tables.ANALYSIS.names, *tables.RUNS.names, "run"}  # "run": a data set's row
+        ours = {*tables.ANALYSIS.names, *tables.RUNS.names}
         factors = [c for c in rows[0] if c not in ours]
         raise ConfigError(f"compare (--compare): the data have no factor {compare!r}; they have {factors}")
     if person is None:
@@ -101,13 +101,13 @@ def line_values(
     constant per line in every run, so its effects would be |Ht|'s again, doubling the Holm family.
     """
     out = {}
-    for seed, record in records.items():
+    for run, record in records.items():
         try:
             fc = fc_estimate([record], rate, slice(0, n))
         except DataError:
             continue
         values = []
-        yc = None if plants is None else plants[seed].response(fc.omega_t)
+        yc = None if plants is None else plants[run].response(fc.omega_t)
         paths = [("He", fc.omega_e, fc.he), ("Ht", fc.omega_t, fc.ht)]
         for path, omega, h in paths + ([("Ht Yc", fc.omega_t, fc.ht * yc)] if yc is not None else []):
             for w, x in zip(omega, h, strict=True):
@@ -115,7 +115,7 @@ def line_values(
                     values.append((f"|{path}| at {w:.3g} rad/s", float(20 * np.log10(abs(x)))))
                     if path != "Ht Yc":  # the inversion's size, as SPEC 12's |Ht Yc|; no phase
                         values.append((f"{path} phase at {w:.3g} rad/s", float(np.degrees(np.angle(x)))))
-        out[seed] = values
+        out[run] = values
     return out
 
 

@@ -96,6 +96,7 @@ class Checks:
                 self.problems[run] = f"no test: {exc}"
 
     def problem(self, members) -> str:
+        """Why some run of ``members`` has no test (the first such run's reason), else ""."""
         return next((self.problems[s] for s in members if s in self.problems), "")
 
     def run(self, run: int, fit):
@@ -107,15 +108,16 @@ class Checks:
         yc = self.yc_of[run]
         return consistency(fit.values, yc, self.lines[run], self.records[run], self.rate, fitted)
 
-    def group(self, members: list[int], values: dict):
+    def group(self, members: list[int], values: dict) -> tuple[object, str]:
+        """The group's model against its runs together, and why there is no test where there is
+        none (a run's problem, or the group's own)."""
         if not all(s in self.lines for s in members):
-            return None
+            return None, self.problem(members)
         try:
             lines, records = [self.lines[s] for s in members], [self.records[s] for s in members]
-            return group_consistency(values, self.yc_of[members[0]], lines, records, self.rate)
+            return group_consistency(values, self.yc_of[members[0]], lines, records, self.rate), ""
         except DataError as exc:
-            self.problems[members[0]] = f"no test: {exc}"
-            return None
+            return None, f"no test: {exc}"
 
 
 def consistency_columns(check, problem: str) -> dict:
@@ -231,7 +233,7 @@ class Evidence:
             (g, folder, held)
             for g, used in twins
             for t in used.sets
-            for folder, held in ((t.folder, t.simulations), (t.fb_folder, t.fb_simulations))
+            for folder, held in ((t.folder, t.records), (t.fb_folder, t.fb_records))
             if folder
         ]
         return dataclasses.replace(self, folder_lines=self._with_folders(folders))
@@ -260,7 +262,7 @@ class Evidence:
                 *more.get((group, forcing_set), ()),
                 _Draw(draws.count, w, draws.folder),
             )
-        lines = self._with_folders([(g, d.folder, d.simulations) for g, _, d, lines in drawn if lines])
+        lines = self._with_folders([(g, d.folder, d.records) for g, _, d, lines in drawn if lines])
         return dataclasses.replace(self, folder_lines=lines, more=more)
 
     def drawn(self, group: str, forcing_set: int, twin) -> int:
@@ -282,7 +284,8 @@ class Evidence:
         self, group: str, forcing_set: int, twin, drawn: bool = True
     ) -> dict[str, np.ndarray] | None:
         """Every FB twin's line statistics in the order drawn (statistic -> values); the
-        calibration's only unless ``drawn`` (the draws' statistics are computed when first asked)."""
+        calibration's only unless ``drawn`` (the draws' statistics, computed by :meth:`with_draws`
+        where a line statistic decides: only then are they asked for)."""
         base = self.lines(group, twin)
         if base is None:
             return None

@@ -23,7 +23,7 @@ import hashlib
 import math
 import shutil
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -136,35 +136,14 @@ def _records(run_dir: Path) -> dict[tuple[str, int], dict[str, np.ndarray]]:
     return out
 
 
-def stored_choices(
-    run_dir: Path, held: Mapping[str, pa.Table] | None = None
-) -> dict[str, dict[tuple[str, int], methods.StageChoice]]:
-    """Per choosing stage, its stored choice per (model, seed): from ``held`` (each stage's table,
-    as :class:`hcid.pipeline.studies.IdentifyRun` holds them just written), else read from
-    ``run_dir``."""
+def stored_choices(run_dir: Path) -> dict[str, dict[tuple[str, int], methods.StageChoice]]:
+    """Per choosing stage, its stored choice per (model, seed), read from ``run_dir``."""
     out: dict[str, dict] = {}
     for method in methods.METHODS.values():
         for stage in method.choice_stages:
-            schema = tables.stage_choice(stage.name, stage.inputs)
-            table = held.get(stage.name) if held is not None else results.read_optional(schema, run_dir)
-            if table is None:
-                continue
-            i1, i2 = stage.inputs[0], stage.inputs[1]
-            found = {}
-            for row in table.to_pylist():
-                found[(row["model"], row["seed"])] = methods.StageChoice(
-                    stage=stage.name,
-                    na=row["na"],
-                    nb1=row[f"nb_{i1}"],
-                    nb2=row[f"nb_{i2}"],
-                    nk1=row[f"nk_{i1}"],
-                    nk2=row[f"nk_{i2}"],
-                    v=row["v"],
-                    n_candidates=row["n_candidates"],
-                    n_unstable=row["n_unstable"],
-                    seconds=0.0,
-                )
-            out[stage.name] = found
+            table = results.read_optional(tables.stage_choice(stage.name, stage.inputs), run_dir)
+            if table is not None:
+                out[stage.name] = results.stage_choices_of(table, stage)
     return out
 
 

@@ -100,9 +100,11 @@ def twin_statistics_of(
     by this command), else None (read from the folder)."""
     keys, tasks = [], []
     for folder, config, start, offsets, records in folders:
+        path = folder / tables.SIMULATIONS.file
         if records is None:
-            path = folder / tables.SIMULATIONS.file
             records = results.records(results.read(tables.SIMULATIONS, folder), path)
+        else:
+            results.check_records(records, path)
         keys.append(sorted(records))
         tasks += [
             (records[k], config.timing.output_rate, config.loop, _offset(start, offsets, k[1]), config.fit_hc)

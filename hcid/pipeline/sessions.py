@@ -498,14 +498,14 @@ def feedback_settings(identify: IdentifyConfig) -> IdentifyConfig:
     return replace(identify, stages=stages)
 
 
-def _feedback_task(config: Config, seed: int, record: dict, person: str) -> list[dict]:
+def _feedback_task(config: Config, run_id: int, record: dict, person: str) -> list[dict]:
     """A disturbance-only run's feedback alone: each method's ARX model without the target path
     selected at W_BIC (no feedforward question, so no calibrated W), and the parametric feedback
     path fitted to the run (the config's estimator), with its loop's crossover and phase margin."""
     rate = config.timing.output_rate
     settings = feedback_settings(config.identify)
     signals = {k: record[k] for k in ("t", "ft", "fd", "e", "u")}
-    run = api.Record(seed, rate, **signals)
+    run = api.Record(run_id, rate, **signals)
     yc = plant(config.loop)
     # Over the analysis window, whole periods of the multisine: the lines estimator's lines (a
     # sample more, as a 45 s file at 25 Hz leaves, can smear them below its threshold).
@@ -514,7 +514,7 @@ def _feedback_task(config: Config, seed: int, record: dict, person: str) -> list
     fitted = _feedback_fit(config, tracking, yc)
     rows = []
     for method in methods.METHODS:
-        row = {"data_set": config.data.name, "run_id": seed, "person": person, "method": method}
+        row = {"data_set": config.data.name, "run_id": run_id, "person": person, "method": method}
         try:
             found = api.identify(run, method, settings)
             chosen = found.select(found.w_bic)
@@ -560,9 +560,9 @@ def fit_feedback(
 ) -> pa.Table | None:
     """Every disturbance-only run's feedback alone (:func:`_feedback_task`), on the worker pool;
     ``who`` maps a run to its person. None without such runs."""
-    seeds = [s for s in sorted(trials) if trials[s].kind is Kind.DISTURBANCE_ONLY]
-    if not seeds:
+    run_ids = [s for s in sorted(trials) if trials[s].kind is Kind.DISTURBANCE_ONLY]
+    if not run_ids:
         return None
-    tasks = [(config, s, records[s], who[s]) for s in seeds]
+    tasks = [(config, s, records[s], who[s]) for s in run_ids]
     rows = [row for found in execution.map(_feedback_task, tasks, "feedback alone") for row in found]
     return pa.Table.from_pylist(rows, schema=tables.FEEDBACK_RUNS.arrow)

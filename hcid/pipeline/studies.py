@@ -110,7 +110,7 @@ def simulate_studies(
             results.write(tables.SIMULATIONS, simulations, Path(run_dir))
             results.write(tables.SIMULATION_SUMMARY, summary, Path(run_dir))
             results.append_run_log(Path(run_dir), "simulate", seconds, execution.jobs)
-            records = results.records_of(realizations, Path(run_dir) / tables.SIMULATIONS.file)
+            records = results.records_of(realizations)
             out.append(SimulationRun(records=records, summary=summary, kn=kn, run_dir=Path(run_dir)))
     return out
 
@@ -188,14 +188,15 @@ def noise_free_records(config: Config) -> dict[str, dict[str, np.ndarray]]:
 
 @dataclass(frozen=True)
 class IdentifyRun:
-    """Tables of the identification of a run.
+    """The identification of a run: each record's frontier per method, each choosing stage's
+    choice per record (``choices``: stage -> (model, seed) -> StageChoice) and the log table.
 
     ``simulation`` is set when the run had no simulations and they were made
     first; ``imported`` counts the measured runs read from a data file.
     """
 
     frontiers: dict[tuple[str, int, str], Frontier]
-    choices: dict[str, pa.Table]
+    choices: dict[str, dict[tuple[str, int], methods.StageChoice]]
     log: pa.Table
     computed: int
     reused: int
@@ -233,7 +234,7 @@ def _existing(run_dir: Path) -> dict[tuple[str, int, str], dict[str, pa.Table]]:
         return {}
     hint = "use --force to recompute it"
     key = tables.FRONTIER.key
-    frontier = results.read(tables.FRONTIER, run_dir, key, hint=hint)
+    frontier = results.read(tables.FRONTIER, run_dir, hint=hint)  # every column: it is kept as it is
     logs = results.split_by_key(results.read(tables.IDENTIFY_LOG, run_dir, key, hint=hint), key)
     choices = {}
     for name, schema in _choice_schemas().items():
@@ -266,6 +267,8 @@ def _load_records(
     if made is None:
         table = results.read(tables.SIMULATIONS, run_dir, hint="run `hcid simulate` first")
         made = results.records(table, path)
+    else:
+        results.check_records(made, path)
     recs = made
     n = config.timing.record_samples
     for m in config.models:
@@ -298,18 +301,22 @@ def _done(run_dir: Path, keys: list, names: tuple[str, ...], force: bool) -> dic
 
 def _write_identification(config: Config, run_dir: Path, done: dict) -> tuple[dict, dict, pa.Table]:
     """Write frontier, identify_log, each choosing stage's table and the handoff; drop the parts.
-    Returns the frontiers by (model, seed, method), the choosing stages' tables and the log."""
+    Returns the frontiers by (model, seed, method), the choosing stages' choices and the log.
+    A frontier kept from an earlier run is checked against the config as one read is."""
     order = _canonical_order(config, done)
     frontier = results.concat([done[k]["frontier"] for k in order])
+    results.check_against_config(frontier, config, run_dir / tables.FRONTIER.file)
     log = results.concat([_with_worker(done[k]["log"]) for k in order])
     results.write(tables.FRONTIER, frontier, run_dir)
     results.write(tables.IDENTIFY_LOG, log, run_dir)
     choices = {}
+    stages = {s.name: s for m in methods.METHODS.values() for s in m.choice_stages}
     for name, schema in _choice_schemas().items():
         parts = [done[k][name] for k in order if name in done[k]]
         if parts:
-            choices[name] = results.concat(parts)
-            results.write(schema, choices[name], run_dir)
+            table = results.concat(parts)
+            results.write(schema, table, run_dir)
+            choices[name] = results.stage_choices_of(table, stages[name])
     handoff = [done[k]["handoff"] for k in order if "handoff" in done[k]]
     if handoff:
         results.write(tables.HANDOFF, results.concat(handoff), run_dir)

@@ -219,8 +219,8 @@ class Twins:
     fb_folder: str = ""  # where the FB twin was simulated when not in ``folder`` (shared)
     #: The records of ``folder`` and of ``fb_folder`` by (model, seed) where this command
     #: simulated them (held for the line statistics, not read back); None where an earlier did.
-    simulations: dict | None = field(default=None, compare=False, repr=False)
-    fb_simulations: dict | None = field(default=None, compare=False, repr=False)
+    records: dict | None = field(default=None, compare=False, repr=False)
+    fb_records: dict | None = field(default=None, compare=False, repr=False)
 
 
 @dataclass(frozen=True)
@@ -286,12 +286,12 @@ def calibrate_twin_sets(
             if fb_from is None:
                 both = model_paths(twin_config, twin_dir, ("FB", "FF"), frontiers=run.frontiers)
                 paths = {m: TwinPaths(*both[m]) for m in methods.METHODS}
-                fb_folder, fb_simulations = "", None
+                fb_folder, fb_records = "", None
             else:
                 ff = model_paths(twin_config, twin_dir, ("FF",), frontiers=run.frontiers)
                 paths = {m: TwinPaths(fb_from.paths[m].fb, *ff[m]) for m in methods.METHODS}
                 fb_folder = fb_from.fb_folder or fb_from.folder
-                fb_simulations = fb_from.fb_simulations if fb_from.fb_folder else fb_from.simulations
+                fb_records = fb_from.fb_records if fb_from.fb_folder else fb_from.records
             calibrations = {c.method: c for c in calibrate_paths(twin_config, twin_dir, paths)}
             simulated = {**source.model, **twin_values(source.model, source.kn_rate)}
             folder = f"twins/{slug}"
@@ -306,7 +306,7 @@ def calibrate_twin_sets(
                     paths,
                     fb_folder,
                     made_now,
-                    fb_simulations,
+                    fb_records,
                 )
             )
     return out
@@ -336,7 +336,7 @@ class FbDraws:
     paths: dict[str, Selections]  # per identified method
     folder: str
     #: Their records by (model, seed) where this command simulated them (None: an earlier command's).
-    simulations: dict | None = field(default=None, compare=False, repr=False)
+    records: dict | None = field(default=None, compare=False, repr=False)
 
 
 def draw_fb_twins(

@@ -65,9 +65,11 @@ class Frontier:
     @classmethod
     def from_table(cls, table: pa.Table) -> Frontier:
         """One record's rows of ``frontier.parquet`` (its columns; model and seed may be absent)."""
+        for key in ("model", "seed", "method"):
+            values = table.column(key).unique().to_pylist() if key in table.column_names else [None]
+            if len(values) != 1:
+                raise ValueError(f"a frontier is one record's by one method, got {key} {values}")
         methods = table.column("method").unique().to_pylist()
-        if len(methods) != 1:
-            raise ValueError(f"a frontier is one record's by one method, got methods {methods}")
         numbers = {c: table.column(c).to_numpy() for c in _NUMBERS}
         coefficients = {}
         for c in _COEFFICIENTS:
@@ -96,10 +98,10 @@ class Frontier:
         return select_at(self.d, self.v, self.orders, np.asarray(w, dtype=float).reshape(-1))
 
     def row_coefficients(self, row: int) -> dict[str, np.ndarray]:
-        """Row ``row``'s coefficients: ``a`` (``[1, a1, ..., a_na]``), ``b_ft`` and ``b_e``."""
+        """Row ``row``'s coefficients: ``a`` (``[1, a1, ..., a_na]``), ``b_ft`` and ``b_e`` (copies)."""
         out = {}
         for c, (values, offsets) in self.coefficients.items():
-            out[c] = np.asarray(values[offsets[row] : offsets[row + 1]], dtype=np.float64)
+            out[c] = np.array(values[offsets[row] : offsets[row + 1]], dtype=np.float64)
         return out
 
     def to_arrow(self) -> pa.Table:
