@@ -22,9 +22,10 @@ without its standard errors (unweighted): the intervals' widths show what the we
 hcid's closed loop (configs/integrator_example.yaml's experiment as configs/lab_example/make.py
 runs it: plant 1.5/s, disturbance at its input, 300 Hz, remnant as the config says, both
 conditions with feedforward), each subject's parameters drawn (:data:`E2E_RANGES`) and condition B
-shifting Kpe, TL and Kpt by :data:`E2E_EFFECT`; each run identified at 20 Hz over one 40 s period
-(``hcid.identify``, direct, W at BIC) and fitted (``hcid.fit_hc``): its estimate, se and status
-(undetermined unless ``determined``) go to ``study_effects``. Printed: per quantity and test the
+shifting Kpe, TL and Kpt by the design's effect (``--design``, :data:`E2E_DESIGNS`); each run
+identified at 20 Hz over one 40 s period (``hcid.identify``, direct, W at BIC) and fitted
+(``hcid.fit_hc``): its estimate, se and status (undetermined unless ``determined``) go to
+``study_effects``. Printed: per quantity and test the
 share of studies whose interval covers the true effect; for tau_pe, TI and tau_pt (no effect)
 the share with p <= 0.05 (the level); the runs left out, and the cost per study. ``--jobs``
 spreads the studies over processes (each study its own spawned seed: the same figures).
@@ -48,7 +49,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from joblib import Parallel, delayed
-from lab_study import _margins_ok  # the lab example's rule for a loop a person tracks with
+from lab_study import _gain_margin, _margins_ok  # the lab example's rule for a loop a person tracks with
 from scipy import stats
 
 import hcid
@@ -176,31 +177,51 @@ def verdict(row: pd.Series) -> str:
 #: the effect of condition B on each subject (none on the other three: their level is measured).
 E2E_RANGES = {"Kpe": (1.6, 2.1), "TL": (0.10, 0.18), "tau_pe": (0.22, 0.28), "Kpt": (0.6, 0.9),
               "TI": (0.15, 0.25), "tau_pt": (0.15, 0.30)}  # fmt: skip
-E2E_EFFECT = {"Kpe": 0.3, "TL": 0.03, "Kpt": -0.2}
 E2E_RATE, E2E_SAMPLES = 20.0, 800  # Hz; one 40 s period of the forcing functions
 
 
-def _subject(rng: np.random.Generator) -> dict[str, float]:
+@dataclass(frozen=True)
+class Design:
+    """An end-to-end design: condition B's effect on each subject, and the smallest gain margin a
+    subject's loop keeps in both conditions (1 / |L| where its phase reaches -180 deg)."""
+
+    effect: dict
+    min_gain_margin: float
+
+
+#: ``realistic`` (the default): loops that keep a gain margin of 2 dB or more in both conditions
+#: (the shared recordings' group models: 3.0 dB fo, 4.1 dB so); B a higher gain and less lead.
+#: ``near-unstable`` (the design until 2026-11-28): B a higher gain and more lead, which left
+#: every B loop a gain margin of 0.1 to 1.9 dB (the neuromuscular peak near 10 rad/s), where TL
+#: is fitted low (docs/parametric-fit.md).
+E2E_DESIGNS = {
+    "realistic": Design({"Kpe": 0.2, "TL": -0.03, "Kpt": -0.2}, 10 ** (2 / 20)),
+    "near-unstable": Design({"Kpe": 0.3, "TL": 0.03, "Kpt": -0.2}, 0.0),
+}
+
+
+def _subject(rng: np.random.Generator, design: Design) -> dict[str, float]:
     """A subject's parameters from :data:`E2E_RANGES`, drawn again until the loop is one a person
     tracks with in both conditions (one gain crossover, phase margin at least 30 deg with the
-    example's plant and neuromuscular system: ``benchmarks/lab_study.py``'s rule). Without it,
-    condition B's larger Kpe and TL made 52% of its loops unstable (833 of 1600 subjects' loops
-    over 200 studies, against 9 in A), whose runs no fit determines."""
+    example's plant and neuromuscular system: ``benchmarks/lab_study.py``'s rule) and keeps the
+    design's gain margin. Without the first, condition B's larger Kpe and TL made 52% of its loops
+    unstable (833 of 1600 subjects' loops over 200 studies, against 9 in A), whose runs no fit
+    determines."""
     while True:
         truth = {k: rng.uniform(*r) for k, r in E2E_RANGES.items()}
-        shifted = {k: v + E2E_EFFECT.get(k, 0.0) for k, v in truth.items()}
-        if _margins_ok(truth) and _margins_ok(shifted):
+        shifted = {k: v + design.effect.get(k, 0.0) for k, v in truth.items()}
+        if all(_margins_ok(p) and _gain_margin(p) >= design.min_gain_margin for p in (truth, shifted)):
             return truth
 
 
-def fitted_study(rng: np.random.Generator, config, kn: float, experiment) -> pd.DataFrame:
+def fitted_study(rng: np.random.Generator, config, kn: float, experiment, design: Design) -> pd.DataFrame:
     """One study simulated run by run and fitted with hcid: ``quantity, subject, condition, value,
     se, undetermined`` for every parameter of :data:`E2E_RANGES`."""
     rows = []
     for subject in range(SUBJECTS):
-        truth = _subject(rng)
+        truth = _subject(rng, design)
         for condition in CONDITIONS:
-            p = {k: v + (condition == "B") * E2E_EFFECT.get(k, 0.0) for k, v in truth.items()}
+            p = {k: v + (condition == "B") * design.effect.get(k, 0.0) for k, v in truth.items()}
             model = HCModel(
                 f"S{subject}{condition}", p["Kpt"], p["TI"], p["tau_pt"], p["Kpe"], p["TL"], p["tau_pe"]
             )
@@ -223,25 +244,27 @@ def fitted_study(rng: np.random.Generator, config, kn: float, experiment) -> pd.
 
 
 def _e2e_study(
-    seed: np.random.SeedSequence, config, kn: float, experiment
+    seed: np.random.SeedSequence, config, kn: float, experiment, design: Design
 ) -> tuple[list[tuple], pd.DataFrame]:
     """One end-to-end study's rows (per quantity and test, the interval, p and left-out runs) and
     its fitted runs (:func:`fitted_study`)."""
-    fitted = fitted_study(np.random.default_rng(seed), config, kn, experiment)
-    return _effect_rows(fitted), fitted
+    fitted = fitted_study(np.random.default_rng(seed), config, kn, experiment, design)
+    return _effect_rows(fitted, design), fitted
 
 
-def _effect_rows(fitted: pd.DataFrame) -> list[tuple]:
+def _effect_rows(fitted: pd.DataFrame, design: Design) -> list[tuple]:
     """Per quantity and test of one study's fitted runs: the interval, p and left-out runs."""
     frame = effects_frame(study_effects(fitted, "condition"))
     return [
-        (row.quantity, row.test, E2E_EFFECT.get(row.quantity, 0.0), row.low, row.high, row.p, row.estimate,
+        (row.quantity, row.test, design.effect.get(row.quantity, 0.0), row.low, row.high, row.p, row.estimate,
          row.left_out, row.runs)
         for row in frame.itertuples(index=False)
     ]  # fmt: skip
 
 
-def end_to_end(studies: int, seed: int, jobs: int, save: Path | None = None) -> None:
+def end_to_end(
+    studies: int, seed: int, jobs: int, save: Path | None = None, design: str = "realistic"
+) -> None:
     """Print the end-to-end variant's figures (see the module's docstring). Each study has its own
     seed (spawned from ``seed``): the figures do not depend on ``jobs``. ``save``: every study's
     fitted runs (:func:`fitted_study`, a ``study`` column added) written there as Parquet, so that
@@ -254,9 +277,11 @@ def end_to_end(studies: int, seed: int, jobs: int, save: Path | None = None) -> 
     config = dataclasses.replace(config, timing=timing)
     experiment = hcid.Experiment(hcid.Plant.integrator(1.5), "input")
     seeds = np.random.SeedSequence(seed).spawn(studies)
+    chosen = E2E_DESIGNS[design]
+    print(f"end-to-end design {design!r}: {chosen}")
     start = time.perf_counter()
     done = Parallel(n_jobs=jobs)(
-        delayed(_e2e_study)(s, config, remnant_gain(config), experiment) for s in seeds
+        delayed(_e2e_study)(s, config, remnant_gain(config), experiment, chosen) for s in seeds
     )
     elapsed = time.perf_counter() - start
     if save is not None:
@@ -266,11 +291,15 @@ def end_to_end(studies: int, seed: int, jobs: int, save: Path | None = None) -> 
     _e2e_summary([rows for rows, _ in done], studies, jobs, elapsed)
 
 
-def from_fitted(path: Path) -> None:
-    """The end-to-end figures again from fitted runs saved by ``--save`` (the effects only)."""
+def from_fitted(path: Path, design: str = "realistic") -> None:
+    """The end-to-end figures again from fitted runs saved by ``--save`` (the effects only;
+    ``design``: the one they were made with, for the true effects)."""
     fitted = pd.read_parquet(path)
     start = time.perf_counter()
-    done = [_effect_rows(table.drop(columns="study")) for _, table in fitted.groupby("study", sort=True)]
+    chosen = E2E_DESIGNS[design]
+    done = [
+        _effect_rows(table.drop(columns="study"), chosen) for _, table in fitted.groupby("study", sort=True)
+    ]
     _e2e_summary(done, fitted.study.nunique(), 1, time.perf_counter() - start)
 
 
@@ -322,9 +351,12 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=1, help="processes for --end-to-end (same figures)")
     parser.add_argument("--save", type=Path, help="--end-to-end: the fitted runs to this Parquet file")
     parser.add_argument("--from-fitted", type=Path, help="the end-to-end figures from a --save file only")
+    parser.add_argument(
+        "--design", choices=tuple(E2E_DESIGNS), default="realistic", help="the end-to-end design"
+    )
     args = parser.parse_args()
     if args.from_fitted is not None:
-        from_fitted(args.from_fitted)
+        from_fitted(args.from_fitted, args.design)
         return
     studies = 4 if args.smoke else args.studies
     if studies < 1:
@@ -351,7 +383,7 @@ def main() -> None:
         f"CPU {cpu:.1f} s ({1000 * per_study:.0f} ms per simulated study, 6 quantities), wall {elapsed:.1f} s"
     )
     if args.end_to_end:
-        end_to_end(args.end_to_end, args.seed, args.jobs, args.save)
+        end_to_end(args.end_to_end, args.seed, args.jobs, args.save, args.design)
 
 
 if __name__ == "__main__":

@@ -57,6 +57,20 @@ def _margins_ok(p: dict) -> bool:
     return m.n_crossovers == 1 and m.phase_margin >= 30.0
 
 
+def _gain_margin(p: dict) -> float:
+    """The loop's gain margin with the example's plant and neuromuscular system: 1 / |L| at the
+    first frequency where its phase (continuous from 0.1 rad/s) reaches -180 deg (inf where it
+    does not below 100 rad/s). The neuromuscular peak near 10 rad/s sets it."""
+    from hcid.hcfit import hc_response
+
+    yc = _example_plant()
+    w = np.logspace(-1, 2, 3000)
+    loop = hc_response({**p, **NMS}, yc, w)[1] * np.asarray(yc(1j * w)).ravel()
+    phase = np.unwrap(np.angle(loop))
+    below = np.flatnonzero((phase[:-1] > -np.pi) & (phase[1:] <= -np.pi))
+    return float(1.0 / abs(loop[below[0]])) if below.size else float("inf")
+
+
 @functools.cache
 def _example_plant():
     """The lab example's plant (1.5/s), as python-control's system (read once)."""
