@@ -772,3 +772,19 @@ def test_the_issues_group_gets_twins_their_config_takes(fo_study):
     twins = _twins_config(config, record, model.values, remnants[("4",)])
     assert {m.tau_pe for m in twins.models} == {0.01}
     assert model.source == A4_SOURCE + ")"
+
+
+def test_few_twins_recomputes_every_stored_p(analysed):
+    # Source: analysis.parquet's p_value, made by hcid analyse from evidence_twins.parquet's FB
+    # twins in the order drawn: benchmarks/few_twins.py must get it back from the two tables.
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("few_twins", LAB.parents[1] / "benchmarks" / "few_twins.py")
+    few = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(few)
+    _, out = analysed
+    rows = few.runs_of(out[1][0], (5, 99))
+    assert len(rows) == 16
+    for r in rows:
+        assert r["p_all"] == r["p_stored"], r
+        assert r["p99"] == r["p_all"]  # the first 99 of at most 12: all of them
