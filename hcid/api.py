@@ -35,7 +35,6 @@ from hcid.config.parse import data_identify_defaults, default_data
 from hcid.config.stages import record_timing
 from hcid.errors import ConfigError, DataError, IdentificationError, checked_rate
 from hcid.hcfit.selected import SelectedModel, fit_selected
-from hcid.io import results
 from hcid.io.measured import TIME_JITTER, check_signal, read_runs, time_rate
 from hcid.loop.hcmodel import transfer_function
 from hcid.selection import criteria
@@ -335,8 +334,7 @@ def identify(
             f"got {type(settings).__name__}"
         )
     found = methods.identify(record.signals, settings, method, rate=record.rate, threads=threads)
-    parts = results.frontier_part("record", record.run, found, methods.get(method).choice_stages)
-    frontier = Frontier.from_table(parts["frontier"])
+    frontier = Frontier.from_grid_fit(found.fit, method)
     return IdentificationResult(method, record.rate, settings, frontier, found.choices, found.seconds)
 
 

@@ -15,13 +15,27 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
+from hcid.arx.gridfit import GridFit
 from hcid.selection.over_w import SelectionPath, breakpoints, select_at
-from hcid.tables import FRONTIER, ORDER_COLUMNS
+from hcid.tables import FRONTIER, FRONTIER_NAMES, ORDER_COLUMNS
 
 __all__ = ["Frontier"]
 
 _NUMBERS = (*ORDER_COLUMNS, "d", "v", "vaf_estimation", "vaf_validation", "n_unstable")
 _COEFFICIENTS = ("a", "b_ft", "b_e")
+#: The engine's names of :data:`_NUMBERS` (:class:`hcid.arx.gridfit.GridFit`: input 1 ft, input 2 e).
+_ENGINE_NUMBERS = (
+    "na",
+    "nb1",
+    "nb2",
+    "nk1",
+    "nk2",
+    "d",
+    "v",
+    "vaf_estimation",
+    "vaf_validation",
+    "n_unstable",
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,6 +92,19 @@ class Frontier:
             values = lists.values.to_numpy()[offsets[0] : offsets[-1]].copy()
             coefficients[c] = (values, offsets - offsets[0])
         return cls(method=methods[0], **numbers, coefficients=coefficients)
+
+    @classmethod
+    def from_grid_fit(cls, fit: GridFit, method: str) -> Frontier:
+        """The frontier :func:`hcid.arx.engine.fit_grid` returned (input 1 is ft, input 2 e), as
+        :meth:`from_table` reads it from ``frontier.parquet``."""
+        numbers = {FRONTIER_NAMES.get(c, c): np.asarray(getattr(fit, c)) for c in _ENGINE_NUMBERS}
+        coefficients = {}
+        for engine_name in ("a", "b1", "b2"):
+            rows = getattr(fit, engine_name)
+            offsets = np.concatenate(([0], np.cumsum([r.size for r in rows]))).astype(np.int64)
+            values = np.concatenate(rows).astype(np.float64) if rows else np.empty(0)
+            coefficients[FRONTIER_NAMES.get(engine_name, engine_name)] = (values, offsets)
+        return cls(method=method, **numbers, coefficients=coefficients)
 
     @property
     def n_rows(self) -> int:
