@@ -408,3 +408,22 @@ def test_runs_left_out_by_subject_leave_the_within_subject_effect():
     within = np.linalg.lstsq(x * root[:, None], y[keep] * root, rcond=None)[0][0]
     assert mixed.estimate == pytest.approx(within, rel=1e-8)
     assert mixed.left_out == int(lost.sum()) and mixed.subjects == n
+
+
+def test_levels_that_lose_different_shares_of_runs_say_so():
+    # Source: counted by hand. Six subjects with one run per level; level B loses 2 of its 6 runs
+    # as undetermined (33%), A none: the note names both shares. With one lost in each (17% and
+    # 17%) it says nothing of it.
+    from hcid.analysis.effects import quantity_effects
+
+    subject = [s for s in "abcdef" for _ in range(2)]
+    level = ["A", "B"] * 6
+    value = [1.0, 1.5, 1.1, 1.4, 0.9, 1.6, 1.2, 1.3, 1.0, 1.7, 1.1, 1.5]
+    lost = [False, True, False, True] + [False] * 8
+    effects = quantity_effects("Kpe", value, subject, level, undetermined=lost)
+    said = "left out unevenly (A 0%, B 33% of the runs undetermined): the effect may be biased"
+    assert all(said in e.note for e in effects), [e.note for e in effects]
+    even = [True, False, False, True] + [False] * 8
+    assert not any(
+        "unevenly" in e.note for e in quantity_effects("Kpe", value, subject, level, undetermined=even)
+    )

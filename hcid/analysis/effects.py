@@ -71,6 +71,10 @@ KRUSKAL = "Kruskal-Wallis"
 CIRCULAR = "circular (paired)"
 #: Two-sided level of every interval (95%).
 ALPHA = 0.05
+#: Undetermined shares of the compared levels' runs that differ by this much are named in the
+#: effect's note (:meth:`_Data.uneven`): end to end, 5% against 13% of tau_pt's runs (no effect)
+#: gave a false effect at 7.5% of studies, 17% against 36% of TL's cut its effect by a fifth.
+UNEVEN = 0.05
 #: statsmodels' warnings that do not mean a failed fit, and how an effect's note says them.
 WARNINGS = {"on the boundary": "subjects' variance near 0", "not positive definite": "Hessian not definite"}
 
@@ -308,8 +312,25 @@ class _Data:
         omnibus = f"any of {', '.join(map(str, levels))}"
         label = f"{level} - {self.reference}" if level is not None else omnibus
         left = int(np.isin(self.dropped, levels).sum())
+        compared = [self.reference, level] if level is not None else levels
+        note = "; ".join(x for x in (note, self.uneven(compared)) if x)
         figures = (est, low, high, p, math.nan, test, subjects, runs, left, self.unit, note)
         return Effect(self.quantity, f"{self.factor}: {label}", *figures)
+
+    def uneven(self, levels: list) -> str:
+        """Where the compared levels lose shares of their runs as undetermined that differ by
+        :data:`UNEVEN` or more, each level's share, in words: the values left out are seldom like
+        the rest (a parameter is undetermined near its bound), so the effect may be biased
+        (measured end to end: docs/methodology.md, "Effects across people"); else ""."""
+        shares = {}
+        for lv in levels:
+            dropped = int(np.sum(self.dropped == lv))
+            total = dropped + int(np.sum(self.level == lv))
+            shares[lv] = dropped / total if total else 0.0
+        if max(shares.values()) - min(shares.values()) < UNEVEN:
+            return ""
+        said = ", ".join(f"{lv} {100 * share:.0f}%" for lv, share in shares.items())
+        return f"left out unevenly ({said} of the runs undetermined): the effect may be biased"
 
 
 def _checked(value, subject, level, se, undetermined, factors):
