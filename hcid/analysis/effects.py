@@ -313,7 +313,8 @@ class _Data:
         label = f"{level} - {self.reference}" if level is not None else omnibus
         left = int(np.isin(self.dropped, levels).sum())
         compared = [self.reference, level] if level is not None else levels
-        note = "; ".join(x for x in (note, self.uneven(compared)) if x)
+        uneven = self.uneven(compared) if math.isfinite(est) or math.isfinite(p) else ""
+        note = "; ".join(x for x in (note, uneven) if x)
         figures = (est, low, high, p, math.nan, test, subjects, runs, left, self.unit, note)
         return Effect(self.quantity, f"{self.factor}: {label}", *figures)
 
