@@ -5,6 +5,7 @@ the group's verdict, and the group's parameters from the runs that determine the
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -191,11 +192,11 @@ class Evidence:
     #: (group, forcing set) -> its draws of more FB twins, in order.
     more: Mapping[tuple[str, int], tuple[_Draw, ...]] = field(default_factory=dict)
 
-    @property
+    @functools.cached_property
     def lo(self) -> float:
         return float(min(self.config.selection.w_grid))
 
-    @property
+    @functools.cached_property
     def hi(self) -> float:
         return float(max(self.config.selection.w_grid))
 
@@ -332,21 +333,15 @@ class Evidence:
         method -> twins) that W* decides (``deciding``: method -> statistic) and under which some
         run (``runs``: (W* by method, line statistics)) has a p-value more twins could change;
         and whether a line statistic decides somewhere and has such a run."""
-        methods_open = [
-            m
-            for m, twin in twin_of.items()
-            if deciding[m] == "W*"
-            and any(
-                not sequential_settled(
-                    w[m],
-                    self.fb_thresholds(group, forcing_set, twin, m),
-                    EXCEEDANCES,
-                    self.max_fb,
-                    self.tail_below,
-                )
-                for w, _ in runs
-            )
-        ]
+        methods_open = []
+        for m, twin in twin_of.items():
+            if deciding[m] != "W*":
+                continue
+            fb = self.fb_thresholds(group, forcing_set, twin, m)  # once for all the set's runs
+            if any(
+                not sequential_settled(w[m], fb, EXCEEDANCES, self.max_fb, self.tail_below) for w, _ in runs
+            ):
+                methods_open.append(m)
         line_deciding = [name for name in LINE_STATISTICS if name in deciding.values()]
         fb = self.fb_lines(group, forcing_set, next(iter(twin_of.values()))) if line_deciding else None
         lines_open = fb is not None and any(
@@ -423,8 +418,7 @@ class Evidence:
                 if run not in members or judged in done:
                     continue
                 done.add(judged)
-                forcing_set = e["forcing_set"]
-                twin = used[key][method].sets[forcing_set - 1]  # the run's own (Evidence.run)
+                twin, forcing_set = used[key][method].of_run(run), e["forcing_set"]
                 lines = self.lines(name, twin)
                 fb_w, fb_lines = self.used(name, forcing_set, twin, method, e["decided_by"])
                 drawn = {

@@ -220,12 +220,13 @@ def _part_kinds() -> dict[str, dict[str, tables.Schema]]:
     }
 
 
+def _choice_stages() -> list:
+    """Every registered method's choosing stages (:class:`hcid.methods.StageSpec`)."""
+    return [s for m in methods.METHODS.values() for s in m.choice_stages]
+
+
 def _choice_schemas() -> dict[str, tables.Schema]:
-    return {
-        s.name: tables.stage_choice(s.name, s.inputs)
-        for m in methods.METHODS.values()
-        for s in m.choice_stages
-    }
+    return {s.name: tables.stage_choice(s.name, s.inputs) for s in _choice_stages()}
 
 
 def _existing(run_dir: Path) -> dict[tuple[str, int, str], dict[str, pa.Table]]:
@@ -266,10 +267,10 @@ def _load_records(
     path = run_dir / tables.SIMULATIONS.file
     if made is None:
         table = results.read(tables.SIMULATIONS, run_dir, hint="run `hcid simulate` first")
-        made = results.records(table, path)
+        recs = results.records(table, path)
     else:
         results.check_records(made, path)
-    recs = made
+        recs = made
     n = config.timing.record_samples
     for m in config.models:
         for seed in config.seeds:
@@ -310,13 +311,12 @@ def _write_identification(config: Config, run_dir: Path, done: dict) -> tuple[di
     results.write(tables.FRONTIER, frontier, run_dir)
     results.write(tables.IDENTIFY_LOG, log, run_dir)
     choices = {}
-    stages = {s.name: s for m in methods.METHODS.values() for s in m.choice_stages}
-    for name, schema in _choice_schemas().items():
-        parts = [done[k][name] for k in order if name in done[k]]
+    for stage in _choice_stages():
+        parts = [done[k][stage.name] for k in order if stage.name in done[k]]
         if parts:
             table = results.concat(parts)
-            results.write(schema, table, run_dir)
-            choices[name] = results.stage_choices_of(table, stages[name])
+            results.write(tables.stage_choice(stage.name, stage.inputs), table, run_dir)
+            choices[stage.name] = results.stage_choices_of(table, stage)
     handoff = [done[k]["handoff"] for k in order if "handoff" in done[k]]
     if handoff:
         results.write(tables.HANDOFF, results.concat(handoff), run_dir)

@@ -24,18 +24,7 @@ __all__ = ["Frontier"]
 _NUMBERS = (*ORDER_COLUMNS, "d", "v", "vaf_estimation", "vaf_validation", "n_unstable")
 _COEFFICIENTS = ("a", "b_ft", "b_e")
 #: The engine's names of :data:`_NUMBERS` (:class:`hcid.arx.gridfit.GridFit`: input 1 ft, input 2 e).
-_ENGINE_NUMBERS = (
-    "na",
-    "nb1",
-    "nb2",
-    "nk1",
-    "nk2",
-    "d",
-    "v",
-    "vaf_estimation",
-    "vaf_validation",
-    "n_unstable",
-)
+_ENGINE_NAMES = {table: engine for engine, table in FRONTIER_NAMES.items()}
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,13 +86,13 @@ class Frontier:
     def from_grid_fit(cls, fit: GridFit, method: str) -> Frontier:
         """The frontier :func:`hcid.arx.engine.fit_grid` returned (input 1 is ft, input 2 e), as
         :meth:`from_table` reads it from ``frontier.parquet``."""
-        numbers = {FRONTIER_NAMES.get(c, c): np.asarray(getattr(fit, c)) for c in _ENGINE_NUMBERS}
+        numbers = {c: np.asarray(getattr(fit, _ENGINE_NAMES.get(c, c))) for c in _NUMBERS}
         coefficients = {}
-        for engine_name in ("a", "b1", "b2"):
-            rows = getattr(fit, engine_name)
+        for c in _COEFFICIENTS:
+            rows = getattr(fit, _ENGINE_NAMES.get(c, c))
             offsets = np.concatenate(([0], np.cumsum([r.size for r in rows]))).astype(np.int64)
             values = np.concatenate(rows).astype(np.float64) if rows else np.empty(0)
-            coefficients[FRONTIER_NAMES.get(engine_name, engine_name)] = (values, offsets)
+            coefficients[c] = (values, offsets)
         return cls(method=method, **numbers, coefficients=coefficients)
 
     @property
