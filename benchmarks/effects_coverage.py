@@ -24,7 +24,8 @@ runs it: plant 1.5/s, disturbance at its input, 300 Hz, remnant as the config sa
 conditions with feedforward), each subject's parameters drawn (:data:`E2E_RANGES`) and condition B
 shifting Kpe, TL and Kpt by the design's effect (``--design``, :data:`E2E_DESIGNS`); each run
 identified at 20 Hz over one 40 s period (``hcid.identify``, direct, W at BIC) and fitted
-(``hcid.fit_hc``): its estimate, se and status (undetermined unless ``determined``) go to
+(``hcid.fit_hc``): its estimate, se and status (undetermined as SPEC 11 and hcid's group
+summaries say, ``hcid.hcfit.determined.is_undetermined``: a flagged value is kept) go to
 ``study_effects``. Printed: per quantity and test the
 share of studies whose interval covers the true effect; for tau_pe, TI and tau_pt (no effect)
 the share with p <= 0.05 (the level); the runs left out, and the cost per study. ``--jobs``
@@ -56,6 +57,7 @@ import hcid
 from hcid.analysis.effects import CIRCULAR, effects_frame, study_effects, wrap
 from hcid.assembly.resolve import load_config
 from hcid.config import HCModel
+from hcid.hcfit.determined import is_undetermined
 from hcid.loop.simulate import remnant_gain, simulate_realization
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -216,7 +218,7 @@ def _subject(rng: np.random.Generator, design: Design) -> dict[str, float]:
 
 def fitted_study(rng: np.random.Generator, config, kn: float, experiment, design: Design) -> pd.DataFrame:
     """One study simulated run by run and fitted with hcid: ``quantity, subject, condition, value,
-    se, undetermined`` for every parameter of :data:`E2E_RANGES`."""
+    se, status, undetermined`` for every parameter of :data:`E2E_RANGES`."""
     rows = []
     for subject in range(SUBJECTS):
         truth = _subject(rng, design)
@@ -235,8 +237,11 @@ def fitted_study(rng: np.random.Generator, config, kn: float, experiment, design
                 for q in E2E_RANGES:  # the ft path is not fitted where the selected model has none
                     i = fit.names.index(q) if q in fit.names else None
                     value, se = (math.nan, math.nan) if i is None else (fit.estimates[i], fit.se[i])
-                    rows.append((q, subject, condition, value, se, fit.status.get(q) != "determined"))
-    columns = ["quantity", "subject", "condition", "value", "se", "undetermined"]
+                    status = fit.status.get(q, "not fitted")
+                    rows.append(
+                        (q, subject, condition, value, se, status, i is None or is_undetermined(status))
+                    )
+    columns = ["quantity", "subject", "condition", "value", "se", "status", "undetermined"]
     table = pd.DataFrame(rows, columns=columns)
     bad_se = ~table.undetermined & ~(np.isfinite(table.se) & (table.se > 0))
     table.loc[bad_se, "undetermined"] = True  # no usable se: left out as undetermined

@@ -13,6 +13,7 @@ from scipy import stats
 from statsmodels.regression.mixed_linear_model import MixedLM, MixedLMParams
 from statsmodels.stats.multitest import multipletests
 
+from hcid import tables
 from hcid.analysis import effects
 from hcid.analysis.effects import (
     CIRCULAR,
@@ -427,3 +428,40 @@ def test_levels_that_lose_different_shares_of_runs_say_so():
     assert not any(
         "unevenly" in e.note for e in quantity_effects("Kpe", value, subject, level, undetermined=even)
     )
+
+
+def test_flagged_values_are_compared_and_undetermined_ones_left_out():
+    # Source: SPEC 11 and hcid.hcfit.determined: "not told from 0" and "outside its plausible
+    # range" flag a determined value (kept in group summaries); a correlated pair, a bound, an
+    # infinite se make it undetermined. End to end, taking the flag for undetermined left out the
+    # tau_pt runs fitted near 0, more of them in the condition with the weaker feedforward: a false
+    # effect (docs/methodology.md, "Effects across people").
+    from hcid.pipeline.effects import long_table
+
+    statuses = {
+        "determined": False,
+        "not told from 0 (se above |value|)": False,
+        "outside its plausible range": False,
+        "correlated with TI (r = +0.97)": True,
+        "at a search bound": True,
+        "not seen by the data (infinite se)": True,
+        "in a failed fit (validation VAF below 0%)": True,
+        "fixed at a literature value": True,
+    }
+    rows = []
+    for k, status in enumerate(statuses):
+        row = {
+            "subject": f"s{k}",
+            "plant": "fo",
+            "crossover": 1.0,
+            "phase_margin": 40.0,
+            "remnant_share_data": 0.3,
+        }
+        for p in tables.HC_PARAMETER_NAMES:
+            row.update({p: 0.05, f"{p}_se": 0.1, f"{p}_status": status})
+        rows.append(row)
+    table = long_table(rows, "plant", "subject")
+    got = table[table.quantity == "tau_pt"].set_index("subject")["undetermined"]
+    assert got.tolist() == list(statuses.values())
+    nan_row = {**rows[0], "tau_pt": math.nan}
+    assert long_table([nan_row], "plant", "subject").query("quantity == 'tau_pt'").undetermined.item()

@@ -477,20 +477,20 @@ def _feedback_line(feedback) -> str:
     import numpy as np
 
     from hcid.config.fit_settings import FEEDBACK_PARAMETERS
-    from hcid.hcfit.determined import DETERMINED
+    from hcid.hcfit.determined import is_undetermined
 
     rows = feedback.to_pylist()
     first = {r["run_id"]: r for r in rows}  # the fit is the run's, the same for every method
     n = len(first)
     parts = []
     for p in FEEDBACK_PARAMETERS:
-        kept = [r[p] for r in first.values() if r[f"{p}_status"] == DETERMINED]
+        kept = [r[p] for r in first.values() if not is_undetermined(r[f"{p}_status"])]
         if kept:
             unit = "" if PARAMETER_UNITS[p] == "-" else f" {PARAMETER_UNITS[p]}"
             sd = f", sd {np.std(kept, ddof=1):.2g}" if len(kept) > 1 else ""
             parts.append(f"{p} {np.median(kept):.3g}{unit} ({len(kept)} of {n} runs{sd})")
     feedback_known = [
-        r for r in first.values() if r["Kpe_status"] == DETERMINED and math.isfinite(r["crossover"])
+        r for r in first.values() if not is_undetermined(r["Kpe_status"]) and math.isfinite(r["crossover"])
     ]
     loop = [r["crossover"] for r in feedback_known]
     arx = []

@@ -19,7 +19,7 @@ from hcid import tables
 from hcid.analysis.fourier import fc_estimate
 from hcid.config import Plant
 from hcid.errors import ConfigError, DataError
-from hcid.hcfit.determined import DETERMINED
+from hcid.hcfit.determined import is_undetermined
 from hcid.io import folders, results
 
 __all__ = [
@@ -63,7 +63,9 @@ def compare_levels(rows: Sequence[dict], compare: str, person: str | None) -> li
 
 def long_table(rows: Sequence[dict], compare: str, person: str):
     """One row per run and quantity of one method's runs: the parameter with its standard error
-    (undetermined where its status is not ``determined``), and each loop figure (no se): a pandas
+    (undetermined where its status says so, :func:`hcid.hcfit.determined.is_undetermined`; a
+    flagged value, outside its plausible range or not told from 0, is determined and kept, as in
+    the group summaries), and each loop figure (no se): a pandas
     DataFrame (pandas and statsmodels are imported here, not with ``hcid analyse``)."""
     import pandas as pd
 
@@ -71,7 +73,7 @@ def long_table(rows: Sequence[dict], compare: str, person: str):
     for r in rows:
         base = {"subject": str(r[person]), compare: str(r[compare])}
         for p in tables.HC_PARAMETER_NAMES:
-            undetermined = r[f"{p}_status"] != DETERMINED or not math.isfinite(r[p])
+            undetermined = is_undetermined(r[f"{p}_status"]) or not math.isfinite(r[p])
             out.append(
                 {**base, "quantity": p, "value": r[p], "se": r[f"{p}_se"], "undetermined": undetermined}
             )

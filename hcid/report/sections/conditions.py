@@ -12,7 +12,7 @@ from matplotlib.figure import Figure
 
 from hcid.analysis.conditions import ANSWERS, SOURCES, Kind
 from hcid.config.fit_settings import FEEDBACK_PARAMETERS
-from hcid.hcfit.determined import DETERMINED
+from hcid.hcfit.determined import is_undetermined
 from hcid.io.datasets import skipped_by_reason
 from hcid.pipeline.sessions import ALL_PEOPLE, BANDS
 from hcid.report.document import Doc
@@ -153,10 +153,12 @@ def _feedback(run) -> tuple[list[str], list[list[str]]]:
         first = list({r["run_id"]: r for r in mine}.values())
         cells = [person, str(len(first))]
         for p in FEEDBACK_PARAMETERS:
-            kept = [r[p] for r in first if r[f"{p}_status"] == DETERMINED]
+            kept = [r[p] for r in first if not is_undetermined(r[f"{p}_status"])]
             cells.append(f"{np.median(kept):.3g} ({len(kept)})" if kept else "-")
         loop = [
-            r["crossover"] for r in first if r["Kpe_status"] == DETERMINED and math.isfinite(r["crossover"])
+            r["crossover"]
+            for r in first
+            if not is_undetermined(r["Kpe_status"]) and math.isfinite(r["crossover"])
         ]
         cells.append(f"{np.median(loop):.3g}" if loop else "-")
         for method in methods:
