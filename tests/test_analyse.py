@@ -97,6 +97,15 @@ def test_every_run_and_group_is_answered_with_its_factors(analysed):
     assert len(checks) == 4 and sum("chi-square" in line for line in checks) == 2
     assert sum(line.startswith("    data check: the group's model as above; ") for line in checks) == 2
     assert (run / "report" / "report.html").is_file()
+    # Every group and method names what each evidence statistic alone finds, in the answer and the
+    # report's table (2 groups x 2 methods x 3 statistics), the deciding one marked once per group.
+    said = [line for line in output.splitlines() if line.startswith("    per statistic, runs at p <= ")]
+    assert len(said) == 4 and all(line.count("; decides)") == 1 for line in said), said
+    report = (run / "report" / "report.md").read_text()
+    assert (
+        sum(row.startswith("| condition=") and "| likelihood ratio" in row for row in report.splitlines())
+        == 4
+    )
     # The loop line gives the remnant's share from the data: the median of its runs' column.
     loops = [line for line in output.splitlines() if line.startswith("    loop: ")]
     for g, line in zip(groups, loops, strict=True):
@@ -580,6 +589,36 @@ def test_a_verdict_carried_by_one_subject_is_said_with_each_subjects_count():
     assert GroupSummary(group, runs, (0.3, 0.3), [], 1.5, 55.0).one_subject is None
     one = GroupSummary({**group, "verdict": "UNCERTAIN"}, runs[2:4], (0.3, 0.3), [], 1.5, 55.0)
     assert one.by_subject() == [] and one.one_subject is None  # runs of one subject: no split
+
+
+def test_each_statistics_verdict_is_given_and_a_disagreement_with_power_said():
+    # The sessions' gy fo group, direct method (docs/measured-studies.md): W* decides (power 0.95)
+    # with 2 of 10 runs at p <= 0.05, binomial p 0.086: NO FEEDFORWARD SHOWN; the likelihood ratio
+    # (power 0.90) has all 10 at p <= 0.05. Source for the binomial p's: P(X >= 2 | Bin(10, 0.05))
+    # = 1 - 0.95**10 - 10 * 0.05 * 0.95**9 = 0.0861; P(X >= 10) = 0.05**10. The Fourier size has
+    # no p in one run: left out.
+    from hcid.cli.answers import _statistics_line
+    from hcid.pipeline.summary import GroupSummary
+
+    runs = [
+        {"p_value": p, "power": 0.95, "p_w_star": p, "power_w_star": 0.95, "p_lr": 0.01, "power_lr": 0.9,
+         "p_fourier": 0.5 if k else float("nan"), "power_fourier": 0.1}
+        for k, p in enumerate([0.01, 0.04] + [0.5] * 8)
+    ]  # fmt: skip
+    group = {"alpha": 0.05, "verdict": "NO FEEDFORWARD SHOWN", "decided_by": "W*"}
+    summary = GroupSummary(group, runs, (0.95, 0.95), [], 1.5, 55.0)
+    got = {s.name: (s.verdict, s.n_evidence, s.deciding) for s in summary.statistics}
+    assert got == {"W*": ("NO FEEDFORWARD SHOWN", 2, True), "likelihood ratio": ("FEEDFORWARD", 10, False)}
+    assert summary.statistics[0].binomial_p == pytest.approx(1 - 0.95**10 - 10 * 0.05 * 0.95**9)
+    assert [s.name for s in summary.disagreeing] == ["likelihood ratio"]
+    assert _statistics_line(summary) == (
+        "    per statistic, runs at p <= 0.05 (median power): W* 2 of 10 (0.95; decides), "
+        "likelihood ratio 10 of 10 (0.90); THE STATISTICS DISAGREE: the likelihood ratio alone, with "
+        "power 0.90, says FEEDFORWARD (10 of 10 runs; binomial p = 9.8e-14)"
+    )
+    # Without the power to tell, another verdict is not a disagreement.
+    weak = [{**r, "power_lr": 0.5} for r in runs]
+    assert GroupSummary(group, weak, (0.95, 0.95), [], 1.5, 55.0).disagreeing == []
 
 
 # --------------------------------------------------------------------------- twins of any group's fit

@@ -95,6 +95,8 @@ def print_analysis(result) -> None:
         typer.echo(_verdict_line(summary))
         if summary.by_subject():
             typer.echo(_subjects_line(summary))
+        if len(summary.statistics) > 1:
+            typer.echo(_statistics_line(summary))
         typer.echo(_calibrated_line(summary))
         typer.echo(_analysis_parameters(summary.parameters, len(summary.runs)))
         remnant = summary.remnant_share
@@ -149,6 +151,24 @@ def _subjects_line(summary) -> str:
     one = summary.one_subject
     if one is not None:
         text += f"; every run at p <= {alpha:g} is {one}'s: the verdict rests on one person"
+    return text
+
+
+def _statistics_line(summary) -> str:
+    """Each evidence statistic's runs at p <= alpha and median power, the deciding one marked; where
+    another with the power to tell gives another verdict, said in capitals (issue 47: on the
+    recordings the statistics can disagree, each with its power)."""
+    alpha = summary.group["alpha"]
+    parts = [
+        f"{s.name} {s.n_evidence} of {s.n_runs} ({s.median_power:.2f}{'; decides' if s.deciding else ''})"
+        for s in summary.statistics
+    ]
+    text = f"    per statistic, runs at p <= {alpha:g} (median power): " + ", ".join(parts)
+    for s in summary.disagreeing:
+        text += (
+            f"; THE STATISTICS DISAGREE: the {s.name} alone, with power {s.median_power:.2f}, says "
+            f"{s.verdict} ({s.n_evidence} of {s.n_runs} runs; binomial p = {s.binomial_p:.2g})"
+        )
     return text
 
 

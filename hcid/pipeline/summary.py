@@ -13,10 +13,34 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from hcid.pipeline.evidence import ParameterSummary, group_verdict, summarise_parameters
+from hcid.pipeline.evidence import (
+    MIN_POWER,
+    STATISTICS,
+    ParameterSummary,
+    group_verdict,
+    summarise_parameters,
+)
 from hcid.selection.calibration import WRule, binomial_summary
 
-__all__ = ["GroupSummary", "ParameterFits", "rate_interval", "summarise_fits", "summarise_groups"]
+__all__ = [
+    "GroupSummary", "ParameterFits", "StatisticVerdict", "rate_interval", "summarise_fits",
+    "summarise_groups",
+]  # fmt: skip
+
+
+@dataclass(frozen=True)
+class StatisticVerdict:
+    """What one evidence statistic alone says of a group and method (:func:`group_verdict` over its
+    own p-values and powers): ``verdict``, ``n_evidence`` of ``n_runs`` at p <= alpha, the
+    ``binomial_p``, the ``median_power``; ``deciding`` for the statistic the group's verdict reads."""
+
+    name: str
+    verdict: str
+    n_evidence: int
+    n_runs: int
+    binomial_p: float
+    median_power: float
+    deciding: bool
 
 
 @dataclass(frozen=True)
@@ -56,6 +80,32 @@ class GroupSummary:
         with_evidence = [s for s, k, _, _ in self.by_subject() if k]
         one = self.group["verdict"] == "FEEDFORWARD" and len(with_evidence) == 1
         return with_evidence[0] if one else None
+
+    @functools.cached_property
+    def statistics(self) -> list[StatisticVerdict]:
+        """Each evidence statistic's own verdict (:data:`hcid.pipeline.evidence.STATISTICS`, those
+        with a p-value in every run), the deciding one marked: its verdict is the group's."""
+        out = []
+        for name, (p, power) in STATISTICS.items():
+            rows = [{"p_value": r[p], "power": r[power]} for r in self.runs]
+            if not rows or any(x["p_value"] is None or not math.isfinite(x["p_value"]) for x in rows):
+                continue
+            v = group_verdict(rows, self.group["alpha"])
+            out.append(StatisticVerdict(
+                name, v["verdict"], v["n_evidence"], len(rows), v["binomial_p"], v["median_power"],
+                name == self.group["decided_by"],
+            ))  # fmt: skip
+        return out
+
+    @property
+    def disagreeing(self) -> list[StatisticVerdict]:
+        """The statistics other than the deciding one whose twins show the power to tell (median
+        power at least :data:`hcid.pipeline.evidence.MIN_POWER`) and whose verdict differs from
+        the group's: where the runs' evidence depends on the statistic read."""
+        return [
+            s for s in self.statistics
+            if not s.deciding and s.median_power >= MIN_POWER and s.verdict != self.group["verdict"]
+        ]  # fmt: skip
 
     @property
     def remnant_share(self) -> float:

@@ -11,12 +11,12 @@ import pyarrow as pa
 
 from hcid import tables
 from hcid.hcfit.consistency import CONTRADICTED, format_p
-from hcid.hcfit.determined import is_flagged, is_on_bound, is_undetermined
 from hcid.io import results
 from hcid.pipeline.evidence import FEEDFORWARD
 from hcid.pipeline.summary import has_safe_interval, rate_interval, summarise_groups
 from hcid.report import figures, figures_hcfit
 from hcid.report.document import Doc
+from hcid.report.sections.study_runs import factor_columns, num, run_table, split_runs
 from hcid.tables import HC_PARAMETER_NAMES
 
 TITLE = "The study's answer"
@@ -39,19 +39,13 @@ class StudyData:
     without_paths: list[str] = field(default_factory=list)
     subjects: list[list[str]] = field(default_factory=list)
     one_person: list[str] = field(default_factory=list)
-
-
-def _num(x, digits: int = 3) -> str:
-    return "-" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
+    statistics: list[list[str]] = field(default_factory=list)
+    disagree: list[str] = field(default_factory=list)
 
 
 def _degrees(x: float) -> str:
     """An angle in whole degrees, as the console prints it (114, not 1.1e+02)."""
     return "-" if x is None or not math.isfinite(x) else f"{x:.0f}"
-
-
-def _percent(share: float) -> str:
-    return "-" if not math.isfinite(share) else f"{100 * share:.0f}"
 
 
 def _slug(folder: str) -> str:
@@ -85,18 +79,18 @@ def _model_curves(run, twin: dict, lines: list[float]) -> dict:
 def _answer(summary) -> list[str]:
     """A group and method's answer row: verdict, evidence, W and the twins' rates."""
     g = summary.group
-    safe = f"[{_num(g['safe_low'])}, {_num(g['safe_high'])})" if has_safe_interval(g) else "none"
+    safe = f"[{num(g['safe_low'])}, {num(g['safe_high'])})" if has_safe_interval(g) else "none"
     return [
         g["group"],
         g["method"],
         g["verdict"],
         f"{g['n_evidence']} of {g['n_runs']}",
-        _num(g["binomial_p"], 2),
-        _num(g["median_power"], 2),
+        num(g["binomial_p"], 2),
+        num(g["median_power"], 2),
         f"{g['n_feedforward_at_w']} of {g['n_runs']}",
-        _num(g["w"]),
+        num(g["w"]),
         g["w_rule"],
-        "own" if g["ff_twin"] == "own" else f"study's FF (Kpt {_num(g['twin_Kpt'], 2)})",
+        "own" if g["ff_twin"] == "own" else f"study's FF (Kpt {num(g['twin_Kpt'], 2)})",
         safe,
         rate_interval(g["fp_rate"], g["fp_low"], g["fp_high"], long=False),
         rate_interval(g["fn_rate"], g["fn_low"], g["fn_high"], long=False),
@@ -117,9 +111,9 @@ def _parameter_rows(summary) -> list[list[str]]:
                 p.name,
                 p.unit,
                 f"{p.kept} of {p.fitted}",
-                _num(p.median),
-                _num(p.sd, 2),
-                _num(p.median_se, 2),
+                num(p.median),
+                num(p.sd, 2),
+                num(p.median_se, 2),
                 left_out,
                 care,
             ]
@@ -138,12 +132,12 @@ def _checks(groups) -> tuple[list[list[str]], list[str]]:
             [
                 g["group"],
                 g["fc_verdict"],
-                _num(g["fc_chi2"]),
+                num(g["fc_chi2"]),
                 str(g["fc_dof"]),
                 format_p(g["fc_p"]),
                 g["fc_spread"],
-                f"{_num(g['he_error_db'], 2)} dB, {_degrees(g['he_error_deg'])} deg",
-                f"{_num(g['ht_error_db'], 2)} dB, {_degrees(g['ht_error_deg'])} deg",
+                f"{num(g['he_error_db'], 2)} dB, {_degrees(g['he_error_deg'])} deg",
+                f"{num(g['ht_error_db'], 2)} dB, {_degrees(g['ht_error_deg'])} deg",
                 g["twin_source"],
                 g["twin_undetermined"] or "-",
             ]
@@ -154,84 +148,6 @@ def _checks(groups) -> tuple[list[list[str]], list[str]]:
 
 
 #: The per-run table's parameters in reading order, and its short names of deciding statistics.
-_SHOWN = ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
-_SHORT = {"Fourier coefficients": "Fourier", "likelihood ratio": "LR"}
-
-
-def _with_se(r: dict, p: str) -> str:
-    """The estimate with its se; † where the data do not determine it (no se then: its reason
-    in analysis.csv's <p>_status), ‡ where determined but to read with care (outside its
-    plausible range, or not told from 0), "(held)" where held at a literature value (a degree
-    sign read as a unit)."""
-    if not math.isfinite(r[p]):
-        return "-"
-    status = r[p + "_status"]
-    if status.startswith("fixed"):
-        return _num(r[p]) + " (held)"
-    if is_undetermined(status):  # its se says nothing (3e+05 in a correlated pair, 4e-09 in a failed fit)
-        # On a bound within 1e-6 of 0 (a lead time held at 0) it reads as 0, not as 1.69e-08.
-        at_zero = is_on_bound(status) and abs(r[p]) < 1e-6
-        return ("0" if at_zero else _num(r[p])) + "†"
-    se = f" ± {_num(r[p + '_se'], 2)}" if math.isfinite(r[p + "_se"]) else ""
-    return _num(r[p]) + se + ("‡" if is_flagged(status) else "")
-
-
-def _factors(columns) -> list[str]:
-    """The runs' own factor columns (subject, condition, trial, ...): those not hcid's."""
-    return [c for c in columns if c not in tables.ANALYSIS.names]
-
-
-#: The most factors the run table gives a column each; more share one column.
-_FACTOR_COLUMNS = 3
-
-
-def _run_table(runs) -> tuple[list[str], list[list[str]]]:
-    """The per-run table: its header (the runs' factors, units) and one row per run and method."""
-    factors = _factors(runs.column_names)
-    units = {p: tables.PARAMETER_UNITS[p] for p in _SHOWN}
-    # Many factors (a logger's names: subject, stamp, plant, ...) in one wrapped column: a column
-    # each would make the table wider than the page.
-    merged = len(factors) > _FACTOR_COLUMNS
-    header = [
-        "run",
-        *(["factors"] if merged else factors),
-        "method",
-        "p (evidence)",
-        "nb_ft at W",
-        "feedforward at W",
-        *[f"{p} {units[p]}" if units[p] != "-" else p for p in _SHOWN],
-        "wc rad/s",
-        "PM deg",
-        "VAF %",
-        "remnant % of var(u): fit / data",
-        "data check (p)",
-    ]
-    rows = []
-    for r in runs.to_pylist():
-        check = "-"
-        if r["fc_dof"] != 0:
-            check = format_p(r["fc_p"]) + (" contradicted" if r["fc_p"] < CONTRADICTED else "")
-        rows.append(
-            [
-                str(r["run_id"]),
-                *(["; ".join(f"{f} {r[f]}" for f in factors)] if merged else [str(r[f]) for f in factors]),
-                r["method"],
-                f"{_num(r['p_value'], 2)} ({_SHORT.get(r['decided_by'], r['decided_by'])})",
-                str(r["nb_ft"]),
-                ("yes" if r["feedforward_at_w"] else "no")
-                + (" (uncertain)" if r["uncertain"] else "")
-                + (" *" if bool(r["feedforward_at_w"]) != (r["evidence"] == "feedforward") else ""),
-                *[_with_se(r, p) for p in _SHOWN],
-                _num(r["crossover"]),
-                _num(r["phase_margin"]),
-                "-" if not math.isfinite(r["vaf_validation"]) else f"{r['vaf_validation']:.1f}",
-                f"{_percent(r['share_remnant'])} / {_percent(r['remnant_share_data'])}",
-                check,
-            ]
-        )
-    return header, rows
-
-
 def _calibrations(run, group_rows: list[dict]) -> list[tuple]:
     """Each group's twins: its own (calibrated unless --ff-twin study) and, where they were not
     separated or with --ff-twin study, the study's feedforward on its feedback; the W marked
@@ -246,7 +162,7 @@ def _calibrations(run, group_rows: list[dict]) -> list[tuple]:
         if folder.endswith("-study"):
             kpt = next((g["twin_Kpt"] for g in mine), math.nan)
             title = f"{name}, study's FF"
-            twins = f"twins with the study's strongest feedforward (Kpt {_num(kpt, 2)}) on its own feedback"
+            twins = f"twins with the study's strongest feedforward (Kpt {num(kpt, 2)}) on its own feedback"
         else:
             title, twins = name, "twins of its own fitted model"
         methods = ", ".join(g["method"] for g in mine) or "no method (no W separates them, below)"
@@ -303,15 +219,25 @@ def compute(run, done) -> StudyData | None:
     ]
     parameters = [row for s in summaries for row in _parameter_rows(s)]
     subjects = [
-        [s.group["group"], s.group["method"], subject, f"{k} of {n}", _num(p, 2) if k else "-"]
+        [s.group["group"], s.group["method"], subject, f"{k} of {n}", num(p, 2) if k else "-"]
         for s in summaries
         for subject, k, n, p in s.by_subject()
     ]
     one_person = [
         f"{s.group['group']} ({s.group['method']}): {s.one_subject}" for s in summaries if s.one_subject
     ]
+    statistics = [
+        [s.group["group"], s.group["method"], x.name + (" (decides)" if x.deciding else ""),
+         f"{x.n_evidence} of {x.n_runs}", num(x.binomial_p, 2), num(x.median_power, 2), x.verdict]
+        for s in summaries if len(s.statistics) > 1 for x in s.statistics
+    ]  # fmt: skip
+    disagree = [
+        f"{s.group['group']} ({s.group['method']}): {s.group['decided_by']} decides {s.group['verdict']}, "
+        f"the {x.name} (power {x.median_power:.2f}) alone says {x.verdict}"
+        for s in summaries for x in s.disagreeing
+    ]  # fmt: skip
     checks, contradicted = _checks(groups)
-    header, table_rows = _run_table(runs)
+    header, table_rows = run_table(runs)
     group_rows = groups.to_pylist()
     fc, problems = _fourier(run, group_rows)
     set_aside = (
@@ -333,6 +259,8 @@ def compute(run, done) -> StudyData | None:
         without_paths,
         subjects if len(subjects) <= _SUBJECT_ROWS else [],
         one_person,
+        statistics,
+        disagree,
     )
 
 
@@ -347,14 +275,15 @@ def render(data: StudyData | None, doc: Doc) -> None:
         "**FB twin** the same without feedforward (Kpt = 0), driven by the group's recorded forcing "
         "functions (a **forcing set**: the runs whose target and disturbance agree, or agree with both "
         "signs flipped), identified exactly as the runs are. A run's **p-value** is how often FB "
-        "twins reach its W\\*; the **power**, how often FF twins would be found at the level alpha. "
+        "twins reach its statistic (W\\*, or a statistic of its forcing lines: below); the **power**, "
+        "how often FF twins would be found at the level alpha. "
         "SPEC n names a section of the specification hcid follows (docs/methodology.md)."
     )
     _render_answers(data, doc)
     _render_evidence(data, doc)
     _render_checks(data, doc)
     _render_parameters(data, doc)
-    (evidence_header, evidence_rows), (parameter_header, parameter_rows) = _split_runs(
+    (evidence_header, evidence_rows), (parameter_header, parameter_rows) = split_runs(
         data.runs_header, data.runs
     )
     doc.text(
@@ -383,21 +312,6 @@ def render(data: StudyData | None, doc: Doc) -> None:
     doc.table(parameter_header, parameter_rows)
 
 
-def _split_runs(header: list[str], rows: list[list[str]]) -> tuple[tuple, tuple]:
-    """The run table as two that fit a page: the run (its id, factors and method) with its
-    evidence and fit, and the run with its parameters."""
-    ident = header.index("method") + 1
-    names = tuple(_SHOWN)
-    is_parameter = [h.split(" ")[0] in names for h in header]
-    first = [i for i in range(len(header)) if i < ident or not is_parameter[i]]
-    second = [i for i in range(len(header)) if i < ident or is_parameter[i]]
-
-    def pick(columns: list[int]) -> tuple[list[str], list[list[str]]]:
-        return [header[i] for i in columns], [[row[i] for i in columns] for row in rows]
-
-    return pick(first), pick(second)
-
-
 def _render_answers(data: StudyData, doc: Doc) -> None:
     """The files set aside, then the answer table per group and method."""
     if data.set_aside:
@@ -407,10 +321,12 @@ def _render_answers(data: StudyData, doc: Doc) -> None:
         )
         doc.table(["file", "why it could not be read"], data.set_aside)
     doc.text(
-        "Per group of runs and method, first the runs' own evidence (SPEC 11): each run's W* against "
-        "its forcing set's FB twins gives a p-value; the verdict is FEEDFORWARD where the number of runs "
-        "at p <= alpha is itself unlikely without feedforward (binomial p), else UNCERTAIN where the "
-        "twins' power is below 0.8 (a finding needs no power, an answer of none does) and NO "
+        "Per group of runs and method, first the runs' own evidence (SPEC 11): each run's statistic "
+        "(W*, the Fourier coefficients' size or the likelihood ratio, the one whose twins show the "
+        "most power) against its forcing set's FB twins gives a p-value; the verdict is FEEDFORWARD "
+        "where the number of runs at p <= alpha is itself unlikely without feedforward (binomial p), "
+        "else UNCERTAIN where the twins' power is below 0.8 (a finding needs no power, an answer of "
+        "none does) and NO "
         "FEEDFORWARD SHOWN where it is not. Where the two methods differ, the one whose twins give the "
         "higher power is the one that can tell (the power comes from the twins alone, before the runs "
         "are read); report both. Then SPEC 10's calibrated W: feedforward (nb_ft > 0) in "
@@ -453,6 +369,18 @@ def _render_answer_notes(data: StudyData, doc: Doc) -> None:
             "**A verdict that rests on one person:** " + "; ".join(data.one_person) + ": every run "
             "at p <= alpha is that subject's (the binomial counts runs, not people)."
         )
+    if data.statistics:
+        doc.text(
+            "Per evidence statistic, what it alone says: runs at p <= alpha, binomial p, its twins' "
+            "median power and its verdict by the same rule; the one with the most power decides."
+        )
+        header = ["group", "method", "statistic", "runs at p <= alpha", "binomial p", "median power", "alone"]
+        doc.table(header, data.statistics)
+    if data.disagree:
+        doc.text(
+            "**The statistics disagree**, each with the power to tell: " + "; ".join(data.disagree) + ". "
+            "The verdict reads the one with the most power; read the other beside it."
+        )
     if data.subjects:
         doc.text("Per subject within each group: runs at p <= alpha and their binomial p (where any).")
         doc.table(["group", "method", "subject", "runs at p <= alpha", "binomial p"], data.subjects)
@@ -480,7 +408,7 @@ _SUBJECT_ROWS = 48
 def _render_evidence(data: StudyData, doc: Doc) -> None:
     """Each run's evidence on its twins, then each group's calibration of W."""
     for group, method, twins, runs, alpha, folder in data.evidence:
-        named = figures_hcfit.run_labels(runs, _factors(runs[0]) if runs else [])
+        named = figures_hcfit.run_labels(runs, factor_columns(runs[0]) if runs else [])
         doc.figure(
             f"evidence_{folder}_{method}.png",
             f"{group}, {method} method: each run's W* (the largest W at which its selection keeps "
