@@ -287,3 +287,23 @@ def test_the_power_skips_the_tail_only_where_it_cannot_change_the_decision():
         for alpha in (0.005, 0.01, 0.05, 0.1):
             slow = float(np.mean([run_p_value(w, fb)[0] <= alpha for w in ff]))
             assert evidence_power(ff, fb, alpha) == slow
+
+
+def test_a_run_or_twin_without_the_statistic_is_no_evidence():
+    # Source: SPEC 11's p counts FB twins at or above the run's value; a NaN value has no rank
+    # (every comparison with it is false), so before this guard it lay "beyond every twin" and got
+    # 1/(N+1) = 1/21 < 0.05, evidence, and an FF twin with NaN counted as found. Now: no p, and
+    # not found. A group whose FF twins all lack the statistic has no power: UNCERTAIN, not NO
+    # FEEDFORWARD SHOWN (NaN >= 0.8 is false).
+    import math
+
+    from hcid.pipeline.evidence import group_verdict
+    from hcid.selection.calibration import evidence_power, run_p_value
+
+    fb = np.linspace(0.1, 1.0, 20)
+    p, n, how = run_p_value(float("nan"), fb)
+    assert math.isnan(p) and (n, how) == (0, "")
+    assert run_p_value(2.0, fb)[0] < 1 / 21  # beyond every twin, a value: the tail, as before
+    assert evidence_power(np.array([2.0, float("nan"), 5.0, 0.2]), fb, 0.05) == 0.5
+    rows = [{"p_value": 0.5, "power": float("nan")}] * 3
+    assert group_verdict(rows, 0.05)["verdict"] == "UNCERTAIN"

@@ -72,8 +72,8 @@ CIRCULAR = "circular (paired)"
 #: Two-sided level of every interval (95%).
 ALPHA = 0.05
 #: Undetermined shares of the compared levels' runs that differ by this much are named in the
-#: effect's note (:meth:`_Data.uneven`): end to end, 5% against 13% of tau_pt's runs (no effect)
-#: gave a false effect at 7.5% of studies, 17% against 36% of TL's cut its effect by a fifth.
+#: effect's note (:meth:`_Data.uneven`): end to end, TL undetermined in 13% of condition A's runs and
+#: 31% of B's cut its effect by a fifth (-0.022 against -0.028 over every run's value; truth -0.03).
 UNEVEN = 0.05
 #: statsmodels' warnings that do not mean a failed fit, and how an effect's note says them.
 WARNINGS = {"on the boundary": "subjects' variance near 0", "not positive definite": "Hessian not definite"}

@@ -477,7 +477,7 @@ def group_verdict(rows: list[dict], alpha: float) -> dict:
     power = float(np.median([r["power"] for r in rows]))
     if p <= alpha:
         verdict = FEEDFORWARD
-    elif power < MIN_POWER:
+    elif not power >= MIN_POWER:  # NaN (no FF twin has the statistic): no power shown either
         verdict = "UNCERTAIN"
     else:
         verdict = "NO FEEDFORWARD SHOWN"

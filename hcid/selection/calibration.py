@@ -375,7 +375,11 @@ def evidence_power(ff_thresholds: np.ndarray, fb_thresholds: np.ndarray, alpha: 
     # Beyond every FB twin the p is at most the count's 1 / (N + 1): at a level at or above that,
     # such an FF twin is found without fitting the tail (the fit is most of the time here).
     beyond = alpha >= 1.0 / (fb.size + 1)
-    return float(np.mean([(beyond and not np.any(fb >= w)) or run_p_value(w, fb)[0] <= alpha for w in ff]))
+    # An FF twin without the statistic (NaN) is not found.
+    found = [
+        not math.isnan(w) and ((beyond and not np.any(fb >= w)) or run_p_value(w, fb)[0] <= alpha) for w in ff
+    ]
+    return float(np.mean(found))
 
 
 def sequential_p_value(value: float, fb_in_order: np.ndarray, h: int) -> tuple[float, int]:
@@ -403,7 +407,8 @@ def sequential_p_value(value: float, fb_in_order: np.ndarray, h: int) -> tuple[f
 
 def run_p_value(value: float, fb_in_order: np.ndarray, h: int = 5) -> tuple[float, int, str]:
     """A run's p-value against its FB twins in the order drawn, the twins it used, and how it was
-    made: Besag and Clifford's sequential p where ``h`` twins reached the run's
+    made (NaN, 0 and ``""`` where the run has no value of the statistic: a NaN would otherwise lie
+    beyond every twin): Besag and Clifford's sequential p where ``h`` twins reached the run's
     value (the draws stopped there: ``h / m``), else the Monte Carlo ``(1 + k) / (1 + N)`` over
     every twin drawn; and where the run is beyond every twin (k = 0), where Monte Carlo stops at
     ``1 / (N + 1)``, the generalized Pareto tail of SPEC 13 (:func:`hcid.selection.tail.tail_p_value`;
@@ -423,6 +428,8 @@ def run_p_value(value: float, fb_in_order: np.ndarray, h: int = 5) -> tuple[floa
     >>> n, how, p < 1 / 40
     (39, 'gpd tail', True)
     """
+    if math.isnan(value):  # no statistic (a fit that gave none): no p, no evidence either way
+        return math.nan, 0, ""
     fb = np.asarray(fb_in_order, dtype=np.float64)
     p, n = sequential_p_value(value, fb, h)
     if n < fb.size or np.count_nonzero(fb >= value) > 0 or fb.size < 2:
