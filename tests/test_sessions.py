@@ -319,3 +319,35 @@ def test_the_session_report_fits_a_1400_px_page(session_run, tmp_path):
     if found is None:
         pytest.skip("Chromium is not installed")
     assert found == "0 "
+
+
+def test_feedback_alone_keeps_flagged_values_and_leaves_failed_fits_out():
+    # Source: SPEC 11 (undetermined values left out of summaries; hcid's flags kept and counted, as
+    # in the groups' answer line), counted by hand. Four disturbance-only runs: two determined
+    # (Kpe 1.0 and 3.0), one flagged "not told from 0" (Kpe 2.0: kept), one whose fit failed
+    # ("not fitted: ...", NaN: left out, as the crossover of the runs that do not determine Kpe).
+    # Median of 1, 2, 3 = 2; sd = 1.
+    import pyarrow as pa
+
+    from hcid.cli.answers import _feedback_line
+    from hcid.config.fit_settings import FEEDBACK_PARAMETERS
+    from hcid.report.sections.conditions import _feedback
+
+    cases = [(1.0, "determined"), (2.0, "not told from 0 (se above |value|)"), (3.0, "determined"),
+             (math.nan, "not fitted: every candidate unstable")]  # fmt: skip
+    rows = []
+    for run, (value, status) in enumerate(cases, start=1):
+        row = {"run_id": run, "person": "dp", "method": "direct", "vaf_validation": 50.0, "na": 2, "nb_e": 3,
+               "crossover": value}  # fmt: skip
+        for p in FEEDBACK_PARAMETERS:
+            row.update({p: value, f"{p}_se": 0.1, f"{p}_status": status})
+        rows.append(row)
+    line = _feedback_line(pa.Table.from_pylist(rows))
+    assert "Kpe 2 (3 of 4 runs, sd 1; 1 of them not told from 0: se above |value|)" in line, line
+    assert "nan" not in line and "crossover 2 rad/s (median over the 3 runs that determine Kpe)" in line
+
+    class Run:
+        feedback_runs = pa.Table.from_pylist(rows)
+
+    header, table = _feedback(Run())
+    assert table == [["dp", "4", *["2 (3)"] * len(FEEDBACK_PARAMETERS), "2", "50"]]

@@ -249,17 +249,23 @@ def _without_paths(summary) -> str:
     )
 
 
+def _parameter_text(s, runs: int) -> str:
+    """One parameter's median over the runs that determine it, of ``runs``, their sd and how many
+    of them are flagged (read with care)."""
+    unit = "" if s.unit == "-" else f" {s.unit}"
+    sd = f", sd {s.sd:.2g}" if s.kept > 1 else ""
+    care = "".join(f"; {n} of them {_flat(flag)}" for flag, n in s.flagged.items())
+    return f"{s.name} {s.median:.3g}{unit} ({s.kept} of {runs} runs{sd}{care})"
+
+
 def _analysis_parameters(summaries, n_runs: int | None = None) -> str:
     """The runs' fits at W (hcid.pipeline.evidence.summarise_parameters): median over the runs that
     determine each, their sd and count, units; the feedforward parameters' runs where fewer than
     the group's ``n_runs`` have them; then what some runs leave undetermined, and why."""
     parts, left_out = [], []
     for s in summaries:
-        unit = "" if s.unit == "-" else f" {s.unit}"
         if s.kept:
-            sd = f", sd {s.sd:.2g}" if s.kept > 1 else ""
-            care = "".join(f"; {n} of them {_flat(flag)}" for flag, n in s.flagged.items())
-            parts.append(f"{s.name} {s.median:.3g}{unit} ({s.kept} of {s.fitted} runs{sd}{care})")
+            parts.append(_parameter_text(s, s.fitted))
         if s.left_out:
             several = len(s.left_out) > 1  # then each reason with its count of runs
             whys = ", ".join(
@@ -497,22 +503,17 @@ def _feedback_line(feedback) -> str:
     import numpy as np
 
     from hcid.config.fit_settings import FEEDBACK_PARAMETERS
-    from hcid.hcfit.determined import is_undetermined
+    from hcid.pipeline.evidence import determines, summarise_parameters
 
     rows = feedback.to_pylist()
     first = {r["run_id"]: r for r in rows}  # the fit is the run's, the same for every method
     n = len(first)
-    parts = []
-    for p in FEEDBACK_PARAMETERS:
-        kept = [r[p] for r in first.values() if not is_undetermined(r[f"{p}_status"])]
-        if kept:
-            unit = "" if PARAMETER_UNITS[p] == "-" else f" {PARAMETER_UNITS[p]}"
-            sd = f", sd {np.std(kept, ddof=1):.2g}" if len(kept) > 1 else ""
-            parts.append(f"{p} {np.median(kept):.3g}{unit} ({len(kept)} of {n} runs{sd})")
-    feedback_known = [
-        r for r in first.values() if not is_undetermined(r["Kpe_status"]) and math.isfinite(r["crossover"])
+    parts = [
+        _parameter_text(s, n)
+        for s in summarise_parameters(list(first.values()), FEEDBACK_PARAMETERS)
+        if s.kept
     ]
-    loop = [r["crossover"] for r in feedback_known]
+    loop = [r["crossover"] for r in first.values() if determines(r, "Kpe") and math.isfinite(r["crossover"])]
     arx = []
     for method in dict.fromkeys(r["method"] for r in rows):
         mine = [r for r in rows if r["method"] == method]

@@ -45,6 +45,7 @@ __all__ = [
     "ParameterSummary",
     "consistency_columns",
     "decide",
+    "determines",
     "group_name",
     "group_verdict",
     "summarise_parameters",
@@ -505,14 +506,23 @@ class ParameterSummary:
     flagged: dict = field(default_factory=dict)
 
 
-def summarise_parameters(rows: Sequence[dict]) -> list[ParameterSummary]:
-    """The group's parameters as the answer lines and the report give them (one home for both)."""
+def determines(row: dict, p: str) -> bool:
+    """Whether a run's fit determines parameter ``p`` (SPEC 11: not undetermined; a flagged value
+    is kept) and gave it a value (a fit that failed, ``not fitted: ...``, gives NaN)."""
+    return not is_undetermined(row[f"{p}_status"]) and math.isfinite(row[p])
+
+
+def summarise_parameters(
+    rows: Sequence[dict], names: Sequence[str] = tables.HC_PARAMETER_NAMES
+) -> list[ParameterSummary]:
+    """The parameters ``names`` over runs as the answer lines and the report give them (one home
+    for the groups' and the disturbance-only runs' feedback alone)."""
     out = []
-    for p in tables.HC_PARAMETER_NAMES:
-        fitted = [r for r in rows if r[f"{p}_status"] != "not fitted"]
+    for p in names:
+        fitted = [r for r in rows if not r[f"{p}_status"].startswith("not fitted")]
         if not fitted:
             continue
-        kept = [r for r in fitted if not is_undetermined(r[f"{p}_status"])]
+        kept = [r for r in fitted if determines(r, p)]
         x = np.array([r[p] for r in kept], dtype=float)
         se = np.array([r[f"{p}_se"] for r in kept], dtype=float)
         left: dict[str, int] = {}

@@ -12,8 +12,8 @@ from matplotlib.figure import Figure
 
 from hcid.analysis.conditions import ANSWERS, SOURCES, Kind
 from hcid.config.fit_settings import FEEDBACK_PARAMETERS
-from hcid.hcfit.determined import is_undetermined
 from hcid.io.datasets import skipped_by_reason
+from hcid.pipeline.evidence import determines, summarise_parameters
 from hcid.pipeline.sessions import ALL_PEOPLE, BANDS
 from hcid.report.document import Doc
 from hcid.report.figures import plain_log
@@ -152,14 +152,9 @@ def _feedback(run) -> tuple[list[str], list[list[str]]]:
         mine = [r for r in rows if r["person"] == person]
         first = list({r["run_id"]: r for r in mine}.values())
         cells = [person, str(len(first))]
-        for p in FEEDBACK_PARAMETERS:
-            kept = [r[p] for r in first if not is_undetermined(r[f"{p}_status"])]
-            cells.append(f"{np.median(kept):.3g} ({len(kept)})" if kept else "-")
-        loop = [
-            r["crossover"]
-            for r in first
-            if not is_undetermined(r["Kpe_status"]) and math.isfinite(r["crossover"])
-        ]
+        kept = {s.name: s for s in summarise_parameters(first, FEEDBACK_PARAMETERS) if s.kept}
+        cells += [f"{kept[p].median:.3g} ({kept[p].kept})" if p in kept else "-" for p in FEEDBACK_PARAMETERS]
+        loop = [r["crossover"] for r in first if determines(r, "Kpe") and math.isfinite(r["crossover"])]
         cells.append(f"{np.median(loop):.3g}" if loop else "-")
         for method in methods:
             cells.append(f"{np.median([r['vaf_validation'] for r in mine if r['method'] == method]):.0f}")
