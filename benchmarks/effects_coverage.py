@@ -300,6 +300,13 @@ def from_fitted(path: Path, design: str = "realistic") -> None:
     """The end-to-end figures again from fitted runs saved by ``--save`` (the effects only;
     ``design``: the one they were made with, for the true effects)."""
     fitted = pd.read_parquet(path)
+    if "status" in fitted:  # undetermined as hcid says it now, from each run's own status
+        fitted["undetermined"] = ~np.isfinite(fitted.value) | fitted.status.map(is_undetermined)
+    else:
+        print(
+            f"{path}: no status column (saved before 2026-11-28's seventh session): its runs' "
+            "undetermined flags as saved, a flagged value (not told from 0, ...) counted undetermined"
+        )
     start = time.perf_counter()
     chosen = E2E_DESIGNS[design]
     done = [

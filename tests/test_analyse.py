@@ -97,9 +97,12 @@ def test_every_run_and_group_is_answered_with_its_factors(analysed):
     assert len(checks) == 4 and sum("chi-square" in line for line in checks) == 2
     assert sum(line.startswith("    data check: the group's model as above; ") for line in checks) == 2
     assert (run / "report" / "report.html").is_file()
-    # Every group and method names what each evidence statistic alone finds, in the answer and the
-    # report's table (2 groups x 2 methods x 3 statistics), the deciding one marked once per group.
-    said = [line for line in output.splitlines() if line.startswith("    per statistic, runs at p <= ")]
+    # Every group and method names what each evidence statistic alone finds, in the answer (one
+    # line each, the deciding statistic marked once) and the report's table (a row per statistic:
+    # the likelihood ratio's rows counted, one per group and method).
+    said = [
+        line for line in output.splitlines() if line.startswith("    per statistic, runs at p <= 0.05 and")
+    ]
     assert len(said) == 4 and all(line.count("; decides)") == 1 for line in said), said
     report = (run / "report" / "report.md").read_text()
     assert (
@@ -605,20 +608,29 @@ def test_each_statistics_verdict_is_given_and_a_disagreement_with_power_said():
          "p_fourier": 0.5 if k else float("nan"), "power_fourier": 0.1}
         for k, p in enumerate([0.01, 0.04] + [0.5] * 8)
     ]  # fmt: skip
-    group = {"alpha": 0.05, "verdict": "NO FEEDFORWARD SHOWN", "decided_by": "W*"}
+    group = {"alpha": 0.05, "verdict": "NO FEEDFORWARD SHOWN", "decided_by": "W*", "ff_twin": "own"}
     summary = GroupSummary(group, runs, (0.95, 0.95), [], 1.5, 55.0)
-    got = {s.name: (s.verdict, s.n_evidence, s.deciding) for s in summary.statistics}
-    assert got == {"W*": ("NO FEEDFORWARD SHOWN", 2, True), "likelihood ratio": ("FEEDFORWARD", 10, False)}
+    got = {s.name: (s.verdict, s.n_evidence, s.n_runs, s.deciding) for s in summary.statistics}
+    assert got == {
+        "W*": ("NO FEEDFORWARD SHOWN", 2, 10, True),
+        "Fourier coefficients": ("UNCERTAIN", 0, 9, False),  # over the 9 runs with a p
+        "likelihood ratio": ("FEEDFORWARD", 10, 10, False),
+    }
     assert summary.statistics[0].binomial_p == pytest.approx(1 - 0.95**10 - 10 * 0.05 * 0.95**9)
     assert [s.name for s in summary.disagreeing] == ["likelihood ratio"]
     assert _statistics_line(summary) == (
-        "    per statistic, runs at p <= 0.05 (median power): W* 2 of 10 (0.95; decides), "
-        "likelihood ratio 10 of 10 (0.90); THE STATISTICS DISAGREE: the likelihood ratio alone, with "
-        "power 0.90, says FEEDFORWARD (10 of 10 runs; binomial p = 9.8e-14)"
+        "    per statistic, runs at p <= 0.05 and their twins' median power: W* 2 of 10 (power 0.95; "
+        "decides), Fourier coefficients 0 of 9 (power 0.10), likelihood ratio 10 of 10 (power 0.90); "
+        "THE STATISTICS DISAGREE: the likelihood ratio alone, with power 0.90, says FEEDFORWARD (10 of "
+        "10 runs; binomial p = 9.8e-14)"
     )
     # Without the power to tell, another verdict is not a disagreement.
     weak = [{**r, "power_lr": 0.5} for r in runs]
     assert GroupSummary(group, weak, (0.95, 0.95), [], 1.5, 55.0).disagreeing == []
+    # The other way round: the ratio decides FEEDFORWARD, W* with power finds nothing.
+    found = GroupSummary({**group, "verdict": "FEEDFORWARD", "decided_by": "likelihood ratio"}, runs,
+                         (0.9, 0.9), [], 1.5, 55.0)  # fmt: skip
+    assert [(s.name, s.verdict) for s in found.disagreeing] == [("W*", "NO FEEDFORWARD SHOWN")]
 
 
 # --------------------------------------------------------------------------- twins of any group's fit

@@ -510,7 +510,7 @@ def test_report_text_renders_emphasis_and_literal_asterisks():
 def test_a_value_on_its_bound_at_zero_reads_as_zero():
     import math
 
-    from hcid.report.sections.study_runs import with_se as _with_se
+    from hcid.report.run_table import with_se as _with_se
 
     row = {"TL": 1.69e-08, "TL_status": "at a search bound (0)", "TL_se": math.nan}
     assert _with_se(row, "TL") == "0†"
@@ -533,7 +533,7 @@ def test_a_measured_study_of_another_plant_has_no_paper_labels(tmp_path):
 def test_the_run_table_is_split_in_two_that_fit_a_page():
     """A re-check found the run table (21 columns for the recordings) wider than the page, its
     last columns behind a scroll bar: the run's evidence and fit, then its parameters."""
-    from hcid.report.sections.study_runs import split_runs as _split_runs
+    from hcid.report.run_table import split_runs as _split_runs
 
     header = [
         "run",

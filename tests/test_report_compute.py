@@ -21,7 +21,7 @@ def test_errors_wrap_phase_and_skip_absent_paths():
 def test_each_status_has_its_mark_in_the_run_table():
     # † undetermined, ‡ determined but to read with care, "(held)" held (the table's own note says
     # so; a degree sign had read as a unit: "10.1°" rad/s, issue 46).
-    from hcid.report.sections.study_runs import with_se as _with_se
+    from hcid.report.run_table import with_se as _with_se
 
     def row(status, se=0.1):
         return {"Kpe": 33.5, "Kpe_se": se, "Kpe_status": status}
@@ -147,7 +147,7 @@ def test_a_run_whose_test_and_selection_at_w_disagree_is_marked():
     import pyarrow as pa
 
     from hcid import tables
-    from hcid.report.sections.study_runs import run_table as _run_table
+    from hcid.report.run_table import run_table as _run_table
 
     base = {n: None for n in tables.ANALYSIS.names}
     numbers = {n: float("nan") for n, t in tables.ANALYSIS.fields if t == pa.float64()}

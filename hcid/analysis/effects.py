@@ -41,8 +41,9 @@ to subjects and to a level of the compared factor. Per level against the referen
   differences lack with or without an effect.) The other tests see an angle unwrapped to within
   180 deg of its circular mean over all runs (raw phases near +-180 deg do not average).
 
-Undetermined values (NaN or flagged) are left out and counted. :func:`study_effects` applies
-:func:`holm` per test across quantities; :func:`effects_frame` makes a table.
+Undetermined values (NaN, or marked in ``undetermined``) are left out and counted.
+:func:`study_effects` applies :func:`holm` per test across quantities; :func:`effects_frame` makes
+a table.
 """
 
 from __future__ import annotations

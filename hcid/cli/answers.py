@@ -160,10 +160,14 @@ def _statistics_line(summary) -> str:
     recordings the statistics can disagree, each with its power)."""
     alpha = summary.group["alpha"]
     parts = [
-        f"{s.name} {s.n_evidence} of {s.n_runs} ({s.median_power:.2f}{'; decides' if s.deciding else ''})"
+        f"{s.name} {s.n_evidence} of {s.n_runs} (power {s.median_power:.2f}"
+        + ("; decides)" if s.deciding else ")")
         for s in summary.statistics
     ]
-    text = f"    per statistic, runs at p <= {alpha:g} (median power): " + ", ".join(parts)
+    whose = " (FF twins with the study's feedforward)" if summary.group["ff_twin"] == "study" else ""
+    text = f"    per statistic, runs at p <= {alpha:g} and their twins' median power{whose}: " + ", ".join(
+        parts
+    )
     for s in summary.disagreeing:
         text += (
             f"; THE STATISTICS DISAGREE: the {s.name} alone, with power {s.median_power:.2f}, says "

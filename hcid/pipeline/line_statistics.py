@@ -147,7 +147,9 @@ def deviations(model: Mapping[str, float], fits: Sequence) -> list[dict[str, flo
     it: what is left estimates the spread of the true deviations (the fitted spread minus the fit
     error's, from the runs' own standard errors).
 
-    Only the feedback parameters the run's fit determines get an offset
+    Only the feedback parameters the run's fit determines (status ``determined``; a flagged value,
+    outside its plausible range or not told from 0, gets none: the null study that measured this
+    rule took them so, and a value not told from 0 is mostly its fit error) get an offset
     (:data:`hcid.hcfit.determined.DETERMINED`; along an undetermined direction the cost is flat);
     the feedforward path's start is the group model's for runs and twins alike (under the null
     their feedforward truth is the same: none)."""

@@ -83,25 +83,34 @@ class GroupSummary:
 
     @functools.cached_property
     def statistics(self) -> list[StatisticVerdict]:
-        """Each evidence statistic's own verdict (:data:`hcid.pipeline.evidence.STATISTICS`, those
-        with a p-value in every run), the deciding one marked: its verdict is the group's."""
+        """Each evidence statistic's own verdict (:data:`hcid.pipeline.evidence.STATISTICS`) over
+        the runs that have its p-value (a statistic none has is not listed), the deciding one
+        marked: its verdict is the group's. The deciding statistic was chosen by its calibration
+        twins' power before any run was read, and its p and power are over every FB twin drawn for
+        it; the others' over the calibration's FB twins."""
         out = []
         for name, (p, power) in STATISTICS.items():
-            rows = [{"p_value": r[p], "power": r[power]} for r in self.runs]
-            if not rows or any(x["p_value"] is None or not math.isfinite(x["p_value"]) for x in rows):
-                continue
-            v = group_verdict(rows, self.group["alpha"])
-            out.append(StatisticVerdict(
-                name, v["verdict"], v["n_evidence"], len(rows), v["binomial_p"], v["median_power"],
-                name == self.group["decided_by"],
-            ))  # fmt: skip
+            rows = [
+                {"p_value": r[p], "power": r[power]}
+                for r in self.runs
+                if r[p] is not None and math.isfinite(r[p])
+            ]
+            if rows:
+                v = group_verdict(rows, self.group["alpha"])
+                out.append(StatisticVerdict(
+                    name, v["verdict"], v["n_evidence"], len(rows), v["binomial_p"], v["median_power"],
+                    name == self.group["decided_by"],
+                ))  # fmt: skip
         return out
 
     @property
     def disagreeing(self) -> list[StatisticVerdict]:
         """The statistics other than the deciding one whose twins show the power to tell (median
         power at least :data:`hcid.pipeline.evidence.MIN_POWER`) and whose verdict differs from
-        the group's: where the runs' evidence depends on the statistic read."""
+        the group's: where the runs' evidence depends on the statistic read. A statistic without
+        that power that finds feedforward is listed in :attr:`statistics` but not named here:
+        reading whichever of three statistics finds something would not hold the level alpha,
+        which is why the one to read is chosen by its twins' power before the runs are read."""
         return [
             s for s in self.statistics
             if not s.deciding and s.median_power >= MIN_POWER and s.verdict != self.group["verdict"]

@@ -16,7 +16,7 @@ from hcid.pipeline.evidence import FEEDFORWARD
 from hcid.pipeline.summary import has_safe_interval, rate_interval, summarise_groups
 from hcid.report import figures, figures_hcfit
 from hcid.report.document import Doc
-from hcid.report.sections.study_runs import factor_columns, num, run_table, split_runs
+from hcid.report.run_table import factor_columns, num, run_table, split_runs
 from hcid.tables import HC_PARAMETER_NAMES
 
 TITLE = "The study's answer"
@@ -147,7 +147,6 @@ def _checks(groups) -> tuple[list[list[str]], list[str]]:
     return checks, contradicted
 
 
-#: The per-run table's parameters in reading order, and its short names of deciding statistics.
 def _calibrations(run, group_rows: list[dict]) -> list[tuple]:
     """Each group's twins: its own (calibrated unless --ff-twin study) and, where they were not
     separated or with --ff-twin study, the study's feedforward on its feedback; the W marked
@@ -372,14 +371,19 @@ def _render_answer_notes(data: StudyData, doc: Doc) -> None:
     if data.statistics:
         doc.text(
             "Per evidence statistic, what it alone says: runs at p <= alpha, binomial p, its twins' "
-            "median power and its verdict by the same rule; the one with the most power decides."
+            "median power and its verdict by the same rule. The one that decides was chosen by its "
+            "calibration twins' power before any run was read (its p and power are over every FB "
+            "twin drawn for it, the others' over the calibration's), so another's verdict is not a "
+            "test at level alpha of its own."
         )
         header = ["group", "method", "statistic", "runs at p <= alpha", "binomial p", "median power", "alone"]
         doc.table(header, data.statistics)
     if data.disagree:
         doc.text(
             "**The statistics disagree**, each with the power to tell: " + "; ".join(data.disagree) + ". "
-            "The verdict reads the one with the most power; read the other beside it."
+            "The verdict stands on the statistic chosen before the runs were read; that another, "
+            "with power too, finds otherwise says the evidence depends on what is measured of the "
+            "runs (the model's fit, or its selection over W): read both."
         )
     if data.subjects:
         doc.text("Per subject within each group: runs at p <= alpha and their binomial p (where any).")

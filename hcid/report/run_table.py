@@ -14,14 +14,18 @@ __all__ = ["SHOWN", "factor_columns", "num", "percent", "run_table", "split_runs
 
 
 def num(x, digits: int = 3) -> str:
+    """A number to ``digits`` significant figures, ``-`` for None or NaN."""
     return "-" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
 
 
 def percent(share: float) -> str:
+    """A share (0 to 1) in whole percent, ``-`` for NaN."""
     return "-" if not math.isfinite(share) else f"{100 * share:.0f}"
 
 
+#: The parameters in the run table's reading order (the feedforward path first).
 SHOWN = ("Kpt", "TI", "tau_pt", "Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
+#: The run table's short names of the deciding statistics.
 _SHORT = {"Fourier coefficients": "Fourier", "likelihood ratio": "LR"}
 
 
