@@ -365,9 +365,9 @@ def test_where_subjects_effects_differ_the_interval_is_the_paired_t_test_of_thei
     # Slow reference: the paired t test on each subject's difference of level means. In a balanced
     # design (3 runs per subject and level, no se) the random-intercept model's estimate is their
     # mean, and Bell and McCaffrey's CR2 sandwich by subject with t on subjects - 1 is exactly the
-    # paired t test; here the subjects' own effects spread (sd 0.6) far beyond the runs' noise
-    # (0.05), so the model's own interval (which takes one effect for all) is far narrower and the
-    # wider, cluster-robust one is reported.
+    # paired t test (Satterthwaite's dof: subjects - 1); here the subjects' own effects spread (sd
+    # 0.6) far beyond the runs' noise (0.05), where the model's own interval (which takes one
+    # effect for all) would be far narrower.
     rng = np.random.default_rng(4)
     n, k = 7, 3
     subject = np.repeat(np.arange(n), 2 * k)
@@ -465,3 +465,44 @@ def test_flagged_values_are_compared_and_undetermined_ones_left_out():
     assert got.tolist() == list(statuses.values())
     nan_row = {**rows[0], "tau_pt": math.nan}
     assert long_table([nan_row], "plant", "subject").query("quantity == 'tau_pt'").undetermined.item()
+
+
+def test_cluster_robust_dof_is_satterthwaites_and_subjects_minus_one_when_balanced():
+    # Slow reference: the CR2 variance of coefficient j written as one quadratic form y' M y of the
+    # whitened data, M = sum_g r_g r_g' with r_g = R[g, :]' A_g X_g B e_j (R the whitened residual
+    # maker, A_g = (R_gg)^(-1/2), B the bread), and Satterthwaite's dof of it under the working
+    # model (identity covariance): tr(M)^2 / tr(M^2) (Bell and McCaffrey 2002, eq. 9). Built with
+    # full n x n matrices and a generic matrix square root, not the function's Gram matrix. A
+    # balanced paired design gives subjects - 1 (the paired t test); an unbalanced one fewer.
+    from scipy.linalg import sqrtm
+
+    rng = np.random.default_rng(11)
+    for runs_per_cell in ([3] * 12, [3, 1, 2, 3, 3, 1, 2, 3, 3, 3, 1, 3]):
+        subject = np.repeat(np.arange(6), [runs_per_cell[2 * g] + runs_per_cell[2 * g + 1] for g in range(6)])
+        level = np.concatenate(
+            [["A"] * runs_per_cell[2 * g] + ["B"] * runs_per_cell[2 * g + 1] for g in range(6)]
+        )
+        y = rng.normal(0, 1, 6)[subject] + 0.4 * (level == "B") + rng.normal(0, 0.3, subject.size)
+        x = np.column_stack([np.ones(y.size), (level == "B").astype(float)])
+        x = effects._with_subject_means(x, [1], subject, np.ones(y.size))
+        model = effects.MixedLM(y, x, groups=subject, exog_re=np.ones((y.size, 1)))
+        result, _ = effects._fit(model)
+        cov, dof = effects._cluster_robust(model, result, subject)
+        psi = float(result.cov_re_unscaled[0, 0])
+        v = np.eye(y.size) + psi * (subject[:, None] == subject[None, :])
+        root_inv = np.linalg.inv(np.real(sqrtm(v)))
+        xw, yw = root_inv @ x, root_inv @ y
+        bread = np.linalg.inv(xw.T @ xw)
+        r = np.eye(y.size) - xw @ bread @ xw.T
+        m = np.zeros((y.size, y.size))
+        for g in range(6):
+            rows = np.flatnonzero(subject == g)
+            a = np.linalg.pinv(np.real(sqrtm(r[np.ix_(rows, rows)])))
+            vec = r[rows, :].T @ a @ xw[rows] @ bread[:, 1]
+            m += np.outer(vec, vec)
+        assert cov[1, 1] == pytest.approx(yw @ m @ yw, rel=1e-8)
+        assert dof[1] == pytest.approx(np.trace(m) ** 2 / np.trace(m @ m), rel=1e-8)
+        if len(set(runs_per_cell)) == 1:
+            assert dof[1] == pytest.approx(5.0, rel=1e-9)
+        else:
+            assert dof[1] < 5.0

@@ -17,17 +17,17 @@ to subjects and to a level of the compared factor. Per level against the referen
   the within-subject one, as with a fixed effect per subject, unbiased where which runs are left
   out depends on the subject (issue 49: end to end the subjects with the largest Kpe and TL lost
   their condition B runs, and the random intercept alone, comparing their A runs with the others' B
-  runs, took TL's median effect from 0.021 to 0.016). Interval and p: the wider of two. The
-  model's: its covariance with Student's t on the between-within degrees of freedom (SAS
-  ``DDFM=BETWITHIN``): ``n_runs - n_subjects -`` the within-subject columns' rank for a factor
-  varying within subjects, else ``n_subjects -`` the between-subject columns' rank (one run per
-  subject and level: the paired t test exactly). The cluster-robust one: Bell and McCaffrey's CR2
-  sandwich by subject with t on ``n_subjects - 1`` (for a factor varying within subjects). A random
-  intercept assumes every subject has the same effect and the se tell each run's spread; where
-  subjects' effects differ, or a fit's se understates its trial-to-trial spread, the model's
-  interval is too narrow (a 1000-study check with subjects' effects spread by half the effect: 79%
-  coverage of TL's effect) and the sandwich's is not. ``benchmarks/effects_coverage.py`` measures
-  both.
+  runs, took TL's median effect from 0.021 to 0.016). Interval and p, for a factor varying within
+  subjects: Bell and McCaffrey's CR2 cluster-robust covariance by subject with Student's t on its
+  Satterthwaite degrees of freedom (Pustejovsky and Tipton 2018; ``n_subjects - 1`` on a balanced
+  paired design, where it is the paired t test of the subjects' mean differences; fewer where
+  subjects weigh unequally). A random intercept assumes every subject has the same effect and the
+  se tell each run's spread; where subjects' effects differ, or a fit's se understates its
+  trial-to-trial spread, the model's own interval is too narrow (a 1000-study check with subjects'
+  effects spread by half the effect: 79% coverage of TL's effect; end to end, levels 7.5 to 8.8%)
+  and the sandwich's is not (``benchmarks/effects_coverage.py``; docs/methodology.md). For a factor
+  constant within subjects: the wider of the model's (t on ``n_subjects -`` the between-subject
+  columns' rank, SAS ``DDFM=BETWITHIN``) and the sandwich's on the same degrees of freedom.
 - ``Wilcoxon signed-rank`` on the differences of the per-level means (weighted as above) of the
   subjects with both levels: ``scipy.stats.wilcoxon``'s p, the Hodges-Lehmann estimate and its
   exact interval (Hollander and Wolfe, Nonparametric Statistical Methods, 2nd ed., 3.3: confidence
@@ -410,17 +410,19 @@ def _mixed(d: _Data, contrasts: list) -> list[Effect]:
     if result is None:
         return effects(f"model did not converge: {note}")
     model_based = np.sqrt(np.diag(_fe_covariance(model, result, groups))) * unit
-    robust = np.sqrt(np.clip(np.diag(_cluster_robust_covariance(model, result, groups)), 0.0, None)) * unit
+    robust, robust_dof = _cluster_robust(model, result, groups)
+    robust = np.sqrt(np.clip(np.diag(robust), 0.0, None)) * unit
     for j, lv in enumerate(present, start=1):
         est = float(result.fe_params[j]) * unit
-        # The wider of the model's interval (between-within dof) and the cluster-robust one
-        # (subjects - 1 dof): never narrower than the model says, wider where the subjects'
-        # effects spread more than it says.
+        # Within subjects: the cluster-robust interval with its Satterthwaite dof. Between them
+        # (a factor constant per subject): the wider of the model's and the cluster-robust one,
+        # both on subjects - the between columns' rank.
         within = j not in between
-        candidates = [
-            (float(model_based[j]), runs - n_subj - (rank - rank_b) if within else n_subj - rank_b),
-            (float(robust[j]), n_subj - 1 if within else n_subj - rank_b),
-        ]
+        candidates = (
+            [(float(robust[j]), float(robust_dof[j]))]
+            if within
+            else [(float(model_based[j]), n_subj - rank_b), (float(robust[j]), n_subj - rank_b)]
+        )
         usable = [(se, dof) for se, dof in candidates if dof >= 1 and np.isfinite(se)]
         if not usable:
             why = (
@@ -464,33 +466,40 @@ def _fe_covariance(model: MixedLM, result, groups: np.ndarray) -> np.ndarray:
     return result.scale * np.linalg.inv(x.T @ x - (zx.T * (psi / (1 + psi * zz))) @ zx)
 
 
-def _cluster_robust_covariance(model: MixedLM, result, groups: np.ndarray) -> np.ndarray:
+def _cluster_robust(model: MixedLM, result, groups: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The fixed effects' cluster-robust covariance by subject, Bell and McCaffrey's CR2 (Survey
-    Methodology 28, 2002; Pustejovsky and Tipton, JBES 36, 2018): the sandwich of the REML fit's
-    working covariance (per subject ``V = I + psi z z'``) with each subject's whitened residuals
-    scaled by ``(I - H_gg)^(-1/2)``, ``H_gg`` the subject's block of the whitened hat matrix.
-    Valid whatever the runs' covariance within a subject (standard errors that misstate a fit's
-    spread, subjects whose effect differs), unbiased where the working model is right; read with
-    Student's t on subjects - 1 degrees of freedom. The model-based covariance
-    (:func:`_fe_covariance`) is the slow reference it equals on a balanced paired design."""
+    Methodology 28, 2002; Pustejovsky and Tipton, JBES 36, 2018), and each coefficient's
+    Satterthwaite degrees of freedom. The sandwich of the REML fit's working covariance (per
+    subject ``V = I + psi z z'``) with each subject's whitened residuals scaled by ``(I -
+    H_gg)^(-1/2)``, ``H_gg`` its block of the whitened hat matrix: valid whatever the runs'
+    covariance within a subject, unbiased where the working model is right. A coefficient's
+    variance is ``sum_g (q_g' y)^2`` (``y`` whitened), whose dof under the working model is
+    ``tr(G)^2 / tr(G^2)``, ``G`` the Gram matrix ``q_g' q_h``: ``subjects - 1`` on a balanced paired
+    design (where :func:`_fe_covariance`, the slow reference, equals the covariance)."""
     x, y, z = model.exog, model.endog, model.exog_re[:, 0]
     psi = float(result.cov_re_unscaled[0, 0])
     beta = np.asarray(result.fe_params)
-    whitened = []
-    for g in range(groups.max() + 1):
-        rows = groups == g
-        v = np.eye(rows.sum()) + psi * np.outer(z[rows], z[rows])
-        vals, vecs = np.linalg.eigh(v)
+    members = [np.flatnonzero(groups == g) for g in range(groups.max() + 1)]
+    xw, uw = np.empty_like(x), np.empty_like(y)
+    for rows in members:
+        vals, vecs = np.linalg.eigh(np.eye(rows.size) + psi * np.outer(z[rows], z[rows]))
         root_inv = (vecs / np.sqrt(vals)) @ vecs.T
-        whitened.append((root_inv @ x[rows], root_inv @ (y[rows] - x[rows] @ beta)))
-    bread = np.linalg.inv(sum(w.T @ w for w, _ in whitened))
+        xw[rows], uw[rows] = root_inv @ x[rows], root_inv @ (y[rows] - x[rows] @ beta)
+    bread = np.linalg.inv(xw.T @ xw)
+    residual = np.eye(y.size) - xw @ bread @ xw.T  # whitened residuals = residual @ whitened y
     meat = np.zeros_like(bread)
-    for w, u in whitened:
-        vals, vecs = np.linalg.eigh(np.eye(u.size) - w @ bread @ w.T)
+    q = np.empty((len(members), y.size, bread.shape[0]))
+    for g, rows in enumerate(members):
+        vals, vecs = np.linalg.eigh(residual[np.ix_(rows, rows)])
         scale = np.where(vals > 1e-10, 1 / np.sqrt(np.clip(vals, 1e-10, None)), 0.0)
-        adjusted = w.T @ ((vecs * scale) @ vecs.T @ u)
-        meat += np.outer(adjusted, adjusted)
-    return bread @ meat @ bread
+        adjust = (vecs * scale) @ vecs.T
+        contribution = xw[rows].T @ adjust @ uw[rows]
+        meat += np.outer(contribution, contribution)
+        q[g] = residual[:, rows] @ adjust @ xw[rows] @ bread  # coefficient j's term: (q[g][:, j] . y)^2
+    gram = np.einsum("gnj,hnj->jgh", q, q)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dof = np.trace(gram, axis1=1, axis2=2) ** 2 / np.einsum("jgh,jgh->j", gram, gram)
+    return bread @ meat @ bread, dof
 
 
 def _fit(model: MixedLM):
