@@ -20,14 +20,13 @@ to subjects and to a level of the compared factor. Per level against the referen
   runs, took TL's median effect from 0.021 to 0.016). Interval and p, for a factor varying within
   subjects: Bell and McCaffrey's CR2 cluster-robust covariance by subject with Student's t on its
   Satterthwaite degrees of freedom (Pustejovsky and Tipton 2018; ``n_subjects - 1`` on a balanced
-  paired design, where it is the paired t test of the subjects' mean differences; fewer where
-  subjects weigh unequally). A random intercept assumes every subject has the same effect and the
-  se tell each run's spread; where subjects' effects differ, or a fit's se understates its
-  trial-to-trial spread, the model's own interval is too narrow (a 1000-study check with subjects'
-  effects spread by half the effect: 79% coverage of TL's effect; end to end, levels 7.5 to 8.8%)
-  and the sandwich's is not (``benchmarks/effects_coverage.py``; docs/methodology.md). For a factor
-  constant within subjects: the wider of the model's (t on ``n_subjects -`` the between-subject
-  columns' rank, SAS ``DDFM=BETWITHIN``) and the sandwich's on the same degrees of freedom.
+  paired design, the paired t test of the subjects' mean differences). A random intercept assumes
+  every subject has the same effect and the se tell each run's spread; where subjects' effects
+  differ, or a fit's se understates its trial-to-trial spread, the model's own interval is too
+  narrow (subjects' effects spread by half the effect: 79% coverage of TL's; end to end, levels
+  7.5 to 8.8%) and the sandwich's is not (docs/methodology.md). Below :data:`MIN_ROBUST_DOF`, and
+  for a factor constant within subjects: the wider of the model's (t on the between-within dof,
+  SAS ``DDFM=BETWITHIN``) and the sandwich's (t on ``n_subjects - 1``, or as the model's).
 - ``Wilcoxon signed-rank`` on the differences of the per-level means (weighted as above) of the
   subjects with both levels: ``scipy.stats.wilcoxon``'s p, the Hodges-Lehmann estimate and its
   exact interval (Hollander and Wolfe, Nonparametric Statistical Methods, 2nd ed., 3.3: confidence
@@ -76,6 +75,10 @@ ALPHA = 0.05
 #: effect's note (:meth:`_Data.uneven`): end to end, TL undetermined in 13% of condition A's runs and
 #: 31% of B's cut its effect by a fifth (-0.022 against -0.028 over every run's value; truth -0.03).
 UNEVEN = 0.05
+#: The fewest Satterthwaite degrees of freedom at which a within-subject effect's interval is the
+#: cluster-robust one alone: below it the sandwich rests on too few subjects (a t variance is
+#: infinite at 2 dof and below) and the wider of it and the model's is taken.
+MIN_ROBUST_DOF = 2.0
 #: statsmodels' warnings that do not mean a failed fit, and how an effect's note says them.
 WARNINGS = {"on the boundary": "subjects' variance near 0", "not positive definite": "Hessian not definite"}
 
@@ -414,15 +417,18 @@ def _mixed(d: _Data, contrasts: list) -> list[Effect]:
     robust = np.sqrt(np.clip(np.diag(robust), 0.0, None)) * unit
     for j, lv in enumerate(present, start=1):
         est = float(result.fe_params[j]) * unit
-        # Within subjects: the cluster-robust interval with its Satterthwaite dof. Between them
-        # (a factor constant per subject): the wider of the model's and the cluster-robust one,
-        # both on subjects - the between columns' rank.
+        # Within subjects: the cluster-robust interval with its Satterthwaite dof, where that is
+        # at least MIN_ROBUST_DOF; else (too few subjects carry the contrast for the sandwich: on
+        # the CPHS recordings, 2 or 3, it was exactly 0) and between subjects, the wider of the
+        # model's (between-within dof) and the sandwich's (subjects - 1, or as the model's).
         within = j not in between
-        candidates = (
-            [(float(robust[j]), float(robust_dof[j]))]
-            if within
-            else [(float(model_based[j]), n_subj - rank_b), (float(robust[j]), n_subj - rank_b)]
-        )
+        if within and robust_dof[j] >= MIN_ROBUST_DOF:
+            candidates = [(float(robust[j]), float(robust_dof[j]))]
+        else:
+            candidates = [
+                (float(model_based[j]), runs - n_subj - (rank - rank_b) if within else n_subj - rank_b),
+                (float(robust[j]), n_subj - 1 if within else n_subj - rank_b),
+            ]
         usable = [(se, dof) for se, dof in candidates if dof >= 1 and np.isfinite(se)]
         if not usable:
             why = (
