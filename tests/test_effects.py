@@ -506,3 +506,18 @@ def test_cluster_robust_dof_is_satterthwaites_and_subjects_minus_one_when_balanc
             assert dof[1] == pytest.approx(5.0, rel=1e-9)
         else:
             assert dof[1] < 5.0
+
+
+def test_with_too_few_subjects_for_the_sandwich_the_interval_is_the_wider_rule():
+    # Source: the CPHS recordings' --compare plant (docs/methodology.md): Kpt's plant effect with 2
+    # subjects (3 and 2 runs). The subject-mean column leaves each subject's within residuals no
+    # freedom, the CR2 sandwich is exactly 0 and its Satterthwaite dof below 2; the sandwich alone
+    # gave a zero-width interval at p 1e-18 there, and none at all here (dof below 1: checked with
+    # MIN_ROBUST_DOF set to 0). Below MIN_ROBUST_DOF the interval is the wider of the
+    # model's (t on runs - subjects - within rank: here 5 - 2 - 1 = 2 dof) and the sandwich's.
+    subject = np.array(["a", "a", "a", "b", "b"])
+    level = np.array(["A", "B", "B", "A", "B"])
+    y = np.array([1.0, 0.6, 0.5, 1.2, 0.7])
+    se = np.array([0.05, 0.04, 0.06, 0.05, 0.05])
+    (mixed,) = by_test(quantity_effects("Kpt", y, subject, level, se=se), MIXED)
+    assert mixed.high - mixed.low > 0.1 and mixed.p > 1e-3, mixed
