@@ -508,13 +508,20 @@ def test_cluster_robust_dof_is_satterthwaites_and_subjects_minus_one_when_balanc
             assert dof[1] < 5.0
 
 
-def test_with_too_few_subjects_for_the_sandwich_the_interval_is_the_wider_rule():
-    # Source: the CPHS recordings' --compare plant (docs/methodology.md): Kpt's plant effect with 2
-    # subjects (3 and 2 runs). The subject-mean column leaves each subject's within residuals no
-    # freedom, the CR2 sandwich is exactly 0 and its Satterthwaite dof below 2; the sandwich alone
-    # gave a zero-width interval at p 1e-18 there, and none at all here (dof below 1: checked with
-    # MIN_ROBUST_DOF set to 0). Below MIN_ROBUST_DOF the interval is the wider of the
-    # model's (t on runs - subjects - within rank: here 5 - 2 - 1 = 2 dof) and the sandwich's.
+def test_a_contrast_one_subject_carries_keeps_an_interval():
+    # Source: the CR2 sandwich is unbiased under the working model, so its variance's mean tr(G)
+    # equals the bread's diagonal (Bell and McCaffrey 2002); where one subject alone has runs at
+    # level B, the pseudo-inverse of that subject's I - H_gg removes everything it contributes, the
+    # sandwich is exactly 0 and its Satterthwaite dof rounding noise (review: 25 of 60 such random
+    # designs had noise dof >= 2, giving zero-width intervals at p 1e-33 to 0). Such a sandwich is
+    # degenerate (NaN dof) and the interval is the wider rule's, here the model's: positive width.
+    subject = np.repeat(list("abcdef"), 3)
+    level = np.array(["A", "B", "B"] + ["A"] * 15)
+    rng = np.random.default_rng(0)
+    y = rng.normal(size=6)[np.repeat(np.arange(6), 3)] + 0.3 * (level == "B") + rng.normal(0, 0.2, 18)
+    (mixed,) = by_test(quantity_effects("q", y, subject, level), MIXED)
+    assert mixed.high - mixed.low > 0.1 and mixed.p > 1e-6, mixed
+    # Two subjects with both levels (the CPHS recordings' Kpt: 3 and 2 runs): an interval too.
     subject = np.array(["a", "a", "a", "b", "b"])
     level = np.array(["A", "B", "B", "A", "B"])
     y = np.array([1.0, 0.6, 0.5, 1.2, 0.7])

@@ -24,9 +24,10 @@ to subjects and to a level of the compared factor. Per level against the referen
   every subject has the same effect and the se tell each run's spread; where subjects' effects
   differ, or a fit's se understates its trial-to-trial spread, the model's own interval is too
   narrow (subjects' effects spread by half the effect: 79% coverage of TL's; end to end, levels
-  7.5 to 8.8%) and the sandwich's is not (docs/methodology.md). Below :data:`MIN_ROBUST_DOF`, and
-  for a factor constant within subjects: the wider of the model's (t on the between-within dof,
-  SAS ``DDFM=BETWITHIN``) and the sandwich's (t on ``n_subjects - 1``, or as the model's).
+  7.5 to 8.8%) and the sandwich's is not (docs/methodology.md). Where the sandwich is degenerate
+  (:data:`DEGENERATE`), and for a factor constant within subjects: the wider of the model's (t on
+  the between-within dof, SAS ``DDFM=BETWITHIN``) and the sandwich's (t on ``n_subjects - 1``, or
+  as the model's).
 - ``Wilcoxon signed-rank`` on the differences of the per-level means (weighted as above) of the
   subjects with both levels: ``scipy.stats.wilcoxon``'s p, the Hodges-Lehmann estimate and its
   exact interval (Hollander and Wolfe, Nonparametric Statistical Methods, 2nd ed., 3.3: confidence
@@ -75,10 +76,11 @@ ALPHA = 0.05
 #: effect's note (:meth:`_Data.uneven`): end to end, TL undetermined in 13% of condition A's runs and
 #: 31% of B's cut its effect by a fifth (-0.022 against -0.028 over every run's value; truth -0.03).
 UNEVEN = 0.05
-#: The fewest Satterthwaite degrees of freedom at which a within-subject effect's interval is the
-#: cluster-robust one alone: below it the sandwich rests on too few subjects (a t variance is
-#: infinite at 2 dof and below) and the wider of it and the model's is taken.
-MIN_ROBUST_DOF = 2.0
+#: The share of its unbiased value (the bread's diagonal, under the working model) below which a
+#: coefficient's CR2 sandwich has lost directions to the pseudo-inverse of ``I - H_gg`` (a contrast
+#: that one subject alone carries, or two on the CPHS recordings): there it is 0 or biased low,
+#: its Satterthwaite dof rounding noise, and the effect's interval is the wider rule's.
+DEGENERATE = 1 - 1e-6
 #: statsmodels' warnings that do not mean a failed fit, and how an effect's note says them.
 WARNINGS = {"on the boundary": "subjects' variance near 0", "not positive definite": "Hessian not definite"}
 
@@ -417,13 +419,13 @@ def _mixed(d: _Data, contrasts: list) -> list[Effect]:
     robust = np.sqrt(np.clip(np.diag(robust), 0.0, None)) * unit
     for j, lv in enumerate(present, start=1):
         est = float(result.fe_params[j]) * unit
-        # Within subjects: the cluster-robust interval with its Satterthwaite dof, where that is
-        # at least MIN_ROBUST_DOF; else (too few subjects carry the contrast for the sandwich: on
-        # the CPHS recordings, 2 or 3, it was exactly 0) and between subjects, the wider of the
-        # model's (between-within dof) and the sandwich's (subjects - 1, or as the model's).
+        # Within subjects: the cluster-robust interval on its Satterthwaite dof (t on 1 to 2 dof is
+        # wide, as it should be). Where the sandwich is degenerate (dof NaN: one subject alone
+        # carries the contrast) and between subjects: the wider of the model's (between-within
+        # dof) and the sandwich's (subjects - 1, or as the model's).
         within = j not in between
-        if within and robust_dof[j] >= MIN_ROBUST_DOF:
-            candidates = [(float(robust[j]), float(robust_dof[j]))]
+        if within and robust_dof[j] >= 1 - 1e-9:
+            candidates = [(float(robust[j]), max(1.0, float(robust_dof[j])))]
         else:
             candidates = [
                 (float(model_based[j]), runs - n_subj - (rank - rank_b) if within else n_subj - rank_b),
@@ -481,7 +483,9 @@ def _cluster_robust(model: MixedLM, result, groups: np.ndarray) -> tuple[np.ndar
     covariance within a subject, unbiased where the working model is right. A coefficient's
     variance is ``sum_g (q_g' y)^2`` (``y`` whitened), whose dof under the working model is
     ``tr(G)^2 / tr(G^2)``, ``G`` the Gram matrix ``q_g' q_h``: ``subjects - 1`` on a balanced paired
-    design (where :func:`_fe_covariance`, the slow reference, equals the covariance)."""
+    design (where :func:`_fe_covariance`, the slow reference, equals the covariance). Unbiased
+    means ``tr(G)`` equals the bread's diagonal; where the pseudo-inverse lost directions (a
+    contrast one subject alone carries) it falls short, and the dof are NaN (:data:`DEGENERATE`)."""
     x, y, z = model.exog, model.endog, model.exog_re[:, 0]
     psi = float(result.cov_re_unscaled[0, 0])
     beta = np.asarray(result.fe_params)
@@ -503,8 +507,10 @@ def _cluster_robust(model: MixedLM, result, groups: np.ndarray) -> tuple[np.ndar
         meat += np.outer(contribution, contribution)
         q[g] = residual[:, rows] @ adjust @ xw[rows] @ bread  # coefficient j's term: (q[g][:, j] . y)^2
     gram = np.einsum("gnj,hnj->jgh", q, q)
+    expected = np.trace(gram, axis1=1, axis2=2)  # the variance's mean under the working model
     with np.errstate(invalid="ignore", divide="ignore"):
-        dof = np.trace(gram, axis1=1, axis2=2) ** 2 / np.einsum("jgh,jgh->j", gram, gram)
+        dof = expected**2 / np.einsum("jgh,jgh->j", gram, gram)
+    dof[~(expected >= DEGENERATE * np.diag(bread))] = np.nan  # directions lost: no dof to read
     return bread @ meat @ bread, dof
 
 
