@@ -14,7 +14,7 @@ from statsmodels.regression.mixed_linear_model import MixedLM, MixedLMParams
 from statsmodels.stats.multitest import multipletests
 
 from hcid import tables
-from hcid.analysis import effects
+from hcid.analysis import effects, mixed_model
 from hcid.analysis.effects import (
     CIRCULAR,
     KRUSKAL,
@@ -484,10 +484,10 @@ def test_cluster_robust_dof_is_satterthwaites_and_subjects_minus_one_when_balanc
         )
         y = rng.normal(0, 1, 6)[subject] + 0.4 * (level == "B") + rng.normal(0, 0.3, subject.size)
         x = np.column_stack([np.ones(y.size), (level == "B").astype(float)])
-        x = effects._with_subject_means(x, [1], subject, np.ones(y.size))
+        x = mixed_model.with_subject_means(x, [1], subject, np.ones(y.size))
         model = effects.MixedLM(y, x, groups=subject, exog_re=np.ones((y.size, 1)))
-        result, _ = effects._fit(model)
-        cov, dof = effects._cluster_robust(model, result, subject)
+        result, _ = mixed_model.fit_reml(model)
+        cov, dof = mixed_model.cluster_robust(model, result, subject)
         psi = float(result.cov_re_unscaled[0, 0])
         v = np.eye(y.size) + psi * (subject[:, None] == subject[None, :])
         root_inv = np.linalg.inv(np.real(sqrtm(v)))
