@@ -238,14 +238,16 @@ def fitted_study(rng: np.random.Generator, config, kn: float, experiment, design
                     i = fit.names.index(q) if q in fit.names else None
                     value, se = (math.nan, math.nan) if i is None else (fit.estimates[i], fit.se[i])
                     status = fit.status.get(q, "not fitted")
-                    rows.append(
-                        (q, subject, condition, value, se, status, i is None or is_undetermined(status))
-                    )
-    columns = ["quantity", "subject", "condition", "value", "se", "status", "undetermined"]
-    table = pd.DataFrame(rows, columns=columns)
-    bad_se = ~table.undetermined & ~(np.isfinite(table.se) & (table.se > 0))
-    table.loc[bad_se, "undetermined"] = True  # no usable se: left out as undetermined
-    return table
+                    rows.append((q, subject, condition, value, se, status))
+    table = pd.DataFrame(rows, columns=["quantity", "subject", "condition", "value", "se", "status"])
+    return table.assign(undetermined=_undetermined(table))
+
+
+def _undetermined(table: pd.DataFrame) -> pd.Series:
+    """Each fitted run's value left out: none (the ft path not fitted), undetermined by SPEC 11
+    (a flagged value is kept, as hcid's group summaries keep it), or without a usable se."""
+    usable_se = np.isfinite(table.se) & (table.se > 0)
+    return ~np.isfinite(table.value) | table.status.map(is_undetermined) | ~usable_se
 
 
 def _e2e_study(
@@ -301,7 +303,7 @@ def from_fitted(path: Path, design: str = "realistic") -> None:
     ``design``: the one they were made with, for the true effects)."""
     fitted = pd.read_parquet(path)
     if "status" in fitted:  # undetermined as hcid says it now, from each run's own status
-        fitted["undetermined"] = ~np.isfinite(fitted.value) | fitted.status.map(is_undetermined)
+        fitted["undetermined"] = _undetermined(fitted)
     else:
         print(
             f"{path}: no status column (saved before 2026-11-28's seventh session): its runs' "
