@@ -97,10 +97,33 @@ def test_a_twins_start_is_as_far_from_its_truth_as_a_runs_from_its_own_fit():
     found = deviations(model, fits)
     assert found == [pytest.approx({"Kpe": 0.5 * k, "TL": 0.0, "Kpt": 0.0}),
                      pytest.approx({"Kpe": -0.25 * k, "TL": 0.0, "Kpt": 0.0})]  # fmt: skip
-    assert _offset(model, found, 1) == pytest.approx({"Kpe": 2.0 - 0.5 * k, "TL": 0.15, "Kpt": 0.8})
-    assert _offset(model, found, 2) == pytest.approx({"Kpe": 2.0 + 0.25 * k, "TL": 0.15, "Kpt": 0.8})
-    assert _offset(model, found, 3) == _offset(model, found, 1)  # the cycle
-    assert _offset(model, [], 7) == model  # no runs' deviations: the model itself
+    # Every start a stable loop with an integrator (none is moved nearer the truth; next test).
+    full = {**model, "tau_pe": 0.1, "w_nms": 10.1, "zeta_nms": 0.35}
+    integrator = (np.array([1.0]), np.array([1.0, 0.0]))
+    rest = {"TL": 0.15, "Kpt": 0.8, "tau_pe": 0.1, "w_nms": 10.1, "zeta_nms": 0.35}
+    assert _offset(full, found, 1, *integrator) == pytest.approx({"Kpe": 2.0 - 0.5 * k, **rest})
+    assert _offset(full, found, 2, *integrator) == pytest.approx({"Kpe": 2.0 + 0.25 * k, **rest})
+    assert _offset(full, found, 3, *integrator) == _offset(full, found, 1, *integrator)  # the cycle
+    assert _offset(full, [], 7, *integrator) == full  # no runs' deviations: the model itself
+
+
+def test_a_twins_start_is_moved_towards_its_truth_until_its_loop_is_stable():
+    # Source: line_statistics._offset's rule (a twin starts where a run could: a stable loop),
+    # with the paper's plant 2.75 * 2 / (s (s + 2)) and p below, whose loop is stable for Kpe below
+    # 1.7086 (bisection on loop_is_stable, whose own doctest checks Kpe 0.75 and 20 against it).
+    # A deviation of -3 starts at Kpe 3.75, halved 2.25 (both unstable), halved again 1.5: stable.
+    # Without the rule the start's cost is flat (1e6 a residual), the fit never moves, and the
+    # likelihood ratio is 0 whatever the record (half of the CPHS fo twins, power 0.50).
+    from hcid.hcfit.closed_loop import loop_is_stable
+    from hcid.pipeline.line_statistics import _offset
+
+    paper = (np.array([5.5]), np.array([1.0, 2.0, 0.0]))
+    p = {"Kpe": 0.75, "TL": 0.4, "tau_pe": 0.24, "w_nms": 10.1, "zeta_nms": 0.35}
+    assert loop_is_stable({**p, "Kpe": 1.70}, *paper) and not loop_is_stable({**p, "Kpe": 1.72}, *paper)
+    assert _offset(p, [{"Kpe": -3.0}], 1, *paper) == pytest.approx({**p, "Kpe": 1.5})
+    assert _offset(p, [{"Kpe": 0.5}], 1, *paper) == pytest.approx({**p, "Kpe": 0.25})  # stable: kept
+    # Never stable within 8 halvings (-1e6 / 2^7 still starts at Kpe 7813): the truth itself.
+    assert _offset(p, [{"Kpe": -1e6}], 1, *paper) == p
 
 
 def test_the_slope_in_kpt_at_the_nested_model_is_exact():

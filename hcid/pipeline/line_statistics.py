@@ -16,6 +16,7 @@ from hcid import tables
 from hcid.config import Config, Loop
 from hcid.config.fit_settings import FEEDFORWARD_PARAMETERS, FitSettings
 from hcid.errors import DataError
+from hcid.hcfit.closed_loop import loop_is_stable
 from hcid.hcfit.determined import DETERMINED
 from hcid.hcfit.lines import feedforward_size, record_lines
 from hcid.hcfit.lr import feedforward_lr
@@ -87,7 +88,8 @@ def twin_statistics(
     its truth, where a run's start lies away from its own optimum by the run's deviation from its
     group's medians. ``offsets`` are the group's runs' deviations (:func:`deviations`): twin ``k``
     (the FB and the FF twin of seed ``k`` alike) starts at ``start`` minus deviation
-    ``(k - 1) mod len(offsets)``, away from its truth as a run is from its own."""
+    ``(k - 1) mod len(offsets)``, away from its truth as a run is from its own (nearer where that
+    start's loop would be unstable: :func:`_offset`)."""
     return twin_statistics_of([(folder, config, start, offsets, None)], execution)[0]
 
 
@@ -106,8 +108,10 @@ def twin_statistics_of(
         else:
             results.check_records(records, path)
         keys.append(sorted(records))
+        polynomials = np.array(config.loop.plant.num), np.array(config.loop.plant.den)
+        starts = {seed: _offset(start, offsets, seed, *polynomials) for seed in {k[1] for k in keys[-1]}}
         tasks += [
-            (records[k], config.timing.output_rate, config.loop, _offset(start, offsets, k[1]), config.fit_hc)
+            (records[k], config.timing.output_rate, config.loop, starts[k[1]], config.fit_hc)
             for k in keys[-1]
         ]
     found = list(execution.map(record_statistics, tasks, "twins' line statistics")) if tasks else []
@@ -125,11 +129,35 @@ def twin_statistics_of(
     return out
 
 
-def _offset(start: Mapping[str, float], offsets: Sequence[Mapping[str, float]], seed: int) -> dict:
+#: A twin's start whose loop is unstable is moved towards its truth by halving its offset at most
+#: this many times, then the truth itself (:func:`_offset`).
+_HALVINGS = 8
+
+
+def _offset(
+    start: Mapping[str, float],
+    offsets: Sequence[Mapping[str, float]],
+    seed: int,
+    num_c: np.ndarray,
+    den_c: np.ndarray,
+) -> dict:
+    """Twin ``seed``'s start: ``start`` minus deviation ``(seed - 1) mod len(offsets)``, that
+    deviation halved until the start makes a stable loop with the plant (``num_c``, ``den_c``).
+
+    A run's fits start at its group's model, a stable loop (hcid makes twins only of one), and so
+    must a twin's: from an unstable loop the lines' cost is flat (no slope), neither fit moves and
+    the likelihood ratio is 0 whatever the record holds. Unhalved, a large gain deviation gave
+    half of the CPHS ``fo`` twins such starts (the FB twins' ratio 0 in half the draws, the FF
+    twins' too: power 0.50 where the FF twins started stable are all found)."""
     if not offsets:
         return dict(start)
     deviation = offsets[(int(seed) - 1) % len(offsets)]
-    return {p: v - deviation.get(p, 0.0) for p, v in start.items()}
+    for _ in range(_HALVINGS):
+        moved = {p: v - deviation.get(p, 0.0) for p, v in start.items()}
+        if loop_is_stable(moved, num_c, den_c):
+            return moved
+        deviation = {p: d / 2.0 for p, d in deviation.items()}
+    return dict(start)
 
 
 def deviations(model: Mapping[str, float], fits: Sequence) -> list[dict[str, float]]:
