@@ -18,15 +18,14 @@ SeedSequence (the results do not depend on ``--jobs``); every run its own remnan
 takes the forcing functions from configs/integrator_example.yaml and has no option for their
 phases, so every study has the SAME forcing functions (only the subjects and remnants differ).
 
-Twins' noise. ``hcid analyse`` simulates a study's twins with the remnant seeds 1, 2, ... (fixed);
-with the same forcing functions in every study, the twins of all studies would share their
-noise, and the runs' p-values would be judged against nearly the same reference draws in every
-study: the table would show one draw of the twins' quantiles (the share of p <= 0.05 over 1000
-runs then has a spread of about 0.02, three times the binomial's), not the p-values' level. By
-default this benchmark therefore salts the simulator's noise per study
-(``hcid.loop.simulate.white_noise`` draws from ``default_rng([seed, salt])``, in this benchmark's
-processes only: hcid is not changed), so that studies are independent like real ones;
-``--shared-twin-noise`` runs hcid exactly as shipped.
+Twins' noise. Every study here has the same forcing functions. Before hcid drew its twins'
+remnants from a stream of their own (``seeds: stream``, a digest of the group and its data:
+hcid.pipeline.twins.TwinSource.noise_stream), a study's twins took remnant seeds 1, 2, ... alone,
+so the twins of all studies shared their noise and the table showed one draw of the twins'
+quantiles (the share of p <= 0.05 over 1000 runs then had a spread of about 0.02, three times the
+binomial's), not the p-values' level; this benchmark salted the simulator's noise per study then.
+hcid as shipped now keeps the studies apart (each study's runs differ), and the benchmark runs it
+as it is.
 
 Discrete p-values. A Monte Carlo p is not uniform but exact on its support: ``(1 + k) / (1 + N)``
 (k of N FB twins at or above the run) and Besag and Clifford's sequential ``5 / m`` (stopped at the
@@ -116,19 +115,9 @@ def _runs_per_study(text: str) -> tuple[int, int]:
     return subjects, trials
 
 
-def _salt_noise(salt: int) -> None:
-    """Every white-noise stream of hcid's simulator in this process drawn from ``[seed, salt]``."""
-    import hcid.loop.simulate as simulate
-
-    def white_noise(seed: int, n: int) -> np.ndarray:
-        return np.random.default_rng([int(seed), salt]).standard_normal(n)
-
-    simulate.white_noise = white_noise
-
-
 def study_spec(seq: np.random.SeedSequence, subjects: int, trials: int) -> dict:
     """The study's subjects (lab_study.py's ranges and check), its single compensatory condition,
-    its first remnant seed (make.py adds 1 per run) and its noise salt, all from ``seq``."""
+    and its first remnant seed (make.py adds 1 per run), all from ``seq``."""
     lab_study = _load("lab_study", HERE / "lab_study.py")
     rng = np.random.default_rng(seq)
     truth = {}
@@ -136,14 +125,13 @@ def study_spec(seq: np.random.SeedSequence, subjects: int, trials: int) -> dict:
         p = {name: round(float(rng.uniform(lo, hi)), 3) for name, (lo, hi) in lab_study.RANGES.items()}
         if lab_study._margins_ok(p):
             truth[f"P{len(truth) + 1:02d}"] = p
-    first, salt = (int(x) for x in seq.generate_state(2, np.uint32))
+    first = int(seq.generate_state(2, np.uint32)[0])  # as when a second word salted the noise
     return {
         "truth": truth,
         "remnant": 1.0,
         "seed": first * 1000,  # make.py's remnant seeds: first * 1000 + 1, + 2, ...
         "conditions": ("compensatory",),
         "trials": tuple(range(1, trials + 1)),
-        "salt": salt,
     }
 
 
@@ -171,8 +159,6 @@ def run_study(index: int, seq: np.random.SeedSequence, options: dict) -> tuple[l
     """Make and analyse study ``index``: one row per run and method, and the wall seconds."""
     start = time.perf_counter()
     spec = study_spec(seq, *options["runs"])
-    if not options["shared_twin_noise"]:
-        _salt_noise(spec["salt"])
     make = _load("lab_make", ROOT / "configs" / "lab_example" / "make.py")
     import pyarrow.parquet as pq
 
@@ -213,7 +199,6 @@ def run_study(index: int, seq: np.random.SeedSequence, options: dict) -> tuple[l
             row[f"ties_{stem}"] = ties[(r["run_id"], r["method"], name)]
         row.update({f"true_{p}": spec["truth"][r["subject"]][p] for p in FEEDBACK})
         row["remnant_seed_first"] = spec["seed"] + 1
-        row["noise_salt"] = "" if options["shared_twin_noise"] else spec["salt"]
         row["twins"], row["max_fb_twins"] = options["twins"], options["max_fb_twins"]
         rows.append(row)
     return rows, time.perf_counter() - start
@@ -417,8 +402,6 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--jobs", type=int, default=2, help="studies analysed side by side")
     parser.add_argument("--twins", type=int, default=20, help="hcid analyse --twins (default 20)")
     parser.add_argument("--max-fb-twins", type=int, default=99, help="hcid analyse --max-fb-twins (99)")
-    parser.add_argument("--shared-twin-noise", action="store_true",
-                        help="twins' noise seeds 1, 2, ... in every study, as hcid alone")  # fmt: skip
     parser.add_argument("--out", type=Path, help="per-run CSV (default: TMPDIR/null_study[_smoke].csv)")
     parser.add_argument("--smoke", action="store_true", help="1 study of 4 runs, --twins 4 --max-fb-twins 8")
     parser.add_argument("--from-csv", type=Path, metavar="CSV",
@@ -445,14 +428,12 @@ def main(argv: list[str] | None = None) -> None:
         "runs": args.runs_per_study,
         "twins": args.twins,
         "max_fb_twins": args.max_fb_twins,
-        "shared_twin_noise": args.shared_twin_noise,
     }
     cpu, load = _machine()
     subjects, trials = args.runs_per_study
     print(
         f"{args.studies} studies x {subjects} subjects x {trials} trials (feedback only), seed {args.seed}, "
-        f"--twins {args.twins} --max-fb-twins {args.max_fb_twins}, --jobs {args.jobs}, twins' noise "
-        f"{'shared (hcid as shipped)' if args.shared_twin_noise else 'per study'}\nCPU {cpu}, "
+        f"--twins {args.twins} --max-fb-twins {args.max_fb_twins}, --jobs {args.jobs}\nCPU {cpu}, "
         f"{os.cpu_count()} cores; before: {load}",
         flush=True,
     )

@@ -839,3 +839,25 @@ def test_few_twins_recomputes_every_stored_p(analysed):
     for r in rows:
         assert r["p_all"] == r["p_stored"], r
         assert r["p99"] == r["p_all"]  # the first 99 of at most 12: all of them
+
+
+def test_each_groups_twins_draw_noise_of_their_own_that_its_folders_share(analysed):
+    # Source: TwinSource.noise_stream: a digest of the group and its forcing set's first run's
+    # record. Every twin folder of one group and set (the calibration's, the study's FF twin, the
+    # more FB twins) has it, so a seed's FB and FF twins share their noise; no two groups do (with
+    # remnant seeds 1, 2, ... alone, every group's and study's twins drew the same noise). The
+    # API's run on two workers made the same.
+    import yaml
+
+    _, out = analysed
+    found = []
+    for run, _ in out.values():
+        streams: dict[str, set] = {}
+        for path in sorted((run / "twins").glob("*/config.yaml")):
+            group = path.parent.name.split("-")[0]
+            streams.setdefault(group, set()).add(yaml.safe_load(path.read_text())["seeds"]["stream"])
+        assert sorted(streams) == ["compensatory", "pursuit"]
+        assert all(len(s) == 1 and 0 not in s for s in streams.values())
+        assert streams["compensatory"] != streams["pursuit"]
+        found.append(streams)
+    assert found[0] == found[1]

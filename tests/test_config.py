@@ -24,6 +24,7 @@ def test_paper_config_values(paper_config):
     assert (ff.Kpt, ff.TI, ff.tau_pt, ff.Kpe, ff.TL, ff.tau_pe) == (0.8, 0.25, 0.35, 0.75, 0.4, 0.24)
     assert paper_config.timing.record_samples == 2048
     assert paper_config.seeds == tuple(range(1, 51))
+    assert paper_config.noise_stream == 0  # no stream: each seed's own noise (white_noise)
     assert paper_config.identify.stage("direct").estimation.rows() == slice(128, 1088)
     assert paper_config.identify.stage("stage1").estimation.rows() == slice(29, 2048)  # SPEC 3
     assert paper_config.selection.w_grid[0] == pytest.approx(1e-4)
@@ -51,6 +52,7 @@ BAD = [
     (("loop", "Kc"), "big", "loop.Kc: must be a number in (0, 1000], got 'big'"),
     (("loop", "remnant_ratio"), 1.5, "loop.remnant_ratio: must be a number in [0, 0.9], got 1.5"),
     (("seeds",), [], "seeds: must be a non-empty list"),
+    (("seeds",), {"first": 1, "count": 2, "stream": -1}, "seeds.stream: must be an integer in [0, "),
     (
         ("identify", "direct", "na"),
         [0, 3],
@@ -635,3 +637,9 @@ def test_fit_hc_refuses_a_plant_per_level_in_one_line(tmp_path):
         "'plant' (fo, so): give each plant a config of its own"
     )
     assert not any((tmp_path / "run").iterdir())  # nothing written
+
+
+def test_a_noise_stream_is_read_from_seeds(paper_raw):
+    # Source: the config reference (docs/configuration.md, seeds): {first, count, stream}.
+    config = parse_config({**paper_raw, "seeds": {"first": 1, "count": 2, "stream": 99}}, "paper")
+    assert config.seeds == (1, 2) and config.noise_stream == 99

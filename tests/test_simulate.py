@@ -291,3 +291,14 @@ def test_compiled_filter_is_lfilters_bits(paper_config):
     for b, a in (dloop.remnant, dloop.feedforward, dloop.feedback, (np.array([0.5, 0.25]), np.array([1.0]))):
         got, ref = _lfilter(b, a, x), sps.lfilter(b, a, x)
         assert np.array_equal(got.view(np.int64), ref.view(np.int64))
+
+
+def test_a_noise_stream_gives_every_seed_another_noise_and_0_keeps_the_seeds_own():
+    # Source: white_noise's rule: stream 0 is numpy's default_rng(seed) (every table made before
+    # streams is unchanged), a stream s is default_rng([s, seed]).
+    from hcid.loop.simulate import white_noise
+
+    assert np.array_equal(white_noise(7, 50), np.random.default_rng(7).standard_normal(50))
+    assert np.array_equal(white_noise(7, 50, 0), white_noise(7, 50))
+    assert np.array_equal(white_noise(7, 50, 123), np.random.default_rng([123, 7]).standard_normal(50))
+    assert not np.allclose(white_noise(7, 50, 123), white_noise(7, 50, 124))

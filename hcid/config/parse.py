@@ -140,14 +140,16 @@ def _loop_section(top: Section, plant_only: bool = False) -> Loop:
     return loop
 
 
-def _seeds_section(top: Section) -> tuple[int, ...]:
+def _seeds_section(top: Section) -> tuple[tuple[int, ...], int]:
+    """The seeds and the noise stream (``stream``, 0 where not given: :attr:`Config.noise_stream`)."""
     value = top.get("seeds")
     if isinstance(value, dict):
         s = Section(value, "seeds")
         first = s.integer("first", 0, 2**31 - 1)
         count = s.integer("count", 1, LIMITS["seeds"])
+        stream = s.integer("stream", 0, 2**63 - 1, 0)
         s.done()
-        return tuple(range(first, first + count))
+        return tuple(range(first, first + count)), stream
     if not isinstance(value, list) or not value:
         raise ConfigError(
             f"seeds: must be a non-empty list of integers or {{first, count}}, got {fmt(value)}"
@@ -157,7 +159,7 @@ def _seeds_section(top: Section) -> tuple[int, ...]:
     seeds = tuple(integer(v, f"seeds[{i}]", 0, 2**31 - 1) for i, v in enumerate(value))
     if len(set(seeds)) != len(seeds):
         raise ConfigError(f"seeds: must not repeat a seed, got {list(seeds)}")
-    return seeds
+    return seeds, 0
 
 
 # --------------------------------------------------------------------------- selection and data
@@ -506,9 +508,9 @@ def describe_config(data: Any, name: str, base: Path | None = None) -> Config:
         disturbance, target = signals_section(top, base)
         timing = timing_section(top)
         check_against_timing(timing, (disturbance, target), models)
-        seeds = _seeds_section(top)
+        seeds, noise_stream = _seeds_section(top)
     else:
-        models, disturbance, target, seeds = (), None, None, ()
+        models, disturbance, target, seeds, noise_stream = (), None, None, (), 0
         top.get("loop", None), top.get("timing", None)  # optional: named among the allowed keys
         loop = _loop_section(top, plant_only=True) if "loop" in top.data else None
         timing = timing_section(top) if "timing" in top.data else _data_timing(top)
@@ -537,5 +539,6 @@ def describe_config(data: Any, name: str, base: Path | None = None) -> Config:
         selection=selection,
         data=data_cfg,
         fit_hc=fit_hc,
+        noise_stream=noise_stream,
         raw=raw,
     )

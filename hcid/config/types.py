@@ -377,6 +377,10 @@ class Config:
     data: DataConfig | None = None
     #: The parametric HC fit's settings (config section ``fit_hc``).
     fit_hc: FitSettings | None = None
+    #: The remnant's white-noise stream (``seeds: {first, count, stream}``): 0, each seed's own
+    #: stream (numpy's ``default_rng(seed)``); else ``default_rng([stream, seed])``. hcid's twins
+    #: take a digest of their group and its data (:attr:`hcid.pipeline.twins.TwinSource.noise_stream`).
+    noise_stream: int = 0
     raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False, hash=False)
 
     @property

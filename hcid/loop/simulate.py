@@ -76,9 +76,10 @@ class Realization:
         return float(np.var(self.n) / np.var(self.u))
 
 
-def white_noise(seed: int, n: int) -> np.ndarray:
-    """Unit-variance Gaussian white noise, one stream per seed (shared by every model)."""
-    return np.random.default_rng(seed).standard_normal(n)
+def white_noise(seed: int, n: int, stream: int = 0) -> np.ndarray:
+    """Unit-variance Gaussian white noise, one stream per seed (shared by every model); a
+    ``stream`` other than 0 (:attr:`hcid.config.Config.noise_stream`) gives every seed another."""
+    return np.random.default_rng([stream, seed] if stream else seed).standard_normal(n)
 
 
 def simulate_loop(
@@ -339,7 +340,8 @@ def simulate_realization(
     model : HCModel
         The HC model. With ``disturbance_only`` its feedforward is dropped and ft = 0.
     seed : int
-        Seed of the white-noise stream (the same stream for every model).
+        Seed of the white-noise stream (the same stream for every model; with the config's
+        ``noise_stream``).
     kn : float
         Remnant gain, from :func:`remnant_gain`.
 
@@ -357,7 +359,7 @@ def simulate_realization(
     ahead = max(0, -dloop.delay_ft)  # an anticipating feedforward reads the target past the end
     ft = np.zeros_like(t) if disturbance_only else _forcing(timing, config.target, ahead)
     b_n, a_n = dloop.remnant
-    n = kn * _lfilter(b_n, a_n, white_noise(seed, t.size))
+    n = kn * _lfilter(b_n, a_n, white_noise(seed, t.size, config.noise_stream))
     out = simulate_loop(dloop, ft[: t.size], fd, n, ft_ahead=ft[t.size :])
 
     keep = slice(t.size - timing.window_samples, t.size)

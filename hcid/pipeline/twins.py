@@ -68,10 +68,11 @@ def group_slug(key: tuple[str, ...]) -> str:
 
 
 def twin_config_raw(
-    config: Config, fitted: dict, remnant: Remnant, forcing: Path, twins: int, name: str
+    config: Config, fitted: dict, remnant: Remnant, forcing: Path, twins: int, name: str, stream: int = 0
 ) -> dict:
     """The twins' config (as YAML would give it): the group's fitted model and its FB twin, every
-    value in :data:`hcid.pipeline.twin_values.TWIN_RANGES` (:func:`twin_values`)."""
+    value in :data:`hcid.pipeline.twin_values.TWIN_RANGES` (:func:`twin_values`); the remnant's
+    noise ``stream`` (:attr:`TwinSource.noise_stream`; 0: none given)."""
     loop_raw = dict(config.raw.get("loop", {}))
     kn, w_n, zeta_n = remnant
     rate, window = config.timing.output_rate, config.timing.window
@@ -102,7 +103,7 @@ def twin_config_raw(
             "window": window,
             "periods": 2,
         },
-        "seeds": {"first": 1, "count": twins},
+        "seeds": {"first": 1, "count": twins, **({"stream": stream} if stream else {})},
         "identify": config.raw["identify"],
         "selection": config.raw["selection"],
         "fit_hc": config.raw.get("fit_hc") or {},
@@ -245,6 +246,21 @@ class TwinSource:
         return group_slug(self.key) + (f"-f{self.forcing_set}" if self.forcing_set else "")
 
     @property
+    def noise_stream(self) -> int:
+        """The twins' remnant noise stream (:attr:`hcid.config.Config.noise_stream`): a digest of
+        the group's factor values and the set's first run's ft, fd and u, so that no two groups,
+        forcing sets or studies draw their twins' remnants from the same noise (with remnant seeds
+        1, 2, ... alone they all did: two sets' runs were judged against correlated twins), and
+        the same data give the same twins. The record's samples, not a fitted value, are digested:
+        they are the same bits on every machine. Every twin folder of one group and set (the
+        calibration's, the study's FF twin, the more FB twins) shares it, so a seed's FB and FF
+        twins share their noise as before."""
+        digest = hashlib.sha256(repr(tuple(self.key)).encode())
+        for name in ("ft", "fd", "u"):
+            digest.update(np.ascontiguousarray(self.record[name], dtype=np.float64).tobytes())
+        return int(digest.hexdigest()[:15], 16) or 1
+
+    @property
     def whose(self) -> str:
         return f"{', '.join(self.key) or 'all runs'}{_set_label(self.forcing_set)}"
 
@@ -316,7 +332,8 @@ def _calibration_raw(source: TwinSource, twins: int, slug: str, ff_only: bool, f
     """The calibration twins' config (:func:`twin_config_raw`), only the FF twin where the FB
     twin is another folder's."""
     config = source.config
-    raw = twin_config_raw(config, source.model, source.remnant, forcing, twins, f"{config.name}_twins_{slug}")
+    name, stream = f"{config.name}_twins_{slug}", source.noise_stream
+    raw = twin_config_raw(config, source.model, source.remnant, forcing, twins, name, stream)
     return {**raw, "models": {"FF": raw["models"]["FF"]}} if ff_only else raw
 
 
@@ -387,8 +404,9 @@ def draw_fb_twin_sets(
 
 def _draw_raw(source: TwinSource, first: int, count: int, slug: str, forcing: Path) -> dict:
     config = source.config
-    raw = twin_config_raw(config, source.model, source.remnant, forcing, count, f"{config.name}_twins_{slug}")
-    return {**raw, "models": {"FB": raw["models"]["FB"]}, "seeds": {"first": first, "count": count}}
+    name, stream = f"{config.name}_twins_{slug}", source.noise_stream
+    raw = twin_config_raw(config, source.model, source.remnant, forcing, count, name, stream)
+    return {**raw, "models": {"FB": raw["models"]["FB"]}, "seeds": {**raw["seeds"], "first": first}}
 
 
 @contextmanager
