@@ -856,8 +856,27 @@ def test_each_groups_twins_draw_noise_of_their_own_that_its_folders_share(analys
         for path in sorted((run / "twins").glob("*/config.yaml")):
             group = path.parent.name.split("-")[0]
             streams.setdefault(group, set()).add(yaml.safe_load(path.read_text())["seeds"]["stream"])
-        assert sorted(streams) == ["compensatory", "pursuit"]
+        assert sorted(streams) == ["compensatory", "pursuit"]  # one forcing set each
         assert all(len(s) == 1 and 0 not in s for s in streams.values())
         assert streams["compensatory"] != streams["pursuit"]
         found.append(streams)
     assert found[0] == found[1]
+
+
+def test_two_forcing_sets_of_a_group_draw_other_noise_and_one_set_the_same():
+    # Source: TwinSource.noise_stream digests the group's values and the set's first run's ft, fd
+    # and u (nothing else: the config, model and run directory are not read).
+    from hcid.pipeline.twins import TwinSource
+
+    rng = np.random.default_rng(0)
+    record = {k: rng.standard_normal(100) for k in ("ft", "fd", "u", "e")}
+    other = {**record, "fd": -record["fd"]}
+
+    def source(key, rec, number):
+        return TwinSource(None, Path("run"), key, rec, {}, (1.0, 8.0, 0.5), 100.0, number)
+
+    one = source(("pursuit",), record, 1).noise_stream
+    assert one == source(("pursuit",), dict(record), 2).noise_stream  # the same samples
+    assert one != source(("pursuit",), other, 2).noise_stream  # another set of the group
+    assert one != source(("compensatory",), record, 1).noise_stream  # another group
+    assert one != source(("pursuit",), {**record, "u": record["u"] + 1e-12}, 1).noise_stream

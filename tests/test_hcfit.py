@@ -1,6 +1,7 @@
 """Parametric HC fit (SPEC section 8): recovery of known models, bounds, settings."""
 
 import dataclasses
+import math
 
 import control
 import numpy as np
@@ -372,3 +373,23 @@ def test_a_group_models_notes_share_one_pair_of_parentheses():
     noted = plain.noting("its remnant filter from fits on their search bounds").noting("kn lowered")
     assert noted.source == f"{FROM_MEDIANS} (its remnant filter from fits on their search bounds; kn lowered)"
     assert noted.values == plain.values and noted.taken == FROM_MEDIANS
+
+
+def test_a_group_model_is_stable_as_fitted_too():
+    # Source: group_model's rule, as the likelihood ratio needs it: its fits (runs' and twins')
+    # start at the model's values as fitted, and from an unstable loop they never move. On the
+    # paper's plant with TL 0.4 s the loop at Kpe 1.705 is stable with tau_pe 0.24 s and not with
+    # 0.2411 s (hcid.hcfit.loop_is_stable, the limits being 1.7086 at 0.24 s): a simulation whose
+    # delay is whole 10 ms samples (rounded down here) takes the medians, as fitted they are
+    # unstable, and the nearest run whose own model is stable both ways is the group's.
+    paper = (np.array([5.5]), np.array([1.0, 2.0, 0.0]))
+    loop = {"Kpe": 1.705, "TL": 0.4, "tau_pe": 0.2411, "w_nms": 10.1, "zeta_nms": 0.35}
+    assert hcfit.loop_is_stable({**loop, "tau_pe": 0.24}, *paper) and not hcfit.loop_is_stable(loop, *paper)
+
+    def simulated(values):
+        return Simulated({**values, "tau_pe": math.floor(values["tau_pe"] * 100) / 100})
+
+    fits = [_determined_fit({**TRUE_FF, **loop, "Kpe": k}) for k in (1.705, 1.705, 1.0)]
+    model = group_model(fits, ["run 1", "run 2", "run 3"], *paper, simulated)
+    assert model.source == "run 3's own model (the medians make an unstable loop with the plant)"
+    assert model.values["Kpe"] == 1.0

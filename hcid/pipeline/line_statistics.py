@@ -70,7 +70,16 @@ def run_statistics(
     """:func:`record_statistics` of every run (``configs``: each run's, with its own plant;
     ``starts``: each run's group model), by run."""
     runs = sorted(starts)
-    tasks = [(records[r], configs[r].timing.output_rate, configs[r].loop, dict(starts[r])) for r in runs]
+    tasks = [
+        (
+            records[r],
+            configs[r].timing.output_rate,
+            configs[r].loop,
+            dict(starts[r]),
+            configs[r].fit_hc or FitSettings(),
+        )
+        for r in runs
+    ]
     return dict(zip(runs, execution.map(record_statistics, tasks, "line statistics"), strict=True))
 
 
@@ -109,7 +118,10 @@ def twin_statistics_of(
             results.check_records(records, path)
         keys.append(sorted(records))
         polynomials = np.array(config.loop.plant.num), np.array(config.loop.plant.den)
-        starts = {seed: _offset(start, offsets, seed, *polynomials) for seed in {k[1] for k in keys[-1]}}
+        settings = config.fit_hc or FitSettings()
+        starts = {
+            seed: _offset(start, offsets, seed, *polynomials, settings) for seed in {k[1] for k in keys[-1]}
+        }
         tasks += [
             (records[k], config.timing.output_rate, config.loop, starts[k[1]], config.fit_hc)
             for k in keys[-1]
@@ -140,24 +152,32 @@ def _offset(
     seed: int,
     num_c: np.ndarray,
     den_c: np.ndarray,
+    settings: FitSettings = FitSettings(),  # noqa: B008 (frozen)
 ) -> dict:
     """Twin ``seed``'s start: ``start`` minus deviation ``(seed - 1) mod len(offsets)``, that
-    deviation halved until the start makes a stable loop with the plant (``num_c``, ``den_c``).
+    deviation halved (at most :data:`_HALVINGS` times, then ``start`` itself) until the start, as
+    the fits take it (clipped into ``settings``' bounds), makes a stable loop with the plant
+    (``num_c``, ``den_c``).
 
-    A run's fits start at its group's model, a stable loop (hcid makes twins only of one), and so
-    must a twin's: from an unstable loop the lines' cost is flat (no slope), neither fit moves and
-    the likelihood ratio is 0 whatever the record holds. Unhalved, a large gain deviation gave
-    half of the CPHS ``fo`` twins such starts (the FB twins' ratio 0 in half the draws, the FF
-    twins' too: power 0.50 where the FF twins started stable are all found)."""
+    A run's fits start at its group's model, a stable loop (:func:`hcid.hcfit.determined.group_model`
+    takes no other), and so must a twin's: from an unstable loop the lines' cost is flat (no
+    slope), neither fit moves and the likelihood ratio is 0 whatever the record holds
+    (docs/methodology.md, "A third statistic")."""
     if not offsets:
         return dict(start)
     deviation = offsets[(int(seed) - 1) % len(offsets)]
-    for _ in range(_HALVINGS):
+    for _ in range(_HALVINGS + 1):
         moved = {p: v - deviation.get(p, 0.0) for p, v in start.items()}
-        if loop_is_stable(moved, num_c, den_c):
+        if loop_is_stable(_clipped(moved, settings), num_c, den_c):
             return moved
         deviation = {p: d / 2.0 for p, d in deviation.items()}
     return dict(start)
+
+
+def _clipped(values: Mapping[str, float], settings: FitSettings) -> dict[str, float]:
+    """``values`` clipped into ``settings``' bounds, as :func:`hcid.hcfit.lr.feedforward_lr`'s fits
+    start."""
+    return {p: min(max(v, settings.bound(p).lower), settings.bound(p).upper) for p, v in values.items()}
 
 
 def deviations(model: Mapping[str, float], fits: Sequence) -> list[dict[str, float]]:

@@ -249,12 +249,11 @@ class TwinSource:
     def noise_stream(self) -> int:
         """The twins' remnant noise stream (:attr:`hcid.config.Config.noise_stream`): a digest of
         the group's factor values and the set's first run's ft, fd and u, so that no two groups,
-        forcing sets or studies draw their twins' remnants from the same noise (with remnant seeds
-        1, 2, ... alone they all did: two sets' runs were judged against correlated twins), and
-        the same data give the same twins. The record's samples, not a fitted value, are digested:
-        they are the same bits on every machine. Every twin folder of one group and set (the
-        calibration's, the study's FF twin, the more FB twins) shares it, so a seed's FB and FF
-        twins share their noise as before."""
+        forcing sets or studies draw their twins' remnants from the same noise (their runs would
+        be judged against correlated twins), and the same data give the same twins. The record's
+        samples, not a fitted value, are digested: they are the same bits on every machine. Every
+        twin folder of one group and set (the calibration's, the study's FF twin, the more FB
+        twins) shares it, so a seed's FB and FF twins share their noise."""
         digest = hashlib.sha256(repr(tuple(self.key)).encode())
         for name in ("ft", "fd", "u"):
             digest.update(np.ascontiguousarray(self.record[name], dtype=np.float64).tobytes())
