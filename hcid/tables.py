@@ -364,8 +364,8 @@ PARAMETER_UNITS = {
 }
 _SHARES = (
     "fp_rate", "fp_low", "fp_high", "fn_rate", "fn_low", "fn_high", "p_w_star", "power_w_star", "p_fourier",
-    "power_fourier", "p_lr", "power_lr", "p_value", "power", "binomial_p", "median_power", "fc_p",
-    "share_remnant", "remnant_share_data", "alpha",
+    "power_fourier", "p_lr", "power_lr", "p_value", "power", "binomial_p", "median_power", "group_power",
+    "fc_p", "share_remnant", "remnant_share_data", "alpha",
 )  # fmt: skip
 #: The units of the analysis tables' numeric columns (Parquet field metadata ``unit``; "-": none,
 #: "1": a share or probability, "%").
@@ -489,7 +489,7 @@ ANALYSIS_GROUPS = _schema(
     _CHOICE_FIELDS
     + [("n_runs", _INT), ("n_feedforward_at_w", _INT)]
     + [("verdict", _STR), ("n_evidence", _INT), ("binomial_p", _F64), ("median_power", _F64)]
-    + [("alpha", _F64), ("forcing_sets", _INT), ("decided_by", _STR)]
+    + [("group_power", _F64), ("alpha", _F64), ("forcing_sets", _INT), ("decided_by", _STR)]
     + [(f"twin_{p}", _F64) for p in HC_PARAMETER_NAMES]
     + [(f"fitted_{p}", _F64) for p in HC_PARAMETER_NAMES]
     + [("twin_kn", _F64), ("twin_w_n", _F64), ("twin_zeta_n", _F64), ("twins", _INT), ("fb_twins", _INT)]

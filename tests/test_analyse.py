@@ -621,11 +621,20 @@ def test_each_statistics_verdict_is_given_and_a_disagreement_with_power_said():
     assert _statistics_line(summary) == (
         "    per statistic, runs at p <= 0.05 and their twins' median power: W* 2 of 10 (power 0.95; "
         "decides), Fourier coefficients 0 of 9 (power 0.10), likelihood ratio 10 of 10 (power 0.90); "
-        "THE STATISTICS DISAGREE: the likelihood ratio alone, with power 0.90, says FEEDFORWARD (10 of "
-        "10 runs; binomial p = 9.8e-14)"
+        "THE STATISTICS DISAGREE: the likelihood ratio alone, with power 0.90 (its count's 1.00), says "
+        "FEEDFORWARD (10 of 10 runs; binomial p = 9.8e-14)"
     )
-    # Without the power to tell, another verdict is not a disagreement.
-    weak = [{**r, "power_lr": 0.5} for r in runs]
+    # Without the power to tell, another verdict is not a disagreement: runs of power 0.2 make a count
+    # of power 0.32 (3 of 10 are significant: P(X >= 3 | Bin(10, 0.2)) = 1 - 0.8**10 - 10 * 0.2 *
+    # 0.8**9 - 45 * 0.04 * 0.8**8); runs of power 0.5 one of 0.95, which can tell.
+    weak = [{**r, "power_lr": 0.2} for r in runs]
+    assert GroupSummary(group, weak, (0.95, 0.95), [], 1.5, 55.0).statistics[2].group_power == pytest.approx(
+        1 - 0.8**10 - 10 * 0.2 * 0.8**9 - 45 * 0.04 * 0.8**8
+    )
+    half = [{**r, "power_lr": 0.5} for r in runs]
+    assert [s.name for s in GroupSummary(group, half, (0.95, 0.95), [], 1.5, 55.0).disagreeing] == [
+        "likelihood ratio"
+    ]
     assert GroupSummary(group, weak, (0.95, 0.95), [], 1.5, 55.0).disagreeing == []
     # The other way round: the ratio decides FEEDFORWARD, W* with power finds nothing.
     found = GroupSummary({**group, "verdict": "FEEDFORWARD", "decided_by": "likelihood ratio"}, runs,

@@ -307,3 +307,42 @@ def test_a_run_or_twin_without_the_statistic_is_no_evidence():
     assert evidence_power(np.array([2.0, float("nan"), 5.0, 0.2]), fb, 0.05) == 0.5
     rows = [{"p_value": 0.5, "power": float("nan")}] * 3
     assert group_verdict(rows, 0.05)["verdict"] == "UNCERTAIN"
+
+
+def test_the_counts_power_is_the_chance_its_binomial_test_is_significant():
+    # Slow reference: every one of the 2^n outcomes (run i found with its power or not), each
+    # judged by binomial_summary itself (its p at most alpha: significant), against count_power's
+    # Poisson binomial above the fewest runs found that the test calls significant.
+    import itertools
+
+    from hcid.selection.calibration import binomial_summary, count_power
+
+    rng = np.random.default_rng(4)
+    for n in (1, 2, 3, 6, 9):
+        powers = rng.uniform(0.05, 1.0, n)
+        for alpha in (0.05, 0.01):
+            slow = 0.0
+            for found in itertools.product((False, True), repeat=n):
+                chance = np.prod([q if f else 1.0 - q for q, f in zip(powers, found, strict=True)])
+                p_values = np.where(found, alpha / 2, 0.5)
+                if binomial_summary(p_values, alpha)[2] <= alpha:
+                    slow += chance
+            assert count_power(powers, alpha) == pytest.approx(slow, abs=1e-12)
+    assert np.isnan(count_power(np.array([0.9, np.nan]), 0.05))
+
+
+def test_a_group_verdict_reads_the_power_of_its_count():
+    # Source: group_verdict's rule. Twelve runs found with power 0.6 each, 2 of them at p <= 0.05
+    # (binomial p 0.12): the count is significant from 3 runs on (Binomial(12, 0.05) gives 3 or
+    # more with chance 0.020, 2 or more 0.118), which 12 runs of power 0.6 reach with chance
+    # 1 - P(0, 1 or 2 of them) = 0.9997: NO FEEDFORWARD SHOWN (the runs' median power, 0.6, had
+    # said UNCERTAIN). Two runs of power 0.8: one of two is not significant (0.0975), both are
+    # found with chance 0.64 < 0.8: UNCERTAIN (the median, 0.8, had said NO FEEDFORWARD SHOWN).
+    from hcid.pipeline.evidence import group_verdict
+
+    twelve = [{"p_value": 0.01, "power": 0.6}] * 2 + [{"p_value": 0.5, "power": 0.6}] * 10
+    v = group_verdict(twelve, 0.05)
+    assert v["group_power"] == pytest.approx(1 - 0.4**12 - 12 * 0.6 * 0.4**11 - 66 * 0.36 * 0.4**10)
+    assert (v["verdict"], v["median_power"]) == ("NO FEEDFORWARD SHOWN", 0.6)
+    two = group_verdict([{"p_value": 0.5, "power": 0.8}] * 2, 0.05)
+    assert two["group_power"] == pytest.approx(0.64) and two["verdict"] == "UNCERTAIN"

@@ -133,12 +133,13 @@ def _verdict_line(summary) -> str:
     power = f"{low:.2f} for every run" if same else f"{low:.2f} to {high:.2f} over the runs"
     if g["ff_twin"] == "study":  # the power is that of the study's feedforward, not the group's own
         power += f" (FF twins with the study's feedforward, Kpt {g['twin_Kpt']:.2g})"
+    plural = "s" if g["forcing_sets"] > 1 else ""
     return (
         f"{g['group']}, {g['method']}: {g['verdict']}: {g['n_evidence']} of {g['n_runs']} runs show "
         f"feedforward at p <= {g['alpha']:g} (decided by their {g['decided_by']} against their own "
         f"forcing set's FB twins, up to {g['fb_twins']} drawn: the statistic with the most power; "
-        f"binomial p = {g['binomial_p']:.2g}; power (FF twins found at this level) {power}, "
-        f"{g['forcing_sets']} forcing set{'s' if g['forcing_sets'] > 1 else ''})"
+        f"binomial p = {g['binomial_p']:.2g}; power (FF twins found at this level) {power}, the "
+        f"count's {g['group_power']:.2f}; {g['forcing_sets']} forcing set{plural})"
     )
 
 
@@ -170,7 +171,8 @@ def _statistics_line(summary) -> str:
     )
     for s in summary.disagreeing:
         text += (
-            f"; THE STATISTICS DISAGREE: the {s.name} alone, with power {s.median_power:.2f}, says "
+            f"; THE STATISTICS DISAGREE: the {s.name} alone, with power {s.median_power:.2f} (its "
+            f"count's {s.group_power:.2f}), says "
             f"{s.verdict} ({s.n_evidence} of {s.n_runs} runs; binomial p = {s.binomial_p:.2g})"
         )
     return text

@@ -32,7 +32,9 @@ __all__ = [
 class StatisticVerdict:
     """What one evidence statistic alone says of a group and method (:func:`group_verdict` over its
     own p-values and powers): ``verdict``, ``n_evidence`` of ``n_runs`` at p <= alpha, the
-    ``binomial_p``, the ``median_power``; ``deciding`` for the statistic the group's verdict reads."""
+    ``binomial_p``, the runs' ``median_power`` and the count's ``group_power``
+    (:func:`hcid.selection.calibration.count_power`); ``deciding`` for the statistic the group's
+    verdict reads."""
 
     name: str
     verdict: str
@@ -40,6 +42,7 @@ class StatisticVerdict:
     n_runs: int
     binomial_p: float
     median_power: float
+    group_power: float
     deciding: bool
 
 
@@ -99,21 +102,21 @@ class GroupSummary:
                 v = group_verdict(rows, self.group["alpha"])
                 out.append(StatisticVerdict(
                     name, v["verdict"], v["n_evidence"], len(rows), v["binomial_p"], v["median_power"],
-                    name == self.group["decided_by"],
+                    v["group_power"], name == self.group["decided_by"],
                 ))  # fmt: skip
         return out
 
     @property
     def disagreeing(self) -> list[StatisticVerdict]:
-        """The statistics other than the deciding one whose twins show the power to tell (median
-        power at least :data:`hcid.pipeline.evidence.MIN_POWER`) and whose verdict differs from
+        """The statistics other than the deciding one whose twins show the power to tell (their
+        count's power at least :data:`hcid.pipeline.evidence.MIN_POWER`) and whose verdict differs from
         the group's: where the runs' evidence depends on the statistic read. A statistic without
         that power that finds feedforward is listed in :attr:`statistics` but not named here:
         reading whichever of three statistics finds something would not hold the level alpha,
         which is why the one to read is chosen by its twins' power before the runs are read."""
         return [
             s for s in self.statistics
-            if not s.deciding and s.median_power >= MIN_POWER and s.verdict != self.group["verdict"]
+            if not s.deciding and s.group_power >= MIN_POWER and s.verdict != self.group["verdict"]
         ]  # fmt: skip
 
     @property

@@ -36,6 +36,7 @@ __all__ = [
     "WRule",
     "benjamini_hochberg",
     "binomial_summary",
+    "count_power",
     "calibrate",
     "choose_w",
     "clopper_pearson",
@@ -495,6 +496,32 @@ def binomial_summary(p_values: np.ndarray, alpha: float) -> tuple[int, int, floa
     from scipy import stats
 
     return k, n, float(stats.binom.sf(k - 1, n, alpha)) if n else float("nan")
+
+
+def count_power(powers: np.ndarray, alpha: float) -> float:
+    """The power of :func:`binomial_summary`'s test: the chance that at least ``k`` of the ``n``
+    runs reach p <= alpha, ``k`` the fewest it calls significant (``Binomial(n, alpha)``'s chance
+    of at least ``k`` at most alpha), were each run found with its own power (a Poisson binomial).
+    NaN where a run's power is.
+
+    Examples
+    --------
+    >>> round(count_power(np.full(6, 0.5), 0.05), 6)  # k = 2: 1 - (1 + 6) / 2^6
+    0.890625
+    >>> count_power(np.array([0.8, 0.8]), 0.05)  # k = 2 (one of two is not significant): 0.8^2
+    0.6400000000000001
+    """
+    powers = np.asarray(powers, dtype=np.float64)
+    n = powers.size
+    if n == 0 or not np.all(np.isfinite(powers)):
+        return float("nan")
+    from scipy import stats
+
+    k = next(k for k in range(1, n + 1) if stats.binom.sf(k - 1, n, alpha) <= alpha)
+    found = np.array([1.0])  # the chance of each number of runs found, by convolution
+    for q in powers:
+        found = np.convolve(found, [1.0 - q, q])
+    return float(min(1.0, found[k:].sum()))
 
 
 def benjamini_hochberg(p_values: np.ndarray, q: float) -> np.ndarray:

@@ -87,6 +87,7 @@ def _answer(summary) -> list[str]:
         f"{g['n_evidence']} of {g['n_runs']}",
         num(g["binomial_p"], 2),
         num(g["median_power"], 2),
+        num(g["group_power"], 2),
         f"{g['n_feedforward_at_w']} of {g['n_runs']}",
         num(g["w"]),
         g["w_rule"],
@@ -227,12 +228,13 @@ def compute(run, done) -> StudyData | None:
     ]
     statistics = [
         [s.group["group"], s.group["method"], x.name + (" (decides)" if x.deciding else ""),
-         f"{x.n_evidence} of {x.n_runs}", num(x.binomial_p, 2), num(x.median_power, 2), x.verdict]
+         f"{x.n_evidence} of {x.n_runs}", num(x.binomial_p, 2), num(x.median_power, 2),
+         num(x.group_power, 2), x.verdict]
         for s in summaries if len(s.statistics) > 1 for x in s.statistics
     ]  # fmt: skip
     disagree = [
         f"{s.group['group']} ({s.group['method']}): {s.group['decided_by']} decides {s.group['verdict']}, "
-        f"the {x.name} (power {x.median_power:.2f}) alone says {x.verdict}"
+        f"the {x.name} (power {x.median_power:.2f}, its count's {x.group_power:.2f}) alone says {x.verdict}"
         for s in summaries for x in s.disagreeing
     ]  # fmt: skip
     checks, contradicted = _checks(groups)
@@ -324,8 +326,9 @@ def _render_answers(data: StudyData, doc: Doc) -> None:
         "(W*, the Fourier coefficients' size or the likelihood ratio, the one whose twins show the "
         "most power) against its forcing set's FB twins gives a p-value; the verdict is FEEDFORWARD "
         "where the number of runs at p <= alpha is itself unlikely without feedforward (binomial p), "
-        "else UNCERTAIN where the twins' power is below 0.8 (a finding needs no power, an answer of "
-        "none does) and NO "
+        "else UNCERTAIN where that count's power is below 0.8 (the chance it would be significant "
+        "were every run's feedforward its FF twins', from each run's power: a finding needs no power, "
+        "an answer of none does) and NO "
         "FEEDFORWARD SHOWN where it is not. Where the two methods differ, the one whose twins give the "
         "higher power is the one that can tell (the power comes from the twins alone, before the runs "
         "are read); report both. Then SPEC 10's calibrated W: feedforward (nb_ft > 0) in "
@@ -345,7 +348,8 @@ def _render_answers(data: StudyData, doc: Doc) -> None:
             "verdict",
             "runs at p <= alpha",
             "binomial p",
-            "median power",
+            "runs' median power",
+            "the count's power",
             "feedforward at W",
             "W",
             "rule",
@@ -371,12 +375,14 @@ def _render_answer_notes(data: StudyData, doc: Doc) -> None:
     if data.statistics:
         doc.text(
             "Per evidence statistic, what it alone says: runs at p <= alpha, binomial p, its twins' "
-            "median power and its verdict by the same rule. The one that decides was chosen by its "
-            "calibration twins' power before any run was read (its p and power are over every FB "
-            "twin drawn for it, the others' over the calibration's), so another's verdict is not a "
+            "median power, its count's power and its verdict by the same rule. The one that decides "
+            "was chosen by its calibration twins' power before any run was read (its p and power are "
+            "over every FB twin drawn for it, the others' over the calibration's), so another's "
+            "verdict is not a "
             "test at level alpha of its own."
         )
-        header = ["group", "method", "statistic", "runs at p <= alpha", "binomial p", "median power", "alone"]
+        header = ["group", "method", "statistic", "runs at p <= alpha", "binomial p", "median power",
+                  "the count's power", "alone"]  # fmt: skip
         doc.table(header, data.statistics)
     if data.disagree:
         doc.text(
