@@ -165,8 +165,9 @@ def test_the_line_statistics_p_values_and_the_deciding_statistic_come_from_the_t
     # Source: SPEC 11 as for W* (the test above): each line statistic's p-value over its set's FB
     # twins in evidence_twins.parquet, sequential where it decides, else over the calibration's 4;
     # the deciding statistic is the one whose calibration twins have the highest median power
-    # over the group's runs (hcid.selection.calibration.evidence_power), the first on a tie.
-    from hcid.pipeline.evidence import STATISTICS
+    # over the group's runs (hcid.selection.calibration.evidence_power), the first of TIE_ORDER on a
+    # tie (W*, the likelihood ratio, the Fourier size).
+    from hcid.pipeline.evidence import STATISTICS, TIE_ORDER
     from hcid.pipeline.line_statistics import LINE_STATISTICS
     from hcid.selection.calibration import evidence_power, run_p_value
 
@@ -205,7 +206,8 @@ def test_the_line_statistics_p_values_and_the_deciding_statistic_come_from_the_t
         }
         power = {n: evidence_power(ff[n], fb[n], 0.05) for n in STATISTICS}
         best = max(power.values())
-        assert group_rows[0]["decided_by"] == next(n for n in STATISTICS if power[n] == best)
+        assert group_rows[0]["decided_by"] == next(n for n in TIE_ORDER if power[n] == best)
+    assert sorted(TIE_ORDER) == sorted(STATISTICS)
 
 
 _COLUMNS = {"W*": "w_star", "Fourier coefficients": "fourier_size", "likelihood ratio": "likelihood_ratio"}
