@@ -601,7 +601,8 @@ def test_each_statistics_verdict_is_given_and_a_disagreement_with_power_said():
     # with 2 of 10 runs at p <= 0.05, binomial p 0.086: NO FEEDFORWARD SHOWN; the likelihood ratio
     # (power 0.90) has all 10 at p <= 0.05. Source for the binomial p's: P(X >= 2 | Bin(10, 0.05))
     # = 1 - 0.95**10 - 10 * 0.05 * 0.95**9 = 0.0861; P(X >= 10) = 0.05**10. The Fourier size has
-    # no p in one run: left out.
+    # no p in one run: one of the 10, never found (as the group's verdict counts it), so its count
+    # (3 of 10 significant) has power 1 - 0.9**9 - 9 * 0.1 * 0.9**8 - 36 * 0.01 * 0.9**7 = 0.053.
     from hcid.cli.answers import _statistics_line
     from hcid.pipeline.summary import GroupSummary
 
@@ -615,14 +616,15 @@ def test_each_statistics_verdict_is_given_and_a_disagreement_with_power_said():
     got = {s.name: (s.verdict, s.n_evidence, s.n_runs, s.deciding) for s in summary.statistics}
     assert got == {
         "W*": ("NO FEEDFORWARD SHOWN", 2, 10, True),
-        "Fourier coefficients": ("UNCERTAIN", 0, 9, False),  # over the 9 runs with a p
+        "Fourier coefficients": ("UNCERTAIN", 0, 10, False),  # the run without a p among the 10
         "likelihood ratio": ("FEEDFORWARD", 10, 10, False),
     }
     assert summary.statistics[0].binomial_p == pytest.approx(1 - 0.95**10 - 10 * 0.05 * 0.95**9)
     assert [s.name for s in summary.disagreeing] == ["likelihood ratio"]
     assert _statistics_line(summary) == (
-        "    per statistic, runs at p <= 0.05 and their twins' median power: W* 2 of 10 (power 0.95; "
-        "decides), Fourier coefficients 0 of 9 (power 0.10), likelihood ratio 10 of 10 (power 0.90); "
+        "    per statistic, runs at p <= 0.05 and their twins' median power: W* 2 of 10 (power 0.95, its "
+        "count's 1.00; decides), Fourier coefficients 0 of 10 (power 0.10, its count's 0.05), likelihood "
+        "ratio 10 of 10 (power 0.90, its count's 1.00); "
         "THE STATISTICS DISAGREE: the likelihood ratio alone, with power 0.90 (its count's 1.00), says "
         "FEEDFORWARD (10 of 10 runs; binomial p = 9.8e-14)"
     )
@@ -891,3 +893,20 @@ def test_two_forcing_sets_of_a_group_draw_other_noise_and_one_set_the_same():
     assert one != source(("pursuit",), other, 2).noise_stream  # another set of the group
     assert one != source(("compensatory",), record, 1).noise_stream  # another group
     assert one != source(("pursuit",), {**record, "u": record["u"] + 1e-12}, 1).noise_stream
+
+
+def test_each_groups_count_power_is_that_of_its_runs(analysed):
+    # Source: group_verdict's rule, from the tables alone: a group's group_power is count_power of
+    # its runs' power (0 for a run without a p) at its alpha, and its verdict UNCERTAIN exactly where
+    # no feedforward is shown and that power is below 0.8.
+    from hcid.selection.calibration import count_power
+
+    _, out = analysed
+    run = out[1][0]
+    rows = pq.read_table(run / tables.ANALYSIS.file).to_pylist()
+    for g in pq.read_table(run / tables.ANALYSIS_GROUPS.file).to_pylist():
+        mine = [r for r in rows if (r["group"], r["method"]) == (g["group"], g["method"])]
+        powers = np.array([0.0 if np.isnan(r["p_value"]) else r["power"] for r in mine])
+        assert g["group_power"] == count_power(powers, g["alpha"])
+        if g["verdict"] != "FEEDFORWARD":
+            assert (g["verdict"] == "UNCERTAIN") == (not g["group_power"] >= 0.8)

@@ -335,7 +335,7 @@ def test_a_group_verdict_reads_the_power_of_its_count():
     # Source: group_verdict's rule. Twelve runs found with power 0.6 each, 2 of them at p <= 0.05
     # (binomial p 0.12): the count is significant from 3 runs on (Binomial(12, 0.05) gives 3 or
     # more with chance 0.020, 2 or more 0.118), which 12 runs of power 0.6 reach with chance
-    # 1 - P(0, 1 or 2 of them) = 0.9997: NO FEEDFORWARD SHOWN (the runs' median power, 0.6, had
+    # 1 - P(0, 1 or 2 of them) = 0.9972: NO FEEDFORWARD SHOWN (the runs' median power, 0.6, had
     # said UNCERTAIN). Two runs of power 0.8: one of two is not significant (0.0975), both are
     # found with chance 0.64 < 0.8: UNCERTAIN (the median, 0.8, had said NO FEEDFORWARD SHOWN).
     from hcid.pipeline.evidence import group_verdict
@@ -346,3 +346,15 @@ def test_a_group_verdict_reads_the_power_of_its_count():
     assert (v["verdict"], v["median_power"]) == ("NO FEEDFORWARD SHOWN", 0.6)
     two = group_verdict([{"p_value": 0.5, "power": 0.8}] * 2, 0.05)
     assert two["group_power"] == pytest.approx(0.64) and two["verdict"] == "UNCERTAIN"
+
+
+def test_a_run_without_a_p_is_one_of_the_count_and_never_found():
+    # Source: group_verdict's rule: binomial_summary counts a run whose p is NaN among the n (not
+    # at p <= alpha), so the count's power gives it 0, not its twins' power. Two runs of power 0.85
+    # and one without a p: 2 of 3 are significant (1 of 3 is not: 0.143), reached with 0.85^2 =
+    # 0.7225 < 0.8: UNCERTAIN (with the third run's 0.85 it would read 0.94).
+    from hcid.pipeline.evidence import group_verdict
+
+    rows = [{"p_value": 0.5, "power": 0.85}] * 2 + [{"p_value": float("nan"), "power": 0.85}]
+    v = group_verdict(rows, 0.05)
+    assert v["group_power"] == pytest.approx(0.85**2) and v["verdict"] == "UNCERTAIN"

@@ -161,7 +161,7 @@ def _statistics_line(summary) -> str:
     recordings the statistics can disagree, each with its power)."""
     alpha = summary.group["alpha"]
     parts = [
-        f"{s.name} {s.n_evidence} of {s.n_runs} (power {s.median_power:.2f}"
+        f"{s.name} {s.n_evidence} of {s.n_runs} (power {s.median_power:.2f}, its count's {s.group_power:.2f}"
         + ("; decides)" if s.deciding else ")")
         for s in summary.statistics
     ]

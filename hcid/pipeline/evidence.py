@@ -495,12 +495,16 @@ def group_verdict(rows: list[dict], alpha: float) -> dict:
     the runs' median power, the power of that binomial test (:func:`count_power`: were every run's
     feedforward its FF twins', the chance the count would be significant), and the verdict word:
     FEEDFORWARD where the count is significant, else UNCERTAIN where the test's power is below
-    :data:`MIN_POWER`, else NO FEEDFORWARD SHOWN. The verdict is the count's test, so its power is
+    :data:`MIN_POWER`, else NO FEEDFORWARD SHOWN (a run without a p counts among the n, never
+    found). The verdict is the count's test, so its power is
     the one to read: six runs each found with a power of 0.5 make a test of power 0.89, two of 0.8
     one of 0.64."""
-    k, n, p = binomial_summary(np.array([r["p_value"] for r in rows]), alpha)
+    p_values = np.array([r["p_value"] for r in rows], dtype=np.float64)
+    k, n, p = binomial_summary(p_values, alpha)
     power = float(np.median([r["power"] for r in rows]))
-    test_power = count_power(np.array([r["power"] for r in rows], dtype=np.float64), alpha)
+    # A run without a p (no value of the statistic) is one of the n and is never found: power 0.
+    powers = np.array([r["power"] for r in rows], dtype=np.float64)
+    test_power = count_power(np.where(np.isnan(p_values), 0.0, powers), alpha)
     if p <= alpha:
         verdict = FEEDFORWARD
     elif not test_power >= MIN_POWER:  # NaN (no FF twin has the statistic): no power shown either

@@ -87,18 +87,15 @@ class GroupSummary:
     @functools.cached_property
     def statistics(self) -> list[StatisticVerdict]:
         """Each evidence statistic's own verdict (:data:`hcid.pipeline.evidence.STATISTICS`) over
-        the runs that have its p-value (a statistic none has is not listed), the deciding one
-        marked: its verdict is the group's. The deciding statistic was chosen by its calibration
+        the group's runs, as the group's verdict counts them (a run without its p-value among the
+        n, never found; a statistic no run has is not listed), the deciding one marked: its
+        verdict is the group's. The deciding statistic was chosen by its calibration
         twins' power before any run was read, and its p and power are over every FB twin drawn for
         it; the others' over the calibration's FB twins."""
         out = []
         for name, (p, power) in STATISTICS.items():
-            rows = [
-                {"p_value": r[p], "power": r[power]}
-                for r in self.runs
-                if r[p] is not None and math.isfinite(r[p])
-            ]
-            if rows:
+            rows = [{"p_value": math.nan if r[p] is None else r[p], "power": r[power]} for r in self.runs]
+            if any(math.isfinite(r["p_value"]) for r in rows):
                 v = group_verdict(rows, self.group["alpha"])
                 out.append(StatisticVerdict(
                     name, v["verdict"], v["n_evidence"], len(rows), v["binomial_p"], v["median_power"],
