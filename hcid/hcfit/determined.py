@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hcid.config.fit_settings import FEEDBACK_PARAMETERS
 from hcid.errors import DataError
 from hcid.hcfit.closed_loop import loop_is_stable
 from hcid.hcfit.uncertainty import Z95
@@ -64,8 +65,6 @@ PLAUSIBLE = {
 #: The neuromuscular system's values where a record does not determine it: those of the
 #: paper's HC model (McRuer et al. 1968; Laurense et al. 2015; SPEC 1).
 LITERATURE_NMS = {"w_nms": 10.1, "zeta_nms": 0.35}
-#: The parameters of the loop's stability (:func:`hcid.hcfit.closed_loop.loop_is_stable`).
-_LOOP = ("Kpe", "TL", "tau_pe", "w_nms", "zeta_nms")
 
 #: The status of a determined parameter.
 DETERMINED = "determined"
@@ -278,7 +277,8 @@ def group_model(
         finite = all(math.isfinite(v) for v in sim.values.values())
         # Stable as simulated (the twins) and as fitted (the likelihood ratio's fits start there:
         # hcid.pipeline.line_statistics); a delay rounded to whole samples can tell them apart.
-        as_fitted = {p: candidate[p] for p in _LOOP} if all(p in candidate for p in _LOOP) else sim.values
+        loop = FEEDBACK_PARAMETERS  # the loop's stability reads these alone
+        as_fitted = {p: candidate[p] for p in loop} if all(p in candidate for p in loop) else sim.values
         if finite and not (
             loop_is_stable(sim.values, num_c, den_c) and loop_is_stable(as_fitted, num_c, den_c)
         ):

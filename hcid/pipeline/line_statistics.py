@@ -123,8 +123,7 @@ def twin_statistics_of(
             seed: _offset(start, offsets, seed, *polynomials, settings) for seed in {k[1] for k in keys[-1]}
         }
         tasks += [
-            (records[k], config.timing.output_rate, config.loop, starts[k[1]], config.fit_hc)
-            for k in keys[-1]
+            (records[k], config.timing.output_rate, config.loop, starts[k[1]], settings) for k in keys[-1]
         ]
     found = list(execution.map(record_statistics, tasks, "twins' line statistics")) if tasks else []
     out, first = [], 0

@@ -378,8 +378,7 @@ def _render_answer_notes(data: StudyData, doc: Doc) -> None:
             "median power, its count's power and its verdict by the same rule. The one that decides "
             "was chosen by its calibration twins' power before any run was read (its p and power are "
             "over every FB twin drawn for it, the others' over the calibration's), so another's "
-            "verdict is not a "
-            "test at level alpha of its own."
+            "verdict is not a test at level alpha of its own."
         )
         header = ["group", "method", "statistic", "runs at p <= alpha", "binomial p", "median power",
                   "the count's power", "alone"]  # fmt: skip
