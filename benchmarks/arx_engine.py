@@ -7,11 +7,13 @@ kernel (one candidate at a time, every candidate simulated in full,
 unfused; the engine's twin in the tests) and the reference loop (lstsq +
 lfilter + roots) on a random sample of the same grid; then the stage-1 grid
 and stage 2 (the direct grid with stage 1's output e_r), whose rates per
-candidate the issue compares, timed alternately. Repeats alternate between
+candidate the issue compares, timed alternately; and stage 1 as the indirect
+method runs it (``best_only``) against the whole frontier's search. Repeats alternate between
 the configurations so that load from other work on the machine hits them
 alike. Both engines' frontiers must equal the old kernel's bit for bit, and the
-engine must agree with the reference loop on the sample; the script exits
-with code 1 where one does not.
+engine must agree with the reference loop on the sample, and ``best_only``'s
+best row must equal the whole search's; the script exits with code 1 where
+one does not.
 
 ``--smoke``: small grids, one repeat, a small sample; every path of this
 script in a few seconds, no figure worth keeping.
@@ -117,6 +119,33 @@ def _side_by_side(label, signals, grid, rows, repeats, failures):
     return n / min(seconds[engine]), n / min(seconds["old kernel"])
 
 
+def _best_only(label, signals, grid, rows, repeats, failures):
+    """Stage 1 as the indirect method runs it (``best_only``: its choice is the grid's smallest V)
+    against the whole frontier's search, alternating, best of ``repeats``; their best rows
+    compared (a difference appended to ``failures``)."""
+    seconds = {False: [], True: []}
+    fits = {}
+    for _ in range(repeats):
+        for best_only in (False, True):
+            start = time.perf_counter()
+            fits[best_only] = _fit_grid(*signals, grid, *rows, 1, False, unpruned=False, fused=None,
+                                        best_only=best_only)  # fmt: skip
+            seconds[best_only].append(time.perf_counter() - start)
+    (whole, whole_counts), (found, counts) = fits[False], fits[True]
+    a, b = best(whole), best(found)
+    same = a == b and all(
+        np.array_equal(getattr(whole, n)[a], getattr(found, n)[b])
+        for n in ("nk1", "nk2", "v", "vaf_estimation", "a", "b1", "b2")
+    )
+    ratio = min(seconds[False]) / min(seconds[True])
+    stable = whole.n_candidates - whole.n_unstable_total
+    print(f"{label + ', best_only vs whole':<34} {ratio:7.2f} x   best row identical: {same}   "
+          f"({min(seconds[True]):.3f} vs {min(seconds[False]):.3f} s; {counts[:, 2].sum() / stable:,.0f} "
+          f"vs {whole_counts[:, 2].sum() / stable:,.0f} samples per stable candidate)")  # fmt: skip
+    if not same:
+        failures.append(f"{label}: best_only's best row differs from the whole search's")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--smoke", action="store_true", help="small grids, one repeat: seconds")
@@ -167,6 +196,7 @@ def main():
         )
 
     _side_by_side("stage 1", stage1, stage1_grid, STAGE1_ROWS, repeats, failures)
+    _best_only("stage 1", stage1, stage1_grid, STAGE1_ROWS, repeats, failures)
     # Stage 2 as the indirect method runs it: the direct grid with e_r, stage 1's best output.
     fit, _ = _fit(stage1, stage1_grid, STAGE1_ROWS, False, fused=True)
     row = best(fit)

@@ -74,7 +74,7 @@ def _waiting_by_score(v_all, score, start, size):
 
 @njit(cache=True, inline="always")
 def _simulate_block(
-    row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
+    row, block_orders, block_start, block_size, block_ceiling, bounds, theta_all, score, i1p, i2p, pad, o,
     val_start, val_stop, prune, v_all, counts,
 ):  # fmt: skip
     """Simulate the stable candidates of one order triple four at a time (:func:`simulate_lanes`).
@@ -102,7 +102,7 @@ def _simulate_block(
     yh = np.empty((na + n) * 4)
     v4 = np.empty(4)
     pruned = np.empty(4, dtype=np.bool_)
-    bound = np.inf
+    bound = block_ceiling[row]
     for first in range(0, m, 4):
         for lane in range(4):
             # A short last batch repeats its first candidate in the idle lanes.
@@ -239,8 +239,8 @@ def _simulate_affine_groups(
 
 @njit(cache=True, inline="always")
 def _simulate_run(
-    first_row, stop_row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
-    tv1, tv2, pad, o, val_start, val_stop, prune, v_all, counts,
+    first_row, stop_row, block_orders, block_start, block_size, block_ceiling, bounds, theta_all, score,
+    i1p, i2p, tv1, tv2, pad, o, val_start, val_stop, prune, v_all, counts,
 ):  # fmt: skip
     """Simulate the stable candidates of blocks ``first_row .. stop_row - 1`` (one na and
     nb1), ``LANES`` at a time on the vector steps.
@@ -252,7 +252,7 @@ def _simulate_run(
     block's last candidates share a batch with the next block's first, so
     few lanes idle (stage 1's blocks hold 25 candidates). A lane stops once
     its partial V exceeds the best V of its own block so far (``prune``;
-    inf until the block has one), which cannot change the frontier. A
+    the block's ceiling until it has one), which cannot change the frontier. A
     batch that spans two blocks pads B with zero coefficients to its longer
     nb2: ``x + 0.0 * i`` is ``x``, the same value bit for bit but for a zero's sign, which
     V's squares do not keep, so every V is what the block alone would give.
@@ -261,7 +261,7 @@ def _simulate_run(
     tap vectors ``tv1``, ``tv2`` for the rest).
     """
     na, nb1 = block_orders[first_row, 0], block_orders[first_row, 1]
-    best = np.full(stop_row - first_row, np.inf)
+    best = block_ceiling[first_row:stop_row].copy()
     _simulate_affine_groups(
         first_row, stop_row, block_orders, block_start, bounds, theta_all, score, i1p, i2p, pad, o,
         val_start, val_stop, prune, v_all, counts, best,
@@ -347,27 +347,27 @@ def _runs(block_orders):
 
 @njit(cache=True)  # not inlined: a prange body with one call and one exit runs in parallel
 def _simulate_group(
-    g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1, tv2,
-    pad, o, val_start, val_stop, prune, fused, v_all, counts,
+    g, firsts, block_orders, block_start, block_size, block_ceiling, bounds, theta_all, score, i1p, i2p,
+    tv1, tv2, pad, o, val_start, val_stop, prune, fused, v_all, counts,
 ):  # fmt: skip
     first_row, stop_row = firsts[g], firsts[g + 1]
     if _WIDE and fused and block_orders[first_row, 0] <= MAX_NA:
         _simulate_run(
-            first_row, stop_row, block_orders, block_start, block_size, bounds, theta_all, score,
-            i1p, i2p, tv1, tv2, pad, o, val_start, val_stop, prune, v_all, counts,
+            first_row, stop_row, block_orders, block_start, block_size, block_ceiling, bounds, theta_all,
+            score, i1p, i2p, tv1, tv2, pad, o, val_start, val_stop, prune, v_all, counts,
         )  # fmt: skip
     else:  # each block alone (a run of the vector steps' blocks when not fused)
         for row in range(first_row, stop_row):
             _simulate_block(
-                row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
+                row, block_orders, block_start, block_size, block_ceiling, bounds, theta_all, score, i1p, i2p,
                 pad, o, val_start, val_stop, prune, v_all, counts,
             )  # fmt: skip
 
 
 @njit(cache=True)
 def simulate_blocks(
-    block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1, tv2, pad, o,
-    val_start, val_stop, prune, v_all, counts,
+    block_orders, block_start, block_size, block_ceiling, bounds, theta_all, score, i1p, i2p, tv1, tv2,
+    pad, o, val_start, val_stop, prune, v_all, counts,
 ):  # fmt: skip
     """Serial driver of the vector steps: the runs of blocks of one (na, nb1), each by
     :func:`_simulate_run`, every multiply-add fused. Every block's na is at most ``MAX_NA``
@@ -381,6 +381,12 @@ def simulate_blocks(
         ``(na, nb1, nb2)`` of each candidate block.
     block_start, block_size : int64 arrays, shape (n_blocks,)
         Where each block starts in the candidate order, and its length.
+    block_ceiling : float64 array, shape (n_blocks,)
+        The bound each block's pruning starts from (``inf``: none, the
+        frontier's search): a lane stops once its partial V exceeds the
+        smaller of it and the block's best V so far. A V known to be reached
+        elsewhere (:func:`hcid.arx.engine.fit_grid`, ``best_only``) prunes
+        candidates that cannot be the grid's best.
     i1p, i2p : float64 arrays
         The inputs after ``pad`` zeros and with ``TAIL`` zeros after the
         record (the affine and plain steps read them).
@@ -400,14 +406,14 @@ def simulate_blocks(
     firsts = _runs(block_orders)
     for g in range(firsts.shape[0] - 1):
         _simulate_run(
-            firsts[g], firsts[g + 1], block_orders, block_start, block_size, bounds, theta_all, score,
-            i1p, i2p, tv1, tv2, pad, o, val_start, val_stop, prune, v_all, counts,
+            firsts[g], firsts[g + 1], block_orders, block_start, block_size, block_ceiling, bounds,
+            theta_all, score, i1p, i2p, tv1, tv2, pad, o, val_start, val_stop, prune, v_all, counts,
         )  # fmt: skip
 
 
 @njit(cache=True)
 def simulate_blocks_plain(
-    block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
+    block_orders, block_start, block_size, block_ceiling, bounds, theta_all, score, i1p, i2p, pad, o,
     val_start, val_stop, prune, v_all, counts,
 ):  # fmt: skip
     """Serial driver of the plain path: each block alone by :func:`_simulate_block` (four
@@ -416,15 +422,15 @@ def simulate_blocks_plain(
     unfused. Arguments as in :func:`simulate_blocks`."""
     for row in range(block_orders.shape[0]):
         _simulate_block(
-            row, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, pad, o,
-            val_start, val_stop, prune, v_all, counts,
+            row, block_orders, block_start, block_size, block_ceiling, bounds, theta_all, score, i1p, i2p,
+            pad, o, val_start, val_stop, prune, v_all, counts,
         )  # fmt: skip
 
 
 @njit(cache=True, parallel=True)
 def simulate_blocks_parallel(
-    block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p, tv1, tv2, pad, o,
-    val_start, val_stop, prune, fused, v_all, counts, n_threads,
+    block_orders, block_start, block_size, block_ceiling, bounds, theta_all, score, i1p, i2p, tv1, tv2,
+    pad, o, val_start, val_stop, prune, fused, v_all, counts, n_threads,
 ):  # fmt: skip
     """Parallel driver: thread t takes runs t, t + n_threads, ... (:func:`_runs`): the vector
     steps (:func:`simulate_blocks`) if ``fused`` and na is at most ``MAX_NA``, else the plain
@@ -435,8 +441,8 @@ def simulate_blocks_parallel(
     for t in prange(n_threads):
         for g in range(t, n_groups, n_threads):
             _simulate_group(
-                g, firsts, block_orders, block_start, block_size, bounds, theta_all, score, i1p, i2p,
-                tv1, tv2, pad, o, val_start, val_stop, prune, fused, v_all, counts,
+                g, firsts, block_orders, block_start, block_size, block_ceiling, bounds, theta_all, score,
+                i1p, i2p, tv1, tv2, pad, o, val_start, val_stop, prune, fused, v_all, counts,
             )  # fmt: skip
 
 

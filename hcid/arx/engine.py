@@ -95,6 +95,7 @@ def fit_grid(
     threads: int = 1,
     keep_candidates: bool = False,
     fused: bool | None = None,
+    best_only: bool = False,
 ) -> GridFit:
     """Fit every candidate of ``grid`` to one record and keep the frontier.
 
@@ -135,6 +136,15 @@ def fit_grid(
         its rows' unfused outputs, and a triple whose search is in doubt (a
         near tie, an overflow, a recomputed V off the search's) is searched
         again unfused (docs/engine.md).
+    best_only : bool, default False
+        Search only for the grid's smallest V (what stage 1 of the indirect
+        method keeps, SPEC 3): candidates also stop once their partial V
+        exceeds a V already reached in another triple, so a triple that
+        cannot hold the grid's best is not searched to its end and its row
+        has ``v = NaN``, ``nk1 = nk2 = -1``, NaN VAFs and no coefficients.
+        The rows that could (the best and any within the tie margin) are
+        searched as without it: :func:`best` gives the same row, bit for
+        bit, and ``n_unstable`` is the same.
 
     Returns
     -------
@@ -147,7 +157,8 @@ def fit_grid(
     hcid.errors.IdentificationError
         If a window is not a slice ``start:stop`` with ``0 <= start < stop <= n``,
         the estimation window has fewer rows than the largest candidate has
-        coefficients, or ``threads < 1``.
+        coefficients, ``threads < 1``, or ``best_only`` with ``keep_candidates``
+        (which keeps every V).
 
     Notes
     -----
@@ -174,6 +185,7 @@ def fit_grid(
         keep_candidates,
         unpruned=False,
         fused=fused,
+        best_only=best_only,
     )
     return fit
 
@@ -222,8 +234,9 @@ def compile_kernels(part: str) -> None:
     orders = np.stack((block_na, block_nb1, block_nb2), axis=1)
     bounds = np.array([grid.na, grid.nb1, grid.nb2, grid.nk1, grid.nk2], dtype=np.int64)
     blocks = np.arange(start.size)
-    _simulate_part(True, blocks, orders, start, size, bounds, theta_all, score, i1p, i1p, tv, tv, pad,
-                   x, 32, 64, True, v_all)  # fmt: skip
+    ceiling = np.full(start.size, np.inf)
+    _simulate_part(True, blocks, orders, start, size, ceiling, bounds, theta_all, score, i1p, i1p, tv, tv,
+                   pad, x, 32, 64, True, v_all)  # fmt: skip
 
 
 def _vector_blocks(block_na: np.ndarray, fuse: bool) -> np.ndarray:
@@ -232,12 +245,14 @@ def _vector_blocks(block_na: np.ndarray, fuse: bool) -> np.ndarray:
     return np.asarray(block_na <= _lanes.MAX_NA) & bool(fuse and _lanes._WIDE)
 
 
-def _simulate_part(vector, blocks, orders, start, size, bounds, theta_all, score, i1p, i2p, tv1, tv2,
-                   pad, o, val_start, val_stop, prune, v_all) -> np.ndarray:  # fmt: skip
+def _simulate_part(vector, blocks, orders, start, size, ceiling, bounds, theta_all, score, i1p, i2p, tv1,
+                   tv2, pad, o, val_start, val_stop, prune, v_all) -> np.ndarray:  # fmt: skip
     """``blocks`` simulated on the vector steps (:func:`hcid.arx._blocks.simulate_blocks`) or
-    the plain path (``simulate_blocks_plain``): their counts."""
+    the plain path (``simulate_blocks_plain``), each block's pruning from its ``ceiling``: their
+    counts."""
     done = np.zeros((blocks.size, 3), dtype=np.int64)
-    common = (orders[blocks], start[blocks], size[blocks], bounds, theta_all, score, i1p, i2p)
+    common = (orders[blocks], start[blocks], size[blocks], ceiling[blocks], bounds, theta_all, score, i1p,
+              i2p)  # fmt: skip
     if vector:
         _blocks.simulate_blocks(*common, tv1, tv2, pad, o, val_start, val_stop, prune, v_all, done)
     else:
@@ -276,8 +291,9 @@ def _outputs(grid: Grid, start: np.ndarray, size: np.ndarray):
 
 
 def _fit_grid(
-    i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_candidates, *, unpruned, fused
-):
+    i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_candidates, *, unpruned, fused,
+    best_only=False,
+):  # fmt: skip
     """:func:`fit_grid`, also returning the simulation counts; ``unpruned``
     runs the one-candidate-at-a-time kernel (no pruning, unfused
     whatever ``fused``), the twin the tests and the benchmark compare with.
@@ -294,6 +310,8 @@ def _fit_grid(
     )
     threads = _threads(threads)
     fused = _fused(fused)
+    if best_only and (keep_candidates or unpruned):
+        raise IdentificationError("best_only: not with keep_candidates, which keeps every candidate's V")
     pad = max_lag(grid)
     i1p, i2p = padded(i1, pad), padded(i2, pad)
     tv1, tv2 = _tap_vectors(i1p), _tap_vectors(i2p)
@@ -321,6 +339,7 @@ def _fit_grid(
     )
     # errstate: unstable simulations overflow by design; only matters when
     # the kernels run as Python (NUMBA_DISABLE_JIT=1).
+    searched = np.ones(start.size, dtype=bool)  # the triples searched to their end (all but best_only's)
     with np.errstate(over="ignore", invalid="ignore"):
         if threads == 1:
             _kernels.fit_units(*args)
@@ -331,21 +350,22 @@ def _fit_grid(
             # triple, pruning unless every V is wanted.
             orders = np.stack((block_na, block_nb1, block_nb2), axis=1)
             waiting = np.isnan(v_all)
+            ceiling = np.full(start.size, np.inf)  # where each block's pruning starts
 
             def simulate_blocks(blocks, fuse):
                 if threads > 1:
-                    args = (orders[blocks], start[blocks], size[blocks], bounds, theta_all, score, i1p,
-                            i2p, tv1, tv2, pad, o, val_start, val_stop, not keep_candidates, fuse,
-                            v_all)  # fmt: skip
+                    args = (orders[blocks], start[blocks], size[blocks], ceiling[blocks], bounds, theta_all,
+                            score, i1p, i2p, tv1, tv2, pad, o, val_start, val_stop, not keep_candidates,
+                            fuse, v_all)  # fmt: skip
                     done = np.zeros((blocks.size, 3), dtype=np.int64)
                     _kernels.run_parallel(_blocks.simulate_blocks_parallel, (*args, done), threads)
                     parts = [(blocks, done)]
                 else:  # the vector steps (fused) and the plain path: each a kernel of its own
                     vector = _vector_blocks(block_na[blocks], fuse)
                     parts = [
-                        (part, _simulate_part(wide, part, orders, start, size, bounds, theta_all,
-                                              score, i1p, i2p, tv1, tv2, pad, o, val_start, val_stop,
-                                              not keep_candidates, v_all))
+                        (part, _simulate_part(wide, part, orders, start, size, ceiling, bounds,
+                                              theta_all, score, i1p, i2p, tv1, tv2, pad, o, val_start,
+                                              val_stop, not keep_candidates, v_all))
                         for part, wide in ((blocks[vector], True), (blocks[~vector], False))
                         if part.size
                     ]  # fmt: skip
@@ -359,11 +379,16 @@ def _fit_grid(
                 with np.errstate(over="ignore", invalid="ignore"):
                     simulate_blocks(np.flatnonzero(again), False)
 
-            simulate_blocks(np.arange(start.size), fused)
+            if best_only:
+                searched = _search_for_best(
+                    simulate_blocks, ceiling, v_all, score, waiting, start, size, fused
+                )
+            else:
+                simulate_blocks(np.arange(start.size), fused)
             # Triples searched fused but whose choice fused rounding could have changed
             # are searched again unfused (fit_grid, ``fused``); not those that ran
             # unfused anyway (no JIT, na above the vector recursion's).
-            fused_blocks = fused & _lanes._WIDE & (block_na <= _lanes.MAX_NA)
+            fused_blocks = fused & _lanes._WIDE & (block_na <= _lanes.MAX_NA) & searched
             again = fused_blocks & _near_ties(v_all, start, size)
             # A stable candidate whose fused output overflowed might not overflow unfused.
             again |= fused_blocks & np.logical_or.reduceat(waiting & np.isinf(v_all), start)
@@ -378,7 +403,7 @@ def _fit_grid(
     windows = ((est_start, est_stop), (val_start, val_stop))
     first = _blocks.block_best(v_all, start, size)
     v, vaf_est, vaf_val = _frontier_outputs(
-        first, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows
+        first, searched, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows
     )
     if not unpruned and fused:
         # A row whose unfused V is not finite, or further from the search's than the
@@ -386,28 +411,74 @@ def _fit_grid(
         search = v_all[first]
         with np.errstate(invalid="ignore"):  # inf - inf where the triple has no stable candidate
             moved = ~(np.abs(v - search) <= 0.25 * _TIE_RTOL * np.abs(v))
-        off = fused_blocks & np.isfinite(search) & moved
+        off = fused_blocks & np.isfinite(search) & moved  # fused_blocks: searched ones only
         if off.any():
             search_again_unfused(off)
             first = _blocks.block_best(v_all, start, size)
             v, vaf_est, vaf_val = _frontier_outputs(
-                first, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows
+                first, searched, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows
             )
     blocks = (block_na, block_nb1, block_nb2, start)
     candidate_orders = (cand_na, cand_nb1, cand_nb2, cand_nk1, cand_nk2)
     fit = _grid_fit(
-        grid, blocks, candidate_orders, first, v_all, theta_all, (v, vaf_est, vaf_val), keep_candidates
-    )
+        grid, blocks, candidate_orders, first, searched, v_all, theta_all, (v, vaf_est, vaf_val),
+        keep_candidates,
+    )  # fmt: skip
     return fit, counts
 
 
-def _grid_fit(grid, blocks, candidate_orders, first, v_all, theta_all, scores, keep_candidates) -> GridFit:
-    """The :class:`GridFit` of the searched grid: each triple's best candidate (``first``) and its scores."""
+#: best_only: the triples of the best prediction errors, searched first for a V to prune the
+#: others against (the grid's best is rarely far from it: on the paper record stage 1's others
+#: then stop at about a seventh of the samples, benchmarks/pruning_ceiling.py).
+_SEED_BLOCKS = 4
+#: best_only: the other triples in this many rounds, each pruned against the best V before it.
+_ROUNDS = 8
+
+
+def _search_for_best(simulate_blocks, ceiling, v_all, score, waiting, start, size, fused) -> np.ndarray:
+    """:func:`fit_grid`'s ``best_only`` search; which triples it searched to their end.
+
+    The seed triples (:data:`_SEED_BLOCKS`) are searched as the frontier's search does; their
+    best V is every other triple's ceiling, so that a candidate stops once its partial V exceeds
+    it. A triple whose smallest V (a pruned candidate's lower bound counts) comes within the tie
+    margin of the grid's smallest, or one with a candidate whose output overflowed, is then
+    searched again as the frontier's search does, so that the grid's best, and the unfused search
+    of a near tie, are what the frontier would give. Every other triple's true best V is above
+    the grid's best by more than the margin: it cannot be chosen.
+    """
+    stable = np.logical_or.reduceat(waiting, start)  # the triples with a candidate to simulate
+    block_key = np.maximum.reduceat(np.where(waiting, score, -np.inf), start)
+    seeds = np.zeros(start.size, dtype=bool)
+    seeds[np.argsort(-block_key, kind="stable")[:_SEED_BLOCKS]] = True
+    seeds &= stable
+    simulate_blocks(np.flatnonzero(seeds), fused)
+    done = seeds.copy()
+    for part in np.array_split(np.flatnonzero(stable & ~seeds), _ROUNDS):
+        if part.size:
+            ceiling[part] = np.min(v_all[np.repeat(done, size)], initial=np.inf)  # the best so far
+            simulate_blocks(part, fused)
+            done[part] = True
+    ceiling[:] = np.inf
+    block_min = np.minimum.reduceat(v_all, start)  # every candidate has its V or a lower bound now
+    contenders = block_min <= block_min.min() * (1.0 + _TIE_RTOL)
+    contenders |= np.logical_or.reduceat(waiting & np.isinf(v_all), start)  # overflowed fused
+    again = contenders & stable & ~seeds
+    if again.any():
+        v_all[np.repeat(again, size) & waiting] = np.nan
+        simulate_blocks(np.flatnonzero(again), fused)
+    return contenders | seeds | ~stable
+
+
+def _grid_fit(
+    grid, blocks, candidate_orders, first, searched, v_all, theta_all, scores, keep_candidates
+) -> GridFit:
+    """The :class:`GridFit` of the searched grid: each triple's best candidate (``first``) and its
+    scores; a triple not ``searched`` to its end (``best_only``) has none."""
     block_na, block_nb1, block_nb2, start = blocks
     cand_na, cand_nb1, cand_nb2, cand_nk1, cand_nk2 = candidate_orders
     v, vaf_est, vaf_val = scores
     unstable = ~np.isfinite(v_all)
-    fitted = np.isfinite(v_all[first])
+    fitted = np.isfinite(v_all[first]) & searched
     nk1 = np.where(fitted, cand_nk1[first], -1)
     nk2 = np.where(fitted, cand_nk2[first], -1)
     # Each row's [1, a1..a_na], b1, b2: slices of one copy of the frontier's theta.
@@ -454,15 +525,15 @@ def _grid_fit(grid, blocks, candidate_orders, first, v_all, theta_all, scores, k
     )
 
 
-def _frontier_outputs(first, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows):
+def _frontier_outputs(first, searched, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows):
     """V, VAF on the estimation rows and VAF on the validation rows of each block's candidate
     ``first``, from its output as :func:`simulate` gives it (unfused). ``layout`` is the
     blocks' (na, nb1, nb2) and the candidates' (nk1, nk2). A block without a finite search V
     keeps it and NaN VAF; so does a row whose output is not finite (never seen: the search
-    found it finite)."""
+    found it finite). A block not ``searched`` to its end (``best_only``) has NaN throughout."""
     block_na, block_nb1, block_nb2, cand_nk1, cand_nk2 = layout
     (est_start, est_stop), (val_start, val_stop) = windows
-    v = v_all[first]
+    v = np.where(searched, v_all[first], np.nan)
     rows = np.flatnonzero(np.isfinite(v))
     chosen = first[rows]
     models = (

@@ -19,8 +19,9 @@ class GridFit:
     Rows follow the lexicographic order of ``(na, nb1, nb2)`` over the grid
     (448 rows for the paper's direct grid). A row whose candidates are all
     unstable has ``v = inf``, ``nk1 = nk2 = -1``, NaN VAFs and empty
-    coefficient arrays. A dropped input (``nb = 0``) of a fitted row has
-    ``nk = 0``.
+    coefficient arrays; so does one not searched to its end
+    (:func:`~hcid.arx.engine.fit_grid`'s ``best_only``), with ``v = NaN``. A
+    dropped input (``nb = 0``) of a fitted row has ``nk = 0``.
 
     Attributes
     ----------
@@ -35,7 +36,8 @@ class GridFit:
         Number of parameters, ``na + nb1 + nb2 + [nb1 > 0] + [nb2 > 0]``.
     v : numpy.ndarray of float64, shape (n_rows,)
         Mean squared simulation error over the validation rows, in the
-        squared unit of ``o``; ``inf`` if every candidate is unstable.
+        squared unit of ``o``; ``inf`` if every candidate is unstable, NaN if
+        the triple was not searched to its end (``best_only``).
     vaf_estimation, vaf_validation : numpy.ndarray of float64, shape (n_rows,)
         Variance accounted for (percent) of the simulated output over the
         estimation / validation rows, ``(1 - sum (o - o_hat)^2 / sum o^2)

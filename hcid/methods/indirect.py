@@ -86,7 +86,8 @@ def _stage1_fit(settings, ft_s, fd, e, threads):
     grid = stage.grid
     if STAGE1.option(stage, "model") == "fixed":
         grid = Grid(*((v, v) for v in STAGE1.option(stage, "fixed_orders")))
-    return fit_grid(ft_s, fd, e, grid, *_stage1_rows(settings, e.size), threads=threads)
+    # Only the grid's smallest V is kept (SPEC 3), so the search need not finish the other triples.
+    return fit_grid(ft_s, fd, e, grid, *_stage1_rows(settings, e.size), threads=threads, best_only=True)
 
 
 def _stage1_rows(settings, n: int) -> tuple[slice, slice]:
