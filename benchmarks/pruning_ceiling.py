@@ -62,7 +62,7 @@ GRIDS = (
 
 
 def ceiling(r, name, grid, names, estimation, validation, needed, label) -> None:
-    i1, i2, o = (r[name] for name in names)
+    i1, i2, o = (r[signal] for signal in names)
     n, first = o.size, validation.start
     # Every V, then the engine as it runs.
     fit, _ = _fit_grid(i1, i2, o, grid, estimation, validation, 1, True, unpruned=False, fused=True)

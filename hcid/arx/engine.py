@@ -143,8 +143,11 @@ def fit_grid(
         cannot hold the grid's best is not searched to its end and its row
         has ``v = NaN``, ``nk1 = nk2 = -1``, NaN VAFs and no coefficients.
         The rows that could (the best and any within the tie margin) are
-        searched as without it: :func:`best` gives the same row, bit for
-        bit, and ``n_unstable`` is the same.
+        searched as without it, and so are the four triples searched first:
+        :func:`best` gives the same row, bit for bit. ``n_unstable`` is the
+        same unless a stable candidate's output overflows (inputs near
+        1e150), which the whole search may reach where this one stops it
+        earlier.
 
     Returns
     -------
@@ -373,15 +376,16 @@ def _fit_grid(
                     counts[part, :2] = done[:, :2]  # each candidate once: its last simulation
                     counts[part, 2] += done[:, 2]  # the work: every simulation
 
-            def search_again_unfused(again):
-                """The stable candidates of the blocks ``again`` (a mask) simulated anew, unfused."""
+            def search_again(again, fuse=False):
+                """The stable candidates of the blocks ``again`` (a mask) simulated anew, each
+                block's pruning from its ceiling (unfused by default)."""
                 v_all[np.repeat(again, size) & waiting] = np.nan
                 with np.errstate(over="ignore", invalid="ignore"):
-                    simulate_blocks(np.flatnonzero(again), False)
+                    simulate_blocks(np.flatnonzero(again), fuse)
 
             if best_only:
                 searched = _search_for_best(
-                    simulate_blocks, ceiling, v_all, score, waiting, start, size, fused
+                    simulate_blocks, search_again, ceiling, v_all, score, waiting, start, size, fused
                 )
             else:
                 simulate_blocks(np.arange(start.size), fused)
@@ -391,9 +395,9 @@ def _fit_grid(
             fused_blocks = fused & _lanes._WIDE & (block_na <= _lanes.MAX_NA) & searched
             again = fused_blocks & _near_ties(v_all, start, size)
             # A stable candidate whose fused output overflowed might not overflow unfused.
-            again |= fused_blocks & np.logical_or.reduceat(waiting & np.isinf(v_all), start)
+            again |= fused_blocks & _overflowed(v_all, waiting, start)
             if again.any():
-                search_again_unfused(again)
+                search_again(again)
 
     # Frontier: equal V keep the candidate order, in which nk1 and then nk2
     # increase inside a block. Its V and VAF come from the frontier rows' outputs:
@@ -412,8 +416,13 @@ def _fit_grid(
         with np.errstate(invalid="ignore"):  # inf - inf where the triple has no stable candidate
             moved = ~(np.abs(v - search) <= 0.25 * _TIE_RTOL * np.abs(v))
         off = fused_blocks & np.isfinite(search) & moved  # fused_blocks: searched ones only
+        if off.any() and best_only:
+            # best_only's choice of the triples to finish rests on that margin too (V at
+            # rounding, as on a noise-free record, can break it): the whole search instead.
+            return _fit_grid(i1, i2, o, grid, estimation_rows, validation_rows, threads, keep_candidates,
+                             unpruned=unpruned, fused=fused)  # fmt: skip
         if off.any():
-            search_again_unfused(off)
+            search_again(off)
             first = _blocks.block_best(v_all, start, size)
             v, vaf_est, vaf_val = _frontier_outputs(
                 first, searched, v_all, theta_all, layout, i1p, i2p, tv1, tv2, pad, o, windows
@@ -428,14 +437,16 @@ def _fit_grid(
 
 
 #: best_only: the triples of the best prediction errors, searched first for a V to prune the
-#: others against (the grid's best is rarely far from it: on the paper record stage 1's others
-#: then stop at about a seventh of the samples, benchmarks/pruning_ceiling.py).
+#: others against (on the paper record stage 1's candidates then take 400 of 2,048 samples, 281
+#: with the grid's final best as the bound: benchmarks/arx_engine.py, pruning_ceiling.py).
 _SEED_BLOCKS = 4
 #: best_only: the other triples in this many rounds, each pruned against the best V before it.
 _ROUNDS = 8
 
 
-def _search_for_best(simulate_blocks, ceiling, v_all, score, waiting, start, size, fused) -> np.ndarray:
+def _search_for_best(
+    simulate_blocks, search_again, ceiling, v_all, score, waiting, start, size, fused
+) -> np.ndarray:
     """:func:`fit_grid`'s ``best_only`` search; which triples it searched to their end.
 
     The seed triples (:data:`_SEED_BLOCKS`) are searched as the frontier's search does; their
@@ -444,7 +455,10 @@ def _search_for_best(simulate_blocks, ceiling, v_all, score, waiting, start, siz
     margin of the grid's smallest, or one with a candidate whose output overflowed, is then
     searched again as the frontier's search does, so that the grid's best, and the unfused search
     of a near tie, are what the frontier would give. Every other triple's true best V is above
-    the grid's best by more than the margin: it cannot be chosen.
+    the grid's best by more than the margin, so it cannot be chosen as long as fused and unfused
+    V differ by less than the margin; where the frontier's check sees that fail (V at rounding,
+    as on a noise-free record), :func:`_fit_grid` runs the whole search instead. Returns the
+    triples with rows: the seeds, the contenders and those without a stable candidate.
     """
     stable = np.logical_or.reduceat(waiting, start)  # the triples with a candidate to simulate
     block_key = np.maximum.reduceat(np.where(waiting, score, -np.inf), start)
@@ -460,12 +474,10 @@ def _search_for_best(simulate_blocks, ceiling, v_all, score, waiting, start, siz
             done[part] = True
     ceiling[:] = np.inf
     block_min = np.minimum.reduceat(v_all, start)  # every candidate has its V or a lower bound now
-    contenders = block_min <= block_min.min() * (1.0 + _TIE_RTOL)
-    contenders |= np.logical_or.reduceat(waiting & np.isinf(v_all), start)  # overflowed fused
+    contenders = _within_margin(block_min, block_min.min()) | _overflowed(v_all, waiting, start)
     again = contenders & stable & ~seeds
     if again.any():
-        v_all[np.repeat(again, size) & waiting] = np.nan
-        simulate_blocks(np.flatnonzero(again), fused)
+        search_again(again, fused)
     return contenders | seeds | ~stable
 
 
@@ -569,6 +581,16 @@ def _frontier_outputs(first, searched, v_all, theta_all, layout, i1p, i2p, tv1, 
 _TIE_RTOL = 1e-6
 
 
+def _within_margin(v: np.ndarray, best: float | np.ndarray) -> np.ndarray:
+    """Whether ``v`` is within the tie margin (``_TIE_RTOL`` relative) above ``best``."""
+    return v <= best * (1.0 + _TIE_RTOL)
+
+
+def _overflowed(v_all: np.ndarray, waiting: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """Per block: whether a stable candidate's output overflowed in the search (its V inf)."""
+    return np.logical_or.reduceat(waiting & np.isinf(v_all), start)
+
+
 def _near_ties(v_all: np.ndarray, start: np.ndarray, size: np.ndarray) -> np.ndarray:
     """Per block: whether its smallest V has another within ``_TIE_RTOL`` relative (a pruned
     candidate's V is a lower bound of its own, so this misses none)."""
@@ -578,7 +600,7 @@ def _near_ties(v_all: np.ndarray, start: np.ndarray, size: np.ndarray) -> np.nda
     rest[first] = np.inf
     with np.errstate(invalid="ignore"):
         second = np.minimum.reduceat(rest, start)
-        return np.isfinite(best) & (second <= best * (1.0 + _TIE_RTOL))
+        return np.isfinite(best) & _within_margin(second, best)
 
 
 def _squared_errors(models, i1p, i2p, tv1, tv2, pad, o, est, val, same):
