@@ -28,6 +28,7 @@ every root in the open left half-plane, else the cost is infinite.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -43,9 +44,11 @@ __all__ = ["PADE_ORDER", "closed_loop_u", "loop_is_stable", "loop_spectrum", "lo
 PADE_ORDER = 8
 
 
+@functools.cache
 def _pade_coefficients(order: int = PADE_ORDER) -> np.ndarray:
-    """The diagonal Pade approximant's coefficients c_k (ascending powers of s tau), closed form."""
-    return np.array(
+    """The diagonal Pade approximant's coefficients c_k (ascending powers of s tau), closed form
+    (computed once per order: every residual of a fit checks its loop; read-only)."""
+    c = np.array(
         [
             math.factorial(2 * order - k)
             * math.factorial(order)
@@ -53,6 +56,8 @@ def _pade_coefficients(order: int = PADE_ORDER) -> np.ndarray:
             for k in range(order + 1)
         ]
     )
+    c.setflags(write=False)
+    return c
 
 
 def _pade(tau: float, order: int = PADE_ORDER) -> tuple[np.ndarray, np.ndarray]:
@@ -127,8 +132,8 @@ def loops_are_stable(theta: np.ndarray, names, num_c: np.ndarray, den_c: np.ndar
             out[:, i : i + b.shape[1]] += a[:, i : i + 1] * b
         return out
 
-    left = conv(conv(nms_den, np.broadcast_to(den_c, (w.size, den_c.size))), q)
-    right = conv(conv(lead, np.broadcast_to(num_c, (w.size, num_c.size))), pp)
+    left = conv(conv(nms_den, den_c[None, :]), q)  # each row times the plant's polynomials
+    right = conv(conv(lead, num_c[None, :]), pp)
     closed = np.zeros((w.size, max(left.shape[1], right.shape[1])))
     closed[:, closed.shape[1] - left.shape[1] :] += left
     closed[:, closed.shape[1] - right.shape[1] :] += right
