@@ -437,8 +437,8 @@ def _fit_grid(
 
 
 #: best_only: the triples of the best prediction errors, searched first for a V to prune the
-#: others against (on the paper record stage 1's candidates then take 400 of 2,048 samples, 281
-#: with the grid's final best as the bound: benchmarks/arx_engine.py, pruning_ceiling.py).
+#: others against (what it saves, and the most a bound could: benchmarks/arx_engine.py and
+#: benchmarks/pruning_ceiling.py, docs/engine.md).
 _SEED_BLOCKS = 4
 #: best_only: the other triples in this many rounds, each pruned against the best V before it.
 _ROUNDS = 8
