@@ -13,7 +13,7 @@ import pyarrow as pa
 import pytest
 from scipy.signal import lfilter
 
-from hcid.arx import _blocks, _kernels, _lanes, engine
+from hcid.arx import _blocks, _frontier, _kernels, _lanes, engine
 from hcid.arx import grid as engine_grid
 from hcid.arx.engine import GridFit, _fit_grid, best, fit_grid
 from hcid.arx.grid import Grid, candidates, n_parameters
@@ -454,17 +454,15 @@ def test_vaf_and_v_of_frontier_rows(paper_record, na):
 
 @pytest.mark.parametrize("rows", [DIRECT_ROWS, (slice(29, 2048), slice(29, 2048))])
 def test_vaf_of_every_frontier_row_across_the_vaf_chunks(paper_record, rows, monkeypatch):
-    # 36 frontier rows in chunks of 16 (engine._VAF_ROWS, 128 in use, made small so the
+    # 36 frontier rows in chunks of 16 (_frontier._VAF_ROWS, 128 in use, made small so the
     # test stays quick as plain Python), with two windows and with one window for both
     # (stage 1's case, one array of squared errors): each row's VAF is the one numpy
     # computes from simulate()'s output of that row alone, bit for bit.
-    from hcid.arx import engine
-
-    monkeypatch.setattr(engine, "_VAF_ROWS", 16)
+    monkeypatch.setattr(_frontier, "_VAF_ROWS", 16)
     grid = Grid(na=(1, 3), nb1=(0, 2), nb2=(0, 3), nk1=(20, 21), nk2=(4, 5))
     i1, i2, o = _direct(paper_record)
     fit = fit_grid(i1, i2, o, grid, *rows)
-    assert np.count_nonzero(np.isfinite(fit.v)) > 2 * engine._VAF_ROWS
+    assert np.count_nonzero(np.isfinite(fit.v)) > 2 * _frontier._VAF_ROWS
     est, val = rows
     for row in np.flatnonzero(np.isfinite(fit.v)):
         o_hat = simulate(fit.a[row], fit.b1[row], fit.b2[row], fit.nk1[row], fit.nk2[row], i1, i2)
