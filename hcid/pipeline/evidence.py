@@ -501,9 +501,9 @@ def group_verdict(rows: list[dict], alpha: float) -> dict:
     one of 0.64."""
     p_values = np.array([r["p_value"] for r in rows], dtype=np.float64)
     k, n, p = binomial_summary(p_values, alpha)
-    power = float(np.median([r["power"] for r in rows]))
-    # A run without a p (no value of the statistic) is one of the n and is never found: power 0.
     powers = np.array([r["power"] for r in rows], dtype=np.float64)
+    power = float(np.median(powers))
+    # A run without a p (no value of the statistic) is one of the n and is never found: power 0.
     test_power = count_power(np.where(np.isnan(p_values), 0.0, powers), alpha)
     if p <= alpha:
         verdict = FEEDFORWARD
